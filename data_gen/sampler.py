@@ -1,0 +1,186 @@
+"""Seeded sampling of realistic shots and the scenes that render them.
+
+Every function takes a seed (or a ``numpy.random.Generator``) and returns the
+scene with its truth; nothing touches global random state.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from physics.motion import BallParams, Shot
+from physics.scene import Scene, Table, default_camera
+from physics.straight import straight_frame
+
+PRESETS = ("random", "case1", "case2", "case3", "case4", "case5", "masse", "leaves_table")
+
+# Spin ratio k = R w0 . j_hat / v0 for each straight case of Figure 4.
+_CASE_K = {
+    "case1": (-4.0, -2.8),   # R w0 < -5/2 v0: reverses while sliding
+    "case2": (-2.5, -2.5),   # stops exactly as sliding ends
+    "case3": (-2.2, 0.8),    # slides, then rolls forward
+    "case4": (1.0, 1.0),     # natural roll from the strike
+    "case5": (1.3, 2.5),     # over-spun: speeds up while sliding
+}
+FPS_CHOICES = (60.0, 120.0, 240.0, 480.0)
+
+
+def _rng(seed) -> np.random.Generator:
+    return seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+
+
+def _render_settings(rng: np.random.Generator, fps: float, noise: float | None = None,
+                     blur: bool | None = None) -> tuple[dict, float]:
+    """Renderer block and exposure (s) for a sampled scene."""
+    if noise is None:
+        noise = float(rng.uniform(0.0, 10.0))
+    if blur is None:
+        blur = bool(rng.random() < 0.5)
+    exposure = float(rng.uniform(0.3, 1.0) / fps) if blur else 0.0
+    render = {
+        "noise_sigma": round(noise, 3),
+        "felt_grey": float(rng.uniform(60, 110)),
+        "ball_grey": float(rng.uniform(190, 235)),
+        "gradient": float(rng.uniform(0, 20)),
+        "gradient_angle": float(rng.uniform(0, 2 * np.pi)),
+        "seed": int(rng.integers(0, 2**31 - 1)),
+    }
+    return render, exposure
+
+
+def _start_and_heading(rng: np.random.Generator, table: Table, R: float):
+    """A start point on the table and a unit heading towards a far target."""
+    margin = 0.15
+    x0 = rng.uniform([margin, margin], [table.length - margin, table.width - margin])
+    for _ in range(20):
+        target = rng.uniform([margin, margin], [table.length - margin, table.width - margin])
+        if np.hypot(*(target - x0)) > 0.6:
+            break
+    d = target - x0
+    return x0, d / np.hypot(*d)
+
+
+def sample_shot(seed, preset: str = "random", params: BallParams | None = None,
+                table: Table = Table()) -> tuple[Shot, BallParams]:
+    """Sample one shot's initial conditions and friction.
+
+    Parameters
+    ----------
+    seed : int or numpy.random.Generator
+        Source of randomness (local; never global state).
+    preset : str
+        One of :data:`PRESETS`: ``random`` (speeds 0.2-5 m/s log-uniform, spin
+        up to 2.5 v0/R in any planar direction), ``case1``..``case5`` (straight
+        shots in each case of Figure 4), ``masse`` (strong spin along v0: a
+        visibly curved path sliding for half a second or more) or ``leaves_table``
+        (fast, aimed at a near cushion).
+    params : BallParams, optional
+        Fixed friction; sampled (mu_s 0.1-0.3, mu_r 0.005-0.02) when absent.
+    table : Table
+        Playing surface.
+
+    Returns
+    -------
+    (Shot, BallParams)
+        Initial conditions (``t0`` is the lead-in, 0.1-0.5 s) and constants.
+    """
+    if preset not in PRESETS:
+        raise ValueError(f"unknown preset {preset!r}; choose from {', '.join(PRESETS)}")
+    rng = _rng(seed)
+    if params is None:
+        params = BallParams(mu_s=float(rng.uniform(0.1, 0.3)), mu_r=float(rng.uniform(0.005, 0.02)))
+    R = params.R
+    x0, heading = _start_and_heading(rng, table, R)
+    t0 = float(rng.uniform(0.1, 0.5))
+    if preset == "random":
+        speed = float(np.exp(rng.uniform(np.log(0.2), np.log(5.0))))
+        k = float(rng.uniform(0.0, 2.5))
+        ang = float(rng.uniform(0.0, 2 * np.pi))
+        w0 = k * speed / R * np.array([np.cos(ang), np.sin(ang)])
+    elif preset in _CASE_K:
+        speed = float(rng.uniform(0.5, 3.0))
+        k = float(rng.uniform(*_CASE_K[preset]))
+        _, j_hat = straight_frame(heading, np.zeros(2))
+        w0 = k * speed / R * j_hat
+    elif preset == "masse":
+        # Strong spin along v0 (R w ~ 4-7 m/s, a steep cue) gives a large
+        # v0 x u_hat: a visible bend, sliding for half a second or more.
+        params = BallParams(R=R, mu_s=float(rng.uniform(0.1, 0.2)), mu_r=params.mu_r, g=params.g)
+        speed = float(rng.uniform(0.5, 1.5))
+        spin_par = float(rng.uniform(4.0, 7.0)) * rng.choice([-1.0, 1.0])
+        spin_perp = float(rng.uniform(-1.0, 1.0)) * speed
+        _, j_hat = straight_frame(heading, np.zeros(2))
+        w0 = (spin_par * heading + spin_perp * j_hat) / R
+    else:  # leaves_table
+        speed = float(rng.uniform(2.5, 5.0))
+        k = float(rng.uniform(0.0, 1.0))
+        ang = float(rng.uniform(0.0, 2 * np.pi))
+        w0 = k * speed / R * np.array([np.cos(ang), np.sin(ang)])
+        # Start near the middle, heading for the nearest cushion.
+        x0 = np.array([table.length / 2, table.width / 2]) + rng.uniform(-0.2, 0.2, 2)
+        heading = np.array([0.0, rng.choice([-1.0, 1.0])])
+    shot = Shot(x0=x0, v0=speed * heading, w0=w0, t0=t0)
+    return shot, params
+
+
+def make_scene(shot: Shot, params: BallParams, fps: float = 240.0, px_per_m: float = 500.0,
+               exposure_s: float = 0.0, render: dict | None = None,
+               table: Table = Table()) -> Scene:
+    """A scene with truth for a shot, using the conventions' top-down camera."""
+    camera = default_camera(fps=fps, px_per_m=px_per_m, table=table, exposure_s=exposure_s)
+    return Scene(physics=params, camera=camera, table=table, render=dict(render or {}), truth=shot)
+
+
+def sample_scene(seed, preset: str = "random", fps: float | None = None,
+                 noise: float | None = None, blur: bool | None = None,
+                 px_per_m: float = 500.0, codec: str | None = None) -> Scene:
+    """Sample a complete scene: shot, friction, camera and renderer settings.
+
+    Parameters
+    ----------
+    seed : int or numpy.random.Generator
+        Source of randomness.
+    preset : str
+        See :func:`sample_shot`.
+    fps : float, optional
+        Frame rate; sampled from 60, 120, 240, 480 when absent.
+    noise : float, optional
+        Sensor noise sigma (grey levels); sampled 0-10 when absent.
+    blur : bool, optional
+        Motion blur (exposure 0.3-1 frame); sampled when absent.
+    px_per_m : float
+        Camera scale (px per m).
+    codec : str, optional
+        FourCC for the video; the renderer's default when absent.
+
+    Returns
+    -------
+    Scene
+        With ``truth`` set and a ``render`` block carrying its own seed.
+    """
+    rng = _rng(seed)
+    shot, params = sample_shot(rng, preset)
+    if fps is None:
+        fps = float(rng.choice(FPS_CHOICES))
+    render, exposure = _render_settings(rng, fps, noise, blur)
+    if codec is not None:
+        render["codec"] = codec
+    render["preset"] = preset
+    return make_scene(shot, params, fps=fps, px_per_m=px_per_m, exposure_s=exposure, render=render)
+
+
+def sample_scenes(n: int, seed: int, preset: str | None = None, **kwargs) -> list[Scene]:
+    """``n`` independent scenes from one seed (one child seed per scene).
+
+    With ``preset=None`` the presets cycle so that a dataset holds every kind
+    of shot: mostly ``random`` with each named preset mixed in.
+    """
+    children = np.random.SeedSequence(seed).spawn(n)
+    mix = ["random"] * 4 + [p for p in PRESETS if p != "random"]
+    scenes = []
+    for i, child in enumerate(children):
+        p = preset if preset is not None else mix[i % len(mix)]
+        scenes.append(sample_scene(np.random.default_rng(child), p, **kwargs))
+    return scenes

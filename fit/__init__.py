@@ -1,0 +1,1 @@
+"""Strike, sliding/rolling breakpoint and rest; parabola and line fits."""

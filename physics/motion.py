@@ -1,0 +1,295 @@
+"""The paper's forward model (Jia, Mason, Erdmann, section 1).
+
+A ball rests at ``x0`` until the strike at ``t0``; it then slides with
+constant slip direction (eq. 3-13) until ``t1``, rolls along a line
+(eq. 14-19) until ``t2`` and rests at ``x2``.  Everything here is a pure
+function of numpy arrays and small frozen dataclasses; times are absolute
+(seconds on the video's clock), so the strike time ``t0`` is part of the shot.
+
+The table frame is right-handed with z up; planar cross products are the
+scalar z component, ``a x b = a[0] b[1] - a[1] b[0]``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+# |u0| below this (m/s) counts as "no slip": paper case 4, t1 = t0.  Far below
+# anything a video resolves (a slip of 1e-9 m/s slides for 1e-10 s).
+SLIP_ZERO = 1e-9
+# |v1| below this (m/s) counts as "stopped when sliding ends": paper case 2.
+SPEED_ZERO = 1e-9
+
+
+@dataclass(frozen=True)
+class BallParams:
+    """Ball and cloth constants, SI units.
+
+    Attributes
+    ----------
+    R : float
+        Ball radius (m).
+    mu_s : float
+        Sliding friction coefficient (dimensionless).
+    mu_r : float
+        Rolling friction coefficient in the paper's energy convention: the
+        rolling ball decelerates at ``(5/7) mu_r g`` (eq. 16).
+    g : float
+        Gravitational acceleration (m/s^2).
+    """
+
+    R: float = 0.028575
+    mu_s: float = 0.2
+    mu_r: float = 0.01
+    g: float = 9.81
+
+
+@dataclass(frozen=True)
+class Shot:
+    """Initial conditions of one shot.
+
+    Attributes
+    ----------
+    x0 : tuple of float
+        Rest position before the strike, table frame (m).
+    v0 : tuple of float
+        Velocity just after the strike (m/s).
+    w0 : tuple of float
+        Planar angular velocity just after the strike (rad/s).
+    t0 : float
+        Strike time (s).
+    """
+
+    x0: tuple[float, float]
+    v0: tuple[float, float]
+    w0: tuple[float, float]
+    t0: float = 0.0
+
+    def __post_init__(self):
+        for name in ("x0", "v0", "w0"):
+            object.__setattr__(self, name, tuple(float(c) for c in getattr(self, name)))
+        object.__setattr__(self, "t0", float(self.t0))
+
+
+@dataclass(frozen=True)
+class Phases:
+    """Phase boundaries of a shot (paper section 1), absolute times.
+
+    Attributes
+    ----------
+    u0 : ndarray, shape (2,)
+        Initial contact (slip) velocity, eq. 2 (m/s).
+    u_hat : ndarray, shape (2,)
+        Constant slip direction while sliding; zeros when there is no slip.
+    t1, x1, v1 :
+        End of sliding (s), its position (m) and velocity (m/s), eq. 10-13.
+    t2, x2 :
+        End of rolling (s) and rest position (m), eq. 17-19.  ``t2`` is
+        ``inf`` and ``x2`` NaN when ``mu_r == 0`` and the ball never stops.
+    """
+
+    u0: np.ndarray
+    u_hat: np.ndarray
+    t0: float
+    x0: np.ndarray
+    v0: np.ndarray
+    w0: np.ndarray
+    t1: float
+    x1: np.ndarray
+    v1: np.ndarray
+    t2: float
+    x2: np.ndarray
+    params: BallParams = field(repr=False)
+
+    @property
+    def sliding_duration(self) -> float:
+        """Length of the sliding phase ``t1 - t0`` (s)."""
+        return self.t1 - self.t0
+
+    @property
+    def rolling_duration(self) -> float:
+        """Length of the rolling phase ``t2 - t1`` (s); ``inf`` if never stops."""
+        return self.t2 - self.t1
+
+
+@dataclass(frozen=True)
+class State:
+    """Ball state at an array of times; each array has a leading time axis.
+
+    Attributes
+    ----------
+    x : ndarray, shape (n, 2)
+        Centre position (m).
+    v : ndarray, shape (n, 2)
+        Velocity (m/s).
+    w : ndarray, shape (n, 2)
+        Planar angular velocity (rad/s).
+    phase : ndarray of int, shape (n,)
+        0 at rest before the strike, 1 sliding, 2 rolling, 3 at rest after.
+    """
+
+    x: np.ndarray
+    v: np.ndarray
+    w: np.ndarray
+    phase: np.ndarray
+
+
+BEFORE, SLIDING, ROLLING, REST = 0, 1, 2, 3
+
+
+def cross(a, b):
+    """Scalar z component of the planar cross product ``a x b`` (vectorised)."""
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def z_cross(a):
+    """``z_hat x a`` for planar vectors: rotate by +90 degrees (vectorised)."""
+    a = np.asarray(a, dtype=float)
+    return np.stack([-a[..., 1], a[..., 0]], axis=-1)
+
+
+def contact_velocity(v, w, R):
+    """Contact (slip) velocity ``u = v + R z_hat x w`` (eq. 1).
+
+    Parameters
+    ----------
+    v : array_like, shape (..., 2)
+        Velocity (m/s).
+    w : array_like, shape (..., 2)
+        Planar angular velocity (rad/s).
+    R : float
+        Ball radius (m).
+
+    Returns
+    -------
+    ndarray, shape (..., 2)
+        Slip velocity of the contact point (m/s).
+    """
+    return np.asarray(v, dtype=float) + R * z_cross(w)
+
+
+def phases(shot: Shot, params: BallParams) -> Phases:
+    """Phase boundaries of a shot: eq. 2, 10-13 (sliding), 17-19 (rolling).
+
+    Parameters
+    ----------
+    shot : Shot
+        Initial conditions.
+    params : BallParams
+        Ball and cloth constants.
+
+    Returns
+    -------
+    Phases
+        Slip direction and the times, positions and velocities where sliding
+        and rolling end.  Pure rolling from the strike (paper case 4) has
+        ``t1 == t0``; a ball that stops as sliding ends (case 2) has
+        ``t2 == t1``.
+    """
+    R, mu_s, mu_r, g = params.R, params.mu_s, params.mu_r, params.g
+    x0 = np.array(shot.x0)
+    v0 = np.array(shot.v0)
+    w0 = np.array(shot.w0)
+    u0 = contact_velocity(v0, w0, R)  # eq. 2
+    speed_u0 = float(np.hypot(*u0))
+    if speed_u0 > SLIP_ZERO:
+        u_hat = u0 / speed_u0
+        tau1 = 2.0 / 7.0 * speed_u0 / (mu_s * g)  # eq. 10
+    else:
+        u_hat = np.zeros(2)
+        tau1 = 0.0
+    v1 = v0 - mu_s * g * tau1 * u_hat  # eq. 7 at t1, = eq. 11
+    x1 = x0 + v0 * tau1 - 0.5 * mu_s * g * tau1**2 * u_hat  # eq. 9 at t1, = eq. 13
+    speed_v1 = float(np.hypot(*v1))
+    if speed_v1 <= SPEED_ZERO:
+        v1 = np.zeros(2)
+        tau2, x2 = 0.0, x1.copy()
+    elif mu_r > 0:
+        tau2 = 7.0 / 5.0 * speed_v1 / (mu_r * g)  # eq. 17
+        x2 = x1 + 7.0 / 10.0 * speed_v1 / (mu_r * g) * v1  # eq. 19
+    else:
+        tau2, x2 = np.inf, np.full(2, np.nan)
+    t1 = shot.t0 + tau1
+    return Phases(u0=u0, u_hat=u_hat, t0=shot.t0, x0=x0, v0=v0, w0=w0,
+                  t1=t1, x1=x1, v1=v1, t2=t1 + tau2, x2=x2, params=params)
+
+
+def evaluate(shot: Shot, params: BallParams, t, ph: Phases | None = None) -> State:
+    """Position, velocity and angular velocity at any array of times.
+
+    Parameters
+    ----------
+    shot : Shot
+        Initial conditions.
+    params : BallParams
+        Ball and cloth constants.
+    t : array_like, shape (n,)
+        Absolute times (s); any order, any values.
+    ph : Phases, optional
+        Precomputed ``phases(shot, params)``, to save recomputing it.
+
+    Returns
+    -------
+    State
+        ``x`` (m), ``v`` (m/s), ``w`` (rad/s) and ``phase`` at each time: at
+        rest at ``x0`` before ``t0``; eq. 7-9 while sliding; eq. 18 and
+        ``w = z_hat x v / R`` while rolling; at rest at ``x2`` after ``t2``.
+    """
+    if ph is None:
+        ph = phases(shot, params)
+    R, mu_s, mu_r, g = params.R, params.mu_s, params.mu_r, params.g
+    t = np.atleast_1d(np.asarray(t, dtype=float))
+    n = t.shape[0]
+    x = np.empty((n, 2))
+    v = np.zeros((n, 2))
+    w = np.zeros((n, 2))
+    phase = np.full(n, BEFORE, dtype=np.int8)
+
+    before = t < ph.t0
+    sliding = (t >= ph.t0) & (t < ph.t1)
+    rolling = (t >= ph.t1) & (t < ph.t2)
+    rest = t >= ph.t2
+    phase[sliding], phase[rolling], phase[rest] = SLIDING, ROLLING, REST
+
+    x[before] = ph.x0
+
+    s = (t[sliding] - ph.t0)[:, None]
+    x[sliding] = ph.x0 + ph.v0 * s - 0.5 * mu_s * g * s**2 * ph.u_hat  # eq. 9
+    v[sliding] = ph.v0 - mu_s * g * s * ph.u_hat  # eq. 7
+    w[sliding] = ph.w0 + 2.5 / R * mu_s * g * s * z_cross(ph.u_hat)  # eq. 8
+
+    if rolling.any():
+        speed_v1 = np.hypot(*ph.v1)
+        v1_hat = ph.v1 / speed_v1
+        r = (t[rolling] - ph.t1)[:, None]
+        decel = 5.0 / 7.0 * mu_r * g  # eq. 16
+        x[rolling] = ph.x1 + ph.v1 * r - 0.5 * decel * r**2 * v1_hat  # eq. 18
+        v[rolling] = ph.v1 - decel * r * v1_hat
+        w[rolling] = z_cross(v[rolling]) / R  # eq. 12, no slip while rolling
+
+    x[rest] = ph.x2
+    return State(x=x, v=v, w=w, phase=phase)
+
+
+def positions(shot: Shot, params: BallParams, t, ph: Phases | None = None) -> np.ndarray:
+    """Ball centre (m) at an array of times, shape (n, 2); see :func:`evaluate`."""
+    return evaluate(shot, params, t, ph).x
+
+
+def kinetic_energy(v, w, R):
+    """Kinetic energy per unit mass, ``|v|^2/2 + (1/5) R^2 |w|^2`` (J/kg).
+
+    Parameters
+    ----------
+    v, w : array_like, shape (..., 2)
+        Velocity (m/s) and planar angular velocity (rad/s).
+    R : float
+        Ball radius (m).
+    """
+    v = np.asarray(v, dtype=float)
+    w = np.asarray(w, dtype=float)
+    return 0.5 * np.sum(v * v, axis=-1) + 0.2 * R**2 * np.sum(w * w, axis=-1)

@@ -1,0 +1,1 @@
+"""The cuespin command, batch runs, experiments and charts."""

@@ -1,0 +1,1 @@
+"""OpenCV tracker: video to sub-pixel ball centroids in table metres."""
