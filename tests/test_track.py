@@ -1,0 +1,207 @@
+"""The tracker on the project's own rendered videos: accuracy against the
+Cramer-Rao bound, background modelling, flags, and bad input."""
+
+import json
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+
+from data_gen.sampler import make_scene, sample_scene, sample_shot
+from physics import Shot
+from pipeline.io import write_scene
+from render import FrameRenderer, render_video
+from render.video import encode_frames
+from track.bound import centroid_crb
+from track.tracker import FIT_BLUR_PX, GONE, OK, PARTIAL, TWO_BLOBS, TrackerConfig
+from track.video import read_track_csv, track_video, write_track_csv
+
+# The issue's accuracy requirement: RMSE within 1.5x of the bound on lossless
+# video.  Measured here (benchmarks/track.py): 1.0-1.3x for the disc fit.
+CRB_RATIO_MAX = 1.5
+# Grey-weighted moments measured at 2.0-2.6x the bound: the fit must beat them.
+MOMENTS_RATIO_MIN = 1.7
+
+
+def run_condition(tmp_path, scene, refine="fit", n_eval=12):
+    """Render, track; RMSE and bound over frames where the ball moves."""
+    video = tmp_path / "v.avi"
+    truth = render_video(scene, video)
+    res = track_video(video, scene, TrackerConfig(refine=refine))
+    r = FrameRenderer(scene)
+    moving = np.flatnonzero(res.ok & (truth.t > scene.truth.t0 + 0.02))
+    err = res.uv[moving] - truth.uv[moving]
+    rmse = float(np.sqrt(np.mean(err**2)))
+    s = r.settings
+    bounds = []
+    fps = scene.camera.fps
+    for k in moving[np.linspace(0, len(moving) - 1, n_eval).astype(int)]:
+        blur_len = np.hypot(*(r._uv_nodes[k][-1] - r._uv_nodes[k][0]))
+        fit_blur = blur_len * (1 + 1 / max(len(r._uv_nodes[k]) - 1, 1)) > FIT_BLUR_PX
+        bounds.append(centroid_crb(r._uv_nodes[k], r.radius_px, s["ball_grey"], r.background,
+                                   s["noise_sigma"], fit_blur))
+    crb = float(np.sqrt(np.mean(np.square(bounds))))
+    return res, truth, rmse, crb
+
+
+def short_scene(seed=5, preset="case3", fps=240.0, noise=5.0, blur=False, px_per_m=500.0,
+                duration=0.7, **render):
+    shot, params = sample_shot(seed, preset)
+    shot = Shot(shot.x0, shot.v0, shot.w0, t0=0.15)
+    exposure = 1.0 / fps if blur else 0.0
+    rs = {"noise_sigma": noise, "codec": "FFV1", "duration": duration, "seed": seed,
+          "felt_grey": 90.0, "ball_grey": 210.0}
+    rs.update(render)
+    return make_scene(shot, params, fps=fps, px_per_m=px_per_m, exposure_s=exposure, render=rs)
+
+
+@pytest.mark.parametrize("blur,gradient", [(False, 0.0), (True, 15.0)])
+def test_fit_reaches_the_bound(tmp_path, blur, gradient):
+    scene = short_scene(blur=blur, gradient=gradient, gradient_angle=0.7)
+    res, truth, rmse, crb = run_condition(tmp_path, scene)
+    assert res.ok[truth.t > scene.truth.t0].all()
+    assert rmse < CRB_RATIO_MAX * crb, (rmse, crb)
+    # The reported per-frame error agrees with what was measured (within 30%).
+    assert res.centroid_noise_px == pytest.approx(rmse, rel=0.3)
+    # Metres through the inverse homography, stamped k / fps.
+    np.testing.assert_allclose(res.t, np.arange(res.n_frames) / scene.camera.fps)
+    if not blur:
+        ok = res.ok
+        np.testing.assert_allclose(res.xy[ok], truth.xy[ok], atol=3 * CRB_RATIO_MAX * crb / 500.0 + 1e-4)
+
+
+def test_moments_worse_than_fit(tmp_path):
+    scene = short_scene()
+    _, _, rmse_m, crb = run_condition(tmp_path, scene, refine="moments")
+    assert rmse_m > MOMENTS_RATIO_MIN * crb
+
+
+def test_late_strike_and_textured_felt(tmp_path):
+    # The ball rests at x0 for most of the video: a plain median keeps it there.
+    shot, params = sample_shot(3, "case3")
+    scene = make_scene(Shot(shot.x0, shot.v0, shot.w0, t0=1.2), params, fps=120.0,
+                       render={"noise_sigma": 4.0, "texture": 6.0, "codec": "FFV1",
+                               "duration": 1.6, "felt_grey": 100.0, "ball_grey": 200.0})
+    res, truth, rmse, crb = run_condition(tmp_path, scene)
+    assert res.ok.all()
+    assert rmse < CRB_RATIO_MAX * crb, (rmse, crb)
+
+
+def test_slow_shot_that_stops_early(tmp_path):
+    # Natural roll at 0.4 m/s on slow cloth: stops after ~2.9 s and rests at
+    # x2 for the remaining ~57% of the video, where a plain median fails.
+    from physics import BallParams
+    params = BallParams(mu_r=0.02)
+    v0 = np.array([0.4, 0.0])
+    shot = Shot((0.8, 0.6), v0, (0.0, 0.4 / params.R), t0=0.2)
+    scene = make_scene(shot, params, fps=60.0,
+                       render={"noise_sigma": 3.0, "codec": "FFV1", "duration": 7.0})
+    res, truth, rmse, crb = run_condition(tmp_path, scene)
+    assert res.ok.all()
+    assert rmse < CRB_RATIO_MAX * crb, (rmse, crb)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("radius_px", [8.0, 20.0])
+@pytest.mark.parametrize("noise", [1.0, 10.0])
+def test_bound_across_radius_and_noise(tmp_path, radius_px, noise):
+    scene = short_scene(noise=noise, px_per_m=radius_px / 0.028575, duration=0.5)
+    res, truth, rmse, crb = run_condition(tmp_path, scene)
+    assert rmse < CRB_RATIO_MAX * crb, (rmse, crb)
+
+
+def test_lossy_codec_still_tracks(tmp_path):
+    scene = short_scene(codec="MJPG")
+    res, truth, rmse, crb = run_condition(tmp_path, scene)
+    assert res.ok[truth.t > scene.truth.t0].all()
+    # MJPG at OpenCV's default quality adds ~0.3-0.5 px^... measured: ~1.3x the
+    # lossless bound at sigma 5 (benchmarks/track.py); allow 3x.
+    assert rmse < 3.0 * crb
+
+
+def test_ball_leaving_the_frame_ends_the_track(tmp_path):
+    scene = sample_scene(4, "leaves_table", fps=120.0, noise=3.0, blur=False, codec="FFV1")
+    res, truth, _, _ = run_condition(tmp_path, scene)
+    # Once the disc crosses the frame's edge, no frame is ok again.
+    u, v, r = truth.uv[:, 0], truth.uv[:, 1], res.radius_px
+    inside = (u - r > 0) & (v - r > 0) & (u + r < scene.camera.width - 1) & (v + r < scene.camera.height - 1)
+    first_out = np.argmin(inside)
+    assert res.ok[:first_out - 1].all()
+    assert not res.ok[first_out:].any()
+    assert set(res.status[first_out:]) <= {PARTIAL, GONE}
+
+
+def test_two_balls_are_flagged(tmp_path):
+    scene = short_scene(duration=0.4, noise=3.0)
+    r = FrameRenderer(scene)
+    frames = list(r.frames())
+    from render.draw import disc_coverage
+    cov = disc_coverage(200.5, 200.5, r.radius_px, 180, 180, 41, 41)
+    for f in frames[:10]:  # a second ball sits there in the first 10 frames
+        patch = f[180:221, 180:221].astype(float)
+        f[180:221, 180:221] = np.clip(patch + 120 * cov, 0, 255).astype(np.uint8)
+    video = tmp_path / "two.avi"
+    encode_frames(iter(frames), video, "FFV1", scene.camera.fps, (scene.camera.width, scene.camera.height))
+    res = track_video(video, scene)
+    assert (res.status[:10] == TWO_BLOBS).all()
+    assert res.ok[12:].all()
+
+
+def test_track_csv_round_trip(tmp_path):
+    scene = short_scene(duration=0.3)
+    render_video(scene, tmp_path / "v.avi")
+    res = track_video(tmp_path / "v.avi", scene)
+    write_track_csv(tmp_path / "t.csv", res)
+    back = read_track_csv(tmp_path / "t.csv")
+    assert list(back) == ["frame", "t", "u_px", "v_px", "x_m", "y_m", "ok"]
+    np.testing.assert_array_equal(back["ok"].astype(bool), res.ok)
+    np.testing.assert_allclose(back["x_m"][res.ok], res.xy[res.ok, 0], rtol=1e-15)
+
+
+def cli(*args):
+    return subprocess.run([sys.executable, "-m", "pipeline.cli", *map(str, args)],
+                          capture_output=True, text=True, timeout=300)
+
+
+def one_line(res, needle):
+    assert res.returncode == 2, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and needle in lines[0], res.stderr
+
+
+def test_track_cli_and_bad_input(tmp_path):
+    scene = short_scene(duration=0.5, codec="MJPG")
+    sf = tmp_path / "s.json"
+    write_scene(sf, scene)
+    video = tmp_path / "v.avi"
+    render_video(scene, video)
+    out = tmp_path / "t.csv"
+    res = cli("track", video, "--scene", sf, "-o", out)
+    assert res.returncode == 0, res.stderr
+    assert len(out.read_text().splitlines()) == 1 + int(0.5 * 240)
+    one_line(cli("track", tmp_path / "none.avi", "--scene", sf, "-o", out), "video not found")
+    (tmp_path / "junk.avi").write_bytes(b"not a video at all" * 100)
+    one_line(cli("track", tmp_path / "junk.avi", "--scene", sf, "-o", out), "not a video OpenCV can read")
+    d = json.loads(sf.read_text())
+    d["camera"]["width"] = 640
+    (tmp_path / "wrong.json").write_text(json.dumps(d))
+    one_line(cli("track", video, "--scene", tmp_path / "wrong.json", "-o", out), "but the scene's camera says")
+    # A truncated file: one line, exit 2, and the frames before the cut are written.
+    data = video.read_bytes()
+    (tmp_path / "cut.avi").write_bytes(data[: len(data) * 2 // 3])
+    res = cli("track", tmp_path / "cut.avi", "--scene", sf, "-o", tmp_path / "cut.csv")
+    one_line(res, "truncated or corrupt")
+    rows = read_track_csv(tmp_path / "cut.csv")
+    assert 40 < len(rows["frame"]) < 120 and rows["ok"].sum() > 30
+
+
+def test_no_ball_anywhere(tmp_path):
+    shot, params = sample_shot(1, "case3")
+    scene = make_scene(Shot(shot.x0, (0, 0), (0, 0), t0=0.1), params, fps=60.0,
+                       render={"duration": 0.5, "codec": "FFV1", "noise_sigma": 2.0})
+    sf = tmp_path / "s.json"
+    write_scene(sf, scene)
+    render_video(scene, tmp_path / "v.avi")
+    one_line(cli("track", tmp_path / "v.avi", "--scene", sf, "-o", tmp_path / "t.csv"), "no ball found")

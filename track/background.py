@@ -1,0 +1,144 @@
+"""The felt without the ball, learnt from frames spread over the video.
+
+A plain per-pixel median keeps the ball wherever it rests for most of the
+video (before a late strike, after a slow shot stops), and a slow ball
+overlaps itself from sample to sample.  What does hold: the ball is a disc
+of one grey level, on one side of the felt (brighter or darker: its
+polarity), so at every pixel the samples showing felt are the ones at the
+far end from the ball.  Hence:
+
+1. Pixels whose samples spread more than noise can explain lie on the
+   ball's path (or its rest spots); elsewhere the plain mean is the felt.
+2. Polarity: on the path, the ball is the outlier on one side of the
+   median in most pixels (a moving ball covers each pixel briefly).
+3. On the path, a first felt estimate is the extreme sample away from the
+   ball; the felt is then the mean of the samples within noise of it
+   (pixels partly covered by the ball fall outside), re-estimated once
+   against that (unbiased) mean.
+
+The mean rather than the median, since the subtraction's own noise adds to
+every frame's.  A pixel that the ball covers in every sample cannot be
+recovered this way; it keeps the extreme sample (the ball never left it).
+
+Pure functions of arrays; no video I/O.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+# Detection threshold in units of the box-filtered noise's standard deviation.
+DETECT_SIGMAS = 8.0
+# A blob smaller than this fraction of the ball's area is noise or texture.
+MIN_AREA_FRACTION = 0.3
+# A path pixel whose felt is the mean of fewer samples than this adds noise
+# (variance sigma^2 / count) to every frame's subtraction there.
+MIN_FELT_SAMPLES = 10
+
+
+@dataclass(frozen=True)
+class Background:
+    """Background model of a video.
+
+    Attributes
+    ----------
+    image : ndarray, shape (h, w), float32
+        Felt without the ball (grey levels).
+    sigma : float
+        Per-pixel noise standard deviation in a frame (grey levels).
+    polarity : int
+        +1 if the ball is brighter than the felt, -1 if darker.
+    contrast : float
+        Typical |ball - felt| (grey levels).
+    n_samples : int
+        Frames the model was learnt from.
+    path_pixels : int
+        Pixels where the samples disagree: the ball's path and rest spots.
+    weak_samples : ndarray of bool, shape (n,)
+        The samples that show felt at the path pixels where fewer than
+        ``MIN_FELT_SAMPLES`` do (a resting ball hid the felt in the rest):
+        more frames from around these would sharpen the model there.  All
+        False when every path pixel is well covered.
+    """
+
+    image: np.ndarray
+    sigma: float
+    polarity: int
+    contrast: float
+    n_samples: int
+    path_pixels: int
+    weak_samples: np.ndarray
+
+
+def noise_sigma(a: np.ndarray, b: np.ndarray) -> float:
+    """Robust per-frame noise sigma from two frames: MAD of their difference / sqrt 2."""
+    d = (a.astype(np.float32) - b.astype(np.float32)).ravel()
+    mad = 1.4826 * np.median(np.abs(d - np.median(d)))
+    # The MAD of integer-valued differences is coarse (0 without noise);
+    # refine with the standard deviation of the inliers (5 sigma keeps
+    # 99.99994% of them; the ball's pixels are far outside).
+    inl = d[np.abs(d) <= max(5 * mad, 1.5)]
+    return float(inl.std() / np.sqrt(2.0))
+
+
+def box_size(radius_px: float) -> int:
+    """Odd box-filter size matched to the ball: about the inscribed square."""
+    return max(3, int(round(1.4 * radius_px)) | 1)
+
+
+def learn_background(samples: np.ndarray, radius_px: float) -> Background:
+    """Learn the felt from frames spread over a video.
+
+    Parameters
+    ----------
+    samples : ndarray, shape (n, h, w), uint8
+        Grey frames spread over the video (first and last among them).
+    radius_px : float
+        Expected ball radius (px).
+
+    Returns
+    -------
+    Background
+        ``polarity`` and ``contrast`` are 0 when nothing moved (no ball seen
+        anywhere, or it never left its rest spot).
+    """
+    n, H, W = samples.shape
+    sigma = noise_sigma(samples[0], samples[n // 2]) if n > 1 else 0.0
+    lo = samples.min(axis=0)
+    hi = samples.max(axis=0)
+    image = samples.mean(axis=0, dtype=np.float32)
+    # The range of n Gaussian samples exceeds ~7.5 sigma in about 1 pixel in
+    # 10^4 for n = 25; those few noise pixels are harmless below.
+    spread = (hi.astype(np.int16) - lo.astype(np.int16)) > 7.5 * max(sigma, 0.5) + 2
+    spread = cv2.dilate(spread.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+    ys, xs = np.nonzero(spread)
+    if len(ys) < MIN_AREA_FRACTION * np.pi * radius_px**2:
+        return Background(image=image, sigma=sigma, polarity=0, contrast=0.0, n_samples=n,
+                          path_pixels=int(len(ys)), weak_samples=np.zeros(n, bool))
+    S = samples[:, ys, xs].astype(np.float32)  # (n, m) samples on the path
+    med = np.median(S, axis=0)
+    up = S.max(axis=0) - med
+    down = med - S.min(axis=0)
+    strong = np.abs(up - down) > 4 * max(sigma, 0.5)
+    votes = np.sign(up - down)[strong]
+    polarity = int(np.sign(votes.sum()) or 1)
+    P = polarity * S  # ball is high in P
+    felt0 = P.min(axis=0)
+    contrast = float(np.percentile((P.max(axis=0) - felt0)[strong], 75)) if strong.any() else 0.0
+    # Felt samples lie within noise of the felt; a pixel partly covered by
+    # the ball lies between, so the band is set by the noise, not the contrast.
+    band = 3.0 * sigma + 1.5
+    felt = felt0
+    for slack in (2.5 * sigma, 0.0):  # felt0 sits ~2 sigma below the felt's mean
+        keep = P < felt + band + slack
+        felt = np.where(keep.any(axis=0),
+                        (P * keep).sum(axis=0) / np.maximum(keep.sum(axis=0), 1), felt0)
+    image[ys, xs] = polarity * felt
+    count = keep.sum(axis=0)
+    weak = (count < MIN_FELT_SAMPLES) & (count < n)
+    weak_samples = keep[:, weak].any(axis=1) if weak.any() else np.zeros(n, bool)
+    return Background(image=image, sigma=sigma, polarity=polarity, contrast=contrast,
+                      n_samples=n, path_pixels=int(len(ys)), weak_samples=weak_samples)

@@ -1,0 +1,68 @@
+"""Cramer-Rao bound for locating the ball in one rendered frame.
+
+Computed numerically from the rendered image's derivatives: the renderer's
+exact-coverage disc, averaged over its exposure nodes, differentiated by
+central differences with respect to the centre (all nodes shifted), the
+contrast and, when the tracker fits it, the blur vector (nuisances).  Noise
+is the sensor's Gaussian plus 8-bit rounding (variance ``sigma^2 + 1/12``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from render.draw import disc_coverage
+
+_STEP_PX = 1e-3
+
+
+def centroid_crb(uv_nodes: np.ndarray, radius_px: float, ball_grey: float, felt: np.ndarray,
+                 sigma: float, fit_blur: bool) -> np.ndarray:
+    """Per-axis standard-deviation bound (px) for the centre of one frame's ball.
+
+    Parameters
+    ----------
+    uv_nodes : ndarray, shape (K, 2)
+        The renderer's exposure nodes for the frame (px).
+    radius_px : float
+        Ball radius (px).
+    ball_grey : float
+        The ball's grey level.
+    felt : ndarray, shape (height, width)
+        The rendered background (grey levels); the ball hides it.
+    sigma : float
+        Sensor noise (grey levels), before 8-bit rounding.
+    fit_blur : bool
+        Whether the blur vector is a nuisance parameter (the tracker fits it).
+
+    Returns
+    -------
+    ndarray, shape (2,)
+        ``sqrt`` of the diagonal of the inverse Fisher information for
+        ``(u, v)`` (px).
+    """
+    uv_nodes = np.asarray(uv_nodes, dtype=float)
+    centre = uv_nodes.mean(axis=0)
+    offs = uv_nodes - centre
+    half = int(np.ceil(radius_px + np.abs(offs).max() + 3))
+    u0, v0 = int(round(centre[0])) - half, int(round(centre[1])) - half
+    n = 2 * half + 1
+    contrast = (ball_grey - np.asarray(felt, dtype=float)[v0:v0 + n, u0:u0 + n]).ravel()
+
+    taus = (np.arange(len(offs)) + 0.5) / len(offs) - 0.5  # the nodes are in time order
+
+    def image(c, db=(0.0, 0.0)):
+        nodes = c + offs + np.outer(taus, db)
+        return np.mean([disc_coverage(p[0], p[1], radius_px, u0, v0, n, n) for p in nodes], axis=0)
+
+    cols = []
+    for d in (np.array([_STEP_PX, 0.0]), np.array([0.0, _STEP_PX])):
+        cols.append(contrast * (image(centre + d) - image(centre - d)).ravel() / (2 * _STEP_PX))
+    cols.append(image(centre).ravel())  # d/d(ball grey)
+    if fit_blur and len(offs) > 1:
+        # The blur vector (start to end of the exposure) as a nuisance.
+        for d in (np.array([_STEP_PX, 0.0]), np.array([0.0, _STEP_PX])):
+            cols.append(contrast * (image(centre, d) - image(centre, -d)).ravel() / (2 * _STEP_PX))
+    J = np.stack(cols, axis=1)
+    fisher = J.T @ J / (sigma**2 + 1.0 / 12.0)
+    return np.sqrt(np.diag(np.linalg.inv(fisher))[:2])

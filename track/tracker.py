@@ -1,0 +1,186 @@
+"""Per-frame ball finding and refinement (pure: frames in, observations out).
+
+Once the ball is found the search looks only near the position predicted
+from the last two; when that fails it falls back to the whole frame.  Every
+frame gets a status: ``OK`` or the reason it was flagged rather than guessed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from track.background import DETECT_SIGMAS, Background, box_size
+from track.model import fit_disc, moments
+
+OK, NO_BALL, PARTIAL, TWO_BLOBS, GONE, FIT_FAILED = 0, 1, 2, 3, 4, 5
+STATUS_TEXT = {OK: "ok", NO_BALL: "no ball", PARTIAL: "ball partly out of the frame",
+               TWO_BLOBS: "two ball-like blobs", GONE: "ball has left the frame",
+               FIT_FAILED: "refinement failed"}
+REFINERS = ("fit", "moments")
+# Blur shorter than this (px over the exposure) is modelled at its predicted
+# length, not fitted: a symmetric smear moves no centroid, and its image
+# changes only to second order in the length, so fitting it is ill-posed.
+FIT_BLUR_PX = 3.0
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """Tracker settings.
+
+    Attributes
+    ----------
+    refine : str
+        ``fit`` (exact disc model, reaches the Cramer-Rao bound) or
+        ``moments`` (grey-weighted centroid, faster, ~2.3x the bound).
+    n_background : int
+        Frames sampled over the video for the background model.
+    search_margin_px : float
+        Extra search radius around the predicted position (px).
+    """
+
+    refine: str = "fit"
+    n_background: int = 15
+    search_margin_px: float = 6.0
+
+
+@dataclass
+class Observation:
+    """One frame's result: status, centre (px) and its standard error (px)."""
+
+    status: int
+    uv: np.ndarray
+    stderr: np.ndarray
+
+
+class BallTracker:
+    """Finds and refines the ball frame by frame.
+
+    Parameters
+    ----------
+    background : Background
+        The video's felt model.
+    radius_px : float
+        Ball radius in pixels (from ``physics.R`` and the homography).
+    exposure_frames : float
+        Exposure as a fraction of the frame interval (for the blur model).
+    config : TrackerConfig
+    """
+
+    def __init__(self, background: Background, radius_px: float, exposure_frames: float,
+                 config: TrackerConfig = TrackerConfig()):
+        if config.refine not in REFINERS:
+            raise ValueError(f"refine must be one of {REFINERS}, got {config.refine!r}")
+        self.bg = background
+        self.pol = background.polarity or 1
+        self.r = float(radius_px)
+        self.exposure_frames = float(exposure_frames)
+        self.cfg = config
+        self.k = box_size(self.r)
+        # Box-filtered noise of a frame minus a (slightly noisy) background.
+        self.thresh = max(DETECT_SIGMAS * max(background.sigma, 0.5) * 1.1 / self.k,
+                          0.25 * background.contrast)
+        self.H, self.W = background.image.shape
+        self.history: list[tuple[int, np.ndarray]] = []
+        self.gone = False
+        self.was_partial_edge = False
+
+    # -- search ---------------------------------------------------------
+    def _velocity(self, k: int):
+        """Predicted centre at frame ``k`` and velocity (px/frame), or None."""
+        if not self.history:
+            return None, np.zeros(2)
+        k1, c1 = self.history[-1]
+        if len(self.history) >= 2 and k - k1 <= 3:
+            k0, c0 = self.history[-2]
+            vel = (c1 - c0) / (k1 - k0)
+        else:
+            vel = np.zeros(2)
+        return c1 + vel * (k - k1), vel
+
+    def _peak(self, frame: np.ndarray, u0: int, v0: int, u1: int, v1: int):
+        """Box-filtered peak of the ball signal in a window; value and place."""
+        roi = frame[v0:v1, u0:u1].astype(np.float32)
+        D = self.pol * (roi - self.bg.image[v0:v1, u0:u1])
+        sm = cv2.blur(D, (self.k, self.k))
+        _, val, _, loc = cv2.minMaxLoc(sm)
+        return D, sm, val, np.array([loc[0] + u0, loc[1] + v0], float)
+
+    def _full_search(self, frame):
+        D, sm, val, loc = self._peak(frame, 0, 0, self.W, self.H)
+        if val < self.thresh:
+            return None, NO_BALL
+        # A second ball-like blob away from the first: flag, don't guess.
+        mask = np.zeros_like(sm, dtype=np.uint8)
+        cv2.circle(mask, (int(loc[0]), int(loc[1])), int(2.5 * self.r + 4), 1, -1)
+        sm2 = np.where(mask.astype(bool), -np.inf, sm)
+        if sm2.max() >= max(self.thresh, 0.5 * val):
+            return loc, TWO_BLOBS
+        return loc, OK
+
+    # -- per frame ------------------------------------------------------
+    def nothing(self) -> Observation:
+        """A frame in which no ball is reported."""
+        return Observation(NO_BALL, np.full(2, np.nan), np.full(2, np.nan))
+
+    def step(self, k: int, frame: np.ndarray) -> Observation:
+        """Track frame ``k`` (8-bit grey, full size)."""
+        nan2 = np.full(2, np.nan)
+        if self.gone:
+            return Observation(GONE, nan2, nan2)
+        pred, vel = self._velocity(k)
+        blur = vel * self.exposure_frames
+        reach = self.r + 0.5 * np.hypot(*blur) + self.cfg.search_margin_px + 0.5 * np.hypot(*vel)
+        loc = None
+        if pred is not None:
+            u0, v0 = max(int(pred[0] - reach), 0), max(int(pred[1] - reach), 0)
+            u1, v1 = min(int(pred[0] + reach) + 2, self.W), min(int(pred[1] + reach) + 2, self.H)
+            if u1 - u0 > self.k and v1 - v0 > self.k:
+                _, _, val, at = self._peak(frame, u0, v0, u1, v1)
+                if val >= self.thresh:
+                    loc = at
+        if loc is None:
+            loc, status = self._full_search(frame)
+            if loc is None:
+                if self.was_partial_edge:
+                    self.gone = True
+                    return Observation(GONE, nan2, nan2)
+                return Observation(status, nan2, nan2)
+            if status != OK:
+                return Observation(status, nan2, nan2)
+            blur = np.zeros(2)
+        obs = self._refine(frame, loc, blur)
+        if obs.status == OK:
+            self.history = (self.history + [(k, obs.uv)])[-2:]
+        return obs
+
+    def _refine(self, frame, loc, blur) -> Observation:
+        r = self.r
+        nan2 = np.full(2, np.nan)
+        half = int(np.ceil(r + 0.5 * np.hypot(*blur) + 3))
+        u0, v0 = int(round(loc[0])) - half, int(round(loc[1])) - half
+        u1, v1 = u0 + 2 * half + 1, v0 + 2 * half + 1
+        if u0 < 0 or v0 < 0 or u1 > self.W or v1 > self.H:
+            self.was_partial_edge = True
+            return Observation(PARTIAL, nan2, nan2)
+        patch = frame[v0:v1, u0:u1].astype(np.float32)
+        felt = self.bg.image[v0:v1, u0:u1]
+        c = moments(self.pol * (patch - felt), u0, v0, loc, r + 2 + 0.5 * np.hypot(*blur))
+        if self.cfg.refine == "moments":
+            se = np.full(2, np.nan)
+        else:
+            fit_blur = np.hypot(*blur) > FIT_BLUR_PX
+            G0 = float(felt.mean()) + self.pol * max(self.bg.contrast, 1.0)
+            f = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur)
+            if not f:
+                return Observation(FIT_FAILED, nan2, nan2)
+            c, se = f.c, f.stderr
+        # The whole disc must lie inside the frame for the centre to be trusted.
+        if (c[0] - r < -0.5 or c[1] - r < -0.5 or c[0] + r > self.W - 0.5
+                or c[1] + r > self.H - 0.5):
+            self.was_partial_edge = True
+            return Observation(PARTIAL, nan2, nan2)
+        self.was_partial_edge = False
+        return Observation(OK, c, se)

@@ -1,0 +1,318 @@
+"""Reading a video and tracking the ball through it: the tracker's I/O edge.
+
+Decoding runs on a second thread (OpenCV releases the GIL) from the start:
+while it fills a bounded buffer, the main thread seeks a second reader to
+frames spread over the video and learns the background; then it tracks
+what the decoder delivers.  Frames are dropped as soon as they are tracked,
+so memory is capped by the buffer, whatever the video's length.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import queue
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from physics.scene import Scene
+from render.video import quiet_native_stderr
+from track.background import Background, learn_background
+from track.tracker import GONE, OK, STATUS_TEXT, BallTracker, TrackerConfig
+
+# Frames the decoder may run ahead while the background is learnt (~0.8 MB
+# each at 1280 x 640): a fixed cap, so memory does not grow with length.
+_QUEUE_DEPTH = 128
+
+# Decoding grey video without RGB conversion hands back the luma plane and
+# OpenCV logs a warning per frame saying so; the tracker wants exactly that.
+try:
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+except AttributeError:  # builds without the logging module
+    pass
+
+
+class TrackError(Exception):
+    """The video cannot be tracked; the message is one line saying why."""
+
+
+@dataclass
+class TrackResult:
+    """The ball's track through a video.
+
+    Attributes
+    ----------
+    t : ndarray, shape (n,)
+        Frame timestamps ``k / fps`` (s).
+    uv : ndarray, shape (n, 2)
+        Centre of the ball's image (px); NaN where not ``ok``.
+    xy : ndarray, shape (n, 2)
+        Centre on the table (m) through the inverse homography; NaN where not ok.
+    ok : ndarray of bool, shape (n,)
+    status : ndarray of int8, shape (n,)
+        ``track.tracker`` status codes.
+    stderr_px : ndarray, shape (n, 2)
+        Standard error of ``uv`` from the disc fit (px); NaN with ``moments``.
+    radius_px : float
+    background : Background
+    error : str
+        Empty, or what went wrong: the video ended early (truncated or
+        corrupt; the frames before it are still here) or no ball was found.
+    seconds : dict
+        Wall time of the background model and of the tracking pass (s).
+    """
+
+    t: np.ndarray
+    uv: np.ndarray
+    xy: np.ndarray
+    ok: np.ndarray
+    status: np.ndarray
+    stderr_px: np.ndarray
+    radius_px: float
+    background: Background
+    error: str = ""
+    seconds: dict = field(default_factory=dict)
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.t)
+
+    @property
+    def centroid_noise_px(self) -> float:
+        """Typical per-axis standard error of a centroid (px), NaN if unknown."""
+        se = self.stderr_px[self.ok]
+        return float(np.nanmedian(se)) if se.size and np.isfinite(se).any() else float("nan")
+
+    def status_counts(self) -> dict[str, int]:
+        """How many frames had each status."""
+        vals, counts = np.unique(self.status, return_counts=True)
+        return {STATUS_TEXT[int(v)]: int(c) for v, c in zip(vals, counts)}
+
+
+def open_video(path) -> cv2.VideoCapture:
+    """Open a video for reading or raise :class:`TrackError` with one line."""
+    path = Path(path)
+    if not path.exists():
+        raise TrackError(f"video not found: {path}")
+    if path.is_dir():
+        raise TrackError(f"expected a video file, got a folder: {path}")
+    with quiet_native_stderr():
+        cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
+        ok = cap.isOpened()
+    if not ok:
+        raise TrackError(f"{path}: not a video OpenCV can read")
+    # Grey videos decode straight to one channel without RGB conversion.
+    cap.set(cv2.CAP_PROP_CONVERT_RGB, 0.0)
+    return cap
+
+
+def to_grey(img: np.ndarray) -> np.ndarray:
+    """An 8-bit grey image from whatever the decoder returned."""
+    if img.ndim == 2:
+        return img
+    if img.shape[2] == 1:
+        return img[:, :, 0]
+    return cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+
+
+def sample_frames(path, idx) -> tuple[np.ndarray, np.ndarray]:
+    """Grey frames at the given indices (those that decode) and their indices."""
+    cap = open_video(path)
+    got = []
+    out = []
+    try:
+        with quiet_native_stderr():
+            for i in idx:
+                cap.set(cv2.CAP_PROP_POS_FRAMES, float(i))
+                ok, img = cap.read()
+                if ok and img is not None:
+                    out.append(to_grey(img))
+                    got.append(i)
+    finally:
+        cap.release()
+    if not out:
+        return np.zeros((0, 0, 0), np.uint8), np.zeros(0, int)
+    return np.stack(out), np.array(got)
+
+
+def learn_video_background(path, n_frames: int, radius_px: float, n_samples: int) -> Background:
+    """Background from ``n_samples`` frames spread over the video, plus as many
+    again where a resting ball hid the felt from most of the first ones."""
+    idx = np.unique(np.linspace(0, max(n_frames - 1, 0), n_samples).round().astype(int))
+    samples, idx = sample_frames(path, idx)
+    if len(samples) == 0:
+        raise TrackError(f"{path}: no frame could be decoded (corrupt video?)")
+    bg = learn_background(samples, radius_px)
+    if bg.weak_samples.any():
+        # Sample the stretch of video whose frames showed the hidden felt,
+        # reaching half a spacing beyond it on each side.
+        shown = idx[bg.weak_samples]
+        gap = max(n_frames // max(n_samples - 1, 1), 1)
+        lo, hi = max(shown.min() - gap // 2, 0), min(shown.max() + gap // 2, n_frames - 1)
+        extra = np.setdiff1d(np.linspace(lo, hi, n_samples).round().astype(int), idx)
+        more, extra = sample_frames(path, extra)
+        if len(more):
+            bg = learn_background(np.concatenate([samples, more]), radius_px)
+    return bg
+
+
+def _decode(cap: cv2.VideoCapture, q: queue.Queue, stop: threading.Event):
+    try:
+        with quiet_native_stderr():
+            while not stop.is_set():
+                ok, img = cap.read()
+                if not ok or img is None:
+                    break
+                q.put(to_grey(img))
+    except Exception as exc:  # surfaced as the end of the video
+        q.put(exc)
+    finally:
+        q.put(None)
+
+
+def _stop_decoder(worker, q, stop, cap):
+    stop.set()
+    while worker.is_alive():  # unblock a decoder waiting on a full queue
+        try:
+            q.get_nowait()
+        except queue.Empty:
+            pass
+        worker.join(timeout=0.05)
+    cap.release()
+
+
+def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
+                progress=None) -> TrackResult:
+    """Track the ball through a video.
+
+    Parameters
+    ----------
+    path : str or Path
+        Any video OpenCV reads.
+    scene : Scene
+        Only ``physics`` and ``camera`` are used (never ``render``).
+    config : TrackerConfig
+    progress : callable, optional
+        ``progress(n)`` after each ``n`` frames.
+
+    Returns
+    -------
+    TrackResult
+
+    Raises
+    ------
+    TrackError
+        Missing or unreadable file, zero frames, or a frame size that
+        disagrees with the scene.  A video that ends early or shows no ball
+        still returns a result, with ``error`` saying so.
+    """
+    cam = scene.camera
+    cap = open_video(path)
+    n_hint = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+    w = int(cap.get(cv2.CAP_PROP_FRAME_WIDTH))
+    h = int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
+    if n_hint <= 0 and w == 0:
+        cap.release()
+        raise TrackError(f"{path}: the video has no frames")
+    if (w, h) != (cam.width, cam.height):
+        cap.release()
+        raise TrackError(f"{path}: frames are {w}x{h} but the scene's camera says "
+                         f"{cam.width}x{cam.height}; is this the right scene file?")
+    center = cam.to_table([[cam.width / 2, cam.height / 2]])[0]
+    radius_px = scene.physics.R * cam.px_per_m(center)
+
+    q: queue.Queue = queue.Queue(maxsize=_QUEUE_DEPTH)
+    stop = threading.Event()
+    worker = threading.Thread(target=_decode, args=(cap, q, stop), daemon=True)
+    worker.start()
+    t_start = time.perf_counter()
+    try:
+        bg = learn_video_background(path, max(n_hint, 1), radius_px, config.n_background)
+    except BaseException:
+        _stop_decoder(worker, q, stop, cap)
+        raise
+    t_bg = time.perf_counter() - t_start
+    tracker = BallTracker(bg, radius_px, cam.exposure_s * cam.fps, config)
+    uv, se, status = [], [], []
+    t_start = time.perf_counter()
+    error = ""
+    k = 0
+    try:
+        while True:
+            item = q.get()
+            if item is None:
+                break
+            if isinstance(item, Exception):
+                error = f"decoding failed at frame {k}: {item}"
+                continue
+            if item.shape != (cam.height, cam.width):
+                error = f"frame {k} has size {item.shape[1]}x{item.shape[0]}"
+                break
+            # With nothing moving there is no ball to separate from the felt.
+            obs = tracker.step(k, item) if bg.polarity else tracker.nothing()
+            uv.append(obs.uv)
+            se.append(obs.stderr)
+            status.append(obs.status)
+            k += 1
+            if progress is not None and k % 64 == 0:
+                progress(64)
+    finally:
+        _stop_decoder(worker, q, stop, cap)
+    if progress is not None and k % 64:
+        progress(k % 64)
+    t_track = time.perf_counter() - t_start
+    if k == 0:
+        raise TrackError(f"{path}: the video has no frames that decode")
+    # FFmpeg's frame count is exact for intact intra-coded files; a stream
+    # that ends well short of it was cut off or is corrupt.
+    if not error and n_hint > 0 and k < n_hint - 1:
+        error = f"the video ends at frame {k} of {n_hint} (truncated or corrupt)"
+    uv = np.array(uv, float).reshape(-1, 2)
+    status = np.array(status, np.int8)
+    ok = status == OK
+    if not ok.any():
+        why = (" (the ball never moved, or is not in view; do physics.R and camera.homography "
+               "match the video?)")
+        error = f"no ball found in any of {k} frames" + (f"; {error}" if error else why)
+    xy = np.full_like(uv, np.nan)
+    xy[ok] = cam.to_table(uv[ok])
+    return TrackResult(t=cam.frame_times(k), uv=uv, xy=xy, ok=ok, status=status,
+                       stderr_px=np.array(se, float).reshape(-1, 2), radius_px=radius_px,
+                       background=bg, error=error,
+                       seconds={"background": t_bg, "track": t_track})
+
+
+def write_track_csv(path, result: TrackResult) -> None:
+    """Write ``frame,t,u_px,v_px,x_m,y_m,ok`` (CONVENTIONS.md), atomically.
+
+    Rows with ``ok`` 0 have empty coordinates.
+    """
+    path = Path(path)
+    tmp = path.with_name(path.name + ".part")
+    with open(tmp, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["frame", "t", "u_px", "v_px", "x_m", "y_m", "ok"])
+        for k in range(result.n_frames):
+            if result.ok[k]:
+                u, v = result.uv[k]
+                x, y = result.xy[k]
+                w.writerow([k, repr(float(result.t[k])), repr(float(u)), repr(float(v)),
+                            repr(float(x)), repr(float(y)), 1])
+            else:
+                w.writerow([k, repr(float(result.t[k])), "", "", "", "", 0])
+    os.replace(tmp, path)
+
+
+def read_track_csv(path) -> dict[str, np.ndarray]:
+    """Read a track CSV; empty coordinates become NaN."""
+    data = np.genfromtxt(path, delimiter=",", names=True, filling_values=np.nan)
+    return {name: np.atleast_1d(data[name]) for name in data.dtype.names}
+
+
+__all__ = ["GONE", "TrackError", "TrackResult", "open_video", "read_track_csv", "track_video",
+           "write_track_csv"]
