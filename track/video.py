@@ -25,9 +25,12 @@ from render.video import quiet_native_stderr
 from track.background import Background, learn_background
 from track.tracker import GONE, OK, STATUS_TEXT, BallTracker, TrackerConfig
 
-# Frames the decoder may run ahead while the background is learnt (~0.8 MB
-# each at 1280 x 640): a fixed cap, so memory does not grow with length.
-_QUEUE_DEPTH = 128
+# Bytes of decoded frames the decoder may run ahead while the background is
+# learnt.  OpenCV's seek decodes ~16 frames forward from an earlier one, so
+# sampling 15 frames costs ~240 decodes; with this much room (366 frames at
+# 1280 x 640) the sequential decoder does not stall meanwhile.  A fixed cap:
+# memory does not grow with the video's length.
+BUFFER_BYTES = 300 * 2**20
 
 # Decoding grey video without RGB conversion hands back the luma plane and
 # OpenCV logs a warning per frame saying so; the tracker wants exactly that.
@@ -226,7 +229,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     center = cam.to_table([[cam.width / 2, cam.height / 2]])[0]
     radius_px = scene.physics.R * cam.px_per_m(center)
 
-    q: queue.Queue = queue.Queue(maxsize=_QUEUE_DEPTH)
+    q: queue.Queue = queue.Queue(maxsize=max(16, BUFFER_BYTES // (w * h)))
     stop = threading.Event()
     worker = threading.Thread(target=_decode, args=(cap, q, stop), daemon=True)
     worker.start()
