@@ -21,6 +21,17 @@ from pipeline.io import InputError
 DEMO_SEED = 20261122
 
 
+def demo_scene():
+    """The demo's shot: side spin bends the slide (about 0.34 s) before it rolls
+    to rest on a slow cloth, all in view; 240 fps, noise sigma 3, MJPG."""
+    from data_gen.sampler import make_scene
+    from physics.motion import BallParams, Shot
+
+    shot = Shot(x0=(0.5, 0.35), v0=(0.9, 0.25), w0=(30.0, -40.0), t0=0.25)
+    return make_scene(shot, BallParams(mu_s=0.2, mu_r=0.02), fps=240.0,
+                      render={"noise_sigma": 3.0, "seed": DEMO_SEED, "codec": "MJPG"})
+
+
 def _progress(total: int, desc: str, unit: str = "frame"):
     from tqdm import tqdm
 
@@ -83,24 +94,100 @@ def cmd_track(args) -> int:
     return 0
 
 
+def run_recover(video, scene, method="all", fit_friction=False, refine="fit", progress=None) -> dict:
+    """Track a video and recover v0 and w0: the JSON object of CONVENTIONS.md."""
+    import time
+
+    from recover.api import recover_track
+    from track.tracker import TrackerConfig
+    from track.video import track_video
+
+    clock = time.perf_counter()
+    tr = track_video(video, scene, TrackerConfig(refine=refine), progress=progress)
+    t_track = time.perf_counter() - clock
+    cam = scene.camera
+    centre = cam.to_table([[cam.width / 2, cam.height / 2]])[0]
+    stderr_m = tr.stderr_px / cam.px_per_m(centre)
+    out = recover_track(tr.t, tr.xy, tr.ok, stderr_m, scene.physics, cam.exposure_s, method,
+                        fit_friction)
+    noise = tr.centroid_noise_px
+    result = {"video": Path(video).name,
+              "track": {"frames": int(tr.n_frames), "ok_frames": int(tr.ok.sum()),
+                        "centroid_noise_px": noise if noise == noise else None,
+                        **({"error": tr.error} if tr.error else {})},
+              "methods": out["methods"], "best": out["best"],
+              "timing_s": {"track": t_track, **out["timing_s"]}}
+    return result
+
+
+def format_recover(result: dict, truth=None) -> str:
+    """A readable table of a recover result (and the truth beside it, if known)."""
+    def vec(v, nd=4, fmt="f"):
+        return "null" if v is None else "[" + ", ".join(f"{c:.{nd}{fmt}}" for c in v) + "]"
+
+    lines = [f"{result['video']}: {result['track']['ok_frames']}/{result['track']['frames']} frames "
+             f"tracked, centroid noise "
+             f"{result['track']['centroid_noise_px'] or float('nan'):.4f} px"]
+    lines.append(f"{'method':6} {'status':10} {'v0 (m/s)':>22} {'w0 (rad/s)':>24}  t0 (s)")
+    if truth is not None:
+        lines.append(f"{'truth':6} {'':10} {vec(truth.v0):>22} {vec(truth.w0, 2):>24}  {truth.t0:.4f}")
+    for name, m in result["methods"].items():
+        t0 = m.get("t0")
+        lines.append(f"{name:6} {m['status']:10} {vec(m.get('v0')):>22} {vec(m.get('w0'), 2):>24}  "
+                     + ("null" if t0 is None else f"{t0:.4f}"))
+        if name == "mle" and m.get("stderr", {}).get("v0"):
+            se = m["stderr"]
+            lines.append(f"{'  +/-':6} {m.get('model') or '':10} {vec(se.get('v0'), 1, 'e'):>22} "
+                         f"{vec(se.get('w0'), 1, 'e'):>24}")
+        if m["reason"]:
+            lines.append(f"{'':6} reason: {m['reason']}")
+    lines.append(f"best: {result['best']}; time (s): "
+                 + ", ".join(f"{k} {v:.3f}" for k, v in result["timing_s"].items()))
+    return "\n".join(lines)
+
+
+def cmd_recover(args) -> int:
+    import json
+
+    from pipeline.io import read_scene
+    from track.video import TrackError
+
+    scene = read_scene(args.scene)
+    try:
+        with _progress(None, f"track {Path(args.video).name}") as bar:
+            result = run_recover(args.video, scene, args.method, args.fit_friction, args.refine,
+                                 progress=bar.update)
+    except TrackError as exc:
+        raise InputError(str(exc))
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        print(format_recover(result, scene.truth))
+    if result["track"].get("error"):
+        raise InputError(f"{args.video}: {result['track']['error']}")
+    return 0
+
+
 def cmd_demo(args) -> int:
-    from data_gen import sample_scene
     from pipeline.io import write_scene
     from render import render_video, truth_path, video_length
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    scene = sample_scene(DEMO_SEED, "masse", fps=240.0, noise=3.0, blur=False)
+    scene = demo_scene()
     scene_path, video = out / "demo.json", out / "demo.avi"
     write_scene(scene_path, scene)
     n = video_length(scene)
     with _progress(n, "render demo") as bar:
         render_video(scene, video, progress=bar.update)
     t = scene.truth
-    print(f"demo shot (seed {DEMO_SEED}, masse preset): x0={list(t.x0)} v0={[round(c, 4) for c in t.v0]} m/s "
-          f"w0={[round(c, 3) for c in t.w0]} rad/s, t0={t.t0:.4f} s")
+    print(f"demo shot: a curved shot with side spin that stops on the table: x0={list(t.x0)} m, "
+          f"v0={list(t.v0)} m/s, w0={list(t.w0)} rad/s, t0={t.t0} s")
     print(f"rendered {n} frames to {video}; scene {scene_path}; truth {truth_path(video)}")
-    print("tracking and recovery are not built yet (issues 3 and 4)")
+    with _progress(n, "track demo") as bar:
+        result = run_recover(video, scene, progress=bar.update)
+    print(format_recover(result, scene.truth))
+    print(f"again, with JSON: cuespin recover {video} --scene {scene_path} --json")
     return 0
 
 
@@ -111,8 +198,9 @@ def build_parser() -> argparse.ArgumentParser:
                     "Units are SI; files follow CONVENTIONS.md.")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
 
-    d = sub.add_parser("demo", help="generate, render (and later track and recover) one shot",
-                       description="Generate one curved shot, render it and print what was done.")
+    d = sub.add_parser("demo", help="generate, render, track and recover one shot",
+                       description="Generate one curved (masse) shot, render it to video, track it and "
+                                   "recover v0 and w0 by both methods, printed beside the truth.")
     d.add_argument("--out", default="cuespin-demo", help="folder for the demo's files (default: %(default)s)")
     d.set_defaults(func=cmd_demo)
 
@@ -136,6 +224,23 @@ def build_parser() -> argparse.ArgumentParser:
                    help="sub-pixel refinement: exact disc-model fit (default, at the "
                         "Cramer-Rao bound) or grey-weighted moments (about 2x worse)")
     t.set_defaults(func=cmd_track)
+
+    rc = sub.add_parser("recover", help="track a video and recover v0 and w0 (paper and MLE)",
+                        description="Track VIDEO, then recover the strike (x0, t0), v0 and w0 by the "
+                                    "paper's closed form and by a maximum-likelihood fit of the "
+                                    "forward model to the time-stamped track, with standard errors. "
+                                    "Each method says ok, ambiguous, degenerate or failed, with a "
+                                    "reason. Friction comes from the scene unless --fit-friction.")
+    rc.add_argument("video", help="video file")
+    rc.add_argument("--scene", required=True, help="scene file (JSON) with physics and camera")
+    rc.add_argument("--method", choices=("paper", "mle", "all"), default="all",
+                    help="which recovery to run (default: %(default)s)")
+    rc.add_argument("--json", action="store_true", help="print the JSON object of CONVENTIONS.md")
+    rc.add_argument("--fit-friction", action="store_true",
+                    help="estimate mu_s and mu_r too (maximum likelihood only)")
+    rc.add_argument("--refine", choices=("fit", "moments"), default="fit",
+                    help="tracker refinement (default: %(default)s)")
+    rc.set_defaults(func=cmd_recover)
 
     g = sub.add_parser("generate", help="write a seeded dataset of videos, scene files and truth",
                        description="Sample N shots from SEED and render each: DIR/shot_NNNN.{avi,json,truth.csv}. "

@@ -1,0 +1,185 @@
+"""Both recoveries from one track, as the JSON object of CONVENTIONS.md.
+
+Pure: arrays and dataclasses in, a plain dict out (numbers that could not be
+determined are None, never NaN).  No exception escapes: anything unexpected
+becomes a ``failed`` method with its reason.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from fit.conics import classify_path
+from fit.segment import noise_from_track, segment_track
+from physics.motion import BallParams, Shot
+from physics.parabola import sliding_parabola
+from recover.mle import fit_mle, initial_guess
+from recover.paper import CONSISTENCY_SIGMAS, PaperResult, recover_line, recover_parabola
+
+METHODS = ("paper", "mle", "all")
+
+
+def _num(x):
+    if x is None:
+        return None
+    if isinstance(x, (list, tuple, np.ndarray)):
+        return [_num(v) for v in np.asarray(x, dtype=float).tolist()]
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def track_noise(stderr_m, xy):
+    """Per-frame position noise (m): the tracker's standard errors, or, when it
+    gave none (moments refinement), the spread the track itself shows."""
+    se = np.asarray(stderr_m, dtype=float)
+    if se.ndim == 2:
+        se = np.sqrt(np.mean(se**2, axis=1))
+    if np.isfinite(se).sum() >= max(8, 0.5 * len(se)):
+        fill = np.nanmedian(se)
+        return np.where(np.isfinite(se), se, fill)
+    return np.full(len(xy), noise_from_track(xy))
+
+
+def run_paper(seg, xy, params: BallParams, sigma: float, frame_dt: float) -> PaperResult:
+    """The paper's method on a segmented track: parabola or line by the test of
+    ``fit.conics``, with the status and reason CONVENTIONS.md asks for.
+
+    ``xy`` are the track's points (m) that ``seg`` indexes."""
+    if not seg:
+        return PaperResult("failed", f"the track could not be segmented: {seg.reason}")
+    if not np.isfinite(seg.t1):
+        return PaperResult("degenerate", "sliding had not ended when the track did: x1, and so "
+                           "the paper's method, is not determined", x0=seg.x0)
+    # x1 is itself estimated (to about a frame's travel), so eq. 37 and the line's
+    # forward check are held to that, not to the pixel noise alone.
+    tol = CONSISTENCY_SIGMAS * sigma + np.hypot(*seg.v1) * frame_dt
+    slide_pts = None
+    if seg.t1 > seg.t0 and seg.slide is not None and len(seg.slide) >= 5:
+        slide_pts = seg.slide
+    start = None
+    if slide_pts is not None:
+        x0, t0, v0, w0 = initial_guess(seg, params)
+        try:
+            start = sliding_parabola(x0, v0, w0, params)
+        except ValueError:
+            start = None
+    if slide_pts is not None:
+        shape = classify_path(xy[seg.slide], sigma, start)
+        if shape.curved:
+            res = recover_parabola(shape.parabola.parabola, seg.x0, seg.x1, params, tol)
+            return res
+        why_line = f"sliding path is straight within the noise (curvature test {shape.lr:.1f} < 9.21)"
+    else:
+        why_line = "no sliding seen (rolling from the strike)" if seg.t1 <= seg.t0 else \
+            "sliding too short to fit a parabola (fewer than 5 frames)"
+    if seg.x2 is None:
+        return PaperResult("degenerate", f"{why_line}, and no rest point is in view: the paper's "
+                           "line method needs x2", "line", x0=seg.x0, x1=seg.x1)
+    return recover_line(seg.x0, seg.x1, seg.x2, params, tol)
+
+
+def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0.0,
+                  method: str = "all", fit_friction: bool = False) -> dict:
+    """v0 and w0 from a track, by the paper's method and/or maximum likelihood.
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,)
+        Frame times (s).
+    xy : ndarray, shape (n, 2)
+        Ball centre (m); rows where ``ok`` is False are ignored.
+    ok : ndarray of bool, shape (n,)
+    stderr_m : ndarray, shape (n,) or (n, 2)
+        Per-axis standard error of each centre (m); NaN where unknown.
+    params : BallParams
+    exposure_s : float
+        Exposure (s), for the maximum-likelihood model.
+    method : str
+        ``paper``, ``mle`` or ``all``.
+    fit_friction : bool
+        Estimate mu_s and mu_r in the maximum-likelihood fit.
+
+    Returns
+    -------
+    dict
+        ``{"methods": {...}, "best": ..., "timing_s": {"fit": s, "recover": s}}``
+        with each method's fields as CONVENTIONS.md gives them.
+    """
+    t = np.asarray(t, dtype=float)
+    xy = np.asarray(xy, dtype=float)
+    ok = np.asarray(ok, dtype=bool) & np.all(np.isfinite(xy), axis=1)
+    tt, xx = t[ok], xy[ok]
+    sig = track_noise(np.asarray(stderr_m, dtype=float)[ok], xx) if ok.any() else np.zeros(0)
+    sigma = float(np.median(sig)) if len(sig) else float("nan")
+    frame_dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    clock = time.perf_counter()
+    try:
+        seg = segment_track(tt, xx, 5.0 / 7.0 * params.mu_r * params.g, sigma)
+    except Exception as exc:  # never let a fit crash the answer
+        from fit.segment import Segments
+        seg = Segments(False, f"segmentation failed: {exc.__class__.__name__}: {exc}")
+    t_fit = time.perf_counter() - clock
+    methods = {}
+    clock = time.perf_counter()
+    paper = None
+    if method in METHODS:  # the MLE starts from the paper's answer when it has one
+        try:
+            paper = run_paper(seg, xx, params, sigma, frame_dt)
+        except Exception as exc:
+            paper = PaperResult("failed", f"internal error: {exc.__class__.__name__}: {exc}")
+    if method in ("paper", "all"):
+        methods["paper"] = paper_dict(paper, seg, params)
+    if method in ("mle", "all"):
+        methods["mle"] = mle_dict(_run_mle(tt, xx, sig, params, seg, paper, exposure_s, fit_friction))
+    t_rec = time.perf_counter() - clock
+    best = next((m for m in ("mle", "paper") if methods.get(m, {}).get("status") == "ok"), None)
+    if best is None:
+        best = next(iter(methods)) if methods else None
+    return {"methods": methods, "best": best, "timing_s": {"fit": t_fit, "recover": t_rec},
+            "sigma_m": _num(sigma)}
+
+
+def _run_mle(t, xy, sig, params, seg, paper, exposure_s, fit_friction):
+    from recover.mle import MLEResult
+    if not seg:
+        return MLEResult("failed", f"no starting point: {seg.reason}")
+    try:
+        start = initial_guess(seg, params)
+        if paper is not None and paper.status == "ok":
+            start = (seg.x0, seg.t0, paper.v0, paper.w0)
+        return fit_mle(t, xy, sig, params, start, exposure_s, fit_friction,
+                       sliding_ended=bool(np.isfinite(seg.t1)))
+    except Exception as exc:
+        return MLEResult("failed", f"internal error: {exc.__class__.__name__}: {exc}")
+
+
+def paper_dict(p: PaperResult, seg, params: BallParams) -> dict:
+    """The paper method's JSON fields (CONVENTIONS.md)."""
+    from physics.motion import phases
+    out = {"status": p.status, "reason": p.reason, "trajectory": p.trajectory or None,
+           "v0": _num(p.v0), "w0": _num(p.w0), "x0": _num(p.x0 if p.x0 is not None else getattr(seg, "x0", None)),
+           "t0": _num(seg.t0) if seg else None, "x1": None, "t1": None, "x2": None, "t2": None,
+           "solutions": [{"v0": _num(s["v0"]), "w0": _num(s["w0"])} for s in p.solutions]}
+    if p.status == "ok" and seg:
+        # Where and when the recovered shot ends sliding and stops (eq. 10-19).
+        ph = phases(Shot(seg.x0, p.v0, p.w0, seg.t0), params)
+        out.update(x1=_num(ph.x1), t1=_num(ph.t1), x2=_num(ph.x2), t2=_num(ph.t2))
+    elif seg:
+        out.update(x1=_num(seg.x1) if np.isfinite(seg.t1) else None, t1=_num(seg.t1),
+                   x2=_num(seg.x2), t2=_num(seg.t2))
+    return out
+
+
+def mle_dict(m) -> dict:
+    """The maximum-likelihood fit's JSON fields (CONVENTIONS.md)."""
+    out = {"status": m.status, "reason": m.reason, "model": m.model or None,
+           "v0": _num(m.v0), "w0": _num(m.w0),
+           "stderr": {k: _num(v) for k, v in m.stderr.items()},
+           "x0": _num(m.x0), "t0": _num(m.t0), "t1": _num(m.t1), "t2": _num(m.t2),
+           "slip_lr": _num(m.slip_lr), "chi2_per_dof": _num(m.chi2 / m.dof) if m.dof else None}
+    if m.mu_s is not None:
+        out.update(mu_s=_num(m.mu_s), mu_r=_num(m.mu_r))
+    return out
