@@ -5,11 +5,12 @@ moved to the vertex, so the constraint is built in.  Each point's residual
 is its signed distance to the curve, from the foot point that solves
 ``2 a^2 x^3 + (1 - 2 a Y) x - X = 0`` in the parabola's frame.
 
-Curved or straight: with the position noise ``sigma`` known, the drop in
-the sum of squared orthogonal distances from the line (2 parameters) to the
-parabola (4 parameters) is chi^2 with 2 degrees of freedom when the path is
-straight; the parabola is kept only above the 1% point (9.21).  Pure
-functions of arrays.
+Curved or straight: an F-test on the sums of squared orthogonal distances
+of the line (2 parameters) and the parabola (4 parameters),
+``F = ((SSE_line - SSE_par) / 2) / (SSE_par / (n - 4))``, against F(2, n - 4)
+at the 1% level; the parabola is kept only above it.  The F form takes the
+noise from the residuals themselves, so it holds when the tracker's stated
+noise is optimistic (lossy codecs).  Pure functions of arrays.
 """
 
 from __future__ import annotations
@@ -18,10 +19,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
+from scipy.stats import f as f_dist
 
 from physics.parabola import Parabola
 
-CURVE_LR_THRESHOLD = 9.21  # chi^2(2), 1%
+CURVE_TEST_LEVEL = 0.01
 
 
 @dataclass(frozen=True)
@@ -59,12 +61,13 @@ class ParabolaFit:
 class PathShape:
     """The decision between parabola and line for a sliding path.
 
-    ``lr`` is ``(SSE_line - SSE_parabola) / sigma^2``; ``curved`` when it
-    exceeds :data:`CURVE_LR_THRESHOLD`.
+    ``F`` is the F statistic and ``p_value`` its upper tail; ``curved`` when
+    ``p_value < CURVE_TEST_LEVEL``.
     """
 
     curved: bool
-    lr: float
+    F: float
+    p_value: float
     line: LineFit
     parabola: ParabolaFit
     sigma: float
@@ -86,13 +89,14 @@ def parabola_distances(par: Parabola, p) -> np.ndarray:
     X, Y = q[..., 0], q[..., 1]
     a = par.a
     x = X.copy()
-    for _ in range(30):  # Newton on the foot-point cubic; monotone for a > 0 near X
-        f = 2 * a * a * x**3 + (1 - 2 * a * Y) * x - X
-        fp = 6 * a * a * x**2 + (1 - 2 * a * Y)
-        step = f / np.where(np.abs(fp) > 1e-12, fp, 1e-12)
-        x -= step
-        if np.max(np.abs(step)) < 1e-15:
-            break
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        for _ in range(30):  # Newton on the foot-point cubic from x = X
+            f = 2 * a * a * x**3 + (1 - 2 * a * Y) * x - X
+            fp = 6 * a * a * x**2 + (1 - 2 * a * Y)
+            step = f / np.where(np.abs(fp) > 1e-12, fp, 1e-12)
+            x -= step
+            if not np.all(np.abs(step) >= 1e-15):
+                break
     d = np.hypot(x - X, a * x * x - Y)
     return np.where(Y >= a * X * X, d, -d)
 
@@ -134,20 +138,24 @@ def fit_parabola(p, start: Parabola) -> ParabolaFit:
     return ParabolaFit(True, "", par, parabola_distances(par, p))
 
 
-def classify_path(p, sigma: float, start: Parabola | None) -> PathShape:
-    """Fit line and parabola to a sliding path and choose by the likelihood ratio.
+def classify_path(p, start: Parabola | None) -> PathShape:
+    """Fit line and parabola to a sliding path and choose by the F-test.
 
     Parameters
     ----------
     p : ndarray, shape (n, 2)
         Sliding-path points (m).
-    sigma : float
-        Per-axis position noise (m).
     start : Parabola or None
         Starting parabola; None (no curvature seen at all) means straight.
     """
+    p = np.asarray(p, dtype=float)
     line = fit_line(p)
     par = fit_parabola(p, start) if start is not None else ParabolaFit(False, "no curvature")
-    lr = (line.sse - par.sse) / sigma**2 if par else 0.0
-    return PathShape(curved=bool(par) and lr > CURVE_LR_THRESHOLD, lr=float(lr), line=line,
-                     parabola=par, sigma=float(sigma))
+    n = len(p)
+    if not par or n <= 5 or not np.isfinite(par.sse):
+        return PathShape(False, 0.0, 1.0, line, par, float(np.std(line.residuals)))
+    F = max(line.sse - par.sse, 0.0) / 2.0 / max(par.sse / (n - 4), 1e-300)
+    pval = float(f_dist.sf(F, 2, n - 4))
+    sigma = float(np.sqrt(par.sse / (n - 4)))
+    return PathShape(curved=pval < CURVE_TEST_LEVEL, F=float(F), p_value=pval, line=line,
+                     parabola=par, sigma=sigma)

@@ -21,15 +21,15 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import minimize, minimize_scalar
+from scipy.stats import f as f_dist
 
 # Consecutive end frames within this many sigma of the final position are at rest.
 REST_SIGMAS = 5.0
 MIN_REST_FRAMES = 5
 # Frames of motion needed before any fit is attempted.
 MIN_MOVING_FRAMES = 6
-# chi^2(3) at the 1% level: the sliding phase must beat rolling-from-the-strike
-# by this much (in units of the position noise variance) to be believed.
-SLIDING_LR_THRESHOLD = 11.34
+# A sliding phase must beat rolling-from-the-strike by an F-test at this level.
+SLIDING_TEST_LEVEL = 0.01
 
 
 @dataclass(frozen=True)
@@ -37,8 +37,8 @@ class Segments:
     """Phases found in a track; falsy when it could not be segmented.
 
     Times in s, positions in m, velocities in m/s, accelerations in m/s^2.
-    ``sliding_lr`` is the likelihood-ratio statistic for a sliding phase
-    against rolling from the strike (``t1 == t0`` when below the threshold).
+    ``sliding_p`` is the F-test's p-value for "no sliding phase" (rolling
+    from the strike); ``t1 == t0`` when it is not below the test level.
     ``t2``/``x2`` are None when no rest is in view; ``t1`` is ``inf`` (and
     ``x1``, ``v1`` extrapolated to the last frame) when the ball was still
     sliding when the track ended.  ``slide`` and ``roll``
@@ -63,7 +63,7 @@ class Segments:
     sigma: float = float("nan")
     t_last: float = float("nan")
     residuals: np.ndarray | None = None
-    sliding_lr: float = float("nan")
+    sliding_p: float = float("nan")
 
     def __bool__(self):
         return self.ok
@@ -207,14 +207,17 @@ def segment_track(t, xy, decel: float, sigma: float | None = None) -> Segments:
     # A breakpoint within two frames of the track's end is not observed.
     if t1 > tf[-1] - 2 * dt:
         t1 = beyond
-    # Is a sliding phase seen at all?  Likelihood-ratio test of "rolling from
-    # the strike" (case 4) against the fit with sliding, which adds a_s and
-    # t1: chi^2 with 3 degrees of freedom, at the 1% level.  Without it, a
-    # huge a_s over a sliver of time fits noise and trades off against v0.
+    # Is a sliding phase seen at all?  F-test of "rolling from the strike"
+    # (case 4) against the fit with sliding, which adds a_s and t1 (3
+    # parameters), at the 1% level, with the noise from the residuals.
+    # Without it, a huge a_s over a sliver of time fits noise and trades off
+    # against v0.
     r = minimize_scalar(lambda a: cost((a, a)), bounds=(t0 - 3 * dt, t0 + 3 * dt),
                         method="bounded", options={"xatol": 1e-3 * dt})
-    lr = (r.fun - best.fun) / sigma**2
-    rolling_from_strike = lr < SLIDING_LR_THRESHOLD
+    dof_full = max(2 * len(tf) - 9, 1)
+    F = max(r.fun - best.fun, 0.0) / 3.0 / max(best.fun / dof_full, 1e-300)
+    lr = float(f_dist.sf(F, 3, dof_full))  # p-value of "no sliding"
+    rolling_from_strike = lr >= SLIDING_TEST_LEVEL
     if rolling_from_strike:
         t0 = t1 = float(r.x)
     sse, coef, res = _solve(tf, xf, t0, t1, decel)
@@ -245,4 +248,4 @@ def segment_track(t, xy, decel: float, sigma: float | None = None) -> Segments:
     return Segments(True, "", t0=t0, x0=x0, t1=t1, x1=x1, v0=v0, v1=v1, a_slide=a_s, a_roll=a_r,
                     t2=t2, x2=x2, slide=slide, roll=roll,
                     sigma=float(np.sqrt(sse / dof)), t_last=float(t[k_end - 1]), residuals=res,
-                    sliding_lr=float(lr))
+                    sliding_p=lr)

@@ -67,18 +67,20 @@ def run_paper(seg, xy, params: BallParams, sigma: float, frame_dt: float) -> Pap
         except ValueError:
             start = None
     if slide_pts is not None:
-        shape = classify_path(xy[seg.slide], sigma, start)
+        shape = classify_path(xy[seg.slide], start)
         if shape.curved:
             res = recover_parabola(shape.parabola.parabola, seg.x0, seg.x1, params, tol)
             return res
-        why_line = f"sliding path is straight within the noise (curvature test {shape.lr:.1f} < 9.21)"
+        why_line = (f"the sliding path is straight within the noise (F-test for curvature: "
+                    f"p = {shape.p_value:.2g} >= 0.01)")
     else:
         why_line = "no sliding seen (rolling from the strike)" if seg.t1 <= seg.t0 else \
             "sliding too short to fit a parabola (fewer than 5 frames)"
     if seg.x2 is None:
         return PaperResult("degenerate", f"{why_line}, and no rest point is in view: the paper's "
                            "line method needs x2", "line", x0=seg.x0, x1=seg.x1)
-    return recover_line(seg.x0, seg.x1, seg.x2, params, tol)
+    heading = seg.v0 / np.hypot(*seg.v0) if np.hypot(*seg.v0) > 0 else None
+    return recover_line(seg.x0, seg.x1, seg.x2, params, tol, heading)
 
 
 def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0.0,

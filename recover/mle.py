@@ -75,7 +75,9 @@ def _unpack(p, rolling, fit_friction, params: BallParams):
     else:
         w0 = p[5:7]
         i = 7
-    if fit_friction:
+    if fit_friction and rolling:  # no sliding: mu_s leaves no trace in the track
+        params = BallParams(R=params.R, mu_s=params.mu_s, mu_r=float(p[i]), g=params.g)
+    elif fit_friction:
         params = BallParams(R=params.R, mu_s=float(p[i]), mu_r=float(p[i + 1]), g=params.g)
     return Shot(x0=x0, v0=v0, w0=w0, t0=float(t0)), params
 
@@ -97,14 +99,15 @@ def _fit(t, xy, sig, p0, rolling, fit_friction, params, exposure_s):
 
     lo = np.full(len(p0), -np.inf)
     hi = np.full(len(p0), np.inf)
-    if fit_friction:
-        lo[-2:] = [1e-3, 0.0]
-        hi[-2:] = [2.0, 0.5]
     # Scale steps to each parameter: metres, seconds, m/s, rad/s.
     x_scale = np.r_[1e-3, 1e-3, 1e-3, 1e-2, 1e-2]
     if not rolling:
         x_scale = np.r_[x_scale, 1.0, 1.0]
-    if fit_friction:
+    if fit_friction and rolling:
+        lo[-1:], hi[-1:] = [0.0], [0.5]
+        x_scale = np.r_[x_scale, 1e-3]
+    elif fit_friction:
+        lo[-2:], hi[-2:] = [1e-3, 0.0], [2.0, 0.5]
         x_scale = np.r_[x_scale, 1e-2, 1e-3]
     p0 = np.clip(p0, lo + 1e-9, hi - 1e-9) if fit_friction else p0
     return least_squares(resid, p0, bounds=(lo, hi), x_scale=x_scale, method="trf",
@@ -167,9 +170,23 @@ def fit_mle(t, xy, sigma, params: BallParams, start, exposure_s: float = 0.0,
         return MLEResult("failed", f"only {len(t)} usable frames in the track")
     x0, t0, v0, w0 = (np.asarray(s, dtype=float) for s in start)
     extra = [params.mu_s, params.mu_r] if fit_friction else []
+    extra_roll = [params.mu_r] if fit_friction else []
     try:
         full = _fit(t, xy, sig, np.r_[x0, t0, v0, w0, extra], False, fit_friction, params, exposure_s)
-        roll = _fit(t, xy, sig, np.r_[x0, t0, v0, extra], True, fit_friction, params, exposure_s)
+        roll = _fit(t, xy, sig, np.r_[x0, t0, v0, extra_roll], True, fit_friction, params, exposure_s)
+        if full.cost > roll.cost:
+            # Rolling is nested in the full model, so the full fit stopped in a
+            # local minimum: restart it from the rolling answer, nudged along
+            # the segmentation's slip, and keep the better.
+            shot_r, pr_r = _unpack(roll.x, True, fit_friction, params)
+            nudge = 0.05 * np.hypot(*shot_r.v0) / params.R
+            w_start = np.asarray(shot_r.w0) + nudge * (np.asarray(w0) - np.asarray(shot_r.w0)) / \
+                max(np.hypot(*(np.asarray(w0) - np.asarray(shot_r.w0))), 1e-12)
+            fr = [pr_r.mu_s, pr_r.mu_r] if fit_friction else []
+            again = _fit(t, xy, sig, np.r_[roll.x[:5], w_start, fr], False, fit_friction, params,
+                         exposure_s)
+            if again.cost < full.cost:
+                full = again
     except (ValueError, np.linalg.LinAlgError, FloatingPointError) as exc:
         return MLEResult("failed", f"the fit did not run: {exc}")
     chi_full, chi_roll = 2 * full.cost, 2 * roll.cost
@@ -198,14 +215,17 @@ def fit_mle(t, xy, sigma, params: BallParams, start, exposure_s: float = 0.0,
     else:
         stderr["w0"] = se[5:7]
     if fit_friction:
-        stderr["mu_s"], stderr["mu_r"] = float(se[-2]), float(se[-1])
+        stderr["mu_r"] = float(se[-1])
+        if not rolling:
+            stderr["mu_s"] = float(se[-2])
     resid = res.fun.reshape(-1, 2)
     names = ("x0x", "x0y", "t0", "v0x", "v0y") + (() if rolling else ("w0x", "w0y")) + \
-        (("mu_s", "mu_r") if fit_friction else ())
+        ((("mu_r",) if rolling else ("mu_s", "mu_r")) if fit_friction else ())
     out = dict(v0=shot_vec(shot.v0), w0=shot_vec(shot.w0), x0=shot_vec(shot.x0), t0=shot.t0,
                t1=ph.t1, t2=ph.t2 if np.isfinite(ph.t2) else None,
                x2=ph.x2 if np.isfinite(ph.t2) else None,
-               mu_s=pr.mu_s if fit_friction else None, mu_r=pr.mu_r if fit_friction else None,
+               mu_s=pr.mu_s if fit_friction and not rolling else None,
+               mu_r=pr.mu_r if fit_friction else None,
                stderr=stderr, model="rolling" if rolling else "full", slip_lr=float(lr),
                chi2=float(chi2), dof=int(dof), residuals=resid, cov=cov, names=names)
     t_end = float(t[-1])

@@ -119,14 +119,19 @@ def recover_parabola(par: Parabola, x0, x1, params: BallParams, tol: float) -> P
     return PaperResult("ok", "", "parabola", v0=s["v0"], w0=s["w0"], x0=x0, x1=x1, u0=s["u0"])
 
 
-def recover_line(x0, x1, x2, params: BallParams, tol: float) -> PaperResult:
+def recover_line(x0, x1, x2, params: BallParams, tol: float, heading=None) -> PaperResult:
     """Section 2.2: v0 and w0 of a straight shot from ``x0``, ``x1``, ``x2``.
 
     Both hypotheses of eq. 43 are tried, along both orientations of the line
     (``i_hat`` along ``x2 - x0`` as the paper says, and against it, which is
-    where v0 points when the ball reverses while sliding, case 1); each
-    solution is kept when it meets its own hypothesis and, forward through
-    eq. 24 and 27, reproduces the measured ``x1`` and ``x2`` within ``tol``.
+    where v0 points when the ball reverses while sliding and comes to rest
+    behind its start, case 1); each solution is kept when it meets its own
+    hypothesis and, forward through eq. 24 and 27, reproduces the measured
+    ``x1`` and ``x2`` within ``tol``.  ``heading``, the direction the ball
+    was seen to leave ``x0`` in (the video shows the order of the path, if
+    not its timing), rejects solutions whose ``v0`` points the other way;
+    without it, reversed-orientation solutions can reproduce the same three
+    points (status ``ambiguous``).
     """
     x0, x1, x2 = (np.asarray(v, float) for v in (x0, x1, x2))
     R, mu_s, mu_r, g = params.R, params.mu_s, params.mu_r, params.g
@@ -156,6 +161,8 @@ def recover_line(x0, x1, x2, params: BallParams, tol: float) -> PaperResult:
             c = 5 * v0 + 2 * R * w0
             p2 = p1 + abs(c) * c / (70 * mu_r * g)
             if abs(p1 - s1) > tol or abs(p2 - s2) > tol:
+                continue
+            if heading is not None and v0 > 0 and float(i_hat @ heading) < 0:
                 continue
             sol = {"v0": v0 * i_hat, "w0": w0 * j_hat}
             if not any(np.hypot(*(sol["v0"] - o["v0"])) < 1e-9 and np.hypot(*(sol["w0"] - o["w0"])) < 1e-6
