@@ -177,9 +177,11 @@ def segment_track(t, xy, decel: float, sigma: float | None = None) -> Segments:
     lo = max(k_move - 8, 0)
     tf, xf = t[lo:k_end + (1 if rest_k is not None else 0)], xy[lo:k_end + (1 if rest_k is not None else 0)]
     dt = float(np.median(np.diff(t)))
-    t0_guess = t[k_move] - dt
-    if k_move == 0:  # no rest in view before the motion: t0 is extrapolated
-        t0_guess = t[0] - dt
+    # Extrapolate the first two moving frames' distances back to zero.
+    d1, d2 = (np.hypot(*(xy[k] - start)) for k in (k_move, min(k_move + 1, len(t) - 1)))
+    speed = (d2 - d1) / dt if d2 > d1 else 0.0
+    back = d1 / speed if speed > 0 else dt
+    t0_guess = t[k_move] - float(np.clip(back, 0.0, dt if k_move > 0 else 10 * dt))
 
     def cost(p):
         t0, t1 = p
@@ -190,20 +192,36 @@ def segment_track(t, xy, decel: float, sigma: float | None = None) -> Segments:
     # A t1 past the last frame means "still sliding when the track ends".
     beyond = tf[-1] + dt
     # Coarse scan of t1 at the t0 guess, then joint refinement.
-    cands = tf[(tf > t0_guess)]
-    cands = np.concatenate([[t0_guess], cands[:: max(1, len(cands) // 150)], [beyond]])
+    # Sliding is usually short (0.05-0.3 s): every frame of the first 0.4 s
+    # after the strike is a candidate, sparser beyond.
+    after = tf[tf > t0_guess]
+    near = after[after < t0_guess + 0.4]
+    far = after[after >= t0_guess + 0.4]
+    cands = np.concatenate([[t0_guess], near[:: max(1, len(near) // 100)],
+                            far[:: max(1, len(far) // 40)], [beyond]])
     costs = [cost((t0_guess, c)) for c in cands]
     t1_guess = float(cands[int(np.argmin(costs))])
-    best = None
-    for start_t0 in (t0_guess, t0_guess + 0.5 * dt):
-        r = minimize(cost, [start_t0, max(t1_guess, start_t0)], method="Nelder-Mead",
-                     options={"xatol": 1e-3 * dt, "fatol": 1e-3 * sigma**2, "maxiter": 300,
-                              "initial_simplex": [[start_t0, t1_guess],
-                                                  [start_t0 + 0.3 * dt, t1_guess],
-                                                  [start_t0, t1_guess + 2 * dt]]})
-        if best is None or r.fun < best.fun:
-            best = r
+    # A hundredth of a frame is plenty: the maximum-likelihood fit refines
+    # both times with the full model.
+    best = minimize(cost, [t0_guess, max(t1_guess, t0_guess)], method="Nelder-Mead",
+                    options={"xatol": 1e-2 * dt, "fatol": 1e-2 * sigma**2, "maxiter": 200,
+                             "initial_simplex": [[t0_guess, t1_guess],
+                                                 [t0_guess + 0.5 * dt, t1_guess],
+                                                 [t0_guess, t1_guess + 2 * dt]]})
     t0, t1 = (float(v) for v in best.x)
+    # Nelder-Mead stalls on the kinks of this profile; polish each time in
+    # turn by a bounded 1-D search.
+    for _ in range(2):
+        t0 = float(minimize_scalar(lambda a: cost((a, t1)), bounds=(t0 - dt, min(t0 + dt, t1)),
+                                   method="bounded", options={"xatol": 1e-3 * dt}).x)
+        r1 = minimize_scalar(lambda b: cost((t0, b)), bounds=(t0, min(t1 + dt, beyond)),
+                             method="bounded", options={"xatol": 1e-3 * dt})
+        if t1 > t0 + dt:
+            r1b = minimize_scalar(lambda b: cost((t0, b)), bounds=(max(t1 - dt, t0), t1),
+                                  method="bounded", options={"xatol": 1e-3 * dt})
+            r1 = min(r1, r1b, key=lambda r: r.fun)
+        t1 = float(r1.x)
+    best = type(best)(x=np.array([t0, t1]), fun=cost((t0, t1)))
     # A breakpoint within two frames of the track's end is not observed.
     if t1 > tf[-1] - 2 * dt:
         t1 = beyond
@@ -213,7 +231,7 @@ def segment_track(t, xy, decel: float, sigma: float | None = None) -> Segments:
     # Without it, a huge a_s over a sliver of time fits noise and trades off
     # against v0.
     r = minimize_scalar(lambda a: cost((a, a)), bounds=(t0 - 3 * dt, t0 + 3 * dt),
-                        method="bounded", options={"xatol": 1e-3 * dt})
+                        method="bounded", options={"xatol": 1e-2 * dt})
     dof_full = max(2 * len(tf) - 9, 1)
     F = max(r.fun - best.fun, 0.0) / 3.0 / max(best.fun / dof_full, 1e-300)
     lr = float(f_dist.sf(F, 3, dof_full))  # p-value of "no sliding"

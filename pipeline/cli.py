@@ -94,8 +94,10 @@ def cmd_track(args) -> int:
     return 0
 
 
-def run_recover(video, scene, method="all", fit_friction=False, refine="fit", progress=None) -> dict:
-    """Track a video and recover v0 and w0: the JSON object of CONVENTIONS.md."""
+def run_recover(video, scene, method="all", fit_friction=False, refine="fit", progress=None,
+                return_track=False):
+    """Track a video and recover v0 and w0: the JSON object of CONVENTIONS.md
+    (and the TrackResult too, with ``return_track``)."""
     import time
 
     from recover.api import recover_track
@@ -109,7 +111,7 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
     centre = cam.to_table([[cam.width / 2, cam.height / 2]])[0]
     stderr_m = tr.stderr_px / cam.px_per_m(centre)
     out = recover_track(tr.t, tr.xy, tr.ok, stderr_m, scene.physics, cam.exposure_s, method,
-                        fit_friction)
+                        fit_friction, lossless=tr.lossless)
     noise = tr.centroid_noise_px
     result = {"video": Path(video).name,
               "track": {"frames": int(tr.n_frames), "ok_frames": int(tr.ok.sum()),
@@ -117,7 +119,7 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
                         **({"error": tr.error} if tr.error else {})},
               "methods": out["methods"], "best": out["best"],
               "timing_s": {"track": t_track, **out["timing_s"]}}
-    return result
+    return (result, tr) if return_track else result
 
 
 def format_recover(result: dict, truth=None) -> str:

@@ -27,8 +27,8 @@ from physics.motion import BallParams, Shot, phases, positions, z_cross
 # chi^2(2) at the 1% level: free slip must beat rolling-from-the-strike by this.
 SLIP_LR_THRESHOLD = 9.21
 # Gauss-Legendre nodes for averaging the model over the exposure: exact for
-# the polynomial motion within a phase.
-_GL_T, _GL_W = np.polynomial.legendre.leggauss(5)
+# the (quadratic) motion within a phase.
+_GL_T, _GL_W = np.polynomial.legendre.leggauss(3)
 
 
 @dataclass(frozen=True)
@@ -109,9 +109,12 @@ def _fit(t, xy, sig, p0, rolling, fit_friction, params, exposure_s):
     elif fit_friction:
         lo[-2:], hi[-2:] = [1e-3, 0.0], [2.0, 0.5]
         x_scale = np.r_[x_scale, 1e-2, 1e-3]
-    p0 = np.clip(p0, lo + 1e-9, hi - 1e-9) if fit_friction else p0
-    return least_squares(resid, p0, bounds=(lo, hi), x_scale=x_scale, method="trf",
-                         diff_step=1e-7, xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=400)
+    if fit_friction:  # bounded: trust-region reflective
+        p0 = np.clip(p0, lo + 1e-9, hi - 1e-9)
+        return least_squares(resid, p0, bounds=(lo, hi), x_scale=x_scale, method="trf",
+                             diff_step=1e-7, xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=400)
+    return least_squares(resid, p0, x_scale=x_scale, method="lm", diff_step=1e-7,
+                         xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=400)
 
 
 def initial_guess(seg, params: BallParams):
@@ -131,7 +134,8 @@ def initial_guess(seg, params: BallParams):
 
 
 def fit_mle(t, xy, sigma, params: BallParams, start, exposure_s: float = 0.0,
-            fit_friction: bool = False, sliding_ended: bool = True) -> MLEResult:
+            fit_friction: bool = False, sliding_ended: bool = True,
+            sliding_obvious: bool = False) -> MLEResult:
     """Maximum-likelihood estimate of the shot from a track.
 
     Parameters
@@ -155,6 +159,10 @@ def fit_mle(t, xy, sigma, params: BallParams, start, exposure_s: float = 0.0,
         Sliding that outlasts the track leaves the slip's magnitude, so
         ``w0``, undetermined: the fit then has a flat valley along it and
         may stop anywhere in it, even with ``t1`` just inside the track.
+    sliding_obvious : bool
+        The segmentation already rejected rolling from the strike
+        overwhelmingly; the rolling fit (only there to be rejected by the
+        likelihood ratio) is skipped.
 
     Returns
     -------
@@ -173,8 +181,9 @@ def fit_mle(t, xy, sigma, params: BallParams, start, exposure_s: float = 0.0,
     extra_roll = [params.mu_r] if fit_friction else []
     try:
         full = _fit(t, xy, sig, np.r_[x0, t0, v0, w0, extra], False, fit_friction, params, exposure_s)
-        roll = _fit(t, xy, sig, np.r_[x0, t0, v0, extra_roll], True, fit_friction, params, exposure_s)
-        if full.cost > roll.cost:
+        roll = None if sliding_obvious else \
+            _fit(t, xy, sig, np.r_[x0, t0, v0, extra_roll], True, fit_friction, params, exposure_s)
+        if roll is not None and full.cost > roll.cost:
             # Rolling is nested in the full model, so the full fit stopped in a
             # local minimum: restart it from the rolling answer, nudged along
             # the segmentation's slip, and keep the better.
@@ -189,7 +198,8 @@ def fit_mle(t, xy, sigma, params: BallParams, start, exposure_s: float = 0.0,
                 full = again
     except (ValueError, np.linalg.LinAlgError, FloatingPointError) as exc:
         return MLEResult("failed", f"the fit did not run: {exc}")
-    chi_full, chi_roll = 2 * full.cost, 2 * roll.cost
+    chi_full = 2 * full.cost
+    chi_roll = 2 * roll.cost if roll is not None else np.inf
     lr = chi_roll - chi_full
     rolling = lr < SLIP_LR_THRESHOLD
     res = roll if rolling else full

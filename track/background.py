@@ -142,3 +142,41 @@ def learn_background(samples: np.ndarray, radius_px: float) -> Background:
     weak_samples = keep[:, weak].any(axis=1) if weak.any() else np.zeros(n, bool)
     return Background(image=image, sigma=sigma, polarity=polarity, contrast=contrast,
                       n_samples=n, path_pixels=int(len(ys)), weak_samples=weak_samples)
+
+
+class FeltAccumulator:
+    """Running mean of the felt over every tracked frame, the ball masked out.
+
+    The sampled background's error (noise / sqrt(samples)) is the same in
+    every frame, so frames that see the same pixels (the rest before the
+    strike, slow rolling, the final rest) share it as a common bias, which
+    a fit of the whole track would read as signal.  Averaging every frame's
+    felt, hundreds of them, makes that bias negligible.  Cost per frame: one
+    full-frame add and a patch update.
+    """
+
+    def __init__(self, shape):
+        self.total = np.zeros(shape, np.float32)
+        self.masked = np.zeros(shape, np.int32)
+        self.n = 0
+
+    def add(self, frame: np.ndarray, centre, radius: float) -> None:
+        """Add a grey frame whose ball (centre in px, radius in px) is masked out."""
+        cv2.accumulate(frame, self.total)
+        self.n += 1
+        H, W = frame.shape
+        r = int(np.ceil(radius)) + 1
+        u, v = int(round(centre[0])), int(round(centre[1]))
+        u0, v0, u1, v1 = max(u - r, 0), max(v - r, 0), min(u + r + 1, W), min(v + r + 1, H)
+        if u1 <= u0 or v1 <= v0:
+            return
+        yy, xx = np.mgrid[v0:v1, u0:u1]
+        disc = (xx - centre[0]) ** 2 + (yy - centre[1]) ** 2 <= radius * radius
+        self.total[v0:v1, u0:u1] -= np.where(disc, frame[v0:v1, u0:u1], 0).astype(np.float32)
+        self.masked[v0:v1, u0:u1] += disc
+
+    def felt(self, fallback: np.ndarray, min_frames: int = 20) -> np.ndarray:
+        """The mean felt; ``fallback`` where fewer than ``min_frames`` showed it."""
+        count = self.n - self.masked
+        mean = self.total / np.maximum(count, 1)
+        return np.where(count >= min_frames, mean, fallback).astype(np.float32)

@@ -253,3 +253,26 @@ def moments(D: np.ndarray, u0: int, v0: int, c0, radius: float, n_iter: int = 3)
             break
         c = np.array([(wgt * uu).sum() / tot, (wgt * vv).sum() / tot])
     return c
+
+
+def refit_shift(felt_old: np.ndarray, felt_new: np.ndarray, u0: int, v0: int, c, b, G: float,
+                r: float, fit_blur: bool) -> np.ndarray:
+    """Change of a converged disc fit's centre (px) when its felt is replaced.
+
+    One linearised Gauss-Newton step from the old optimum, where the
+    gradient vanished: replacing ``felt`` by ``felt + df`` changes the
+    residual by ``-df (1 - cov)``, so the centre moves by the first two
+    components of ``(J^T J)^-1 J^T (-df (1 - cov))``.  No pixels of the frame
+    are needed.
+    """
+    taus = blur_nodes(np.hypot(*b))
+    _, J = streak_model(np.asarray(c, float), np.asarray(b, float), G, felt_new, r, u0, v0, taus)
+    cols = [0, 1, 2, 3, 4] if fit_blur else [0, 1, 4]
+    cov = J[:, 4]
+    df = (np.asarray(felt_new, np.float64) - felt_old).ravel()
+    Jc = J[:, cols]
+    try:
+        step = np.linalg.solve(Jc.T @ Jc, Jc.T @ (-df * (1.0 - cov)))
+    except np.linalg.LinAlgError:
+        return np.zeros(2)
+    return step[:2]

@@ -84,6 +84,8 @@ class BallTracker:
                           0.25 * background.contrast)
         self.H, self.W = background.image.shape
         self.history: list[tuple[int, np.ndarray]] = []
+        # What each converged disc fit needs to be corrected for a better felt.
+        self.last_fit: tuple | None = None
         self.gone = False
         self.was_partial_edge = False
 
@@ -151,6 +153,7 @@ class BallTracker:
             if status != OK:
                 return Observation(status, nan2, nan2)
             blur = np.zeros(2)
+        self.last_fit = None
         obs = self._refine(frame, loc, blur)
         if obs.status == OK:
             self.history = (self.history + [(k, obs.uv)])[-2:]
@@ -177,6 +180,7 @@ class BallTracker:
             if not f:
                 return Observation(FIT_FAILED, nan2, nan2)
             c, se = f.c, f.stderr
+            self.last_fit = (u0, v0, v1 - v0, u1 - u0, f.c.copy(), f.b.copy(), f.G, bool(fit_blur))
         # The whole disc must lie inside the frame for the centre to be trusted.
         if (c[0] - r < -0.5 or c[1] - r < -0.5 or c[0] + r > self.W - 0.5
                 or c[1] + r > self.H - 0.5):

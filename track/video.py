@@ -22,7 +22,8 @@ import numpy as np
 
 from physics.scene import Scene
 from render.video import quiet_native_stderr
-from track.background import Background, learn_background
+from track.background import Background, FeltAccumulator, learn_background
+from track.model import refit_shift
 from track.tracker import GONE, OK, STATUS_TEXT, BallTracker, TrackerConfig
 
 # Bytes of decoded frames the decoder may run ahead while the background is
@@ -68,6 +69,10 @@ class TrackResult:
         corrupt; the frames before it are still here) or no ball was found.
     seconds : dict
         Wall time of the background model and of the tracking pass (s).
+    lossless : bool
+        The video's codec is lossless.  A lossy codec's error is a function
+        of the image, so frames of a resting ball share it: they are one
+        measurement, not many.
     """
 
     t: np.ndarray
@@ -80,6 +85,7 @@ class TrackResult:
     background: Background
     error: str = ""
     seconds: dict = field(default_factory=dict)
+    lossless: bool = False
 
     @property
     def n_frames(self) -> int:
@@ -95,6 +101,15 @@ class TrackResult:
         """How many frames had each status."""
         vals, counts = np.unique(self.status, return_counts=True)
         return {STATUS_TEXT[int(v)]: int(c) for v, c in zip(vals, counts)}
+
+
+LOSSLESS_FOURCC = {"FFV1", "HFYU", "FFVH", "MPNG", "PNG ", "Y800", "GREY", "RGBA", "I420", "IYUV", "YV12"}
+
+
+def fourcc_of(cap: cv2.VideoCapture) -> str:
+    """The stream's four-character code ('' if unknown)."""
+    code = int(cap.get(cv2.CAP_PROP_FOURCC))
+    return "".join(chr((code >> 8 * i) & 0xFF) for i in range(4)) if code > 0 else ""
 
 
 def open_video(path) -> cv2.VideoCapture:
@@ -217,6 +232,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     cam = scene.camera
     cap = open_video(path)
     n_hint = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+    lossless = fourcc_of(cap).upper() in LOSSLESS_FOURCC
     w = int(cap.get(cv2.CAP_PROP_FRAME_WIDTH))
     h = int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
     if n_hint <= 0 and w == 0:
@@ -245,6 +261,8 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     t_start = time.perf_counter()
     error = ""
     k = 0
+    felt = FeltAccumulator((cam.height, cam.width))
+    fits = []  # (frame index, the fit's state) for the final background correction
     try:
         while True:
             item = q.get()
@@ -258,6 +276,11 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
                 break
             # With nothing moving there is no ball to separate from the felt.
             obs = tracker.step(k, item) if bg.polarity else tracker.nothing()
+            if obs.status == OK:
+                blur_len = np.hypot(*tracker.last_fit[5]) if tracker.last_fit else 0.0
+                felt.add(item, obs.uv, radius_px + 0.5 * blur_len + 1.5)
+                if tracker.last_fit is not None:
+                    fits.append((k, tracker.last_fit))
             uv.append(obs.uv)
             se.append(obs.stderr)
             status.append(obs.status)
@@ -268,7 +291,6 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         _stop_decoder(worker, q, stop, cap)
     if progress is not None and k % 64:
         progress(k % 64)
-    t_track = time.perf_counter() - t_start
     if k == 0:
         raise TrackError(f"{path}: the video has no frames that decode")
     # FFmpeg's frame count is exact for intact intra-coded files; a stream
@@ -276,6 +298,17 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     if not error and n_hint > 0 and k < n_hint - 1:
         error = f"the video ends at frame {k} of {n_hint} (truncated or corrupt)"
     uv = np.array(uv, float).reshape(-1, 2)
+    if fits and felt.n >= 20:
+        # Every tracked frame's felt, averaged: correct each disc fit for it.
+        better = felt.felt(bg.image)
+        for kk, (pu, pv, h, w, c, b, G, fb) in fits:
+            old = bg.image[pv:pv + h, pu:pu + w]
+            new = better[pv:pv + h, pu:pu + w]
+            uv[kk] = c + refit_shift(old, new, pu, pv, c, b, G, radius_px, fb)
+        bg = Background(image=better, sigma=bg.sigma, polarity=bg.polarity, contrast=bg.contrast,
+                        n_samples=bg.n_samples, path_pixels=bg.path_pixels,
+                        weak_samples=bg.weak_samples)
+    t_track = time.perf_counter() - t_start
     status = np.array(status, np.int8)
     ok = status == OK
     if not ok.any():
@@ -287,7 +320,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     return TrackResult(t=cam.frame_times(k), uv=uv, xy=xy, ok=ok, status=status,
                        stderr_px=np.array(se, float).reshape(-1, 2), radius_px=radius_px,
                        background=bg, error=error,
-                       seconds={"background": t_bg, "track": t_track})
+                       seconds={"background": t_bg, "track": t_track}, lossless=lossless)
 
 
 def write_track_csv(path, result: TrackResult) -> None:
