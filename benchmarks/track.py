@@ -27,13 +27,11 @@ _here = os.path.dirname(os.path.abspath(__file__))
 sys.path[:] = [p for p in sys.path if os.path.abspath(p or ".") != _here]
 
 import cv2  # noqa: E402
-import numpy as np  # noqa: E402
 
 from data_gen.sampler import make_scene, sample_shot  # noqa: E402
 from physics import Shot  # noqa: E402
-from render import FrameRenderer, render_video  # noqa: E402
-from track.bound import centroid_crb  # noqa: E402
-from track.tracker import FIT_BLUR_PX, TrackerConfig  # noqa: E402
+from pipeline.measure import tracker_accuracy  # noqa: E402
+from render import render_video  # noqa: E402
 from track.video import open_video, track_video  # noqa: E402
 
 
@@ -103,24 +101,11 @@ def memory(tmp):
 
 
 def accuracy_row(tmp, label, scene, refine):
-    video = Path(tmp) / "acc.avi"
-    truth = render_video(scene, video)
-    res = track_video(video, scene, TrackerConfig(refine=refine))
-    r = FrameRenderer(scene)
-    moving = np.flatnonzero(res.ok & (truth.t > scene.truth.t0 + 0.02))
-    err = res.uv[moving] - truth.uv[moving]
-    rmse = float(np.sqrt(np.mean(err**2)))
-    s = r.settings
-    bounds = []
-    for k in moving[np.linspace(0, len(moving) - 1, 10).astype(int)]:
-        nodes = r._uv_nodes[k]
-        blur_len = np.hypot(*(nodes[-1] - nodes[0])) * (1 + 1 / max(len(nodes) - 1, 1))
-        bounds.append(centroid_crb(nodes, r.radius_px, s["ball_grey"], r.background,
-                                   s["noise_sigma"], blur_len > FIT_BLUR_PX))
-    crb = float(np.sqrt(np.mean(np.square(bounds))))
-    print(f"{label:44} {refine:8} {rmse:9.4f} {crb:9.4f} {rmse / crb:6.2f}  "
+    acc = tracker_accuracy(scene, Path(tmp) / "acc.avi", refine, n_eval=10)
+    res = acc.result
+    print(f"{label:44} {refine:8} {acc.rmse:9.4f} {acc.crb:9.4f} {acc.ratio:6.2f}  "
           f"ok {res.ok.sum()}/{res.n_frames}")
-    return rmse, crb
+    return acc.rmse, acc.crb
 
 
 def accuracy(tmp, quick):

@@ -6,7 +6,6 @@ scene with its truth; nothing touches global random state.
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 

@@ -95,7 +95,7 @@ def cmd_track(args) -> int:
 
 
 def run_recover(video, scene, method="all", fit_friction=False, refine="fit", progress=None,
-                return_track=False):
+                return_track=False, config=None):
     """Track a video and recover v0 and w0: the JSON object of CONVENTIONS.md
     (and the TrackResult too, with ``return_track``)."""
     import time
@@ -105,7 +105,9 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
     from track.video import track_video
 
     clock = time.perf_counter()
-    tr = track_video(video, scene, TrackerConfig(refine=refine), progress=progress)
+    if config is None:
+        config = TrackerConfig(refine=refine)
+    tr = track_video(video, scene, config, progress=progress)
     t_track = time.perf_counter() - clock
     cam = scene.camera
     centre = cam.to_table([[cam.width / 2, cam.height / 2]])[0]
@@ -168,6 +170,25 @@ def cmd_recover(args) -> int:
     if result["track"].get("error"):
         raise InputError(f"{args.video}: {result['track']['error']}")
     return 0
+
+
+def cmd_batch(args) -> int:
+    from pipeline.batch import BatchInputError, expand_inputs, run_batch
+
+    try:
+        videos = expand_inputs(args.inputs)
+        if args.scene is not None and not Path(args.scene).exists():
+            raise InputError(f"scene file not found: {args.scene}")
+        out = Path(args.output)
+        if not out.parent.exists():
+            raise InputError(f"output folder does not exist: {out.parent}")
+        counts = run_batch(videos, out, Path(args.scene) if args.scene else None, args.workers,
+                           args.scheduler)
+    except BatchInputError as exc:
+        raise InputError(str(exc))
+    print(f"{len(videos)} videos: {counts['done']} processed, {counts['skipped']} already in {args.output}, "
+          f"{counts['failed']} failed")
+    return min(counts["failed"], 125)
 
 
 def cmd_demo(args) -> int:
@@ -243,6 +264,21 @@ def build_parser() -> argparse.ArgumentParser:
     rc.add_argument("--refine", choices=("fit", "moments"), default="fit",
                     help="tracker refinement (default: %(default)s)")
     rc.set_defaults(func=cmd_recover)
+
+    b = sub.add_parser("batch", help="recover every video in folders/globs into one CSV (resumable)",
+                       description="Track and recover many videos, one row per video and method in "
+                                   "RESULTS.csv. Each video's scene is <stem>.json beside it unless --scene "
+                                   "is given. Rows are written as videos finish; rerunning with the same "
+                                   "output skips videos already there (by content hash). A video that "
+                                   "cannot be processed becomes a 'failed' row; the exit status is the "
+                                   "number of such videos (0: all processed).")
+    b.add_argument("inputs", nargs="+", metavar="INPUT", help="video files, folders or glob patterns")
+    b.add_argument("-o", "--output", required=True, help="results CSV (appended to and resumed)")
+    b.add_argument("--scene", default=None, help="one scene file for every video")
+    b.add_argument("--workers", type=int, default=None, help="local worker processes (default: all cores)")
+    b.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run on a Dask distributed cluster, e.g. tcp://HOST:8786 (needs cuespin[dask])")
+    b.set_defaults(func=cmd_batch)
 
     g = sub.add_parser("generate", help="write a seeded dataset of videos, scene files and truth",
                        description="Sample N shots from SEED and render each: DIR/shot_NNNN.{avi,json,truth.csv}. "

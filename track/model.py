@@ -276,3 +276,26 @@ def refit_shift(felt_old: np.ndarray, felt_new: np.ndarray, u0: int, v0: int, c,
     except np.linalg.LinAlgError:
         return np.zeros(2)
     return step[:2]
+
+
+def streak_from_moments(D: np.ndarray, u0: int, v0: int, c, radius: float) -> np.ndarray:
+    """Blur vector (px) of a streaked ball from its image's second moments.
+
+    A disc of radius ``r`` smeared over a segment of length ``L`` has
+    variance ``r^2/4 + L^2/12`` along the segment and ``r^2/4`` across it,
+    so ``L = sqrt(12 (var_major - var_minor))`` along the major axis.  Used
+    when no velocity predicts the blur (just after the strike, or after the
+    ball was lost).  The sign of the vector is arbitrary (a streak has none).
+    """
+    h, w = D.shape
+    uu = np.arange(u0, u0 + w, dtype=float)[None, :] - c[0]
+    vv = np.arange(v0, v0 + h, dtype=float)[:, None] - c[1]
+    wgt = np.clip(D, 0, None)
+    tot = wgt.sum()
+    if tot <= 0:
+        return np.zeros(2)
+    cov = np.array([[(wgt * uu * uu).sum(), (wgt * uu * vv).sum()],
+                    [(wgt * uu * vv).sum(), (wgt * vv * vv).sum()]]) / tot
+    vals, vecs = np.linalg.eigh(cov)
+    length = np.sqrt(max(12.0 * (vals[1] - vals[0]), 0.0))
+    return length * vecs[:, 1]

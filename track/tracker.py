@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 
 from track.background import DETECT_SIGMAS, Background, box_size
-from track.model import fit_disc, moments
+from track.model import fit_disc, moments, streak_from_moments
 
 OK, NO_BALL, PARTIAL, TWO_BLOBS, GONE, FIT_FAILED = 0, 1, 2, 3, 4, 5
 STATUS_TEXT = {OK: "ok", NO_BALL: "no ball", PARTIAL: "ball partly out of the frame",
@@ -39,11 +39,16 @@ class TrackerConfig:
         Frames sampled over the video for the background model.
     search_margin_px : float
         Extra search radius around the predicted position (px).
+    threaded : bool
+        Decode on a second thread, overlapping decoding with background
+        learning and tracking.  Batches run one single-threaded process per
+        core instead.
     """
 
     refine: str = "fit"
     n_background: int = 15
     search_margin_px: float = 6.0
+    threaded: bool = True
 
 
 @dataclass
@@ -152,17 +157,36 @@ class BallTracker:
                 return Observation(status, nan2, nan2)
             if status != OK:
                 return Observation(status, nan2, nan2)
-            blur = np.zeros(2)
+            blur = None  # no velocity to predict it: measured from the image
         self.last_fit = None
         obs = self._refine(frame, loc, blur)
         if obs.status == OK:
             self.history = (self.history + [(k, obs.uv)])[-2:]
         return obs
 
+    def _max_blur_px(self, frame, loc) -> float:
+        """Longest streak (px) the exposure allows, from the blob's extent."""
+        if self.exposure_frames <= 0:
+            return 0.0
+        k = 4 * int(self.r) + 1
+        u0, v0 = max(int(loc[0]) - k, 0), max(int(loc[1]) - k, 0)
+        roi = self.pol * (frame[v0:int(loc[1]) + k, u0:int(loc[0]) + k].astype(np.float32)
+                          - self.bg.image[v0:int(loc[1]) + k, u0:int(loc[0]) + k])
+        on = roi > 0.5 * max(self.bg.contrast, 1.0) * 0.5
+        if not on.any():
+            return 0.0
+        ys, xs = np.nonzero(on)
+        return float(max(xs.max() - xs.min(), ys.max() - ys.min()) - 2 * self.r + 2) if len(xs) else 0.0
+
     def _refine(self, frame, loc, blur) -> Observation:
         r = self.r
         nan2 = np.full(2, np.nan)
-        half = int(np.ceil(r + 0.5 * np.hypot(*blur) + 3))
+        unknown_blur = blur is None
+        if unknown_blur:  # size the patch for the longest blur the exposure allows
+            blur = np.zeros(2)
+            half = int(np.ceil(r + 3)) + int(np.ceil(self._max_blur_px(frame, loc)))
+        else:
+            half = int(np.ceil(r + 0.5 * np.hypot(*blur) + 3))
         u0, v0 = int(round(loc[0])) - half, int(round(loc[1])) - half
         u1, v1 = u0 + 2 * half + 1, v0 + 2 * half + 1
         if u0 < 0 or v0 < 0 or u1 > self.W or v1 > self.H:
@@ -170,13 +194,21 @@ class BallTracker:
             return Observation(PARTIAL, nan2, nan2)
         patch = frame[v0:v1, u0:u1].astype(np.float32)
         felt = self.bg.image[v0:v1, u0:u1]
-        c = moments(self.pol * (patch - felt), u0, v0, loc, r + 2 + 0.5 * np.hypot(*blur))
+        D = self.pol * (patch - felt)
+        c = moments(D, u0, v0, loc, half - 1 if unknown_blur else r + 2 + 0.5 * np.hypot(*blur))
+        if unknown_blur and self.exposure_frames > 0:
+            blur = streak_from_moments(D, u0, v0, c, r)
         if self.cfg.refine == "moments":
             se = np.full(2, np.nan)
         else:
             fit_blur = np.hypot(*blur) > FIT_BLUR_PX
             G0 = float(felt.mean()) + self.pol * max(self.bg.contrast, 1.0)
             f = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur)
+            if not f and not fit_blur and self.exposure_frames > 0:
+                # A streak the prediction missed (the strike, a sudden turn).
+                blur = streak_from_moments(D, u0, v0, c, r)
+                fit_blur = np.hypot(*blur) > FIT_BLUR_PX
+                f = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur)
             if not f:
                 return Observation(FIT_FAILED, nan2, nan2)
             c, se = f.c, f.stderr

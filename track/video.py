@@ -245,16 +245,19 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     center = cam.to_table([[cam.width / 2, cam.height / 2]])[0]
     radius_px = scene.physics.R * cam.px_per_m(center)
 
-    q: queue.Queue = queue.Queue(maxsize=max(16, BUFFER_BYTES // (w * h)))
+    q: queue.Queue = queue.Queue(maxsize=max(16, BUFFER_BYTES // (w * h)) if config.threaded else 1)
     stop = threading.Event()
     worker = threading.Thread(target=_decode, args=(cap, q, stop), daemon=True)
-    worker.start()
+    if config.threaded:
+        worker.start()
     t_start = time.perf_counter()
     try:
         bg = learn_video_background(path, max(n_hint, 1), radius_px, config.n_background)
     except BaseException:
         _stop_decoder(worker, q, stop, cap)
         raise
+    if not config.threaded:
+        worker.start()  # a one-frame queue: decoding waits on tracking
     t_bg = time.perf_counter() - t_start
     tracker = BallTracker(bg, radius_px, cam.exposure_s * cam.fps, config)
     uv, se, status = [], [], []
