@@ -122,7 +122,8 @@ def fit_parabola(p, start: Parabola) -> ParabolaFit:
         return ParabolaFit(False, "no curvature to start from")
 
     def build(q):
-        return Parabola(a=float(np.exp(q[0])), theta=float(q[1]), vertex=np.array(q[2:4]))
+        # log a is unbounded while the fit explores; keep exp finite.
+        return Parabola(a=float(np.exp(np.clip(q[0], -60.0, 60.0))), theta=float(q[1]), vertex=np.array(q[2:4]))
 
     def resid(q):
         return parabola_distances(build(q), p)

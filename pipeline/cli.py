@@ -191,6 +191,17 @@ def cmd_batch(args) -> int:
     return min(counts["failed"], 125)
 
 
+def cmd_experiment(args) -> int:
+    from pipeline.experiments import run_experiment
+
+    if args.n < 1:
+        raise InputError("--n must be at least 1")
+    path = run_experiment(args.name, Path(args.out), args.n, args.seed, args.workers, args.quick)
+    charts = sorted(p.name for p in Path(args.out).glob("*.png"))
+    print(f"wrote {path} and {', '.join(charts)} in {args.out}")
+    return 0
+
+
 def cmd_demo(args) -> int:
     from pipeline.io import write_scene
     from render import render_video, truth_path, video_length
@@ -279,6 +290,20 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run on a Dask distributed cluster, e.g. tcp://HOST:8786 (needs cuespin[dask])")
     b.set_defaults(func=cmd_batch)
+
+    e = sub.add_parser("experiment", help="accuracy against noise/speed, failure maps: CSV + PNG charts",
+                       description="noise: errors against noise sigma, frame rate, resolution and codec, "
+                                   "with the Cramer-Rao bound. speed-accuracy: time per video against "
+                                   "error, Pareto front marked. stability: error and failure rate over "
+                                   "spin direction and magnitude. Writes OUT/trials.csv and OUT/*.png.")
+    from pipeline.experiments import EXPERIMENTS
+    e.add_argument("name", choices=EXPERIMENTS, help="which experiment")
+    e.add_argument("--out", required=True, help="output folder")
+    e.add_argument("--n", type=int, default=4, help="shots per setting (default: %(default)s)")
+    e.add_argument("--seed", type=int, default=0, help="seed (default: %(default)s)")
+    e.add_argument("--workers", type=int, default=None, help="worker processes (default: all cores)")
+    e.add_argument("--quick", action="store_true", help="a small grid, for a smoke test")
+    e.set_defaults(func=cmd_experiment)
 
     g = sub.add_parser("generate", help="write a seeded dataset of videos, scene files and truth",
                        description="Sample N shots from SEED and render each: DIR/shot_NNNN.{avi,json,truth.csv}. "

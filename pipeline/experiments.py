@@ -1,0 +1,328 @@
+"""Experiments: accuracy against noise and against speed, and where methods break.
+
+Each experiment renders, tracks and recovers many scenes (in worker
+processes), writes every trial to ``trials.csv`` and draws PNG charts:
+
+* ``noise``: errors of v0 and w0 for each method against noise sigma, frame
+  rate, pixels per metre and codec (one factor at a time from a base of
+  sigma 5, 240 fps, 500 px/m, MJPG), with the MLE's Cramer-Rao bound.
+* ``speed-accuracy``: time per video against error for the choices that
+  trade one for the other (tracker refinement, resolution, frame rate,
+  paper vs MLE), Pareto front marked.
+* ``stability``: a map over the spin's direction relative to v0 and its
+  magnitude, colouring each method's error and failure rate; each cell is
+  labelled with its sliding time.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+EXPERIMENTS = ("noise", "speed-accuracy", "stability")
+BASE = {"noise": 5.0, "fps": 240.0, "px_per_m": 500.0, "codec": "MJPG", "refine": "fit"}
+MAX_SECONDS = 3.0
+
+
+def shot_pool(n: int, seed: int):
+    """``n`` shots whose sliding ends in view and which stay on the table for a
+    while after: the shots both methods can in principle answer."""
+    from data_gen.sampler import sample_shot
+    from physics import phases, positions
+    from physics.scene import Table
+
+    rng = np.random.default_rng(seed)
+    table = Table()
+    out = []
+    while len(out) < n:
+        shot, p = sample_shot(rng, "random")
+        speed = np.hypot(*shot.v0)
+        if not 0.4 <= speed <= 2.5:
+            continue
+        ph = phases(shot, p)
+        t = np.linspace(shot.t0, min(ph.t2, ph.t1 + 0.5), 50)
+        if ph.t1 - shot.t0 < 0.03 or not table.contains(positions(shot, p, t), margin=p.R).all():
+            continue
+        out.append((shot, p))
+    return out
+
+
+def trial(spec: dict) -> dict:
+    """Render, track and recover one scene; errors, the MLE bound and timings.
+
+    ``spec`` holds the shot (``x0 v0 w0 t0`` and friction) and the settings
+    (``noise fps px_per_m codec refine``) plus labels copied to the row.
+    """
+    from data_gen.sampler import make_scene
+    from pipeline.cli import run_recover
+    from physics import BallParams, Shot, contact_velocity
+    from recover.api import track_noise
+    from recover.mle import crb_covariance
+    from render import render_video
+    from track.tracker import TrackerConfig
+
+    shot = Shot(spec["x0"], spec["v0"], spec["w0"], spec["t0"])
+    p = BallParams(mu_s=spec["mu_s"], mu_r=spec["mu_r"])
+    scene = make_scene(shot, p, fps=spec["fps"], px_per_m=spec["px_per_m"],
+                       render={"noise_sigma": spec["noise"], "codec": spec["codec"],
+                               "max_duration": MAX_SECONDS, "seed": spec.get("seed", 0)})
+    row = {k: v for k, v in spec.items() if k not in ("x0", "v0", "w0")}
+    fd, name = tempfile.mkstemp(suffix=".avi")
+    os.close(fd)
+    try:
+        render_video(scene, name)
+        clock = time.perf_counter()
+        out, tr = run_recover(name, scene, return_track=True,
+                              config=TrackerConfig(refine=spec["refine"], threaded=False))
+        row["t_total"] = time.perf_counter() - clock
+    except Exception as exc:  # an experiment records failures, it does not stop
+        row.update(status_paper="failed", status_mle="failed", reason=str(exc))
+        return row
+    finally:
+        Path(name).unlink(missing_ok=True)
+    v0, w0 = np.array(shot.v0), np.array(shot.w0)
+    speed = np.hypot(*v0)
+    row.update(t_track=out["timing_s"]["track"], t_fit=out["timing_s"]["fit"],
+               t_recover=out["timing_s"]["recover"], t1=float(spec["t1"]))
+    for m, d in out["methods"].items():
+        row[f"status_{m}"] = d["status"]
+        row[f"err_v0_{m}"] = np.hypot(*(np.array(d["v0"]) - v0)) / speed if d["v0"] else math.nan
+        row[f"err_rw0_{m}"] = p.R * np.hypot(*(np.array(d["w0"]) - w0)) / speed if d["w0"] else math.nan
+    # The bound for this scene, with the tracker's measured noise.
+    cam = scene.camera
+    centre = cam.to_table([[cam.width / 2, cam.height / 2]])[0]
+    se = track_noise(tr.stderr_px[tr.ok] / cam.px_per_m(centre), tr.xy[tr.ok])
+    rolling = np.hypot(*contact_velocity(v0, w0, p.R)) < 1e-9
+    try:
+        cov = crb_covariance(shot, p, tr.t[tr.ok], se, cam.exposure_s, rolling=rolling)
+        row["crb_v0"] = float(np.sqrt(cov[3, 3] + cov[4, 4]) / speed)
+        row["crb_rw0"] = float(p.R * np.sqrt(cov[5, 5] + cov[6, 6]) / speed) if not rolling else row["crb_v0"]
+    except (np.linalg.LinAlgError, IndexError):
+        row["crb_v0"] = row["crb_rw0"] = math.nan
+    return row
+
+
+def _spec(shot, p, i, **settings):
+    from physics import phases
+    s = dict(BASE)
+    s.update(settings)
+    s.update(x0=shot.x0, v0=shot.v0, w0=shot.w0, t0=shot.t0, mu_s=p.mu_s, mu_r=p.mu_r, shot=i,
+             t1=phases(shot, p).t1 - shot.t0, seed=i)
+    return s
+
+
+def specs_noise(n, seed, quick=False):
+    pool = shot_pool(n, seed)
+    factors = {"noise": [0.0, 2.0, 5.0, 10.0, 20.0], "fps": [60.0, 120.0, 240.0, 480.0],
+               "px_per_m": [250.0, 375.0, 500.0], "codec": ["MJPG", "FFV1"]}
+    if quick:
+        factors = {"noise": [2.0, 10.0], "fps": [120.0], "px_per_m": [500.0], "codec": ["FFV1"]}
+    return [_spec(shot, p, i, factor=f, level=str(v), **{f: v})
+            for f, values in factors.items() for v in values for i, (shot, p) in enumerate(pool)]
+
+
+def specs_speed(n, seed, quick=False):
+    pool = shot_pool(n, seed)
+    grid = [(r, s, f) for r in ("fit", "moments") for s in (250.0, 500.0) for f in (120.0, 240.0)]
+    if quick:
+        grid = grid[:2]
+    return [_spec(shot, p, i, refine=r, px_per_m=s, fps=f, config=f"{r}, {s:.0f} px/m, {f:.0f} fps")
+            for r, s, f in grid for i, (shot, p) in enumerate(pool)]
+
+
+def specs_stability(n, seed, quick=False):
+    """Spin direction (relative to v0) x spin magnitude R|w0|/|v0|, n shots per cell."""
+    from physics import BallParams, Shot
+    angles = np.arange(0, 360, 45) if not quick else np.array([0, 90])
+    mags = [0.25, 0.75, 1.5, 2.5] if not quick else [1.5]
+    rng = np.random.default_rng(seed)
+    out = []
+    for a in angles:
+        for k in mags:
+            for j in range(n):
+                head = rng.uniform(-0.3, 0.3)
+                d = np.array([np.cos(head), np.sin(head)])
+                speed = 1.0
+                ang = head + np.radians(a)
+                w0 = k * speed / 0.028575 * np.array([np.cos(ang), np.sin(ang)])
+                shot = Shot((0.45, 0.55 + rng.uniform(-0.1, 0.1)), speed * d, w0, t0=0.2)
+                p = BallParams(mu_s=0.2, mu_r=0.015)
+                out.append(_spec(shot, p, len(out), angle=float(a), mag=float(k)))
+    return out
+
+
+SPECS = {"noise": specs_noise, "speed-accuracy": specs_speed, "stability": specs_stability}
+
+
+def run_experiment(name: str, out: Path, n: int, seed: int, workers: int | None = None,
+                   quick: bool = False, progress=True) -> Path:
+    """Run an experiment: ``out/trials.csv`` and ``out/*.png``; returns the CSV path."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from tqdm import tqdm
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    specs = SPECS[name](n, seed, quick)
+    workers = workers or os.cpu_count() or 1
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        rows = list(tqdm(pool.map(trial, specs), total=len(specs), desc=name, unit="trial",
+                         disable=None if progress else True))
+    cols = sorted({k for r in rows for k in r})
+    path = out / "trials.csv"
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=cols)
+        w.writeheader()
+        w.writerows(rows)
+    CHARTS[name](rows, out)
+    return path
+
+
+# -- charts ---------------------------------------------------------------------------
+
+def _plt():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def _median(rows, key):
+    v = [r.get(key, math.nan) for r in rows]
+    v = [x for x in v if isinstance(x, float) and np.isfinite(x)]
+    return float(np.median(v)) if v else math.nan
+
+
+STYLE = {"paper": dict(color="tab:orange", marker="s"), "mle": dict(color="tab:blue", marker="o"),
+         "crb": dict(color="k", ls="--", marker="")}
+
+
+def chart_noise(rows, out):
+    plt = _plt()
+    factors = ["noise", "fps", "px_per_m", "codec"]
+    xlabels = {"noise": "image noise sigma (grey levels)", "fps": "frame rate (fps)",
+               "px_per_m": "resolution (px per m)", "codec": "codec"}
+    fig, axes = plt.subplots(2, 4, figsize=(15, 6.5), sharey="row")
+    for j, f in enumerate(factors):
+        sub = [r for r in rows if r.get("factor") == f]
+        levels = sorted({r["level"] for r in sub}, key=lambda s: (float(s) if _isnum(s) else s))
+        xs = [float(lv) if _isnum(lv) else i for i, lv in enumerate(levels)]
+        for i, (qty, lab) in enumerate((("v0", "|dv0| / |v0|"), ("rw0", "R |dw0| / |v0|"))):
+            ax = axes[i, j]
+            for m in ("paper", "mle"):
+                ys = [_median([r for r in sub if r["level"] == lv and r.get(f"status_{m}") == "ok"],
+                              f"err_{qty}_{m}") for lv in levels]
+                ax.plot(xs, ys, label=f"{m} (median over ok)", **STYLE[m])
+            ys = [_median([r for r in sub if r["level"] == lv], f"crb_{qty}") for lv in levels]
+            ax.plot(xs, ys, label="Cramer-Rao bound (MLE)", **STYLE["crb"])
+            ax.set_yscale("log")
+            if not _isnum(levels[0]):
+                ax.set_xticks(xs, levels)
+            ax.set_xlabel(xlabels[f])
+            if j == 0:
+                ax.set_ylabel(f"relative error {lab}")
+            ax.grid(True, which="both", alpha=0.3)
+    axes[0, 0].legend(fontsize=8)
+    fig.suptitle("Recovery error against image noise, frame rate, resolution and codec "
+                 "(one factor at a time; base sigma 5, 240 fps, 500 px/m, MJPG)")
+    fig.tight_layout()
+    fig.savefig(out / "noise.png", dpi=80)
+    plt.close(fig)
+
+
+def _isnum(s):
+    try:
+        float(s)
+        return True
+    except (TypeError, ValueError):
+        return False
+
+
+def pareto(points):
+    """Indices of points (time, error) that no other point beats on both."""
+    idx = []
+    for i, (t, e) in enumerate(points):
+        if not any((t2 <= t and e2 <= e) and (t2 < t or e2 < e) for j, (t2, e2) in enumerate(points) if j != i):
+            idx.append(i)
+    return idx
+
+
+def chart_speed(rows, out):
+    plt = _plt()
+    pts, labels = [], []
+    for cfg in sorted({r["config"] for r in rows if "config" in r}):
+        sub = [r for r in rows if r.get("config") == cfg]
+        t = _median(sub, "t_total")
+        for m in ("paper", "mle"):
+            e = _median([r for r in sub if r.get(f"status_{m}") == "ok"], f"err_v0_{m}")
+            if np.isfinite(e):
+                pts.append((t, e))
+                labels.append(f"{m}: {cfg}")
+    front = set(pareto(pts))
+    fig, ax = plt.subplots(figsize=(9, 6))
+    for i, ((t, e), lab) in enumerate(zip(pts, labels)):
+        m = lab.split(":")[0]
+        ax.scatter([t], [e], s=70 if i in front else 30, edgecolor="k" if i in front else "none", **{
+            k: v for k, v in STYLE[m].items() if k != "ls"})
+        ax.annotate(lab.split(": ")[1], (t, e), fontsize=7, xytext=(4, 2), textcoords="offset points")
+    fp = sorted(pts[i] for i in front)
+    ax.plot([p[0] for p in fp], [p[1] for p in fp], "k-", lw=1, label="Pareto front")
+    ax.scatter([], [], label="paper", **{k: v for k, v in STYLE["paper"].items() if k != "ls"})
+    ax.scatter([], [], label="MLE", **{k: v for k, v in STYLE["mle"].items() if k != "ls"})
+    ax.set_yscale("log")
+    ax.set_xlabel("time per video: track + fit + recover (s, median)")
+    ax.set_ylabel("|dv0| / |v0| (median over answers ok)")
+    ax.set_title("Speed against accuracy: tracker refinement, resolution, frame rate, method")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(out / "speed_accuracy.png", dpi=80)
+    plt.close(fig)
+
+
+def chart_stability(rows, out):
+    plt = _plt()
+    angles = sorted({r["angle"] for r in rows})
+    mags = sorted({r["mag"] for r in rows})
+    fig, axes = plt.subplots(2, 2, figsize=(12, 8))
+    for j, m in enumerate(("paper", "mle")):
+        err = np.full((len(mags), len(angles)), np.nan)
+        fail = np.zeros_like(err)
+        t1 = np.zeros_like(err)
+        for a_i, a in enumerate(angles):
+            for k_i, k in enumerate(mags):
+                cell = [r for r in rows if r["angle"] == a and r["mag"] == k]
+                ok = [r for r in cell if r.get(f"status_{m}") == "ok"]
+                err[k_i, a_i] = _median(ok, f"err_rw0_{m}")
+                fail[k_i, a_i] = 1 - len(ok) / max(len(cell), 1)
+                t1[k_i, a_i] = _median(cell, "t1")
+        ax = axes[0, j]
+        im = ax.imshow(np.log10(err), origin="lower", cmap="viridis", aspect="auto", vmin=-5, vmax=0)
+        fig.colorbar(im, ax=ax, label="log10 R|dw0|/|v0| (answers ok)")
+        ax2 = axes[1, j]
+        im2 = ax2.imshow(fail, origin="lower", cmap="Reds", aspect="auto", vmin=0, vmax=1)
+        fig.colorbar(im2, ax=ax2, label="share not ok (degenerate, ambiguous, failed)")
+        for a_i in range(len(angles)):
+            for k_i in range(len(mags)):
+                ax2.text(a_i, k_i, f"{t1[k_i, a_i] * 1000:.0f} ms", ha="center", va="center", fontsize=7)
+        for a in (ax, ax2):
+            a.set_xticks(range(len(angles)), [f"{x:.0f}" for x in angles])
+            a.set_yticks(range(len(mags)), [f"{x:g}" for x in mags])
+            a.set_xlabel("spin direction relative to v0 (deg)")
+            a.set_ylabel("spin magnitude R|w0|/|v0|")
+        ax.set_title(f"{m}: error of w0")
+        ax2.set_title(f"{m}: failure rate (cells: sliding time)")
+    fig.suptitle("Where each method breaks: 90/270 deg = pure top/back spin (straight sliding), "
+                 "0/180 deg = side spin (curved)")
+    fig.tight_layout()
+    fig.savefig(out / "stability.png", dpi=80)
+    plt.close(fig)
+
+
+CHARTS = {"noise": chart_noise, "speed-accuracy": chart_speed, "stability": chart_stability}
