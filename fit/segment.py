@@ -238,6 +238,14 @@ def segment_track(t, xy, decel: float, sigma: float | None = None) -> Segments:
     rolling_from_strike = lr >= SLIDING_TEST_LEVEL
     if rolling_from_strike:
         t0 = t1 = float(r.x)
+    # Is the end of sliding seen?  F-test of "still sliding when the track
+    # ends" against the breakpoint found (one more parameter), at the 1%
+    # level: a kink fitted into noise near the end must not pass for one.
+    if t1 < beyond and not rolling_from_strike:
+        dof_bp = max(2 * len(tf) - 8, 1)
+        F_end = max(cost((t0, beyond)) - cost((t0, t1)), 0.0) / max(cost((t0, t1)) / dof_bp, 1e-300)
+        if f_dist.sf(F_end, 1, dof_bp) >= SLIDING_TEST_LEVEL:
+            t1 = beyond
     sse, coef, res = _solve(tf, xf, t0, t1, decel)
     x0, v0, a_s, a_r = coef
     tau1 = min(t1, beyond) - t0

@@ -112,9 +112,11 @@ def _fit(t, xy, sig, p0, rolling, fit_friction, params, exposure_s):
     if fit_friction:  # bounded: trust-region reflective
         p0 = np.clip(p0, lo + 1e-9, hi - 1e-9)
         return least_squares(resid, p0, bounds=(lo, hi), x_scale=x_scale, method="trf",
-                             diff_step=1e-7, xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=400)
+                             diff_step=1e-7, xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=60)
+    # max_nfev counts residual evaluations, Jacobians included: ~12 iterations,
+    # plenty from the segmentation's start; beyond that the fit is lost anyway.
     return least_squares(resid, p0, x_scale=x_scale, method="lm", diff_step=1e-7,
-                         xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=400)
+                         xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=100)
 
 
 def initial_guess(seg, params: BallParams):
