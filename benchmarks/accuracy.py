@@ -64,7 +64,7 @@ def one_shot(args):
         row[f"{m}_ev"] = np.hypot(*(np.array(d["v0"]) - v0)) / speed if d["v0"] else np.nan
         row[f"{m}_ew"] = p.R * np.hypot(*(np.array(d["w0"]) - w0)) / speed if d["w0"] else np.nan
     mle = out["methods"]["mle"]
-    row["mle_z"] = row["mle_cover"] = row["mle_crb_z"] = np.nan
+    row["mle_z"] = row["mle_cover"] = row["mle_crb_z"] = row["mle_crb_z_meas"] = np.nan
     if mle["status"] == "ok":
         est = np.r_[mle["v0"], mle["w0"]]
         se = np.r_[mle["stderr"]["v0"], mle["stderr"]["w0"]]
@@ -83,6 +83,10 @@ def one_shot(args):
             crb = np.sqrt(np.diag(cov)[[3, 4] if rolling else [3, 4, 5, 6]])
             e = err[:2] if rolling else err
             row["mle_crb_z"] = float(np.sqrt(np.mean((e / crb) ** 2)))
+            # The same bound with the noise the fit's residuals measure
+            # (larger than the tracker states for lossy codecs).
+            scale = np.sqrt(max(mle.get("chi2_per_dof") or 1.0, 1.0))
+            row["mle_crb_z_meas"] = row["mle_crb_z"] / scale
         except np.linalg.LinAlgError:  # the bound is a diagnostic; never lose the row
             pass
     return row
@@ -123,9 +127,11 @@ def main():
               f"{pct([r[f'{m}_ev'] for r in ok], 95):9.2e} {pct([r[f'{m}_ew'] for r in ok], 50):9.2e} "
               f"{pct([r[f'{m}_ew'] for r in ok], 95):9.2e}  {other}")
     ok = [r for r in rows if r["mle_status"] == "ok"]
-    crb_z = [r["mle_crb_z"] for r in ok if np.isfinite(r["mle_crb_z"])]
-    print(f"\nMLE: RMS error / Cramer-Rao bound (v0, w0 components, {len(crb_z)} shots): "
-          f"{np.sqrt(np.mean(np.square(crb_z))):.2f} (median per shot {np.median(crb_z):.2f}; target <= 1.3)")
+    for key, what in (("mle_crb_z", "tracker's stated noise"), ("mle_crb_z_meas", "noise the residuals measure")):
+        crb_z = np.array([r[key] for r in ok if np.isfinite(r[key])])
+        print(f"\nMLE: RMS error / Cramer-Rao bound with the {what} (v0, w0 components, {len(crb_z)} shots): "
+              f"{np.sqrt(np.mean(np.square(crb_z))):.2f}; per shot median {np.median(crb_z):.2f}, "
+              f"p90 {np.percentile(crb_z, 90):.2f} (target <= 1.3)")
     print(f"MLE: RMS error / its own stderr: {np.sqrt(np.nanmean(np.square([r['mle_z'] for r in ok]))):.2f}; "
           f"coverage of 95% intervals: {np.nanmean([r['mle_cover'] for r in ok]):.1%} (target 90-97%)")
     ratio = [(r["t_fit"] + r["t_recover"]) / r["t_decode"] for r in rows]

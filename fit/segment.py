@@ -135,7 +135,8 @@ def noise_from_track(xy):
     return float(np.sqrt(np.mean(mad**2)) / np.sqrt(6.0))
 
 
-def segment_track(t, xy, decel: float, sigma: float | None = None) -> Segments:
+def segment_track(t, xy, decel: float, sigma: float | None = None,
+                  exposure_s: float = 0.0) -> Segments:
     """Find the strike, the end of sliding and the rest in a track.
 
     Parameters
@@ -148,6 +149,10 @@ def segment_track(t, xy, decel: float, sigma: float | None = None) -> Segments:
         Rolling deceleration ``(5/7) mu_r g`` (m/s^2), eq. 16.
     sigma : float, optional
         Per-axis position noise (m); estimated from the track when absent.
+    exposure_s : float
+        Exposure (s).  Frames whose exposure may hold the strike are left out
+        of the fit: a half-still, half-streaking ball has a biased centre,
+        and that bias near the strike would pass for a sliding phase.
 
     Returns
     -------
@@ -177,6 +182,13 @@ def segment_track(t, xy, decel: float, sigma: float | None = None) -> Segments:
     lo = max(k_move - 8, 0)
     tf, xf = t[lo:k_end + (1 if rest_k is not None else 0)], xy[lo:k_end + (1 if rest_k is not None else 0)]
     dt = float(np.median(np.diff(t)))
+    if exposure_s > 0:  # the strike lies between the last still frame and the first moving one
+        t_strike_lo, t_strike_hi = t[k_move] - dt, t[k_move]
+        keep = (tf < t_strike_lo - 0.5 * exposure_s) | (tf > t_strike_hi + 0.5 * exposure_s) | \
+            (tf == t[k_move - 1] if k_move > 0 else False)
+        keep &= ~((tf > t_strike_lo) & (tf < t_strike_hi + 0.5 * exposure_s))
+        if keep.sum() >= MIN_MOVING_FRAMES + 4:
+            tf, xf = tf[keep], xf[keep]
     # Extrapolate the first two moving frames' distances back to zero.
     d1, d2 = (np.hypot(*(xy[k] - start)) for k in (k_move, min(k_move + 1, len(t) - 1)))
     speed = (d2 - d1) / dt if d2 > d1 else 0.0

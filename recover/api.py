@@ -164,7 +164,7 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
     frame_dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
     clock = time.perf_counter()
     try:
-        seg = segment_track(tt, xx, 5.0 / 7.0 * params.mu_r * params.g, sigma)
+        seg = segment_track(tt, xx, 5.0 / 7.0 * params.mu_r * params.g, sigma, exposure_s)
     except Exception as exc:  # never let a fit crash the answer
         from fit.segment import Segments
         seg = Segments(False, f"segmentation failed: {exc.__class__.__name__}: {exc}")
