@@ -85,6 +85,12 @@ def process_video(video: str, scene_path: str, threaded: bool = True) -> list[di
         Let the tracker decode on a second thread; batches of many videos run
         one process per core instead.
     """
+    if not threaded:
+        # One process per core: keep OpenCV and FFmpeg's decoder to one
+        # thread each, or two workers fight over both cores.
+        os.environ.setdefault("OPENCV_FFMPEG_CAPTURE_OPTIONS", "threads;1")
+        import cv2
+        cv2.setNumThreads(1)
     from pipeline.cli import run_recover
     from pipeline.io import InputError, read_scene
     from track.tracker import TrackerConfig
