@@ -36,7 +36,9 @@ class TrackerConfig:
         ``fit`` (exact disc model, reaches the Cramer-Rao bound) or
         ``moments`` (grey-weighted centroid, faster, ~2.3x the bound).
     n_background : int
-        Frames sampled over the video for the background model.
+        Frames sampled over the video for the first background model.  It
+        only has to find the ball: every fit is then corrected with the felt
+        averaged over all tracked frames, so few (costly) seeks suffice.
     search_margin_px : float
         Extra search radius around the predicted position (px).
     threaded : bool
@@ -46,7 +48,7 @@ class TrackerConfig:
     """
 
     refine: str = "fit"
-    n_background: int = 15
+    n_background: int = 9
     search_margin_px: float = 6.0
     threaded: bool = True
 
