@@ -28,8 +28,7 @@ from physics.parabola import Parabola
 
 # A candidate satisfies eq. 37 when its predicted x1 is within this many
 # position-noise sigmas of the measured one (the measured x1 is itself an
-# estimate); the best candidate must also be this much better than the rest
-# to be unique.
+# estimate; callers add a frame's travel); every candidate within it is kept.
 CONSISTENCY_SIGMAS = 6.0
 
 

@@ -36,7 +36,6 @@ RENDER_DEFAULTS = {
     "gradient_angle": 0.0,    # its direction in the image (rad)
     "texture": 0.0,           # static felt texture: standard deviation (grey levels)
     "codec": "MJPG",          # FourCC; FFV1 for lossless
-    "lead_in": None,          # unused when truth.t0 is given: the strike time is the lead-in
     "duration": None,         # seconds of video; default: until the ball stops or leaves, plus tail
     "tail": 0.25,             # seconds after the ball stops
     "max_duration": 20.0,     # cap (s)
@@ -51,7 +50,7 @@ def render_settings(scene: Scene) -> dict:
     return s
 
 
-def _quadrant_area(x, y, r):
+def quadrant_area(x, y, r):
     """Area of the disc ``X^2 + Y^2 <= r^2`` with ``X <= x`` and ``Y <= y``.
 
     Vectorised over ``x`` and ``y``; exact, from the primitive of the chord
@@ -95,7 +94,7 @@ def disc_coverage(cu: float, cv: float, r: float, u0: int, v0: int, w: int, h: i
     """
     xu = np.arange(u0, u0 + w + 1) - 0.5 - cu
     yv = np.arange(v0, v0 + h + 1) - 0.5 - cv
-    G = _quadrant_area(xu[None, :], yv[:, None], r)
+    G = quadrant_area(xu[None, :], yv[:, None], r)
     return G[1:, 1:] - G[1:, :-1] - G[:-1, 1:] + G[:-1, :-1]
 
 

@@ -42,7 +42,7 @@ def test_paper_parabola_exact(preset, seed):
     r = recover_parabola(par, ph.x0, ph.x1, p, EXACT)
     assert r.status == "ok", r.reason
     np.testing.assert_allclose(r.v0, shot.v0, atol=EXACT)
-    np.testing.assert_allclose(r.w0, shot.w0, atol=EXACT * 1e3 / p.R * p.R)  # rad/s: 1e-9 m/s of R w0
+    np.testing.assert_allclose(r.w0, shot.w0, atol=EXACT / p.R)  # rad/s: 1e-9 m/s of R w0
 
 
 @pytest.mark.parametrize("case", range(1, 6))

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from render.draw import _quadrant_area
+from render.draw import quadrant_area
 
 MAX_ITER = 8
 # Gauss-Newton stops when the centre moves less than this (px).  It
@@ -61,7 +61,7 @@ def disc_with_gradient(cu: float, cv: float, r: float, u0: int, v0: int, w: int,
     """
     xe = np.arange(u0, u0 + w + 1) - 0.5 - cu  # column edges, relative
     ye = np.arange(v0, v0 + h + 1) - 0.5 - cv  # row edges, relative
-    G = _quadrant_area(xe[None, :], ye[:, None], r)
+    G = quadrant_area(xe[None, :], ye[:, None], r)
     cov = G[1:, 1:] - G[1:, :-1] - G[:-1, 1:] + G[:-1, :-1]
     vert = _chords(xe[None, :], ye[:-1, None], ye[1:, None], r)   # (h, w+1)
     horz = _chords(ye[:, None], xe[None, :-1], xe[None, 1:], r)   # (h+1, w)

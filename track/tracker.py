@@ -174,7 +174,7 @@ class BallTracker:
         u0, v0 = max(int(loc[0]) - k, 0), max(int(loc[1]) - k, 0)
         roi = self.pol * (frame[v0:int(loc[1]) + k, u0:int(loc[0]) + k].astype(np.float32)
                           - self.bg.image[v0:int(loc[1]) + k, u0:int(loc[0]) + k])
-        on = roi > 0.5 * max(self.bg.contrast, 1.0) * 0.5
+        on = roi > 0.25 * max(self.bg.contrast, 1.0)  # the streak's faint ends count
         if not on.any():
             return 0.0
         ys, xs = np.nonzero(on)

@@ -24,7 +24,7 @@ from physics.scene import Scene
 from render.video import quiet_native_stderr
 from track.background import Background, FeltAccumulator, learn_background
 from track.model import refit_shift
-from track.tracker import GONE, OK, STATUS_TEXT, BallTracker, TrackerConfig
+from track.tracker import OK, STATUS_TEXT, BallTracker, TrackerConfig
 
 # Bytes of decoded frames the decoder may run ahead while the background is
 # learnt.  OpenCV's seek decodes ~16 frames forward from an earlier one, so
@@ -353,5 +353,5 @@ def read_track_csv(path) -> dict[str, np.ndarray]:
     return {name: np.atleast_1d(data[name]) for name in data.dtype.names}
 
 
-__all__ = ["GONE", "TrackError", "TrackResult", "open_video", "read_track_csv", "track_video",
+__all__ = ["TrackError", "TrackResult", "open_video", "read_track_csv", "track_video",
            "write_track_csv"]
