@@ -286,7 +286,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("inputs", nargs="+", metavar="INPUT", help="video files, folders or glob patterns")
     b.add_argument("-o", "--output", required=True, help="results CSV (appended to and resumed)")
     b.add_argument("--scene", default=None, help="one scene file for every video")
-    b.add_argument("--workers", type=int, default=None, help="local worker processes (default: all cores)")
+    b.add_argument("--workers", type=int, default=None, help="local worker processes, one core each (default: all cores)")
     b.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run on a Dask distributed cluster, e.g. tcp://HOST:8786 (needs cuespin[dask])")
     b.set_defaults(func=cmd_batch)

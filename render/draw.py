@@ -67,9 +67,13 @@ def quadrant_area(x, y, r):
     ya = np.abs(y)
     c = np.sqrt(np.maximum(r2 - ya * ya, 0.0))
     # int_{-r}^{x} min(|y|, s(X)) dX, in three pieces split at -c and c.
-    m = A(np.minimum(x, -c)) + ya * (np.clip(x, -c, c) + c) + (A(np.maximum(x, c)) - A(c))
-    upper = A(x) + m                 # y >= 0: int (s + min(y, s))
-    lower = 2.0 * A(x) - upper       # y < 0: the strip X <= x less its part above -y
+    # A is evaluated only on x and on c (each varies along one axis of a
+    # patch), never on their broadcast: A(min(x, -c)) is A(x) or A(-c).
+    Ax, Ac = A(x), A(c)
+    m = (np.where(x <= -c, Ax, A(-c)) + ya * (np.clip(x, -c, c) + c)
+         + (np.where(x >= c, Ax, Ac) - Ac))
+    upper = Ax + m                   # y >= 0: int (s + min(y, s))
+    lower = Ax - m                   # y < 0: the strip X <= x less its part above -y
     return np.where(y >= 0, upper, lower)
 
 

@@ -38,13 +38,13 @@ def _chords(edges, lo, hi, r):
     return np.maximum(np.minimum(hi, s) - np.maximum(lo, -s), 0.0)
 
 
-def disc_with_gradient(cu: float, cv: float, r: float, u0: int, v0: int, w: int, h: int):
+def disc_with_gradient(cu, cv, r: float, u0: int, v0: int, w: int, h: int):
     """Exact pixel coverage of a disc and its derivatives w.r.t. the centre.
 
     Parameters
     ----------
-    cu, cv : float
-        Centre (px).
+    cu, cv : float or ndarray, shape (K,)
+        Centre (px); K centres give K patches at once.
     r : float
         Radius (px).
     u0, v0 : int
@@ -54,18 +54,22 @@ def disc_with_gradient(cu: float, cv: float, r: float, u0: int, v0: int, w: int,
 
     Returns
     -------
-    cov, d_du, d_dv : ndarray, shape (h, w)
+    cov, d_du, d_dv : ndarray, shape (h, w) or (K, h, w)
         Covered area per pixel and its derivatives (per px of centre shift):
         moving the disc right gains the chord on a pixel's left edge and
         loses the one on its right edge.
     """
-    xe = np.arange(u0, u0 + w + 1) - 0.5 - cu  # column edges, relative
-    ye = np.arange(v0, v0 + h + 1) - 0.5 - cv  # row edges, relative
-    G = quadrant_area(xe[None, :], ye[:, None], r)
-    cov = G[1:, 1:] - G[1:, :-1] - G[:-1, 1:] + G[:-1, :-1]
-    vert = _chords(xe[None, :], ye[:-1, None], ye[1:, None], r)   # (h, w+1)
-    horz = _chords(ye[:, None], xe[None, :-1], xe[None, 1:], r)   # (h+1, w)
-    return cov, vert[:, :-1] - vert[:, 1:], horz[:-1, :] - horz[1:, :]
+    cu = np.asarray(cu, float)[..., None, None]
+    cv = np.asarray(cv, float)[..., None, None]
+    xe = np.arange(u0, u0 + w + 1) - 0.5 - cu  # column edges, relative: (..., 1, w+1)
+    ye = np.swapaxes(np.arange(v0, v0 + h + 1) - 0.5 - cv, -1, -2)  # row edges: (..., h+1, 1)
+    G = quadrant_area(xe, ye, r)
+    cov = G[..., 1:, 1:] - G[..., 1:, :-1] - G[..., :-1, 1:] + G[..., :-1, :-1]
+    vert = _chords(xe, ye[..., :-1, :], ye[..., 1:, :], r)                       # (..., h, w+1)
+    horz = _chords(ye, xe[..., :, :-1], xe[..., :, 1:], r)                       # (..., h+1, w)
+    d_du = vert[..., :, :-1] - vert[..., :, 1:]
+    d_dv = horz[..., :-1, :] - horz[..., 1:, :]
+    return cov, d_du, d_dv
 
 
 def blur_nodes(blur_px: float) -> np.ndarray:
@@ -85,19 +89,14 @@ def streak_model(c, b, G, felt, r, u0, v0, taus):
     ``d/dcu, d/dcv, d/dbu, d/dbv, d/dG``.
     """
     h, w = felt.shape
-    cov = np.zeros((h, w))
-    du = np.zeros((h, w))
-    dv = np.zeros((h, w))
-    bu = np.zeros((h, w))
-    bv = np.zeros((h, w))
-    for tau in taus:
-        cv_, gu, gv = disc_with_gradient(c[0] + b[0] * tau, c[1] + b[1] * tau, r, u0, v0, w, h)
-        cov += cv_
-        du += gu
-        dv += gv
-        if tau != 0.0:
-            bu += tau * gu
-            bv += tau * gv
+    taus = np.asarray(taus, float)
+    # Every exposure node in one vectorised call.
+    covs, gus, gvs = disc_with_gradient(c[0] + b[0] * taus, c[1] + b[1] * taus, r, u0, v0, w, h)
+    cov = covs.sum(axis=0)
+    du = gus.sum(axis=0)
+    dv = gvs.sum(axis=0)
+    bu = np.tensordot(taus, gus, axes=1)
+    bv = np.tensordot(taus, gvs, axes=1)
     n = len(taus)
     cov /= n
     contrast = (G - felt)[..., None] / n

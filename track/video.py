@@ -193,6 +193,17 @@ def _decode(cap: cv2.VideoCapture, q: queue.Queue, stop: threading.Event):
         q.put(None)
 
 
+def _read_one(cap: cv2.VideoCapture):
+    """The next grey frame on the calling thread: None at the end, the
+    exception if decoding failed (as the decoder thread delivers them)."""
+    try:
+        with quiet_native_stderr():
+            ok, img = cap.read()
+    except Exception as exc:
+        return exc
+    return to_grey(img) if ok and img is not None else None
+
+
 def _stop_decoder(worker, q, stop, cap):
     stop.set()
     while worker.is_alive():  # unblock a decoder waiting on a full queue
@@ -245,7 +256,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     center = cam.to_table([[cam.width / 2, cam.height / 2]])[0]
     radius_px = scene.physics.R * cam.px_per_m(center)
 
-    q: queue.Queue = queue.Queue(maxsize=max(16, BUFFER_BYTES // (w * h)) if config.threaded else 1)
+    q: queue.Queue = queue.Queue(maxsize=max(16, BUFFER_BYTES // (w * h)))
     stop = threading.Event()
     worker = threading.Thread(target=_decode, args=(cap, q, stop), daemon=True)
     if config.threaded:
@@ -256,8 +267,6 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     except BaseException:
         _stop_decoder(worker, q, stop, cap)
         raise
-    if not config.threaded:
-        worker.start()  # a one-frame queue: decoding waits on tracking
     t_bg = time.perf_counter() - t_start
     tracker = BallTracker(bg, radius_px, cam.exposure_s * cam.fps, config)
     uv, se, status = [], [], []
@@ -268,7 +277,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     fits = []  # (frame index, the fit's state) for the final background correction
     try:
         while True:
-            item = q.get()
+            item = q.get() if config.threaded else _read_one(cap)
             if item is None:
                 break
             if isinstance(item, Exception):
