@@ -20,7 +20,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import minimize, minimize_scalar
 from scipy.stats import f as f_dist
 
 # Consecutive end frames within this many sigma of the final position are at rest.
@@ -28,6 +27,8 @@ REST_SIGMAS = 5.0
 MIN_REST_FRAMES = 5
 # Frames of motion needed before any fit is attempted.
 MIN_MOVING_FRAMES = 6
+# The strike is the first of this many consecutive frames away from the start.
+MOVE_CONFIRM_FRAMES = 3
 # A sliding phase must beat rolling-from-the-strike by an F-test at this level.
 SLIDING_TEST_LEVEL = 0.01
 
@@ -69,41 +70,102 @@ class Segments:
         return self.ok
 
 
-def _design(t, t0, t1):
-    """Design matrix (per axis) for x0, v0, a_s, and the rolling time term."""
-    tau = np.maximum(t - t0, 0.0)
-    tau1 = max(t1 - t0, 0.0)
+def _solve_many(t, xy, t0s, t1s, decel):
+    """Least squares for fixed breakpoints, for many ``(t0, t1)`` at once.
+
+    For fixed ``(t0, t1)`` the path is linear in ``x0, v0, a_s`` (per axis):
+    ``x = x0 + v0 tau + a_s (ts^2/2 + tau1 tr) + a_r tr^2/2`` with ``tau`` the
+    time since ``t0``, ``ts`` its part before ``t1`` and ``tr`` after; the
+    rolling acceleration ``a_r`` is ``decel`` along ``-v1`` (eq. 18), its
+    direction taken from a first solve.  Normal equations, batched over the
+    pairs (``t0s`` and ``t1s`` broadcast to one shape (K,)): this is the
+    inner loop of the search.  A sliding phase of zero length (case 4:
+    rolling from the strike) drops the sliding term.
+
+    Returns the sums of squared residuals, shape (K,), the coefficients
+    ``[x0, v0, a_s, a_r]``, shape (K, 4, 2), and the residuals (K, n, 2).
+    """
+    t0s, t1s = np.broadcast_arrays(np.atleast_1d(np.asarray(t0s, dtype=float)),
+                                   np.atleast_1d(np.asarray(t1s, dtype=float)))
+    tau = np.maximum(t[None, :] - t0s[:, None], 0.0)   # (K, n)
+    tau1 = np.maximum(t1s - t0s, 0.0)[:, None]         # (K, 1)
     ts = np.minimum(tau, tau1)
-    tr = np.maximum(tau - tau1, 0.0)
-    # x = x0 + v0 tau + a_s (ts^2/2 + tau1 tr) + a_r tr^2/2
-    return np.stack([np.ones_like(t), tau, 0.5 * ts**2 + tau1 * tr], axis=1), 0.5 * tr**2
+    tr = tau - ts                                      # time rolling
+    c2 = 0.5 * ts**2 + tau1 * tr
+    roll = 0.5 * tr**2
+    K, n = c2.shape
+    AtA = np.empty((K, 3, 3))
+    AtA[:, 0, 0] = n
+    AtA[:, 0, 1] = AtA[:, 1, 0] = tau.sum(axis=1)
+    AtA[:, 1, 1] = np.einsum("kn,kn->k", tau, tau)
+    AtA[:, 0, 2] = AtA[:, 2, 0] = c2.sum(axis=1)
+    AtA[:, 1, 2] = AtA[:, 2, 1] = np.einsum("kn,kn->k", c2, tau)
+    AtA[:, 2, 2] = np.einsum("kn,kn->k", c2, c2)
+    no_slide = tau1[:, 0] < 1e-9
+    AtA[no_slide, 2, :] = AtA[no_slide, :, 2] = 0.0
+    AtA[no_slide, 2, 2] = 1.0
+    Atxy = np.empty((K, 3, 2))
+    Atxy[:, 0] = xy.sum(axis=0)
+    Atxy[:, 1] = tau @ xy
+    Atxy[:, 2] = c2 @ xy
+    Atroll = np.stack([roll.sum(axis=1), np.einsum("kn,kn->k", roll, tau),
+                       np.einsum("kn,kn->k", roll, c2)], axis=1)
+    Atroll[no_slide, 2] = 0.0
+    Atxy[no_slide, 2] = 0.0
+    a_r = np.zeros((K, 2))
+    for _ in range(2):  # the direction of v1 from the previous solve
+        rhs = Atxy - Atroll[:, :, None] * a_r[:, None, :]
+        try:
+            coef = np.linalg.solve(AtA, rhs)
+        except np.linalg.LinAlgError:
+            coef = np.stack([np.linalg.lstsq(M, r, rcond=None)[0] for M, r in zip(AtA, rhs)])
+        v1 = coef[:, 1] + coef[:, 2] * tau1
+        speed = np.hypot(v1[:, 0], v1[:, 1])[:, None]
+        a_r = np.where(speed > 0, -decel * v1 / np.where(speed > 0, speed, 1.0), 0.0)
+    model = (coef[:, 0, None, :] + tau[:, :, None] * coef[:, 1, None, :]
+             + c2[:, :, None] * coef[:, 2, None, :] + roll[:, :, None] * a_r[:, None, :])
+    res = xy[None] - model
+    sse = np.einsum("knd,knd->k", res, res)
+    return sse, np.concatenate([coef, a_r[:, None, :]], axis=1), res
 
 
 def _solve(t, xy, t0, t1, decel):
-    """Least squares for fixed breakpoints; ``decel`` is the rolling deceleration.
+    """:func:`_solve_many` for one pair: (SSE, coefficients (4, 2), residuals (n, 2))."""
+    sse, coef, res = _solve_many(t, xy, t0, t1, decel)
+    return float(sse[0]), coef[0], res[0]
 
-    Normal equations (3 x 3 per call): this is the inner loop of the search.
-    A sliding phase shorter than the design can resolve (case 4: rolling from
-    the strike) drops the sliding term.
+
+def _zoom(cost_many, t0, t1, h0, h1, tol, points=7, shrink=3.0, max_rounds=40):
+    """Minimise ``cost_many(t0s, t1s)`` by a grid around ``(t0, t1)`` that
+    re-centres on its best point and shrinks until finer than ``tol``.
+
+    The profile has kinks wherever a frame changes phase, which stall
+    derivative-free simplex and bracketing methods; a grid steps over them,
+    and each round is one batched evaluation.  ``h1 = 0`` searches ``t0``
+    alone with ``t1 = t0`` (rolling from the strike).  Returns
+    ``(t0, t1, cost)``.
     """
-    A, roll_term = _design(t, t0, t1)
-    if t1 - t0 < 1e-9:
-        A = A[:, :2]
-    AtA = A.T @ A
-    a_r = np.zeros(2)
-    for _ in range(2):  # the direction of v1 from the previous solve
-        y = xy - roll_term[:, None] * a_r
-        try:
-            coef = np.linalg.solve(AtA, A.T @ y)
-        except np.linalg.LinAlgError:
-            coef = np.linalg.lstsq(A, y, rcond=None)[0]
-        if len(coef) == 2:
-            coef = np.vstack([coef, np.zeros(2)])
-        v1 = coef[1] + coef[2] * max(t1 - t0, 0.0)
-        speed = np.hypot(*v1)
-        a_r = -decel * v1 / speed if speed > 0 else np.zeros(2)
-    res = xy - A @ coef[:A.shape[1]] - roll_term[:, None] * a_r
-    return float(np.sum(res * res)), np.vstack([coef, a_r]), res
+    u = np.linspace(-1.0, 1.0, points)
+    best = float("inf")
+    for _ in range(max_rounds):
+        if h1 > 0:
+            g0, g1 = np.meshgrid(t0 + h0 * u, t1 + h1 * u, indexing="ij")
+            g0, g1 = g0.ravel(), g1.ravel()
+        else:
+            g0 = t0 + h0 * u
+            g1 = g0
+        c = cost_many(g0, g1)
+        k = int(np.argmin(c))
+        moved = c[k] < best
+        if moved:
+            best, t0, t1 = float(c[k]), float(g0[k]), float(g1[k])
+        i0, i1 = divmod(k, points) if h1 > 0 else (k, 1)
+        inside = 0 < i0 < points - 1 and 0 < i1 < points - 1
+        if inside or not moved:  # the minimum is held in the box: look closer
+            h0, h1 = h0 / shrink, h1 / shrink
+        if h0 < tol and h1 < tol:
+            break
+    return t0, t1, best
 
 
 def find_rest_end(t, xy, sigma):
@@ -168,13 +230,19 @@ def segment_track(t, xy, decel: float, sigma: float | None = None,
     if sigma is None or not np.isfinite(sigma) or sigma <= 0:
         sigma = noise_from_track(xy)
     sigma = max(float(sigma), 1e-7)
-    # Motion starts where the ball leaves its first position by more than noise.
+    # Rest is judged against the scatter the track shows, when larger than
+    # the stated noise: a lossy codec's error scatters a still ball's centre
+    # by several stated errors (measured: 3x for MJPG at sigma 2).
+    still = max(sigma, noise_from_track(xy) if len(xy) > 4 else 0.0)
+    # Motion starts where the ball leaves its first position by more than
+    # noise and stays away: one outlying still frame is not a strike.
     start = np.median(xy[:3], axis=0)
-    away = np.hypot(*(xy - start).T) > REST_SIGMAS * sigma
-    if away.sum() < MIN_MOVING_FRAMES:
+    away = np.hypot(*(xy - start).T) > REST_SIGMAS * still
+    stays = np.convolve(away, np.ones(MOVE_CONFIRM_FRAMES, int), "valid") == MOVE_CONFIRM_FRAMES
+    if away.sum() < MIN_MOVING_FRAMES or not stays.any():
         return Segments(False, "the ball does not move in the track")
-    k_move = int(np.argmax(away))
-    rest_k = find_rest_end(t, xy, sigma)
+    k_move = int(np.argmax(stays))
+    rest_k = find_rest_end(t, xy, still)
     k_end = rest_k if rest_k is not None else len(t)
     if k_end - k_move < MIN_MOVING_FRAMES:
         return Segments(False, f"only {k_end - k_move} frames of motion")
@@ -195,11 +263,12 @@ def segment_track(t, xy, decel: float, sigma: float | None = None,
     back = d1 / speed if speed > 0 else dt
     t0_guess = t[k_move] - float(np.clip(back, 0.0, dt if k_move > 0 else 10 * dt))
 
-    def cost(p):
-        t0, t1 = p
-        if t1 < t0:
-            return np.inf
-        return _solve(tf, xf, t0, min(t1, beyond), decel)[0]
+    def cost_many(t0s, t1s):
+        c = _solve_many(tf, xf, t0s, np.minimum(t1s, beyond), decel)[0]
+        return np.where(np.asarray(t1s) < np.asarray(t0s), np.inf, c)
+
+    def cost(t0, t1):
+        return float(cost_many(t0, t1)[0])
 
     # A t1 past the last frame means "still sliding when the track ends".
     beyond = tf[-1] + dt
@@ -211,29 +280,13 @@ def segment_track(t, xy, decel: float, sigma: float | None = None,
     far = after[after >= t0_guess + 0.4]
     cands = np.concatenate([[t0_guess], near[:: max(1, len(near) // 100)],
                             far[:: max(1, len(far) // 40)], [beyond]])
-    costs = [cost((t0_guess, c)) for c in cands]
-    t1_guess = float(cands[int(np.argmin(costs))])
-    # A hundredth of a frame is plenty: the maximum-likelihood fit refines
-    # both times with the full model.
-    best = minimize(cost, [t0_guess, max(t1_guess, t0_guess)], method="Nelder-Mead",
-                    options={"xatol": 1e-2 * dt, "fatol": 1e-2 * sigma**2, "maxiter": 200,
-                             "initial_simplex": [[t0_guess, t1_guess],
-                                                 [t0_guess + 0.5 * dt, t1_guess],
-                                                 [t0_guess, t1_guess + 2 * dt]]})
-    t0, t1 = (float(v) for v in best.x)
-    # Nelder-Mead stalls on the kinks of this profile; polish each time in
-    # turn by a bounded 1-D search.
-    for _ in range(2):
-        t0 = float(minimize_scalar(lambda a: cost((a, t1)), bounds=(t0 - dt, min(t0 + dt, t1)),
-                                   method="bounded", options={"xatol": 1e-3 * dt}).x)
-        r1 = minimize_scalar(lambda b: cost((t0, b)), bounds=(t0, min(t1 + dt, beyond)),
-                             method="bounded", options={"xatol": 1e-3 * dt})
-        if t1 > t0 + dt:
-            r1b = minimize_scalar(lambda b: cost((t0, b)), bounds=(max(t1 - dt, t0), t1),
-                                  method="bounded", options={"xatol": 1e-3 * dt})
-            r1 = min(r1, r1b, key=lambda r: r.fun)
-        t1 = float(r1.x)
-    best = type(best)(x=np.array([t0, t1]), fun=cost((t0, t1)))
+    costs = cost_many(t0_guess, cands)
+    k = int(np.argmin(costs))
+    t1_guess = float(cands[k])
+    gap = max(np.diff(cands[max(k - 1, 0):k + 2]).max(initial=0.0), 2 * dt)
+    # Joint refinement to a thousandth of a frame (the maximum-likelihood fit
+    # refines both times further with the full model).
+    t0, t1, best_sse = _zoom(cost_many, t0_guess, t1_guess, dt, gap, 1e-3 * dt)
     # A breakpoint within two frames of the track's end is not observed.
     if t1 > tf[-1] - 2 * dt:
         t1 = beyond
@@ -242,20 +295,19 @@ def segment_track(t, xy, decel: float, sigma: float | None = None,
     # parameters), at the 1% level, with the noise from the residuals.
     # Without it, a huge a_s over a sliver of time fits noise and trades off
     # against v0.
-    r = minimize_scalar(lambda a: cost((a, a)), bounds=(t0 - 3 * dt, t0 + 3 * dt),
-                        method="bounded", options={"xatol": 1e-2 * dt})
+    t_roll, _, sse_roll = _zoom(cost_many, t0, t0, 3 * dt, 0.0, 1e-2 * dt)
     dof_full = max(2 * len(tf) - 9, 1)
-    F = max(r.fun - best.fun, 0.0) / 3.0 / max(best.fun / dof_full, 1e-300)
+    F = max(sse_roll - best_sse, 0.0) / 3.0 / max(best_sse / dof_full, 1e-300)
     lr = float(f_dist.sf(F, 3, dof_full))  # p-value of "no sliding"
     rolling_from_strike = lr >= SLIDING_TEST_LEVEL
     if rolling_from_strike:
-        t0 = t1 = float(r.x)
+        t0 = t1 = t_roll
     # Is the end of sliding seen?  F-test of "still sliding when the track
     # ends" against the breakpoint found (one more parameter), at the 1%
     # level: a kink fitted into noise near the end must not pass for one.
     if t1 < beyond and not rolling_from_strike:
         dof_bp = max(2 * len(tf) - 8, 1)
-        F_end = max(cost((t0, beyond)) - cost((t0, t1)), 0.0) / max(cost((t0, t1)) / dof_bp, 1e-300)
+        F_end = max(cost(t0, beyond) - cost(t0, t1), 0.0) / max(cost(t0, t1) / dof_bp, 1e-300)
         if f_dist.sf(F_end, 1, dof_bp) >= SLIDING_TEST_LEVEL:
             t1 = beyond
     sse, coef, res = _solve(tf, xf, t0, t1, decel)

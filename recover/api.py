@@ -125,6 +125,18 @@ def strike_exclusion(t, sig, seg, exposure_s, frame_dt):
     return sig
 
 
+def mle_noise(t, sig, seg, exposure_s: float, frame_dt: float, lossless: bool):
+    """The per-frame errors (m) the maximum-likelihood fit weights by.
+
+    The tracker's errors, with each rest counted once for a lossy codec
+    (:func:`rest_weighting`) and the strike's frames left out
+    (:func:`strike_exclusion`).  The Cramer-Rao bound of the same
+    measurements uses the same errors (benchmarks/accuracy.py).
+    """
+    sig = sig if lossless else rest_weighting(t, sig, seg, frame_dt)
+    return strike_exclusion(t, sig, seg, exposure_s, frame_dt)
+
+
 def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0.0,
                   method: str = "all", fit_friction: bool = False, lossless: bool = True) -> dict:
     """v0 and w0 from a track, by the paper's method and/or maximum likelihood.
@@ -180,8 +192,7 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
     if method in ("paper", "all"):
         methods["paper"] = paper_dict(paper, seg, params)
     if method in ("mle", "all"):
-        sig_mle = sig if lossless else rest_weighting(tt, sig, seg, frame_dt)
-        sig_mle = strike_exclusion(tt, sig_mle, seg, exposure_s, frame_dt)
+        sig_mle = mle_noise(tt, sig, seg, exposure_s, frame_dt, lossless)
         methods["mle"] = mle_dict(_run_mle(tt, xx, sig_mle, params, seg, paper, exposure_s,
                                            fit_friction))
     t_rec = time.perf_counter() - clock
@@ -197,12 +208,19 @@ def _run_mle(t, xy, sig, params, seg, paper, exposure_s, fit_friction):
     if not seg:
         return MLEResult("failed", f"no starting point: {seg.reason}")
     try:
-        start = initial_guess(seg, params)
+        starts = [initial_guess(seg, params)]
         if paper is not None and paper.status == "ok":
-            start = (seg.x0, seg.t0, paper.v0, paper.w0)
-        return fit_mle(t, xy, sig, params, start, exposure_s, fit_friction,
-                       sliding_ended=bool(np.isfinite(seg.t1)),
-                       sliding_obvious=bool(seg.sliding_p < OBVIOUS_SLIDING_P))
+            starts.insert(0, (seg.x0, seg.t0, paper.v0, paper.w0))
+        best = None
+        for start in starts:  # the segmentation's guess when the paper's start fails
+            res = fit_mle(t, xy, sig, params, start, exposure_s, fit_friction,
+                          sliding_ended=bool(np.isfinite(seg.t1)),
+                          sliding_obvious=bool(seg.sliding_p < OBVIOUS_SLIDING_P))
+            if best is None or (best.status == "failed" and res.status != "failed"):
+                best = res
+            if best.status != "failed":
+                break
+        return best
     except Exception as exc:
         return MLEResult("failed", f"internal error: {exc.__class__.__name__}: {exc}")
 

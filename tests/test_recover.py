@@ -135,6 +135,20 @@ def test_mle_fits_friction_on_request():
     assert abs(m.mu_r - p.mu_r) < MLE_Z_MAX * m.stderr["mu_r"]
 
 
+def test_mle_fails_plainly_when_the_model_cannot_describe_the_track():
+    # Two different shots spliced: no single shot fits, and the answer must
+    # say so rather than report the best of a bad fit as "ok".
+    a, p = sample_shot(3, "random")
+    b, _ = sample_shot(4, "random")
+    t, xa = synthetic(a, p, t_cut=2.0)
+    _, xb = synthetic(b, p, t_cut=2.0)
+    xy = np.where((t > a.t0 + 0.3)[:, None], xb - xb[np.searchsorted(t, a.t0 + 0.3)] +
+                  xa[np.searchsorted(t, a.t0 + 0.3)], xa)
+    m = mle_of(t, xy, p)
+    assert m.status == "failed" and "does not describe" in m.reason
+    assert m.v0 is None and m.w0 is None
+
+
 # -- end to end: video in, v0 and w0 out ----------------------------------------------
 
 def e2e_scene(kind):
