@@ -6,7 +6,8 @@ errors of v0 (relative) and of R w0 (relative to |v0|) over shots answered
 ``ok``, the share answered ``ok`` (and the other statuses); for the MLE, the
 RMS of its errors in units of the Cramer-Rao bound computed from the same
 model's Jacobian at the truth with the per-frame errors the fit weights by
-(recover.api.mle_noise), and the coverage of its reported 95% intervals.  Speed: fit plus both recoveries as
+(recover.api.mle_noise, which includes the codec's own error measured
+from the residuals), and the coverage of its reported 95% intervals.  Speed: fit plus both recoveries as
 a fraction of decoding the same video (target <= 0.1).  Videos are capped at
 6 s; shots run in worker processes.
 
@@ -65,7 +66,7 @@ def one_shot(args):
         row[f"{m}_ew"] = p.R * np.hypot(*(np.array(d["w0"]) - w0)) / speed if d["w0"] else np.nan
     mle = out["methods"]["mle"]
     row["mle_z"] = row["mle_cover"] = row["mle_crb_z"] = row["mle_crb_z_meas"] = row["mle_crb_z_indep"] = np.nan
-    row["chi2_per_dof"] = np.nan
+    row["chi2_per_dof"] = row["codec_noise_px"] = np.nan
     if mle["status"] == "ok":
         est = np.r_[mle["v0"], mle["w0"]]
         se = np.r_[mle["stderr"]["v0"], mle["stderr"]["w0"]]
@@ -86,7 +87,8 @@ def one_shot(args):
         tt, xx = tr.t[tr.ok], tr.xy[tr.ok]
         se_m = track_noise(tr.stderr_px[tr.ok] / cam.px_per_m(centre), xx)
         seg = segment_track(tt, xx, 5.0 / 7.0 * p.mu_r * p.g, float(np.median(se_m)), cam.exposure_s)
-        se_fit = mle_noise(tt, se_m, seg, cam.exposure_s, 1.0 / cam.fps, tr.lossless)
+        se_fit = mle_noise(tt, se_m, seg, cam.exposure_s, 1.0 / cam.fps, tr.lossless,
+                           mle.get("codec_noise_m") or 0.0)
         idx = [3, 4] if rolling else [3, 4, 5, 6]
         e = err[:2] if rolling else err
         scale = np.sqrt(max(mle.get("chi2_per_dof") or 1.0, 1.0))
@@ -96,6 +98,7 @@ def one_shot(args):
                 row[key] = float(np.sqrt(np.mean((e / crb) ** 2)))
             row["mle_crb_z_meas"] = row["mle_crb_z"] / scale
             row["chi2_per_dof"] = mle.get("chi2_per_dof")
+            row["codec_noise_px"] = (mle.get("codec_noise_m") or 0.0) * cam.px_per_m(centre)
         except np.linalg.LinAlgError:  # the bound is a diagnostic; never lose the row
             pass
     return row

@@ -125,16 +125,47 @@ def strike_exclusion(t, sig, seg, exposure_s, frame_dt):
     return sig
 
 
-def mle_noise(t, sig, seg, exposure_s: float, frame_dt: float, lossless: bool):
+def mle_noise(t, sig, seg, exposure_s: float, frame_dt: float, lossless: bool, codec_m: float = 0.0):
     """The per-frame errors (m) the maximum-likelihood fit weights by.
 
-    The tracker's errors, with each rest counted once for a lossy codec
-    (:func:`rest_weighting`) and the strike's frames left out
+    The tracker's errors with, for a lossy codec, its own error ``codec_m``
+    (per axis, m; see :func:`codec_noise`) added in quadrature and each rest
+    counted once (:func:`rest_weighting`); the strike's frames left out
     (:func:`strike_exclusion`).  The Cramer-Rao bound of the same
     measurements uses the same errors (benchmarks/accuracy.py).
     """
-    sig = sig if lossless else rest_weighting(t, sig, seg, frame_dt)
+    sig = np.asarray(sig, dtype=float)
+    if not lossless:
+        sig = rest_weighting(t, np.sqrt(sig**2 + codec_m**2), seg, frame_dt)
     return strike_exclusion(t, sig, seg, exposure_s, frame_dt)
+
+
+def codec_noise(residuals, sig_fit, sig_frame, n_par: int) -> float:
+    """Per-axis error (m) a lossy codec adds beyond the tracker's stated one.
+
+    Measured from a fit's residuals over the frames weighted as single
+    measurements (moving, not at the strike): the variance in excess of the
+    stated one, with the fit's degrees of freedom.  Zero when the residuals
+    are no larger than stated.
+
+    Parameters
+    ----------
+    residuals : ndarray, shape (n, 2)
+        Normalised residuals of the fit (residual / ``sig_fit``).
+    sig_fit, sig_frame : ndarray, shape (n,)
+        Errors the fit weighted by, and the tracker's per-frame errors (m).
+    n_par : int
+        Parameters fitted.
+    """
+    r = np.asarray(residuals, dtype=float)
+    single = np.isclose(sig_fit, sig_frame)
+    n = int(single.sum())
+    if r.shape[0] != len(sig_fit) or 2 * n <= n_par + 2:
+        return 0.0
+    r2 = np.sum((r[single] * sig_fit[single, None]) ** 2)
+    s2 = 2.0 * np.sum(sig_frame[single] ** 2)
+    excess = (r2 - s2 * (1.0 - n_par / (2.0 * n))) / (2 * n - n_par)
+    return float(np.sqrt(excess)) if excess > 0 else 0.0
 
 
 def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0.0,
@@ -193,8 +224,22 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
         methods["paper"] = paper_dict(paper, seg, params)
     if method in ("mle", "all"):
         sig_mle = mle_noise(tt, sig, seg, exposure_s, frame_dt, lossless)
-        methods["mle"] = mle_dict(_run_mle(tt, xx, sig_mle, params, seg, paper, exposure_s,
-                                           fit_friction))
+        mle = _run_mle(tt, xx, sig_mle, params, seg, paper, exposure_s, fit_friction)
+        codec_m = 0.0
+        if not lossless and mle.status != "failed" and mle.residuals is not None:
+            # A lossy codec's error is not in the tracker's: measure it from
+            # this fit's residuals and fit again with it (and each rest's
+            # share of it) in the weights, so that the slip test and the
+            # standard errors see the noise the video has.
+            codec_m = codec_noise(mle.residuals, sig_mle, sig, len(mle.names))
+            if codec_m > 0:
+                sig_mle = mle_noise(tt, sig, seg, exposure_s, frame_dt, lossless, codec_m)
+                again = _run_mle(tt, xx, sig_mle, params, seg, paper, exposure_s, fit_friction,
+                                 first=mle)
+                if again.status != "failed":
+                    mle = again
+        methods["mle"] = mle_dict(mle)
+        methods["mle"]["codec_noise_m"] = _num(codec_m)
     t_rec = time.perf_counter() - clock
     best = next((m for m in ("mle", "paper") if methods.get(m, {}).get("status") == "ok"), None)
     if best is None:
@@ -203,7 +248,9 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
             "sigma_m": _num(sigma)}
 
 
-def _run_mle(t, xy, sig, params, seg, paper, exposure_s, fit_friction):
+def _run_mle(t, xy, sig, params, seg, paper, exposure_s, fit_friction, first=None):
+    """The maximum-likelihood fit from the best start at hand: ``first``'s
+    answer (an earlier fit), the paper's, then the segmentation's guess."""
     from recover.mle import MLEResult
     if not seg:
         return MLEResult("failed", f"no starting point: {seg.reason}")
@@ -211,6 +258,8 @@ def _run_mle(t, xy, sig, params, seg, paper, exposure_s, fit_friction):
         starts = [initial_guess(seg, params)]
         if paper is not None and paper.status == "ok":
             starts.insert(0, (seg.x0, seg.t0, paper.v0, paper.w0))
+        if first is not None and first.status == "ok":
+            starts.insert(0, (first.x0, first.t0, first.v0, first.w0))
         best = None
         for start in starts:  # the segmentation's guess when the paper's start fails
             res = fit_mle(t, xy, sig, params, start, exposure_s, fit_friction,

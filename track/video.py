@@ -282,7 +282,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
                 break
             if isinstance(item, Exception):
                 error = f"decoding failed at frame {k}: {item}"
-                continue
+                break
             if item.shape != (cam.height, cam.width):
                 error = f"frame {k} has size {item.shape[1]}x{item.shape[0]}"
                 break
