@@ -244,40 +244,50 @@ def evaluate(shot: Shot, params: BallParams, t, ph: Phases | None = None) -> Sta
     R, mu_s, mu_r, g = params.R, params.mu_s, params.mu_r, params.g
     t = np.atleast_1d(np.asarray(t, dtype=float))
     n = t.shape[0]
-    x = np.empty((n, 2))
     v = np.zeros((n, 2))
     w = np.zeros((n, 2))
     phase = np.full(n, BEFORE, dtype=np.int8)
 
-    before = t < ph.t0
-    sliding = (t >= ph.t0) & (t < ph.t1)
-    rolling = (t >= ph.t1) & (t < ph.t2)
-    rest = t >= ph.t2
+    before, sliding, rolling, rest = _phase_masks(ph, t)
     phase[sliding], phase[rolling], phase[rest] = SLIDING, ROLLING, REST
-
-    x[before] = ph.x0
-
+    x = _positions(ph, params, t, before, sliding, rolling, rest)
     s = (t[sliding] - ph.t0)[:, None]
-    x[sliding] = ph.x0 + ph.v0 * s - 0.5 * mu_s * g * s**2 * ph.u_hat  # eq. 9
     v[sliding] = ph.v0 - mu_s * g * s * ph.u_hat  # eq. 7
     w[sliding] = ph.w0 + 2.5 / R * mu_s * g * s * z_cross(ph.u_hat)  # eq. 8
-
     if rolling.any():
-        speed_v1 = np.hypot(*ph.v1)
-        v1_hat = ph.v1 / speed_v1
+        v1_hat = ph.v1 / np.hypot(*ph.v1)
         r = (t[rolling] - ph.t1)[:, None]
-        decel = 5.0 / 7.0 * mu_r * g  # eq. 16
-        x[rolling] = ph.x1 + ph.v1 * r - 0.5 * decel * r**2 * v1_hat  # eq. 18
-        v[rolling] = ph.v1 - decel * r * v1_hat
+        v[rolling] = ph.v1 - 5.0 / 7.0 * mu_r * g * r * v1_hat  # eq. 16
         w[rolling] = z_cross(v[rolling]) / R  # eq. 12, no slip while rolling
-
-    x[rest] = ph.x2
     return State(x=x, v=v, w=w, phase=phase)
 
 
+def _phase_masks(ph: Phases, t):
+    return t < ph.t0, (t >= ph.t0) & (t < ph.t1), (t >= ph.t1) & (t < ph.t2), t >= ph.t2
+
+
+def _positions(ph: Phases, params: BallParams, t, before, sliding, rolling, rest) -> np.ndarray:
+    """Centre (m) at times ``t`` given the phase of each: eq. 9 and 18."""
+    g, mu_s, mu_r = params.g, params.mu_s, params.mu_r
+    x = np.empty((t.shape[0], 2))
+    x[before] = ph.x0
+    s = (t[sliding] - ph.t0)[:, None]
+    x[sliding] = ph.x0 + ph.v0 * s - 0.5 * mu_s * g * s**2 * ph.u_hat  # eq. 9
+    if rolling.any():
+        v1_hat = ph.v1 / np.hypot(*ph.v1)
+        r = (t[rolling] - ph.t1)[:, None]
+        x[rolling] = ph.x1 + ph.v1 * r - 0.5 * (5.0 / 7.0 * mu_r * g) * r**2 * v1_hat  # eq. 18
+    x[rest] = ph.x2
+    return x
+
+
 def positions(shot: Shot, params: BallParams, t, ph: Phases | None = None) -> np.ndarray:
-    """Ball centre (m) at an array of times, shape (n, 2); see :func:`evaluate`."""
-    return evaluate(shot, params, t, ph).x
+    """Ball centre (m) at an array of times, shape (n, 2); see :func:`evaluate`
+    (the same equations, without velocities: the fits' inner loop)."""
+    if ph is None:
+        ph = phases(shot, params)
+    t = np.atleast_1d(np.asarray(t, dtype=float))
+    return _positions(ph, params, t, *_phase_masks(ph, t))
 
 
 def kinetic_energy(v, w, R):

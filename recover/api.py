@@ -224,20 +224,18 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
         methods["paper"] = paper_dict(paper, seg, params)
     if method in ("mle", "all"):
         sig_mle = mle_noise(tt, sig, seg, exposure_s, frame_dt, lossless)
-        mle = _run_mle(tt, xx, sig_mle, params, seg, paper, exposure_s, fit_friction)
-        codec_m = 0.0
-        if not lossless and mle.status != "failed" and mle.residuals is not None:
-            # A lossy codec's error is not in the tracker's: measure it from
-            # this fit's residuals and fit again with it (and each rest's
-            # share of it) in the weights, so that the slip test and the
-            # standard errors see the noise the video has.
-            codec_m = codec_noise(mle.residuals, sig_mle, sig, len(mle.names))
-            if codec_m > 0:
+        # A lossy codec's error is not in the tracker's: a first fit (free
+        # slip only) measures it from its residuals, and the fit, slip test
+        # included, is made with it (and each rest's share of it) in the
+        # weights, so that both see the noise the video has.
+        first = _run_mle(tt, xx, sig_mle, params, seg, paper, exposure_s, fit_friction,
+                         compare_rolling=lossless)
+        mle, codec_m = first, 0.0
+        if not lossless:
+            if first.status != "failed" and first.residuals is not None:
+                codec_m = codec_noise(first.residuals, sig_mle, sig, len(first.names))
                 sig_mle = mle_noise(tt, sig, seg, exposure_s, frame_dt, lossless, codec_m)
-                again = _run_mle(tt, xx, sig_mle, params, seg, paper, exposure_s, fit_friction,
-                                 first=mle)
-                if again.status != "failed":
-                    mle = again
+            mle = _run_mle(tt, xx, sig_mle, params, seg, paper, exposure_s, fit_friction, first=first)
         methods["mle"] = mle_dict(mle)
         methods["mle"]["codec_noise_m"] = _num(codec_m)
     t_rec = time.perf_counter() - clock
@@ -248,9 +246,11 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
             "sigma_m": _num(sigma)}
 
 
-def _run_mle(t, xy, sig, params, seg, paper, exposure_s, fit_friction, first=None):
+def _run_mle(t, xy, sig, params, seg, paper, exposure_s, fit_friction, first=None,
+             compare_rolling=True):
     """The maximum-likelihood fit from the best start at hand: ``first``'s
-    answer (an earlier fit), the paper's, then the segmentation's guess."""
+    answer (an earlier fit), the paper's, then the segmentation's guess.
+    Without ``compare_rolling`` only the free-slip model is fitted."""
     from recover.mle import MLEResult
     if not seg:
         return MLEResult("failed", f"no starting point: {seg.reason}")
@@ -258,13 +258,13 @@ def _run_mle(t, xy, sig, params, seg, paper, exposure_s, fit_friction, first=Non
         starts = [initial_guess(seg, params)]
         if paper is not None and paper.status == "ok":
             starts.insert(0, (seg.x0, seg.t0, paper.v0, paper.w0))
-        if first is not None and first.status == "ok":
+        if first is not None and first.status == "ok" and first.model == "full":
             starts.insert(0, (first.x0, first.t0, first.v0, first.w0))
         best = None
         for start in starts:  # the segmentation's guess when the paper's start fails
             res = fit_mle(t, xy, sig, params, start, exposure_s, fit_friction,
                           sliding_ended=bool(np.isfinite(seg.t1)),
-                          sliding_obvious=bool(seg.sliding_p < OBVIOUS_SLIDING_P))
+                          sliding_obvious=bool(seg.sliding_p < OBVIOUS_SLIDING_P) or not compare_rolling)
             if best is None or (best.status == "failed" and res.status != "failed"):
                 best = res
             if best.status != "failed":
