@@ -91,16 +91,24 @@ def streak_model(c, b, G, felt, r, u0, v0, taus):
     h, w = felt.shape
     taus = np.asarray(taus, float)
     # Every exposure node in one vectorised call.
-    covs, gus, gvs = disc_with_gradient(c[0] + b[0] * taus, c[1] + b[1] * taus, r, u0, v0, w, h)
-    cov = covs.sum(axis=0)
-    du = gus.sum(axis=0)
-    dv = gvs.sum(axis=0)
-    bu = np.tensordot(taus, gus, axes=1)
-    bv = np.tensordot(taus, gvs, axes=1)
     n = len(taus)
-    cov /= n
-    contrast = (G - felt)[..., None] / n
-    J = (np.stack([du, dv, bu, bv, cov], axis=-1) * contrast).reshape(-1, 5)
+    if n == 1:  # a sharp ball (no blur fitted): one disc, no blur derivatives
+        cov, du, dv = disc_with_gradient(c[0] + b[0] * taus[0], c[1] + b[1] * taus[0], r, u0, v0, w, h)
+        bu = taus[0] * du
+        bv = taus[0] * dv
+    else:
+        covs, gus, gvs = disc_with_gradient(c[0] + b[0] * taus, c[1] + b[1] * taus, r, u0, v0, w, h)
+        cov = covs.sum(axis=0) / n
+        du = gus.sum(axis=0)
+        dv = gvs.sum(axis=0)
+        bu = np.tensordot(taus, gus, axes=1)
+        bv = np.tensordot(taus, gvs, axes=1)
+    contrast = ((G - felt) / n).ravel()
+    J = np.empty((h * w, 5))
+    J[:, 0] = du.ravel() * contrast
+    J[:, 1] = dv.ravel() * contrast
+    J[:, 2] = bu.ravel() * contrast
+    J[:, 3] = bv.ravel() * contrast
     J[:, 4] = cov.ravel()
     return (G - felt) * cov, J
 
