@@ -99,6 +99,21 @@ def test_bound_across_radius_and_noise(tmp_path, radius_px, noise):
     assert rmse < CRB_RATIO_MAX * crb, (rmse, crb)
 
 
+def test_decoding_thread_and_single_thread_give_the_same_track(tmp_path):
+    # The threaded reader takes background samples from its decode buffer,
+    # the single-threaded one seeks for them: the same frames, so the same
+    # background and the same track, to rounding.
+    from track.tracker import TrackerConfig
+    scene = short_scene(seed=8, noise=3.0, duration=1.2)
+    video = tmp_path / "v.avi"
+    render_video(scene, video)
+    a = track_video(video, scene, TrackerConfig(threaded=True))
+    b = track_video(video, scene, TrackerConfig(threaded=False))
+    np.testing.assert_array_equal(a.background.image, b.background.image)
+    np.testing.assert_array_equal(a.ok, b.ok)
+    np.testing.assert_allclose(a.uv[a.ok], b.uv[b.ok], atol=1e-9)
+
+
 def test_lossy_codec_still_tracks(tmp_path):
     scene = short_scene(codec="MJPG")
     res, truth, rmse, crb = run_condition(tmp_path, scene)

@@ -28,9 +28,10 @@ from track.tracker import OK, STATUS_TEXT, BallTracker, TrackerConfig
 
 # Bytes of decoded frames the decoder may run ahead while the background is
 # learnt.  OpenCV's seek decodes ~16 frames forward from an earlier one, so
-# sampling 15 frames costs ~240 decodes; with this much room (366 frames at
-# 1280 x 640) the sequential decoder does not stall meanwhile.  A fixed cap:
-# memory does not grow with the video's length.
+# each background sample costs ~16 decodes; samples within the first 366
+# frames (this much room at 1280 x 640) are taken from the buffer instead,
+# and the sequential decoder does not stall meanwhile.  A fixed cap: memory
+# does not grow with the video's length.
 BUFFER_BYTES = 300 * 2**20
 
 # Decoding grey video without RGB conversion hands back the luma plane and
@@ -138,31 +139,46 @@ def to_grey(img: np.ndarray) -> np.ndarray:
     return cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
 
 
-def sample_frames(path, idx) -> tuple[np.ndarray, np.ndarray]:
-    """Grey frames at the given indices (those that decode) and their indices."""
-    cap = open_video(path)
-    got = []
-    out = []
-    try:
-        with quiet_native_stderr():
-            for i in idx:
-                cap.set(cv2.CAP_PROP_POS_FRAMES, float(i))
-                ok, img = cap.read()
-                if ok and img is not None:
-                    out.append(to_grey(img))
-                    got.append(i)
-    finally:
-        cap.release()
-    if not out:
+def sample_frames(path, idx, buffered=None) -> tuple[np.ndarray, np.ndarray]:
+    """Grey frames at the given indices (those that decode) and their indices.
+
+    ``buffered``, when given, is a :class:`_Buffered`: frames below its
+    ``limit`` are taken from the sequential decoder's buffer; only the others
+    cost a seek, and a seek decodes ~16 frames.
+    """
+    idx = [int(i) for i in idx]
+    limit = buffered.limit if buffered is not None else 0
+    found = {}
+    seek = [i for i in idx if i >= limit]
+    if seek:  # first, while the decoder fills its buffer
+        cap = open_video(path)
+        try:
+            with quiet_native_stderr():
+                for i in seek:
+                    cap.set(cv2.CAP_PROP_POS_FRAMES, float(i))
+                    ok, img = cap.read()
+                    if ok and img is not None:
+                        found[i] = to_grey(img)
+        finally:
+            cap.release()
+    for i in idx:
+        if i < limit:
+            img = buffered(i)
+            if img is not None:
+                found[i] = img
+    if not found:
         return np.zeros((0, 0, 0), np.uint8), np.zeros(0, int)
-    return np.stack(out), np.array(got)
+    got = sorted(found)
+    return np.stack([found[i] for i in got]), np.array(got)
 
 
-def learn_video_background(path, n_frames: int, radius_px: float, n_samples: int) -> Background:
+def learn_video_background(path, n_frames: int, radius_px: float, n_samples: int,
+                           buffered=None) -> Background:
     """Background from ``n_samples`` frames spread over the video, plus as many
-    again where a resting ball hid the felt from most of the first ones."""
+    again where a resting ball hid the felt from most of the first ones
+    (``buffered`` as in :func:`sample_frames`)."""
     idx = np.unique(np.linspace(0, max(n_frames - 1, 0), n_samples).round().astype(int))
-    samples, idx = sample_frames(path, idx)
+    samples, idx = sample_frames(path, idx, buffered)
     if len(samples) == 0:
         raise TrackError(f"{path}: no frame could be decoded (corrupt video?)")
     bg = learn_background(samples, radius_px)
@@ -173,10 +189,36 @@ def learn_video_background(path, n_frames: int, radius_px: float, n_samples: int
         gap = max(n_frames // max(n_samples - 1, 1), 1)
         lo, hi = max(shown.min() - gap // 2, 0), min(shown.max() + gap // 2, n_frames - 1)
         extra = np.setdiff1d(np.linspace(lo, hi, n_samples).round().astype(int), idx)
-        more, extra = sample_frames(path, extra)
+        more, extra = sample_frames(path, extra, buffered)
         if len(more):
             bg = learn_background(np.concatenate([samples, more]), radius_px)
     return bg
+
+
+class _Buffered:
+    """Frames from the decoder's queue before anything was taken from it.
+
+    Frames below ``limit`` (the queue's size) always arrive, since the
+    decoder can hold them without a consumer, so waiting for them cannot
+    block; ``self(k)`` is None if the video ends first.
+    """
+
+    def __init__(self, q: queue.Queue):
+        self.q = q
+        self.limit = q.maxsize - 1
+
+    def __call__(self, k: int):
+        q = self.q
+        if k >= self.limit:
+            return None
+
+        def ready():
+            return len(q.queue) > k or (len(q.queue) > 0 and not isinstance(q.queue[-1], np.ndarray))
+
+        with q.not_empty:
+            q.not_empty.wait_for(ready)
+            item = q.queue[k] if len(q.queue) > k else None
+        return item if isinstance(item, np.ndarray) else None
 
 
 def _decode(cap: cv2.VideoCapture, q: queue.Queue, stop: threading.Event):
@@ -263,7 +305,9 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         worker.start()
     t_start = time.perf_counter()
     try:
-        bg = learn_video_background(path, max(n_hint, 1), radius_px, config.n_background)
+        # Samples the decoder is about to hold anyway are taken from its queue.
+        buffered = _Buffered(q) if config.threaded else None
+        bg = learn_video_background(path, max(n_hint, 1), radius_px, config.n_background, buffered)
     except BaseException:
         _stop_decoder(worker, q, stop, cap)
         raise
