@@ -100,9 +100,9 @@ def test_bound_across_radius_and_noise(tmp_path, radius_px, noise):
 
 
 def test_decoding_thread_and_single_thread_give_the_same_track(tmp_path):
-    # The threaded reader takes background samples from its decode buffer,
-    # the single-threaded one seeks for them: the same frames, so the same
-    # background and the same track, to rounding.
+    # With a lossless codec the threaded reader takes background samples from
+    # its decode buffer, the single-threaded one seeks for them: the same
+    # frames, so the same background and the same track, to rounding.
     from track.tracker import TrackerConfig
     scene = short_scene(seed=8, noise=3.0, duration=1.2)
     video = tmp_path / "v.avi"

@@ -305,8 +305,12 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         worker.start()
     t_start = time.perf_counter()
     try:
-        # Samples the decoder is about to hold anyway are taken from its queue.
-        buffered = _Buffered(q) if config.threaded else None
+        # With a lossless codec (FFV1 decodes at ~18 ms of CPU a frame, on
+        # both cores) a seek's ~16 decodes cost more than waiting for the
+        # decoder to reach a sample, so samples it is about to hold anyway
+        # are taken from its queue.  Lossy intra codecs (MJPG: ~2.6 ms) seek,
+        # beside the decoder, and tracking starts sooner.
+        buffered = _Buffered(q) if config.threaded and lossless else None
         bg = learn_video_background(path, max(n_hint, 1), radius_px, config.n_background, buffered)
     except BaseException:
         _stop_decoder(worker, q, stop, cap)
