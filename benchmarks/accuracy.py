@@ -34,9 +34,8 @@ MAX_SECONDS = 6.0
 def one_shot(args):
     i, seed, tmp = args
     from data_gen.sampler import sample_scenes
-    from physics import contact_velocity, phases
+    from physics import phases
     from pipeline.cli import run_recover
-    from recover.mle import crb_covariance
     from render import render_video
     from track.video import open_video
 
@@ -73,28 +72,18 @@ def one_shot(args):
         err = est - np.r_[v0, w0]
         row["mle_z"] = float(np.sqrt(np.mean((err / se) ** 2)))
         row["mle_cover"] = float(np.mean(np.abs(err) < 1.96 * se))
-        # The bound for the same measurements: the model's Jacobian at the
-        # truth, with the per-frame errors the fit weights by (the
-        # tracker's, each rest counted once for a lossy codec, the strike's
-        # frames out: see recover.api.mle_noise), and the same errors
-        # scaled to what the residuals measure.  For reference, also the
-        # bound if every frame's error were independent of every other's.
-        from fit.segment import segment_track
-        from recover.api import mle_noise, track_noise
-        rolling = np.hypot(*contact_velocity(v0, w0, p.R)) < 1e-9
+        # The bound for the same measurements (pipeline.measure.mle_bound),
+        # and for reference the one with every frame independent.
+        from pipeline.measure import mle_bound
         cam = scene.camera
         centre = cam.to_table([[cam.width / 2, cam.height / 2]])[0]
-        tt, xx = tr.t[tr.ok], tr.xy[tr.ok]
-        se_m = track_noise(tr.stderr_px[tr.ok] / cam.px_per_m(centre), xx)
-        seg = segment_track(tt, xx, 5.0 / 7.0 * p.mu_r * p.g, float(np.median(se_m)), cam.exposure_s)
-        se_fit = mle_noise(tt, se_m, seg, cam.exposure_s, 1.0 / cam.fps, tr.lossless,
-                           mle.get("codec_noise_m") or 0.0)
-        idx = [3, 4] if rolling else [3, 4, 5, 6]
-        e = err[:2] if rolling else err
         scale = np.sqrt(max(mle.get("chi2_per_dof") or 1.0, 1.0))
         try:
-            for key, se_k in (("mle_crb_z_indep", se_m), ("mle_crb_z", se_fit)):
-                crb = np.sqrt(np.diag(crb_covariance(truth, p, tt, se_k, cam.exposure_s, rolling=rolling))[idx])
+            for key, indep in (("mle_crb_z_indep", True), ("mle_crb_z", False)):
+                cov, rolling = mle_bound(scene, tr, mle, independent=indep)
+                idx = [3, 4] if rolling else [3, 4, 5, 6]
+                e = err[:2] if rolling else err
+                crb = np.sqrt(np.diag(cov)[idx])
                 row[key] = float(np.sqrt(np.mean((e / crb) ** 2)))
             row["mle_crb_z_meas"] = row["mle_crb_z"] / scale
             row["chi2_per_dof"] = mle.get("chi2_per_dof")

@@ -61,9 +61,8 @@ def trial(spec: dict) -> dict:
     """
     from data_gen.sampler import make_scene
     from pipeline.cli import run_recover
-    from physics import BallParams, Shot, contact_velocity
-    from recover.api import track_noise
-    from recover.mle import crb_covariance
+    from physics import BallParams, Shot
+    from pipeline.measure import mle_bound
     from render import render_video
     from track.tracker import TrackerConfig
 
@@ -94,13 +93,9 @@ def trial(spec: dict) -> dict:
         row[f"status_{m}"] = d["status"]
         row[f"err_v0_{m}"] = np.hypot(*(np.array(d["v0"]) - v0)) / speed if d["v0"] else math.nan
         row[f"err_rw0_{m}"] = p.R * np.hypot(*(np.array(d["w0"]) - w0)) / speed if d["w0"] else math.nan
-    # The bound for this scene, with the tracker's measured noise.
-    cam = scene.camera
-    centre = cam.to_table([[cam.width / 2, cam.height / 2]])[0]
-    se = track_noise(tr.stderr_px[tr.ok] / cam.px_per_m(centre), tr.xy[tr.ok])
-    rolling = np.hypot(*contact_velocity(v0, w0, p.R)) < 1e-9
+    # The bound for the same measurements as the fit's (pipeline.measure).
     try:
-        cov = crb_covariance(shot, p, tr.t[tr.ok], se, cam.exposure_s, rolling=rolling)
+        cov, rolling = mle_bound(scene, tr, out["methods"].get("mle"))
         row["crb_v0"] = float(np.sqrt(cov[3, 3] + cov[4, 4]) / speed)
         row["crb_rw0"] = float(p.R * np.sqrt(cov[5, 5] + cov[6, 6]) / speed) if not rolling else row["crb_v0"]
     except (np.linalg.LinAlgError, IndexError):

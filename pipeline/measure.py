@@ -57,3 +57,42 @@ def tracker_accuracy(scene: Scene, video: Path, refine: str = "fit", n_eval: int
                                    s["noise_sigma"], blur_len > FIT_BLUR_PX))
     return TrackerAccuracy(result=res, truth=truth, rmse=float(np.sqrt(np.mean(err**2))),
                            crb=float(np.sqrt(np.mean(np.square(bounds)))))
+
+
+def mle_bound(scene: Scene, track: TrackResult, mle: dict | None = None, independent: bool = False):
+    """Cramer-Rao covariance of ``(x0, t0, v0[, w0])`` at the scene's truth.
+
+    The inverse Fisher information of the maximum-likelihood fit's model
+    (its Jacobian at the truth) for the measurements it used: by default the
+    per-frame errors it weights by (recover.api.mle_noise: the tracker's,
+    plus the codec's own error from ``mle["codec_noise_m"]``, each rest
+    counted once for a lossy codec, the strike's frames out).  With
+    ``independent``, the tracker's stated errors with every frame
+    independent, the bound a lossy codec's shared errors put out of reach.
+
+    Returns
+    -------
+    (cov, rolling) : (ndarray, bool)
+        ``rolling`` when the shot rolls from the strike (w0 then follows
+        from v0, and ``cov`` is 5 x 5).
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        When the information matrix is singular.
+    """
+    from fit.segment import segment_track
+    from physics import contact_velocity
+    from recover.api import mle_noise, track_noise
+    from recover.mle import crb_covariance
+
+    truth, p, cam = scene.truth, scene.physics, scene.camera
+    rolling = bool(np.hypot(*contact_velocity(np.array(truth.v0), np.array(truth.w0), p.R)) < 1e-9)
+    centre = cam.to_table([[cam.width / 2, cam.height / 2]])[0]
+    t, xy = track.t[track.ok], track.xy[track.ok]
+    se = track_noise(track.stderr_px[track.ok] / cam.px_per_m(centre), xy)
+    if not independent:
+        seg = segment_track(t, xy, 5.0 / 7.0 * p.mu_r * p.g, float(np.median(se)), cam.exposure_s)
+        se = mle_noise(t, se, seg, cam.exposure_s, 1.0 / cam.fps, track.lossless,
+                       (mle or {}).get("codec_noise_m") or 0.0)
+    return crb_covariance(truth, p, t, se, cam.exposure_s, rolling=rolling), rolling
