@@ -28,10 +28,10 @@ from track.tracker import OK, STATUS_TEXT, BallTracker, TrackerConfig
 
 # Bytes of decoded frames the decoder may run ahead while the background is
 # learnt.  OpenCV's seek decodes ~16 frames forward from an earlier one, so
-# each background sample costs ~16 decodes; samples within the first 366
-# frames (this much room at 1280 x 640) are taken from the buffer instead,
-# and the sequential decoder does not stall meanwhile.  A fixed cap: memory
-# does not grow with the video's length.
+# each background sample costs ~16 decodes; with this much room (366 frames
+# at 1280 x 640) the sequential decoder does not stall meanwhile, and for a
+# lossless codec, costly to decode, samples within it are taken from the
+# buffer instead.  A fixed cap: memory does not grow with the video's length.
 BUFFER_BYTES = 300 * 2**20
 
 # Decoding grey video without RGB conversion hands back the luma plane and
