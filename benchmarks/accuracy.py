@@ -11,7 +11,7 @@ from the residuals), and the coverage of its reported 95% intervals.  Speed: fit
 a fraction of decoding the same video (target <= 0.1).  Videos are capped at
 6 s; shots run in worker processes.
 
-Usage: python benchmarks/accuracy.py [--n 200] [--seed 0] [--workers 2] [--csv out.csv]
+Usage: python benchmarks/accuracy.py [--n 200] [--seed 0] [--workers 2] [--csv out.csv] [--codec FFV1]
 """
 
 import argparse
@@ -32,7 +32,7 @@ MAX_SECONDS = 6.0
 
 
 def one_shot(args):
-    i, seed, tmp = args
+    i, seed, tmp, codec = args
     from data_gen.sampler import sample_scenes
     from physics import phases
     from pipeline.cli import run_recover
@@ -41,6 +41,8 @@ def one_shot(args):
 
     scene = sample_scenes(i + 1, seed)[i]
     scene.render["max_duration"] = MAX_SECONDS
+    if codec:
+        scene.render["codec"] = codec
     video = Path(tmp) / f"shot_{i}.avi"
     render_video(scene, video)
     cap = open_video(video)
@@ -104,10 +106,11 @@ def main():
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--csv", default=None, help="write every shot's row here")
+    ap.add_argument("--codec", default=None, help="render every shot with this FourCC (default: the scene's, MJPG)")
     args = ap.parse_args()
     from tqdm import tqdm
     with tempfile.TemporaryDirectory() as tmp, Pool(args.workers) as pool:
-        rows = list(tqdm(pool.imap_unordered(one_shot, [(i, args.seed, tmp) for i in range(args.n)]),
+        rows = list(tqdm(pool.imap_unordered(one_shot, [(i, args.seed, tmp, args.codec) for i in range(args.n)]),
                          total=args.n, desc="shots", disable=None))
     rows.sort(key=lambda r: r["i"])
     if args.csv:
