@@ -307,7 +307,8 @@ def segment_track(t, xy, decel: float, sigma: float | None = None,
     # level: a kink fitted into noise near the end must not pass for one.
     if t1 < beyond and not rolling_from_strike:
         dof_bp = max(2 * len(tf) - 8, 1)
-        F_end = max(cost(t0, beyond) - cost(t0, t1), 0.0) / max(cost(t0, t1) / dof_bp, 1e-300)
+        # (t0, t1) is still the refinement's optimum here: its cost is best_sse.
+        F_end = max(cost(t0, beyond) - best_sse, 0.0) / max(best_sse / dof_bp, 1e-300)
         if f_dist.sf(F_end, 1, dof_bp) >= SLIDING_TEST_LEVEL:
             t1 = beyond
     sse, coef, res = _solve(tf, xf, t0, t1, decel)
