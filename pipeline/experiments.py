@@ -63,7 +63,7 @@ def trial(spec: dict) -> dict:
     from pipeline.cli import run_recover
     from physics import BallParams, Shot
     from pipeline.measure import mle_bound
-    from render import render_video
+    from render import render_video, truth_path
     from track.tracker import TrackerConfig
 
     shot = Shot(spec["x0"], spec["v0"], spec["w0"], spec["t0"])
@@ -83,8 +83,9 @@ def trial(spec: dict) -> dict:
     except Exception as exc:  # an experiment records failures, it does not stop
         row.update(status_paper="failed", status_mle="failed", reason=str(exc))
         return row
-    finally:
+    finally:  # the video and the truth sidecar render_video writes beside it
         Path(name).unlink(missing_ok=True)
+        truth_path(name).unlink(missing_ok=True)
     v0, w0 = np.array(shot.v0), np.array(shot.w0)
     speed = np.hypot(*v0)
     row.update(t_track=out["timing_s"]["track"], t_fit=out["timing_s"]["fit"],

@@ -36,3 +36,15 @@ def test_experiment_small(tmp_path, name):
     pngs = list(tmp_path.glob("*.png"))
     assert len(pngs) == 1 and pngs[0].stat().st_size > 10_000
     assert pngs[0].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_trial_leaves_no_files(tmp_path, monkeypatch):
+    # Each trial renders a video and its truth sidecar to a temporary file;
+    # hundreds of trials must not leave hundreds of files behind.
+    import tempfile
+
+    from pipeline.experiments import specs_noise, trial
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    row = trial(specs_noise(1, seed=1, quick=True)[0])
+    assert row["status_mle"] in ("ok", "degenerate", "ambiguous", "failed")
+    assert list(tmp_path.iterdir()) == []
