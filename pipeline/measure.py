@@ -21,12 +21,15 @@ from track.video import TrackResult, track_video
 
 @dataclass
 class TrackerAccuracy:
-    """Per-axis centroid RMSE over moving frames (px) beside the bound (px)."""
+    """Per-axis centroid RMSE over moving frames (px) beside the bound (px),
+    and the RMS of the errors in the tracker's own stated errors
+    (``stated_z``: 1 when its per-frame errors are honest)."""
 
     result: TrackResult
     truth: FrameTruth
     rmse: float
     crb: float
+    stated_z: float = float("nan")
 
     @property
     def ratio(self) -> float:
@@ -55,8 +58,11 @@ def tracker_accuracy(scene: Scene, video: Path, refine: str = "fit", n_eval: int
         blur_len = np.hypot(*(nodes[-1] - nodes[0])) * (1 + 1 / max(len(nodes) - 1, 1))
         bounds.append(centroid_crb(nodes, r.radius_px, s["ball_grey"], r.background,
                                    s["noise_sigma"], blur_len > FIT_BLUR_PX))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        z = err / res.stderr_px[moving]  # NaN with refine="moments", which states none
     return TrackerAccuracy(result=res, truth=truth, rmse=float(np.sqrt(np.mean(err**2))),
-                           crb=float(np.sqrt(np.mean(np.square(bounds)))))
+                           crb=float(np.sqrt(np.mean(np.square(bounds)))),
+                           stated_z=float(np.sqrt(np.mean(z**2))))
 
 
 def mle_bound(scene: Scene, track: TrackResult, mle: dict | None = None, independent: bool = False):

@@ -215,8 +215,17 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
     inside = (u0 - 0.5 <= c[0] <= u0 + w - 0.5) and (v0 - 0.5 <= c[1] <= v0 + h - 0.5)
     if not inside:
         return _failed("centre left the patch", c, b, G, it)
+    # Standard errors by the sandwich (heteroscedasticity-consistent, HC1):
+    # the noise is not the same in every pixel.  At low sensor noise the
+    # 8-bit rounding is most of it, and it sits on the ball's edge, the
+    # pixels that locate it, while felt and ball rounded to the same integer
+    # every frame show almost none: one pooled RMS stated errors 3.6x too
+    # small at noise 0.08 (benchmarks/track.py accuracy, column err/se).  It
+    # equals the sandwich when the noise is the same everywhere.
     try:
-        se = np.sqrt(np.diag(np.linalg.inv(JtJ))[:2]) * rms
+        A = np.linalg.inv(JtJ)
+        meat = J.T @ (J * (res * res)[:, None]) * (len(y) / dof)
+        se = np.sqrt(np.clip(np.diag(A @ meat @ A)[:2], 0.0, None))
     except np.linalg.LinAlgError:
         se = np.full(2, np.nan)
     return DiscFit(True, "", c, b, G, se, rms, it)
@@ -266,20 +275,33 @@ def refit_shift(felt_old: np.ndarray, felt_new: np.ndarray, u0: int, v0: int, c,
                 r: float, fit_blur: bool) -> np.ndarray:
     """Change of a converged disc fit's centre (px) when its felt is replaced.
 
-    One linearised Gauss-Newton step from the old optimum, where the
-    gradient vanished: replacing ``felt`` by ``felt + df`` changes the
-    residual by ``-df (1 - cov)``, so the centre moves by the first two
-    components of ``(J^T J)^-1 J^T (-df (1 - cov))``.  No pixels of the frame
-    are needed.
+    At the old optimum the old Jacobian ``J_o`` is orthogonal to the
+    residual; replacing ``felt`` by ``felt + df`` changes the model by
+    ``df (1 - cov)``, so if the new model fits the frame at ``c + dc``,
+    ``J_o^T (df (1 - cov) + J_n dc) = 0``: ``dc`` is the first two
+    components of ``-(J_o^T J_n)^-1 J_o^T df (1 - cov)``.  No pixels of the
+    frame are needed.  ``J_o`` rather than ``J_n`` on the left matters where
+    the old felt was badly wrong (a felt that shows ball, where a shot
+    stopped near its strike: ``J_o`` is zero there, as those pixels told the
+    old fit nothing; with ``J_n`` the shift came out of the wrong sign).
     """
     taus = blur_nodes(np.hypot(*b))
-    _, J = streak_model(np.asarray(c, float), np.asarray(b, float), G, felt_new, r, u0, v0, taus)
+    # Unit contrast: the coverage's geometric derivatives, scaled per felt below.
+    _, J = streak_model(np.asarray(c, float), np.asarray(b, float), 1.0, np.zeros_like(felt_new, float),
+                        r, u0, v0, taus)
     cols = [0, 1, 2, 3, 4] if fit_blur else [0, 1, 4]
     cov = J[:, 4]
-    df = (np.asarray(felt_new, np.float64) - felt_old).ravel()
-    Jc = J[:, cols]
+    felt_old = np.asarray(felt_old, np.float64).ravel()
+    felt_new = np.asarray(felt_new, np.float64).ravel()
+    Jo, Jn = J.copy(), J
+    Jo[:, :4] *= (G - felt_old)[:, None]
+    Jn[:, :4] *= (G - felt_new)[:, None]
+    Jo, Jn = Jo[:, cols], Jn[:, cols]
+    # Least squares, not solve: a blur fitted near zero length has (almost)
+    # zero derivatives (the blur acts at second order there), which must not
+    # stop the centre's correction.
     try:
-        step = np.linalg.solve(Jc.T @ Jc, Jc.T @ (-df * (1.0 - cov)))
+        step = -np.linalg.lstsq(Jo.T @ Jn, Jo.T @ ((felt_new - felt_old) * (1.0 - cov)), rcond=1e-9)[0]
     except np.linalg.LinAlgError:
         return np.zeros(2)
     return step[:2]
