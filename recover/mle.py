@@ -32,6 +32,12 @@ SLIP_LR_THRESHOLD = 9.21
 # shot); it is reported as failed, never as an answer.  Good fits measured
 # over the 200-shot benchmark stay far below it (README).
 MAX_CHI2_PER_DOF = 100.0
+# v0 is "not determined" when its standard error is this fraction of |v0| or
+# more: the 95% interval then reaches from zero to twice the speed.  Tracks
+# that show the strike measure |v0| to 1e-5-1e-3 (README); one that starts
+# mid-shot extrapolates back to an unseen strike and trades t0 against v0
+# (measured: 25 m/s of error on a 0.07 m/s shot).
+MAX_REL_STDERR_V0 = 0.5
 # Gauss-Legendre nodes for averaging the model over the exposure: exact for
 # the (quadratic) motion within a phase.
 _GL_T, _GL_W = np.polynomial.legendre.leggauss(3)
@@ -253,6 +259,15 @@ def fit_mle(t, xy, sigma, params: BallParams, start, exposure_s: float = 0.0,
                mu_r=pr.mu_r if fit_friction else None,
                stderr=stderr, model="rolling" if rolling else "full", slip_lr=float(lr),
                chi2=float(chi2), dof=int(dof), residuals=resid, cov=cov, names=names)
+    speed = float(np.hypot(*shot.v0))
+    se_speed = float(np.hypot(*stderr["v0"]))
+    if not se_speed < MAX_REL_STDERR_V0 * speed:
+        return MLEResult("degenerate",
+                         f"the track does not determine v0 (standard error {se_speed:.3g} m/s for "
+                         f"|v0| = {speed:.3g} m/s): the strike at t0 is not in view, or the ball "
+                         f"was tracked in too few frames", stderr=stderr, model=out["model"],
+                         slip_lr=float(lr), chi2=float(chi2), dof=int(dof), residuals=resid,
+                         cov=cov, names=names)
     t_end = float(t[-1])
     frame = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
     if not rolling and (ph.t1 > t_end - 2 * frame or not sliding_ended):

@@ -122,6 +122,20 @@ def test_mle_degenerate_when_track_ends_while_sliding():
     assert np.all(np.abs(m.v0 - np.array(shot.v0)) < MLE_Z_MAX * m.stderr["v0"])
 
 
+def test_mle_degenerate_when_the_strike_is_not_in_view():
+    # The track starts mid-shot: the strike's place, time and speed trade
+    # along the path, and v0 is not an answer.
+    shot, p = sample_shot(9, "case4")
+    ph = phases(shot, p)
+    t, xy = synthetic(shot, p, t_cut=ph.t2 + 0.3)
+    late = t > shot.t0 + 0.5 * (ph.t2 - shot.t0)
+    m = mle_of(t[late], xy[late], p)
+    assert m.status == "degenerate" and "does not determine v0" in m.reason, m.reason
+    assert m.v0 is None and m.w0 is None
+    # The whole track from the same shot answers.
+    assert mle_of(t, xy, p).status == "ok"
+
+
 def test_mle_fits_friction_on_request():
     shot, p = sample_shot(13, "random")
     ph = phases(shot, p)
