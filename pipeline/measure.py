@@ -6,7 +6,7 @@ Shared by the tests, the benchmarks and the experiments: one definition of
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -72,9 +72,10 @@ def mle_bound(scene: Scene, track: TrackResult, mle: dict | None = None, indepen
     (its Jacobian at the truth) for the measurements it used: by default the
     per-frame errors it weights by (recover.api.mle_noise: the tracker's,
     plus the codec's own error from ``mle["codec_noise_m"]``, each rest
-    counted once for a lossy codec, the strike's frames out).  With
-    ``independent``, the tracker's stated errors with every frame
-    independent, the bound a lossy codec's shared errors put out of reach.
+    counted once for a lossy codec, the strike's frames out around the
+    fit's ``t0``).  With ``independent``, the tracker's stated errors with
+    every frame independent, the bound a lossy codec's shared errors put out
+    of reach.
 
     Returns
     -------
@@ -99,6 +100,8 @@ def mle_bound(scene: Scene, track: TrackResult, mle: dict | None = None, indepen
     se = track_noise(track.stderr_px[track.ok] / cam.px_per_m(centre), xy)
     if not independent:
         seg = segment_track(t, xy, 5.0 / 7.0 * p.mu_r * p.g, float(np.median(se)), cam.exposure_s)
+        if (mle or {}).get("t0") is not None:  # the fit leaves out the strike's frames around its t0
+            seg = replace(seg, t0=mle["t0"])
         se = mle_noise(t, se, seg, cam.exposure_s, 1.0 / cam.fps, track.lossless,
                        (mle or {}).get("codec_noise_m") or 0.0)
     return crb_covariance(truth, p, t, se, cam.exposure_s, rolling=rolling), rolling
