@@ -71,15 +71,18 @@ def test_stated_errors_are_honest(tmp_path, noise):
     assert STATED_Z_RANGE[0] < acc.stated_z < STATED_Z_RANGE[1], acc.stated_z
 
 
-def test_shot_stopping_within_a_diameter_of_its_strike(tmp_path):
-    # Natural roll over 50 mm (0.9 ball diameters): the rests
-    # and the path between cover a lens of felt in every frame.  Taking the
-    # ball seen there for felt pulled both rests' centres 0.03 px (ten stated
-    # errors) towards each other; filled from the felt around it, the rests
-    # measured within 0.2 stated errors on average.
+@pytest.mark.parametrize("travel_m", [0.05, 0.025])
+def test_shot_stopping_within_a_diameter_of_its_strike(tmp_path, travel_m):
+    # Natural roll over 50 mm (0.9 ball diameters): the rests and the path
+    # between cover a lens of felt in every frame.  Taking the ball seen
+    # there for felt pulled both rests' centres 0.03 px (ten stated errors)
+    # towards each other; filled from the felt around it, the rests measured
+    # within 0.2 stated errors on average.  Over 25 mm (less than a radius)
+    # the learnt felt held a whole ball: the tracker lost the ball at both
+    # rests (24 of 161 frames found) and the frames it found were biased.
     from physics import BallParams, phases
     params = BallParams(mu_r=0.015)
-    speed = np.sqrt(2 * 5.0 / 7.0 * params.mu_r * params.g * 0.05)
+    speed = np.sqrt(2 * 5.0 / 7.0 * params.mu_r * params.g * travel_m)
     shot = Shot((0.8, 0.6), (speed, 0.0), (0.0, speed / params.R), t0=0.25)
     t2 = phases(shot, params).t2
     scene = make_scene(shot, params, fps=120.0,
