@@ -183,6 +183,23 @@ def test_codec_error_is_measured_and_weighted():
     assert lossless["codec_noise_m"] == 0.0
 
 
+def test_codec_error_below_the_stated_one_is_measured_negative():
+    # MJPG at low noise: the tracker states 1.2-1.4 times its real error.
+    # Stated 3e-5 m, real 2e-5 m: the codec's share is -sqrt(5e-10) m,
+    # measured within 10% (as above).
+    from recover.api import recover_track
+    shot, p = sample_shot(3, "random")
+    ph = phases(shot, p)
+    stated, real = 3e-5, 2e-5
+    t, xy = synthetic(shot, p, sigma=real, seed=6, t_cut=min(ph.t2 + 0.3, 5.0))
+    ok = np.ones(len(t), bool)
+    mle = recover_track(t, xy, ok, np.full(len(t), stated), p, lossless=False)["methods"]["mle"]
+    assert mle["status"] == "ok", mle["reason"]
+    assert mle["codec_noise_m"] == pytest.approx(-np.sqrt(stated**2 - real**2), rel=0.1)
+    z = np.abs((np.array(mle["v0"]) - shot.v0) / np.array(mle["stderr"]["v0"]))
+    assert z.max() < MLE_Z_MAX
+
+
 # -- end to end: video in, v0 and w0 out ----------------------------------------------
 
 def e2e_scene(kind):
