@@ -38,6 +38,8 @@ MAX_CHI2_PER_DOF = 100.0
 # mid-shot extrapolates back to an unseen strike and trades t0 against v0
 # (measured: 25 m/s of error on a 0.07 m/s shot).
 MAX_REL_STDERR_V0 = 0.5
+# Convergence tolerances of the Levenberg-Marquardt fit (see _fit).
+LM_TOL = 1e-7
 # Gauss-Legendre nodes for averaging the model over the exposure: exact for
 # the (quadratic) motion within a phase.
 _GL_T, _GL_W = np.polynomial.legendre.leggauss(3)
@@ -127,8 +129,10 @@ def _fit(t, xy, sig, p0, rolling, fit_friction, params, exposure_s):
                              diff_step=1e-7, xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=60)
     # max_nfev counts residual evaluations, Jacobians included: ~12 iterations,
     # plenty from the segmentation's start; beyond that the fit is lost anyway.
+    # Tolerances 1e-7: answers within 5e-6 standard errors of those at 1e-10
+    # (10 benchmark shots, both codecs), in 25% less time.
     return least_squares(resid, p0, x_scale=x_scale, method="lm", diff_step=1e-7,
-                         xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=100)
+                         xtol=LM_TOL, ftol=LM_TOL, gtol=LM_TOL, max_nfev=100)
 
 
 def initial_guess(seg, params: BallParams):
