@@ -84,6 +84,12 @@ def noise_sigma(a: np.ndarray, b: np.ndarray) -> float:
     return float(inl.std() / np.sqrt(2.0))
 
 
+def felt_band(sigma: float) -> float:
+    """Grey levels within which a sample still shows felt (noise ``sigma``
+    plus a level for rounding); a pixel the ball partly covers lies beyond."""
+    return 3.0 * sigma + 1.5
+
+
 def box_size(radius_px: float) -> int:
     """Odd box-filter size matched to the ball: about the inscribed square."""
     return max(3, int(round(1.4 * radius_px)) | 1)
@@ -130,7 +136,7 @@ def learn_background(samples: np.ndarray, radius_px: float) -> Background:
     contrast = float(np.percentile((P.max(axis=0) - felt0)[strong], 75)) if strong.any() else 0.0
     # Felt samples lie within noise of the felt; a pixel partly covered by
     # the ball lies between, so the band is set by the noise, not the contrast.
-    band = 3.0 * sigma + 1.5
+    band = felt_band(sigma)
     felt = felt0
     for slack in (2.5 * sigma, 0.0):  # felt0 sits ~2 sigma below the felt's mean
         keep = P < felt + band + slack
@@ -156,7 +162,7 @@ def hidden_ball(image: np.ndarray, path: np.ndarray, polarity: int, contrast: fl
     pixels stand out from the felt around them (a median over a window
     twice the ball's width, which the ball cannot fill) by the ball's
     contrast; the pixels around them partly covered in every sample, by
-    more than noise.
+    more than :func:`felt_band`.
 
     Returns
     -------
@@ -177,7 +183,7 @@ def hidden_ball(image: np.ndarray, path: np.ndarray, polarity: int, contrast: fl
     if not core.any():
         return hidden
     near = cv2.dilate(core, np.ones((5, 5), np.uint8)).astype(bool)
-    hidden[v0:v1, u0:u1] = core.astype(bool) | (near & (excess > 3.0 * sigma + 1.5))
+    hidden[v0:v1, u0:u1] = core.astype(bool) | (near & (excess > felt_band(sigma)))
     return hidden
 
 
