@@ -16,28 +16,24 @@ Usage: python benchmarks/accuracy.py [--n 200] [--seed 0] [--workers 2] [--csv o
 
 import argparse
 import csv
-import os
-import sys
 import tempfile
 import time
 from multiprocessing import Pool
 from pathlib import Path
 
-_here = os.path.dirname(os.path.abspath(__file__))
-sys.path[:] = [p for p in sys.path if os.path.abspath(p or ".") != _here]
 
-import numpy as np  # noqa: E402
+import numpy as np
 
 MAX_SECONDS = 6.0
 
 
 def one_shot(args):
     i, seed, tmp, codec = args
-    from data_gen.sampler import sample_scenes
-    from physics import phases
-    from pipeline.cli import run_recover
-    from render import render_video
-    from track.video import open_video
+    from cuespin.data_gen.sampler import sample_scenes
+    from cuespin.physics import phases
+    from cuespin.pipeline.cli import run_recover
+    from cuespin.render import render_video
+    from cuespin.track.video import open_video
 
     scene = sample_scenes(i + 1, seed)[i]
     scene.render["max_duration"] = MAX_SECONDS
@@ -76,7 +72,7 @@ def one_shot(args):
         row["mle_cover"] = float(np.mean(np.abs(err) < 1.96 * se))
         # The bound for the same measurements (pipeline.measure.mle_bound),
         # and for reference the one with every frame independent.
-        from pipeline.measure import mle_bound
+        from cuespin.pipeline.measure import mle_bound
         cam = scene.camera
         centre = cam.to_table([[cam.width / 2, cam.height / 2]])[0]
         scale = np.sqrt(max(mle.get("chi2_per_dof") or 1.0, 1.0))

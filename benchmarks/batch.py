@@ -12,17 +12,13 @@ Usage: python benchmarks/batch.py [--n 12] [--repeat 2]
 """
 
 import argparse
-import os
-import sys
 import tempfile
 import time
 from pathlib import Path
 
-_here = os.path.dirname(os.path.abspath(__file__))
-sys.path[:] = [p for p in sys.path if os.path.abspath(p or ".") != _here]
 
-from data_gen.dataset import generate_dataset  # noqa: E402
-from pipeline.batch import expand_inputs, process_video, run_batch, scene_for  # noqa: E402
+from cuespin.data_gen.dataset import generate_dataset
+from cuespin.pipeline.batch import expand_inputs, process_video, run_batch, scene_for
 
 
 def main():

@@ -9,20 +9,16 @@ Usage: python benchmarks/render.py [--codec MJPG] [--codec FFV1] [--noise 5] [--
 """
 
 import argparse
-import os
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 # This file is named after the package it measures: keep its own folder off
 # the import path so that ``import render`` finds the package.
-_here = os.path.dirname(os.path.abspath(__file__))
-sys.path[:] = [p for p in sys.path if os.path.abspath(p or ".") != _here]
 
-from data_gen.sampler import make_scene, sample_shot
-from render import FrameRenderer, render_video
-from render.video import encode_frames
+from cuespin.data_gen.sampler import make_scene, sample_shot
+from cuespin.render import FrameRenderer, render_video
+from cuespin.render.video import encode_frames
 
 
 def bench(codec: str, noise: float, seconds: float, repeat: int) -> dict:

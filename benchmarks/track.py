@@ -17,23 +17,20 @@ Usage: python benchmarks/track.py [speed] [memory] [accuracy] [--quick]
 
 import argparse
 import json
-import os
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-_here = os.path.dirname(os.path.abspath(__file__))
-sys.path[:] = [p for p in sys.path if os.path.abspath(p or ".") != _here]
 
-import cv2  # noqa: E402
+import cv2
 
-from data_gen.sampler import make_scene, sample_shot  # noqa: E402
-from physics import Shot  # noqa: E402
-from pipeline.measure import tracker_accuracy  # noqa: E402
-from render import render_video  # noqa: E402
-from track.video import open_video, track_video  # noqa: E402
+from cuespin.data_gen.sampler import make_scene, sample_shot
+from cuespin.physics import Shot
+from cuespin.pipeline.measure import tracker_accuracy
+from cuespin.render import render_video
+from cuespin.track.video import open_video, track_video
 
 
 def scene_for(codec, seconds, fps=240.0, noise=5.0, px_per_m=500.0, blur=False, gradient=0.0,
@@ -77,8 +74,8 @@ def speed(tmp, repeat):
 
 _CHILD = """
 import json, resource, sys
-from pipeline.io import read_scene
-from track.video import track_video
+from cuespin.pipeline.io import read_scene
+from cuespin.track.video import track_video
 scene = read_scene(sys.argv[2])
 res = track_video(sys.argv[1], scene)
 print(json.dumps({"frames": res.n_frames, "maxrss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
@@ -86,7 +83,7 @@ print(json.dumps({"frames": res.n_frames, "maxrss_mb": resource.getrusage(resour
 
 
 def memory(tmp):
-    from pipeline.io import write_scene
+    from cuespin.pipeline.io import write_scene
     print("\nmemory: peak RSS of a fresh tracking process")
     out = {}
     for secs in (2.0, 20.0):

@@ -12,8 +12,8 @@ import json
 import os
 from pathlib import Path
 
-from data_gen.sampler import sample_scenes
-from physics.scene import scene_to_dict
+from cuespin.data_gen.sampler import sample_scenes
+from cuespin.physics.scene import scene_to_dict
 
 
 def shot_stem(i: int) -> str:
@@ -48,8 +48,8 @@ def generate_dataset(out: Path, n: int, seed: int, preset: str | None = None,
     dict
         ``{"written": int, "skipped": int, "paths": [video paths]}``.
     """
-    from pipeline.io import write_scene
-    from render.video import render_video, truth_path
+    from cuespin.pipeline.io import write_scene
+    from cuespin.render.video import render_video, truth_path
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -80,7 +80,7 @@ def generate_dataset(out: Path, n: int, seed: int, preset: str | None = None,
 
 
 def _complete(scene_file: Path, video: Path, scene) -> bool:
-    from render.video import truth_path
+    from cuespin.render.video import truth_path
 
     if not (scene_file.exists() and video.exists() and truth_path(video).exists()):
         return False

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from physics.motion import BallParams, Shot
-from physics.scene import Scene, Table, default_camera
-from physics.straight import straight_frame
+from cuespin.physics.motion import BallParams, Shot
+from cuespin.physics.scene import Scene, Table, default_camera
+from cuespin.physics.straight import straight_frame
 
 PRESETS = ("random", "case1", "case2", "case3", "case4", "case5", "masse", "leaves_table")
 

@@ -21,7 +21,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.stats import f as f_dist
 
-from physics.parabola import Parabola
+from cuespin.physics.parabola import Parabola
 
 CURVE_TEST_LEVEL = 0.01
 

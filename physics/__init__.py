@@ -1,9 +1,9 @@
 """The paper's forward model: the one source of truth for the ball's motion."""
 
-from physics.motion import (BallParams, Phases, Shot, State, contact_velocity, cross,
+from cuespin.physics.motion import (BallParams, Phases, Shot, State, contact_velocity, cross,
                             evaluate, kinetic_energy, phases, positions, z_cross)
-from physics.parabola import Parabola, sliding_parabola
-from physics.straight import StraightMotion, is_straight, straight_case, straight_motion
+from cuespin.physics.parabola import Parabola, sliding_parabola
+from cuespin.physics.straight import StraightMotion, is_straight, straight_case, straight_motion
 
 __all__ = [
     "BallParams", "Phases", "Shot", "State", "contact_velocity", "cross", "evaluate",

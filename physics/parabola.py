@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from physics.motion import BallParams, contact_velocity, cross
+from cuespin.physics.motion import BallParams, contact_velocity, cross
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from physics.motion import BallParams, Shot, phases, positions
+from cuespin.physics.motion import BallParams, Shot, phases, positions
 
 SCHEMA = 1
 

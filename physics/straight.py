@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from physics.motion import BallParams, z_cross
+from cuespin.physics.motion import BallParams, z_cross
 
 # Relative tolerance for the paper's equality cases (2 and 4) and for
 # deciding that v0 and w0 are orthogonal; far below what any video resolves.

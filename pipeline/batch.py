@@ -91,10 +91,10 @@ def process_video(video: str, scene_path: str, threaded: bool = True) -> list[di
         os.environ.setdefault("OPENCV_FFMPEG_CAPTURE_OPTIONS", "threads;1")
         import cv2
         cv2.setNumThreads(1)
-    from pipeline.cli import run_recover
-    from pipeline.io import InputError, read_scene
-    from track.tracker import TrackerConfig
-    from track.video import TrackError
+    from cuespin.pipeline.cli import run_recover
+    from cuespin.pipeline.io import InputError, read_scene
+    from cuespin.track.tracker import TrackerConfig
+    from cuespin.track.video import TrackError
 
     base = {"video": str(video)}
     try:

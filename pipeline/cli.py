@@ -16,7 +16,7 @@ os.environ.setdefault("OPENCV_LOG_LEVEL", "SILENT")
 os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
 from pathlib import Path
 
-from pipeline.io import InputError
+from cuespin.pipeline.io import InputError
 
 DEMO_SEED = 20261122
 
@@ -24,8 +24,8 @@ DEMO_SEED = 20261122
 def demo_scene():
     """The demo's shot: side spin bends the slide (about 0.34 s) before it rolls
     to rest on a slow cloth, all in view; 240 fps, noise sigma 3, MJPG."""
-    from data_gen.sampler import make_scene
-    from physics.motion import BallParams, Shot
+    from cuespin.data_gen.sampler import make_scene
+    from cuespin.physics.motion import BallParams, Shot
 
     shot = Shot(x0=(0.5, 0.35), v0=(0.9, 0.25), w0=(30.0, -40.0), t0=0.25)
     return make_scene(shot, BallParams(mu_s=0.2, mu_r=0.02), fps=240.0,
@@ -39,9 +39,9 @@ def _progress(total: int, desc: str, unit: str = "frame"):
 
 
 def cmd_render(args) -> int:
-    from pipeline.io import read_scene
-    from render import render_video, truth_path, video_length
-    from render.video import VideoError
+    from cuespin.pipeline.io import read_scene
+    from cuespin.render import render_video, truth_path, video_length
+    from cuespin.render.video import VideoError
 
     scene = read_scene(args.scene)
     if scene.truth is None:
@@ -60,7 +60,7 @@ def cmd_render(args) -> int:
 
 
 def cmd_generate(args) -> int:
-    from data_gen.dataset import generate_dataset
+    from cuespin.data_gen.dataset import generate_dataset
 
     if args.n < 1:
         raise InputError("--n must be at least 1")
@@ -71,9 +71,9 @@ def cmd_generate(args) -> int:
 
 
 def cmd_track(args) -> int:
-    from pipeline.io import read_scene
-    from track.tracker import TrackerConfig
-    from track.video import TrackError, track_video, write_track_csv
+    from cuespin.pipeline.io import read_scene
+    from cuespin.track.tracker import TrackerConfig
+    from cuespin.track.video import TrackError, track_video, write_track_csv
 
     scene = read_scene(args.scene)
     out = Path(args.output)
@@ -100,9 +100,9 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
     (and the TrackResult too, with ``return_track``)."""
     import time
 
-    from recover.api import recover_track
-    from track.tracker import TrackerConfig
-    from track.video import track_video
+    from cuespin.recover.api import recover_track
+    from cuespin.track.tracker import TrackerConfig
+    from cuespin.track.video import track_video
 
     clock = time.perf_counter()
     if config is None:
@@ -153,8 +153,8 @@ def format_recover(result: dict, truth=None) -> str:
 def cmd_recover(args) -> int:
     import json
 
-    from pipeline.io import read_scene
-    from track.video import TrackError
+    from cuespin.pipeline.io import read_scene
+    from cuespin.track.video import TrackError
 
     scene = read_scene(args.scene)
     try:
@@ -173,7 +173,7 @@ def cmd_recover(args) -> int:
 
 
 def cmd_batch(args) -> int:
-    from pipeline.batch import BatchInputError, expand_inputs, run_batch
+    from cuespin.pipeline.batch import BatchInputError, expand_inputs, run_batch
 
     try:
         videos = expand_inputs(args.inputs)
@@ -192,7 +192,7 @@ def cmd_batch(args) -> int:
 
 
 def cmd_experiment(args) -> int:
-    from pipeline.experiments import run_experiment
+    from cuespin.pipeline.experiments import run_experiment
 
     if args.n < 1:
         raise InputError("--n must be at least 1")
@@ -203,8 +203,8 @@ def cmd_experiment(args) -> int:
 
 
 def cmd_demo(args) -> int:
-    from pipeline.io import write_scene
-    from render import render_video, truth_path, video_length
+    from cuespin.pipeline.io import write_scene
+    from cuespin.render import render_video, truth_path, video_length
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -296,7 +296,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "with the Cramer-Rao bound. speed-accuracy: time per video against "
                                    "error, Pareto front marked. stability: error and failure rate over "
                                    "spin direction and magnitude. Writes OUT/trials.csv and OUT/*.png.")
-    from pipeline.experiments import EXPERIMENTS
+    from cuespin.pipeline.experiments import EXPERIMENTS
     e.add_argument("name", choices=EXPERIMENTS, help="which experiment")
     e.add_argument("--out", required=True, help="output folder")
     e.add_argument("--n", type=int, default=4, help="shots per setting (default: %(default)s)")
@@ -311,7 +311,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--n", type=int, required=True, help="number of shots")
     g.add_argument("--seed", type=int, default=0, help="dataset seed (default: %(default)s)")
     g.add_argument("--out", required=True, help="output folder (created if absent)")
-    from data_gen import PRESETS
+    from cuespin.data_gen import PRESETS
     g.add_argument("--preset", choices=PRESETS, default=None,
                    help="one kind of shot for all; default: a mix of every preset")
     g.add_argument("--codec", default=None, help="FourCC, e.g. MJPG (default, lossy) or FFV1 (lossless)")

@@ -33,9 +33,9 @@ MAX_SECONDS = 3.0
 def shot_pool(n: int, seed: int):
     """``n`` shots whose sliding ends in view and which stay on the table for a
     while after: the shots both methods can in principle answer."""
-    from data_gen.sampler import sample_shot
-    from physics import phases, positions
-    from physics.scene import Table
+    from cuespin.data_gen.sampler import sample_shot
+    from cuespin.physics import phases, positions
+    from cuespin.physics.scene import Table
 
     rng = np.random.default_rng(seed)
     table = Table()
@@ -59,12 +59,12 @@ def trial(spec: dict) -> dict:
     ``spec`` holds the shot (``x0 v0 w0 t0`` and friction) and the settings
     (``noise fps px_per_m codec refine``) plus labels copied to the row.
     """
-    from data_gen.sampler import make_scene
-    from pipeline.cli import run_recover
-    from physics import BallParams, Shot
-    from pipeline.measure import mle_bound
-    from render import render_video, truth_path
-    from track.tracker import TrackerConfig
+    from cuespin.data_gen.sampler import make_scene
+    from cuespin.pipeline.cli import run_recover
+    from cuespin.physics import BallParams, Shot
+    from cuespin.pipeline.measure import mle_bound
+    from cuespin.render import render_video, truth_path
+    from cuespin.track.tracker import TrackerConfig
 
     shot = Shot(spec["x0"], spec["v0"], spec["w0"], spec["t0"])
     p = BallParams(mu_s=spec["mu_s"], mu_r=spec["mu_r"])
@@ -105,7 +105,7 @@ def trial(spec: dict) -> dict:
 
 
 def _spec(shot, p, i, **settings):
-    from physics import phases
+    from cuespin.physics import phases
     s = dict(BASE)
     s.update(settings)
     s.update(x0=shot.x0, v0=shot.v0, w0=shot.w0, t0=shot.t0, mu_s=p.mu_s, mu_r=p.mu_r, shot=i,
@@ -134,7 +134,7 @@ def specs_speed(n, seed, quick=False):
 
 def specs_stability(n, seed, quick=False):
     """Spin direction (relative to v0) x spin magnitude R|w0|/|v0|, n shots per cell."""
-    from physics import BallParams, Shot
+    from cuespin.physics import BallParams, Shot
     angles = np.arange(0, 360, 45) if not quick else np.array([0, 90])
     mags = [0.25, 0.75, 1.5, 2.5] if not quick else [1.5]
     rng = np.random.default_rng(seed)

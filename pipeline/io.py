@@ -6,7 +6,7 @@ import json
 import os
 from pathlib import Path
 
-from physics.scene import Scene, SceneError, parse_scene, scene_to_dict
+from cuespin.physics.scene import Scene, SceneError, parse_scene, scene_to_dict
 
 
 class InputError(Exception):

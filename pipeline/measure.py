@@ -11,12 +11,12 @@ from pathlib import Path
 
 import numpy as np
 
-from physics.scene import Scene
-from render import FrameRenderer, render_video
-from render.draw import FrameTruth
-from track.bound import centroid_crb
-from track.tracker import FIT_BLUR_PX, TrackerConfig
-from track.video import TrackResult, track_video
+from cuespin.physics.scene import Scene
+from cuespin.render import FrameRenderer, render_video
+from cuespin.render.draw import FrameTruth
+from cuespin.track.bound import centroid_crb
+from cuespin.track.tracker import FIT_BLUR_PX, TrackerConfig
+from cuespin.track.video import TrackResult, track_video
 
 
 @dataclass
@@ -88,10 +88,10 @@ def mle_bound(scene: Scene, track: TrackResult, mle: dict | None = None, indepen
     numpy.linalg.LinAlgError
         When the information matrix is singular.
     """
-    from fit.segment import segment_track
-    from physics import contact_velocity
-    from recover.api import mle_noise, track_noise
-    from recover.mle import crb_covariance
+    from cuespin.fit.segment import segment_track
+    from cuespin.physics import contact_velocity
+    from cuespin.recover.api import mle_noise, track_noise
+    from cuespin.recover.mle import crb_covariance
 
     truth, p, cam = scene.truth, scene.physics, scene.camera
     rolling = bool(np.hypot(*contact_velocity(np.array(truth.v0), np.array(truth.w0), p.R)) < 1e-9)

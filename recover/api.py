@@ -13,12 +13,12 @@ from dataclasses import replace
 
 import numpy as np
 
-from fit.conics import classify_path
-from fit.segment import noise_from_track, segment_track
-from physics.motion import BallParams, Shot
-from physics.parabola import sliding_parabola
-from recover.mle import fit_mle, initial_guess
-from recover.paper import CONSISTENCY_SIGMAS, PaperResult, recover_line, recover_parabola
+from cuespin.fit.conics import classify_path
+from cuespin.fit.segment import noise_from_track, segment_track
+from cuespin.physics.motion import BallParams, Shot
+from cuespin.physics.parabola import sliding_parabola
+from cuespin.recover.mle import fit_mle, initial_guess
+from cuespin.recover.paper import CONSISTENCY_SIGMAS, PaperResult, recover_line, recover_parabola
 
 METHODS = ("paper", "mle", "all")
 # The segmentation's p-value for "no sliding" below which the MLE's own
@@ -232,7 +232,7 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
     try:
         seg = segment_track(tt, xx, 5.0 / 7.0 * params.mu_r * params.g, sigma, exposure_s)
     except Exception as exc:  # never let a fit crash the answer
-        from fit.segment import Segments
+        from cuespin.fit.segment import Segments
         seg = Segments(False, f"segmentation failed: {exc.__class__.__name__}: {exc}")
     t_fit = time.perf_counter() - clock
     methods = {}
@@ -278,7 +278,7 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
 def _run_mle(t, xy, sig, params, seg, paper, exposure_s, fit_friction, first=None):
     """The maximum-likelihood fit from the best start at hand: ``first``'s
     answer (an earlier fit), the paper's, then the segmentation's guess."""
-    from recover.mle import MLEResult
+    from cuespin.recover.mle import MLEResult
     if not seg:
         return MLEResult("failed", f"no starting point: {seg.reason}")
     try:
@@ -303,7 +303,7 @@ def _run_mle(t, xy, sig, params, seg, paper, exposure_s, fit_friction, first=Non
 
 def paper_dict(p: PaperResult, seg, params: BallParams) -> dict:
     """The paper method's JSON fields (CONVENTIONS.md)."""
-    from physics.motion import phases
+    from cuespin.physics.motion import phases
     out = {"status": p.status, "reason": p.reason, "trajectory": p.trajectory or None,
            "v0": _num(p.v0), "w0": _num(p.w0), "x0": _num(p.x0 if p.x0 is not None else getattr(seg, "x0", None)),
            "t0": _num(seg.t0) if seg else None, "x1": None, "t1": None, "x2": None, "t2": None,

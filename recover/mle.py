@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-from physics.motion import BallParams, Shot, phases, positions, z_cross
+from cuespin.physics.motion import BallParams, Shot, phases, positions, z_cross
 
 # chi^2(2) at the 1% level: free slip must beat rolling-from-the-strike by this.
 SLIP_LR_THRESHOLD = 9.21

@@ -23,8 +23,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from physics.motion import BallParams, z_cross
-from physics.parabola import Parabola
+from cuespin.physics.motion import BallParams, z_cross
+from cuespin.physics.parabola import Parabola
 
 # A candidate satisfies eq. 37 when its predicted x1 is within this many
 # position-noise sigmas of the measured one (the measured x1 is itself an

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtr
 
-from physics.motion import Phases, phases, positions
-from physics.scene import Scene, homography_jacobian, motion_end
+from cuespin.physics.motion import Phases, phases, positions
+from cuespin.physics.scene import Scene, homography_jacobian, motion_end
 
 # Blur nodes are spaced at most this far apart (px) along the path, so the
 # blurred streak is smooth; the centroid is exact whatever the spacing.

@@ -18,8 +18,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from physics.scene import Scene
-from render.draw import FrameRenderer, FrameTruth, render_settings
+from cuespin.physics.scene import Scene
+from cuespin.render.draw import FrameRenderer, FrameTruth, render_settings
 
 LOSSLESS_CODECS = ("FFV1",)
 LOSSY_CODECS = ("MJPG", "mp4v", "XVID")

@@ -10,8 +10,8 @@ from collections import Counter
 
 import pytest
 
-from data_gen.dataset import generate_dataset
-from pipeline.batch import METHOD_NAMES, load_done, run_batch
+from cuespin.data_gen.dataset import generate_dataset
+from cuespin.pipeline.batch import METHOD_NAMES, load_done, run_batch
 
 
 @pytest.fixture(scope="module")
@@ -30,7 +30,7 @@ def rows_of(path):
 
 
 def cli(*args, **kw):
-    return subprocess.run([sys.executable, "-m", "pipeline.cli", *map(str, args)], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "cuespin.pipeline.cli", *map(str, args)], capture_output=True,
                           text=True, timeout=600, **kw)
 
 
@@ -53,7 +53,7 @@ def test_local_batch_rows_failures_and_exit_status(dataset, tmp_path):
 
 def test_killed_run_resumes_to_exactly_one_row_per_video_and_method(dataset, tmp_path):
     out = tmp_path / "r.csv"
-    proc = subprocess.Popen([sys.executable, "-m", "pipeline.cli", "batch", str(dataset), "-o", str(out),
+    proc = subprocess.Popen([sys.executable, "-m", "cuespin.pipeline.cli", "batch", str(dataset), "-o", str(out),
                              "--workers", "1"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                             start_new_session=True)
     deadline = time.time() + 300
@@ -77,7 +77,7 @@ def test_killed_run_resumes_to_exactly_one_row_per_video_and_method(dataset, tmp
 
 def test_torn_file_is_repaired(tmp_path):
     out = tmp_path / "r.csv"
-    from pipeline.batch import COLUMNS
+    from cuespin.pipeline.batch import COLUMNS
     with open(out, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=COLUMNS)
         w.writeheader()

@@ -10,7 +10,7 @@ from tests.test_scene import CONVENTIONS_EXAMPLE
 
 
 def run(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "pipeline.cli", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "cuespin.pipeline.cli", *map(str, args)],
                           capture_output=True, text=True, cwd=cwd, timeout=300)
 
 

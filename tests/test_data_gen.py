@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from data_gen import PRESETS, sample_scene, sample_scenes, sample_shot
-from data_gen.dataset import generate_dataset
-from physics import contact_velocity, phases, sliding_parabola, straight_motion
-from physics.scene import motion_end
-from render.video import truth_path
+from cuespin.data_gen import PRESETS, sample_scene, sample_scenes, sample_shot
+from cuespin.data_gen.dataset import generate_dataset
+from cuespin.physics import contact_velocity, phases, sliding_parabola, straight_motion
+from cuespin.physics.scene import motion_end
+from cuespin.render.video import truth_path
 
 
 def test_same_seed_same_scene_and_no_global_state():

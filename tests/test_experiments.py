@@ -5,8 +5,8 @@ import csv
 import numpy as np
 import pytest
 
-from pipeline.experiments import EXPERIMENTS, pareto, run_experiment, shot_pool
-from physics import phases
+from cuespin.pipeline.experiments import EXPERIMENTS, pareto, run_experiment, shot_pool
+from cuespin.physics import phases
 
 
 def test_pareto_front():
@@ -43,7 +43,7 @@ def test_trial_leaves_no_files(tmp_path, monkeypatch):
     # hundreds of trials must not leave hundreds of files behind.
     import tempfile
 
-    from pipeline.experiments import specs_noise, trial
+    from cuespin.pipeline.experiments import specs_noise, trial
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     row = trial(specs_noise(1, seed=1, quick=True)[0])
     assert row["status_mle"] in ("ok", "degenerate", "ambiguous", "failed")

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from data_gen.sampler import sample_shot
-from fit.conics import classify_path, fit_line, parabola_distances
-from fit.segment import noise_from_track, segment_track
-from physics import phases, positions, sliding_parabola
+from cuespin.data_gen.sampler import sample_shot
+from cuespin.fit.conics import classify_path, fit_line, parabola_distances
+from cuespin.fit.segment import noise_from_track, segment_track
+from cuespin.physics import phases, positions, sliding_parabola
 
 # Position noise of a ~0.01 px centroid at 500 px/m (the tracker's tier).
 SIGMA_M = 2e-5
@@ -94,7 +94,7 @@ def test_fitted_parabola_holds_the_sliding_path(seed):
     slide = (t > shot.t0) & (t < ph.t1)
     true = sliding_parabola(shot.x0, shot.v0, shot.w0, params)
     # Start from a perturbed parabola: the fit must find its way back.
-    from physics.parabola import Parabola
+    from cuespin.physics.parabola import Parabola
     start = Parabola(a=true.a * 1.3, theta=true.theta + 0.05, vertex=true.vertex + 0.01)
     shape = classify_path(xy[slide], start)
     assert shape.curved
@@ -111,7 +111,7 @@ def test_straight_path_is_a_line():
     t, xy, ph = noisy_track(shot, params)
     slide = (t > shot.t0) & (t < ph.t1)
     # Any start: a straight path must not be called curved.
-    from physics.parabola import Parabola
+    from cuespin.physics.parabola import Parabola
     d = fit_line(xy[slide]).direction
     start = Parabola(a=5.0, theta=np.arctan2(d[1], d[0]), vertex=xy[slide][0])
     shape = classify_path(xy[slide], start)

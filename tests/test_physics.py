@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from data_gen.sampler import sample_shot
-from physics import (BallParams, Shot, contact_velocity, evaluate, is_straight, kinetic_energy,
+from cuespin.data_gen.sampler import sample_shot
+from cuespin.physics import (BallParams, Shot, contact_velocity, evaluate, is_straight, kinetic_energy,
                      phases, sliding_parabola, straight_case, straight_motion)
-from physics.motion import ROLLING, SLIDING, z_cross
+from cuespin.physics.motion import ROLLING, SLIDING, z_cross
 
 # Integration tolerance tier: solve_ivp at rtol 1e-11 agrees with itself at
 # ~1e-9 m over a whole path; the issue asks for agreement to 1e-6 m.

@@ -8,14 +8,14 @@ import sys
 import numpy as np
 import pytest
 
-from data_gen.sampler import make_scene, sample_shot
-from physics import BallParams, Shot, phases, positions, sliding_parabola
-from physics.straight import straight_frame
-from pipeline.io import write_scene
-from recover.mle import fit_mle, initial_guess
-from recover.paper import recover_line, recover_parabola
-from fit.segment import segment_track
-from render import render_video
+from cuespin.data_gen.sampler import make_scene, sample_shot
+from cuespin.physics import BallParams, Shot, phases, positions, sliding_parabola
+from cuespin.physics.straight import straight_frame
+from cuespin.pipeline.io import write_scene
+from cuespin.recover.mle import fit_mle, initial_guess
+from cuespin.recover.paper import recover_line, recover_parabola
+from cuespin.fit.segment import segment_track
+from cuespin.render import render_video
 
 EXACT = 1e-9  # the issue: closed forms on exact tracks return the truth to 1e-9
 # The MLE's errors in units of its own standard errors: measured max 3.7 over
@@ -64,7 +64,7 @@ def test_paper_line_exact(case):
 
 
 def test_paper_line_without_rest_point_is_degenerate():
-    from recover.api import run_paper
+    from cuespin.recover.api import run_paper
     shot, p = sample_shot(5, "case3")
     ph = phases(shot, p)
     t = np.arange(0, shot.t0 + 0.5 * (ph.t2 - shot.t0), 1 / 240)
@@ -168,7 +168,7 @@ def test_codec_error_is_measured_and_weighted():
     # of a stated 2e-5 m.  Expected precision of the measured excess: ~2.5%
     # (variance of ~2000 residual components); measured over seeds 5-8:
     # -2.0%, +0.4%, -1.2%, +3.4%.  Asserted within 10% (~4 of that spread).
-    from recover.api import recover_track
+    from cuespin.recover.api import recover_track
     shot, p = sample_shot(3, "random")
     ph = phases(shot, p)
     stated, extra = 2e-5, 3e-5
@@ -187,7 +187,7 @@ def test_codec_error_below_the_stated_one_is_measured_negative():
     # MJPG at low noise: the tracker states 1.2-1.4 times its real error.
     # Stated 3e-5 m, real 2e-5 m: the codec's share is -sqrt(5e-10) m,
     # measured within 10% (as above).
-    from recover.api import recover_track
+    from cuespin.recover.api import recover_track
     shot, p = sample_shot(3, "random")
     ph = phases(shot, p)
     stated, real = 3e-5, 2e-5
@@ -226,8 +226,8 @@ def test_strike_frames_left_out_where_the_fit_puts_the_strike(tmp_path):
     # just after the strike (half still, half moving) and dropped the one
     # before: free slip passed the test (LR 20.8) on that frame alone and v0
     # came out 1.6% off, at 9 stated errors.
-    from data_gen.sampler import sample_scenes
-    from pipeline.cli import run_recover
+    from cuespin.data_gen.sampler import sample_scenes
+    from cuespin.pipeline.cli import run_recover
     scene = sample_scenes(151, 0)[150]
     scene.render["max_duration"] = 6.0
     video = tmp_path / "shot.avi"
@@ -239,7 +239,7 @@ def test_strike_frames_left_out_where_the_fit_puts_the_strike(tmp_path):
 
 
 def cli(*args):
-    return subprocess.run([sys.executable, "-m", "pipeline.cli", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "cuespin.pipeline.cli", *map(str, args)],
                           capture_output=True, text=True, timeout=600)
 
 

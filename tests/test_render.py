@@ -4,10 +4,10 @@ import cv2
 import numpy as np
 import pytest
 
-from data_gen.sampler import make_scene, sample_scene, sample_shot
-from physics import positions
-from render import FrameRenderer, disc_coverage, read_truth_csv, render_video, truth_path
-from render.draw import noise_lut
+from cuespin.data_gen.sampler import make_scene, sample_scene, sample_shot
+from cuespin.physics import positions
+from cuespin.render import FrameRenderer, disc_coverage, read_truth_csv, render_video, truth_path
+from cuespin.render.draw import noise_lut
 
 # The requirement for the drawn disc; measured max over 2000 random
 # placements, radii 8-20 px: 1.4e-3 px, RMS 4.5e-4 (pixel integration, as on a sensor).
@@ -134,7 +134,7 @@ def test_video_length_follows_motion():
     shot, params = sample_shot(4, "case2")
     scene = make_scene(shot, params, fps=60.0)
     r = FrameRenderer(scene)
-    from physics import phases
+    from cuespin.physics import phases
     ph = phases(shot, params)
     assert r.truth.t[-1] == pytest.approx(ph.t2 + 0.25, abs=1 / 60)
     # A ball that leaves: the last frame is the first with the centre off the table.

@@ -5,8 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from data_gen.sampler import sample_scene
-from physics.scene import SceneError, default_camera, parse_scene, scene_to_dict
+from cuespin.data_gen.sampler import sample_scene
+from cuespin.physics.scene import SceneError, default_camera, parse_scene, scene_to_dict
 
 CONVENTIONS_EXAMPLE = {
     "schema": 1,

@@ -8,14 +8,14 @@ import sys
 import numpy as np
 import pytest
 
-from data_gen.sampler import make_scene, sample_scene, sample_shot
-from physics import Shot
-from pipeline.io import write_scene
-from render import FrameRenderer, render_video
-from render.video import encode_frames
-from pipeline.measure import tracker_accuracy
-from track.tracker import GONE, PARTIAL, TWO_BLOBS
-from track.video import read_track_csv, track_video, write_track_csv
+from cuespin.data_gen.sampler import make_scene, sample_scene, sample_shot
+from cuespin.physics import Shot
+from cuespin.pipeline.io import write_scene
+from cuespin.render import FrameRenderer, render_video
+from cuespin.render.video import encode_frames
+from cuespin.pipeline.measure import tracker_accuracy
+from cuespin.track.tracker import GONE, PARTIAL, TWO_BLOBS
+from cuespin.track.video import read_track_csv, track_video, write_track_csv
 
 # The accuracy requirement: RMSE within 1.5x of the bound on lossless
 # video.  Measured here (benchmarks/track.py): 1.0-1.3x for the disc fit.
@@ -80,7 +80,7 @@ def test_shot_stopping_within_a_diameter_of_its_strike(tmp_path, travel_m):
     # within 0.2 stated errors on average.  Over 25 mm (less than a radius)
     # the learnt felt held a whole ball: the tracker lost the ball at both
     # rests (24 of 161 frames found) and the frames it found were biased.
-    from physics import BallParams, phases
+    from cuespin.physics import BallParams, phases
     params = BallParams(mu_r=0.015)
     speed = np.sqrt(2 * 5.0 / 7.0 * params.mu_r * params.g * travel_m)
     shot = Shot((0.8, 0.6), (speed, 0.0), (0.0, speed / params.R), t0=0.25)
@@ -120,7 +120,7 @@ def test_late_strike_and_textured_felt(tmp_path):
 def test_slow_shot_that_stops_early(tmp_path):
     # Natural roll at 0.4 m/s on slow cloth: stops after ~2.9 s and rests at
     # x2 for the remaining ~57% of the video, where a plain median fails.
-    from physics import BallParams
+    from cuespin.physics import BallParams
     params = BallParams(mu_r=0.02)
     v0 = np.array([0.4, 0.0])
     shot = Shot((0.8, 0.6), v0, (0.0, 0.4 / params.R), t0=0.2)
@@ -144,7 +144,7 @@ def test_decoding_thread_and_single_thread_give_the_same_track(tmp_path):
     # With a lossless codec the threaded reader takes background samples from
     # its decode buffer, the single-threaded one seeks for them: the same
     # frames, so the same background and the same track, to rounding.
-    from track.tracker import TrackerConfig
+    from cuespin.track.tracker import TrackerConfig
     scene = short_scene(seed=8, noise=3.0, duration=1.2)
     video = tmp_path / "v.avi"
     render_video(scene, video)
@@ -180,7 +180,7 @@ def test_two_balls_are_flagged(tmp_path):
     scene = short_scene(duration=0.4, noise=3.0)
     r = FrameRenderer(scene)
     frames = list(r.frames())
-    from render.draw import disc_coverage
+    from cuespin.render.draw import disc_coverage
     cov = disc_coverage(200.5, 200.5, r.radius_px, 180, 180, 41, 41)
     for f in frames[:10]:  # a second ball sits there in the first 10 frames
         patch = f[180:221, 180:221].astype(float)
@@ -204,7 +204,7 @@ def test_track_csv_round_trip(tmp_path):
 
 
 def cli(*args):
-    return subprocess.run([sys.executable, "-m", "pipeline.cli", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "cuespin.pipeline.cli", *map(str, args)],
                           capture_output=True, text=True, timeout=300)
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from render.draw import disc_coverage
+from cuespin.render.draw import disc_coverage
 
 _STEP_PX = 1e-3
 

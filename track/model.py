@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from render.draw import quadrant_area
+from cuespin.render.draw import quadrant_area
 
 MAX_ITER = 8
 # Gauss-Newton stops when the centre moves less than this (px).  It

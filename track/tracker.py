@@ -12,8 +12,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from track.background import DETECT_SIGMAS, Background, box_size
-from track.model import fit_disc, moments, streak_from_moments
+from cuespin.track.background import DETECT_SIGMAS, Background, box_size
+from cuespin.track.model import fit_disc, moments, streak_from_moments
 
 OK, NO_BALL, PARTIAL, TWO_BLOBS, GONE, FIT_FAILED = 0, 1, 2, 3, 4, 5
 STATUS_TEXT = {OK: "ok", NO_BALL: "no ball", PARTIAL: "ball partly out of the frame",

@@ -20,11 +20,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from physics.scene import Scene
-from render.video import quiet_native_stderr
-from track.background import Background, FeltAccumulator, learn_background
-from track.model import refit_shift
-from track.tracker import OK, STATUS_TEXT, BallTracker, TrackerConfig
+from cuespin.physics.scene import Scene
+from cuespin.render.video import quiet_native_stderr
+from cuespin.track.background import Background, FeltAccumulator, learn_background
+from cuespin.track.model import refit_shift
+from cuespin.track.tracker import OK, STATUS_TEXT, BallTracker, TrackerConfig
 
 # Bytes of decoded frames the decoder may run ahead while the background is
 # learnt.  OpenCV's seek decodes ~16 frames forward from an earlier one, so
