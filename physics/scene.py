@@ -76,6 +76,49 @@ class Camera:
         """Local scale (px per m) at a table point: sqrt of the Jacobian's |det|."""
         return float(np.sqrt(abs(np.linalg.det(homography_jacobian(self.H, xy)))))
 
+    def jacobian(self, xy) -> np.ndarray:
+        """d(pixels)/d(metres) at table points.
+
+        Parameters
+        ----------
+        xy : array_like, shape (n, 2) or (2,)
+            Ball-centre positions (m).
+
+        Returns
+        -------
+        ndarray, shape (n, 2, 2) or (2, 2)
+            ``J[k, i, j] = d uv_i / d xy_j`` (px per m) at each point.
+        """
+        xy = np.asarray(xy, dtype=float)
+        one = xy.ndim == 1
+        pts = np.atleast_2d(xy)
+        H = self.H
+        num = pts @ H[:2, :2].T + H[:2, 2]                       # (n, 2)
+        den = pts @ H[2, :2] + H[2, 2]                           # (n,)
+        J = (H[None, :2, :2] * den[:, None, None] - num[:, :, None] * H[None, 2, :2][:, None, :]) \
+            / (den**2)[:, None, None]
+        return J[0] if one else J
+
+    def cov_to_table(self, xy, cov_px) -> np.ndarray:
+        """Pixel covariances (px^2) at table points to table covariances (m^2).
+
+        ``C_m = J^-1 C_px J^-T`` with the camera's Jacobian at each point, so a
+        tilted camera's varying scale and shear reach the weights.
+
+        Parameters
+        ----------
+        xy : array_like, shape (n, 2)
+            Ball-centre positions (m).
+        cov_px : array_like, shape (n, 2, 2)
+            Covariance of each pixel centre (px^2).
+
+        Returns
+        -------
+        ndarray, shape (n, 2, 2)
+        """
+        Jinv = np.linalg.inv(self.jacobian(np.atleast_2d(xy)))
+        return Jinv @ np.asarray(cov_px, dtype=float) @ np.swapaxes(Jinv, -1, -2)
+
     def frame_times(self, n: int) -> np.ndarray:
         """Timestamps ``k / fps`` (s) of frames ``0 .. n-1``."""
         return np.arange(n) / self.fps
