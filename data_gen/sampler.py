@@ -144,14 +144,16 @@ def _jitter(rng: np.random.Generator, bgr, rel: float = 0.08) -> list[float]:
 
 
 def framed_camera(rng: np.random.Generator, fps: float, table: Table,
-                  exposure_s: float = 0.0) -> Camera:
+                  exposure_s: float = 0.0, size: tuple[int, int] | None = None) -> Camera:
     """A top-down camera that shows the whole table with its rails and a margin.
 
     The frame size is one of :data:`FRAME_SIZES`; the scale leaves
     ``CUSHION_WIDTH_M + RAIL_WIDTH_M`` plus 2-10 cm around the playing
-    surface, which is centred.
+    surface, which is centred.  ``size`` fixes the frame size ``(w, h)``.
     """
     w, h = FRAME_SIZES[int(rng.integers(len(FRAME_SIZES)))]
+    if size is not None:
+        w, h = size
     border = lk.CUSHION_WIDTH_M + lk.RAIL_WIDTH_M + float(rng.uniform(0.02, 0.10))
     s = min(w / (table.length + 2 * border), h / (table.width + 2 * border))
     u_off = 0.5 * (w - table.length * s)

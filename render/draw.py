@@ -300,6 +300,7 @@ class FrameRenderer:
         self._blur = blur
         self.background = np.clip(np.rint(blur), 0, 255).astype(np.uint8)
         self._bg16 = self.background.astype(np.int16)
+        self._frac = (blur - self.background).astype(np.float32)   # what 8 bits rounded off
         self._orient = None
         if s["markings"] != "none":
             t0 = min(0.0, float(self._t_nodes.min()))
@@ -307,7 +308,12 @@ class FrameRenderer:
 
     def _cloth_points(self, uv: np.ndarray) -> np.ndarray:
         """Table points (m) on the cloth seen at pixels ``uv`` (..., 2)."""
-        return self.cam.to_table(uv.reshape(-1, 2)).reshape(uv.shape)
+        # Elementwise (a matmul with an inner size of 2 is slow on large arrays).
+        Hi = np.linalg.inv(self.H)
+        u, v = uv[..., 0], uv[..., 1]
+        den = Hi[2, 0] * u + Hi[2, 1] * v + Hi[2, 2]
+        return np.stack([(Hi[0, 0] * u + Hi[0, 1] * v + Hi[0, 2]) / den,
+                         (Hi[1, 0] * u + Hi[1, 1] * v + Hi[1, 2]) / den], -1)
 
     def _static_scene(self) -> np.ndarray:
         """The static scene before lens blur, float32 (h, w, 3): cloth with its
@@ -445,6 +451,85 @@ class FrameRenderer:
             return None, 0, 0
         return delta[b0 - pv0:b1 - pv0, a0 - pu0:a1 - pu0], a0, b0
 
+    def cue_tip(self, t: np.ndarray) -> np.ndarray:
+        """Distance (m) of the cue's tip behind the ball's rest contact point at times ``t``.
+
+        At address ``cue_gap`` behind the ball; it approaches at the cue's
+        speed (half the ball's, at least 0.3 m/s) to touch the ball at
+        ``t0``, follows through ``cue_follow`` past the contact point (never
+        into the departing ball), then withdraws at 0.6 m/s.  Negative is
+        past the contact point.
+        """
+        s, tr = self.settings, self.scene.truth
+        t = np.asarray(t, dtype=float)
+        v0 = np.asarray(tr.v0)
+        speed = float(np.hypot(*v0))
+        vc = max(0.5 * speed, 0.3)
+        g0, f = float(s["cue_gap"]), max(float(s["cue_follow"]), 1e-6)
+        tf = 3.0 * f / vc                              # follow-through time (s)
+        gap = np.where(t < tr.t0, np.minimum(g0, vc * (tr.t0 - t)),
+                       -f * (1.0 - np.exp(-(t - tr.t0) * vc / f)))
+        back = t > tr.t0 + tf
+        gap = np.where(back, -f * (1 - math.exp(-3.0)) + 0.6 * (t - tr.t0 - tf), gap)
+        # The tip stays behind the ball's rear point.
+        d_hat = v0 / max(speed, 1e-12)
+        moved = (self.motion(t).x - np.asarray(tr.x0)) @ d_hat
+        return np.maximum(gap, -moved)
+
+    def _cue_pieces(self, k: int) -> list:
+        """The cue's change to the blurred background in frame ``k``: a list
+        of ``(delta, u0, v0)`` patches, one per stretch of the cue (each
+        pixel belongs to one stretch, so overlapping patches add exactly)."""
+        if not self.settings["cue"]:
+            return []
+        tr = self.scene.truth
+        v0 = np.asarray(tr.v0)
+        speed = float(np.hypot(*v0))
+        if speed <= 0:
+            return []
+        d = v0 / speed
+        nrm = np.array([-d[1], d[0]])
+        R = self.scene.physics.R
+        # The cue's state at the frame's middle (its own blur is not drawn).
+        tip = np.asarray(tr.x0) - d * (R + float(self.cue_tip(np.array([self.truth.t[k]]))[0]))
+        px_m = self.radius_px / R
+        h, w = self.cam.height, self.cam.width
+        pieces = []
+        step = 48.0 / px_m                      # a stretch of about 48 px
+        edges = np.arange(0.0, CUE_LENGTH_M + step, step)
+        edges[-1] = CUE_LENGTH_M
+        pad = self._pad + 2
+        for a0, a1 in zip(edges[:-1], edges[1:]):
+            r1 = cue_radius(a1)
+            corners = np.array([tip - d * a + nrm * c for a in (a0, a1) for c in (-r1, r1)])
+            uv = self.cam.to_pixels(corners)
+            u_lo = max(int(math.floor(uv[:, 0].min())) - pad, 0)
+            v_lo = max(int(math.floor(uv[:, 1].min())) - pad, 0)
+            u_hi = min(int(math.ceil(uv[:, 0].max())) + pad, w - 1)
+            v_hi = min(int(math.ceil(uv[:, 1].max())) + pad, h - 1)
+            if u_hi < u_lo or v_hi < v_lo:
+                continue
+            vv, uu = np.mgrid[v_lo:v_hi + 1, u_lo:u_hi + 1]
+            xy = self._cloth_points(np.stack([uu, vv], -1).reshape(-1, 2).astype(float))
+            rel = xy - tip
+            a = -(rel @ d)                       # along the cue from its tip (m)
+            c = rel @ nrm                        # across (m)
+            own = (a >= a0) & (a < a1) if a0 > 0 else (a < a1)
+            ra = cue_radius(np.clip(a, 0, CUE_LENGTH_M))
+            cov = np.clip((ra - np.abs(c)) * px_m + 0.5, 0, 1) * np.clip(a * px_m + 0.5, 0, 1) * own
+            if not cov.any():
+                continue
+            colour = cue_colour(a)
+            across = np.clip(np.abs(c) / ra, 0, 1)
+            colour = colour * (0.55 + 0.45 * np.sqrt(1 - across**2))[:, None]
+            shape = vv.shape
+            sharp = self._sharp[v_lo + self._border:v_hi + 1 + self._border,
+                                u_lo + self._border:u_hi + 1 + self._border]
+            ramp = self._ramp[v_lo:v_hi + 1, u_lo:u_hi + 1, None]
+            delta = cov.reshape(shape)[..., None] * (colour.reshape(shape + (3,)) * ramp - sharp)
+            pieces.append((gaussian(delta, self._psf, constant=True), u_lo, v_lo))
+        return pieces
+
     def _render_realistic(self, k: int, rng: np.random.Generator) -> np.ndarray:
         import cv2
 
@@ -453,13 +538,17 @@ class FrameRenderer:
             frame = cv2.add(np.take(self.lut, u), self._bg16, dtype=cv2.CV_8U)
         else:
             frame = self.background.copy()
+        pieces = self._cue_pieces(k)
         delta, u0, v0 = self._ball_delta(k)
         if delta is not None:
+            pieces.append((delta, u0, v0))
+        # The frame is round(blur + n) with integer noise n: adding each
+        # patch's change to the unrounded value keeps it round(blur + delta + n).
+        for delta, u0, v0 in merge_patches(pieces):
             h, w = delta.shape[:2]
-            clean = self._blur[v0:v0 + h, u0:u0 + w] + delta
-            if self.sigma > 0:
-                clean += self.sigma * rng.standard_normal(clean.shape, dtype=np.float32)
-            frame[v0:v0 + h, u0:u0 + w] = np.clip(np.rint(clean), 0, 255).astype(np.uint8)
+            sl = (slice(v0, v0 + h), slice(u0, u0 + w))
+            clean = frame[sl] + self._frac[sl] + delta
+            frame[sl] = np.clip(np.rint(clean), 0, 255).astype(np.uint8)
         return frame
 
     def render(self, k: int, rng: np.random.Generator) -> np.ndarray:
@@ -502,6 +591,53 @@ class FrameRenderer:
         rng = np.random.default_rng(seed)
         for k in range(self.n_frames):
             yield self.render(k, rng)
+
+
+# The cue (m): length, tip and butt radii, and where its parts end from the tip.
+CUE_LENGTH_M = 1.45
+CUE_TIP_R_M, CUE_BUTT_R_M = 0.0065, 0.0145
+CUE_PARTS = ((0.008, (160, 95, 45)),     # chalked tip, blue
+             (0.030, (220, 232, 238)),   # ferrule, ivory
+             (0.90, (125, 175, 215)),    # maple shaft
+             (CUE_LENGTH_M + 1, (35, 45, 70)))   # dark butt
+
+
+def cue_radius(a):
+    """The cue's radius (m) at distance ``a`` (m) from its tip: a linear taper."""
+    return CUE_TIP_R_M + (CUE_BUTT_R_M - CUE_TIP_R_M) * np.asarray(a) / CUE_LENGTH_M
+
+
+def cue_colour(a: np.ndarray) -> np.ndarray:
+    """BGR colour of the cue at distances ``a`` (m) from its tip, shape (n, 3)."""
+    ends = np.array([e for e, _ in CUE_PARTS])
+    cols = np.array([c for _, c in CUE_PARTS], dtype=np.float32)
+    return cols[np.minimum(np.searchsorted(ends, a), len(ends) - 1)]
+
+
+def merge_patches(pieces: list) -> list:
+    """Patches ``(delta, u0, v0)`` merged until none overlap (overlaps added)."""
+    out = list(pieces)
+    merged = True
+    while merged and len(out) > 1:
+        merged = False
+        for i in range(len(out)):
+            for j in range(i + 1, len(out)):
+                (a, au, av), (b, bu, bv) = out[i], out[j]
+                if (au < bu + b.shape[1] and bu < au + a.shape[1]
+                        and av < bv + b.shape[0] and bv < av + a.shape[0]):
+                    u0, v0 = min(au, bu), min(av, bv)
+                    u1 = max(au + a.shape[1], bu + b.shape[1])
+                    v1 = max(av + a.shape[0], bv + b.shape[0])
+                    m = np.zeros((v1 - v0, u1 - u0, 3), np.float32)
+                    m[av - v0:av - v0 + a.shape[0], au - u0:au - u0 + a.shape[1]] += a
+                    m[bv - v0:bv - v0 + b.shape[0], bu - u0:bu - u0 + b.shape[1]] += b
+                    out[i] = (m, u0, v0)
+                    del out[j]
+                    merged = True
+                    break
+            if merged:
+                break
+    return out
 
 
 def gaussian(img: np.ndarray, sigma: float, constant: bool = False) -> np.ndarray:
