@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 from pathlib import Path
 
 from cuespin.physics.scene import Scene, SceneError, parse_scene, scene_to_dict
@@ -14,7 +15,11 @@ class InputError(Exception):
 
 
 def read_scene(path) -> Scene:
-    """Read and validate a scene file; raise :class:`InputError` with one line."""
+    """Read and validate a scene file; raise :class:`InputError` with one line.
+
+    Physics values the file leaves out (``R``, ``mu_s``, ``mu_r``) take the
+    conventions' defaults, said in one line on stderr.
+    """
     path = Path(path)
     try:
         text = path.read_text()
@@ -27,9 +32,15 @@ def read_scene(path) -> Scene:
     except json.JSONDecodeError as exc:
         raise InputError(f"{path}: not valid JSON (line {exc.lineno}: {exc.msg})")
     try:
-        return parse_scene(d)
+        scene = parse_scene(d)
     except SceneError as exc:
         raise InputError(f"{path}: {exc}")
+    if scene.defaulted:
+        # Values that move the answer are never assumed silently (issue 12, item 7).
+        used = ", ".join(f"{k} = {v:g}" for k, v in scene.defaulted)
+        print(f"{path}: not in the scene file, assumed: {used} (set them to your ball and cloth)",
+              file=sys.stderr)
+    return scene
 
 
 def write_scene(path, scene: Scene) -> None:

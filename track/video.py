@@ -291,6 +291,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     if n_hint <= 0 and w == 0:
         cap.release()
         raise TrackError(f"{path}: the video has no frames")
+    cam = cam.with_size(w, h)  # a scene may leave the size to the video (CONVENTIONS.md)
     if (w, h) != (cam.width, cam.height):
         cap.release()
         raise TrackError(f"{path}: frames are {w}x{h} but the scene's camera says "
