@@ -23,7 +23,7 @@ def shot_stem(i: int) -> str:
 
 def generate_dataset(out: Path, n: int, seed: int, preset: str | None = None,
                      codec: str | None = None, fps: float | None = None,
-                     progress=None) -> dict:
+                     progress=None, look: str = "plain") -> dict:
     """Sample ``n`` scenes from ``seed`` and render each into ``out``.
 
     Parameters
@@ -42,6 +42,8 @@ def generate_dataset(out: Path, n: int, seed: int, preset: str | None = None,
         Frame rate for every shot; sampled when None.
     progress : callable, optional
         ``progress(total, desc, unit)`` returning a context-manager bar.
+    look : str
+        ``plain`` or ``realistic`` (see :func:`cuespin.data_gen.sampler.sample_scene`).
 
     Returns
     -------
@@ -53,7 +55,7 @@ def generate_dataset(out: Path, n: int, seed: int, preset: str | None = None,
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    scenes = sample_scenes(n, seed, preset=preset, fps=fps, codec=codec)
+    scenes = sample_scenes(n, seed, preset=preset, fps=fps, codec=codec, look=look)
     written = skipped = 0
     paths = []
     bar = progress(n, "generate", "shot") if progress else None

@@ -65,7 +65,7 @@ def cmd_generate(args) -> int:
     if args.n < 1:
         raise InputError("--n must be at least 1")
     summary = generate_dataset(Path(args.out), n=args.n, seed=args.seed, preset=args.preset,
-                               codec=args.codec, fps=args.fps, progress=_progress)
+                               codec=args.codec, fps=args.fps, progress=_progress, look=args.look)
     print(f"{summary['written']} written, {summary['skipped']} already there, in {args.out}")
     return 0
 
@@ -316,6 +316,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="one kind of shot for all; default: a mix of every preset")
     g.add_argument("--codec", default=None, help="FourCC, e.g. MJPG (default, lossy) or FFV1 (lossless)")
     g.add_argument("--fps", type=float, default=None, help="frame rate; default: sampled from 60-480")
+    g.add_argument("--look", choices=("plain", "realistic"), default="plain", help="plain grey or realistic colour scenes")
     g.set_defaults(func=cmd_generate)
     return p
 

@@ -69,13 +69,14 @@ def quiet_native_stderr():
                 _quiet_saved = None
 
 
-def open_writer(path: Path, codec: str, fps: float, size: tuple[int, int]) -> cv2.VideoWriter:
-    """An OpenCV VideoWriter for 8-bit grey frames; raises VideoError if it won't open."""
+def open_writer(path: Path, codec: str, fps: float, size: tuple[int, int],
+                color: bool = False) -> cv2.VideoWriter:
+    """An OpenCV VideoWriter for 8-bit grey (or BGR, ``color``) frames; raises VideoError if it won't open."""
     if len(codec) != 4:
         raise VideoError(f"codec must be a four-character code such as MJPG or FFV1, got {codec!r}")
     with quiet_native_stderr():
         writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*codec), float(fps), size,
-                                 isColor=False)
+                                 isColor=bool(color))
     if not writer.isOpened():
         raise VideoError(f"OpenCV cannot write codec {codec} to {path}; "
                          f"try MJPG (lossy) or FFV1 (lossless) in a .avi file")
@@ -89,19 +90,24 @@ def truth_path(video: Path) -> Path:
 
 
 def write_truth_csv(path: Path, truth: FrameTruth) -> None:
-    """Write the sidecar: ``frame,t,u_px,v_px,x_m,y_m`` per frame."""
+    """Write the sidecar: ``frame,t,u_px,v_px,x_m,y_m,uc_px,vc_px`` per frame.
+
+    ``u_px, v_px``: the silhouette's centroid; ``uc_px, vc_px``: the projected
+    true centre (both averaged over the exposure), see :class:`FrameTruth`.
+    """
     with open(path, "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["frame", "t", "u_px", "v_px", "x_m", "y_m"])
+        w.writerow(["frame", "t", "u_px", "v_px", "x_m", "y_m", "uc_px", "vc_px"])
         for k in range(len(truth.t)):
             w.writerow([k, repr(float(truth.t[k])), repr(float(truth.uv[k, 0])),
                         repr(float(truth.uv[k, 1])), repr(float(truth.xy[k, 0])),
-                        repr(float(truth.xy[k, 1]))])
+                        repr(float(truth.xy[k, 1])), repr(float(truth.uvc[k, 0])),
+                        repr(float(truth.uvc[k, 1]))])
 
 
 def encode_frames(frames, path: Path, codec: str, fps: float, size: tuple[int, int],
-                  progress=None) -> int:
-    """Encode an iterable of 8-bit grey frames, drawing them on a second thread.
+                  progress=None, color: bool = False) -> int:
+    """Encode an iterable of 8-bit grey (or BGR) frames, drawing them on a second thread.
 
     Parameters
     ----------
@@ -117,13 +123,15 @@ def encode_frames(frames, path: Path, codec: str, fps: float, size: tuple[int, i
         ``(width, height)`` in pixels.
     progress : callable, optional
         Called with 1 after each frame is written.
+    color : bool
+        Frames are BGR, shape (height, width, 3).
 
     Returns
     -------
     int
         Frames written.
     """
-    writer = open_writer(path, codec, fps, size)
+    writer = open_writer(path, codec, fps, size, color)
     q: queue.Queue = queue.Queue(maxsize=_QUEUE_DEPTH)
     done = object()
     failure: list[BaseException] = []
@@ -180,7 +188,8 @@ def render_video(scene: Scene, path, progress=None, n_frames: int | None = None)
     if codec not in LOSSLESS_CODECS and (cam.width % 2 or cam.height % 2):
         raise VideoError(f"codec {codec} needs an even frame size, got {cam.width}x{cam.height}; "
                          f"make camera.width and camera.height even or use FFV1")
-    n = encode_frames(renderer.frames(), path, codec, cam.fps, (cam.width, cam.height), progress)
+    n = encode_frames(renderer.frames(), path, codec, cam.fps, (cam.width, cam.height), progress,
+                      color=renderer.realistic)
     if n != renderer.n_frames:
         raise VideoError(f"wrote {n} of {renderer.n_frames} frames to {path}")
     write_truth_csv(truth_path(path), renderer.truth)
