@@ -19,6 +19,7 @@ from scipy.special import ndtr
 
 from cuespin.physics.motion import Phases, phases, positions
 from cuespin.physics.scene import Scene, homography_jacobian, motion_end
+from cuespin.render.timing import frame_times
 
 # Blur nodes are spaced at most this far apart (px) along the path, so the
 # blurred streak is smooth; the centroid is exact whatever the spacing.
@@ -197,7 +198,7 @@ class FrameRenderer:
         return t[:, None] + offs[None, :]
 
     def _truth(self) -> FrameTruth:
-        t = self.cam.frame_times(self.n_frames)
+        t = frame_times(self.scene, self.n_frames).t  # the writer stamps the same times
         nodes = self._nodes(t)
         xy_nodes = positions(self.scene.truth, self.scene.physics, nodes.ravel(), self.ph)
         uv_nodes = self.cam.to_pixels(xy_nodes).reshape(nodes.shape + (2,))
