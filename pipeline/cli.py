@@ -314,7 +314,8 @@ def build_parser() -> argparse.ArgumentParser:
     from cuespin.data_gen import PRESETS
     g.add_argument("--preset", choices=PRESETS, default=None,
                    help="one kind of shot for all; default: a mix of every preset")
-    g.add_argument("--codec", default=None, help="FourCC, e.g. MJPG (default, lossy) or FFV1 (lossless)")
+    g.add_argument("--codec", default=None,
+                   help="MJPG (default, lossy), FFV1 (lossless) or H264 (lossy, .mp4 files, CRF 20)")
     g.add_argument("--fps", type=float, default=None, help="frame rate; default: sampled from 60-480")
     g.add_argument("--look", choices=("plain", "realistic"), default="plain", help="plain grey or realistic colour scenes")
     g.set_defaults(func=cmd_generate)
