@@ -48,7 +48,7 @@ def generate_dataset(out: Path, n: int, seed: int, preset: str | None = None,
     dict
         ``{"written": int, "skipped": int, "paths": [video paths]}``.
     """
-    from cuespin.pipeline.io import write_scene
+    from cuespin.sceneio import write_scene
     from cuespin.render.video import render_video, truth_path
 
     out = Path(out)

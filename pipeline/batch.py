@@ -46,7 +46,12 @@ def expand_inputs(inputs) -> list[Path]:
         else:
             raise BatchInputError(f"no such file, folder or match: {item}")
         found += [q for q in cands if q.suffix.lower() in VIDEO_EXTENSIONS and ".part" not in q.name]
-    out = sorted({q.resolve() for q in found})
+    # The paths as given (made absolute, never resolved): a video's scene is
+    # looked for beside the path the user named, a symbolic link included.
+    unique = {}
+    for q in found:
+        unique.setdefault(os.path.normpath(os.path.abspath(q)), q)
+    out = [Path(k) for k in sorted(unique)]
     if not out:
         raise BatchInputError("no videos found in the inputs (looked for " + ", ".join(VIDEO_EXTENSIONS) + ")")
     return out
@@ -91,7 +96,7 @@ def process_video(video: str, scene_path: str, threaded: bool = True) -> list[di
         os.environ.setdefault("OPENCV_FFMPEG_CAPTURE_OPTIONS", "threads;1")
         import cv2
         cv2.setNumThreads(1)
-    from cuespin.pipeline.cli import run_recover
+    from cuespin.pipeline.run import run_recover
     from cuespin.pipeline.io import InputError, read_scene
     from cuespin.track.tracker import TrackerConfig
     from cuespin.track.video import TrackError
@@ -164,7 +169,7 @@ def load_done(out: Path) -> dict[str, list[dict]]:
 
 
 def run_batch(videos, out: Path, shared_scene: Path | None = None, workers: int | None = None,
-              scheduler: str | None = None, progress=True) -> dict:
+              scheduler: str | None = None, progress=True, chunk: int | None = None) -> dict:
     """Process videos into ``out``, resuming what is already there.
 
     Returns ``{"done": n, "skipped": n, "failed": n, "rows": n}``; ``failed``
