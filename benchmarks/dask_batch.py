@@ -52,7 +52,7 @@ def tiny_videos(folder: Path, n: int):
                                    render={"max_duration": 0.09, "codec": "MJPG", "seed": i, "noise_sigma": 2.0})
         v, s = folder / f"t{i:05d}.avi", folder / f"t{i:05d}.json"
         cuespin.write_scene(s, scene)
-        cuespin.render(scene, v)
+        cuespin.render_scene(scene, v)
         jobs.append((str(v), str(s)))
     return jobs
 

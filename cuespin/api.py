@@ -4,13 +4,18 @@ Everything here is re-exported from :mod:`cuespin`::
 
     import cuespin
     scene = cuespin.read_scene("shot.json")
-    result = cuespin.recover("shot.avi", scene)
+    result = cuespin.recover_video("shot.avi", scene)
 
 Results are the objects the stages already return (``Scene``,
 ``TrackResult``, ``FrameTruth``, the recover dict of docs/output.md); the
 heavy imports (OpenCV, matplotlib) happen on first use, so ``import
 cuespin`` stays cheap.  A ``scene`` argument may be a :class:`Scene` or the
 path of a scene file.
+
+The functions are ``render_scene`` and ``recover_video``, not ``render`` and
+``recover``: those names belong to the stage subpackages ``cuespin.render``
+and ``cuespin.recover``, and importing a subpackage rebinds its name on the
+package, so a function of the same name would be replaced by the module.
 """
 
 from __future__ import annotations
@@ -56,7 +61,7 @@ def make_scene(shot: Shot, params: BallParams = BallParams(), fps: float = 240.0
     return _make(shot, params, fps=fps, px_per_m=px_per_m, exposure_s=exposure_s, render=render)
 
 
-def render(scene, video, progress=None):
+def render_scene(scene, video, progress=None):
     """Render a scene with a truth block to a video and its ``.truth.csv``.
 
     Parameters
@@ -186,7 +191,7 @@ def track_dataframe(track, scene=None):
         "stderr_m": stderr_m}, columns=list(TRACK_COLUMNS))
 
 
-def recover(video, scene, method: str = "all", fit_friction: bool = False, refine: str = "fit",
+def recover_video(video, scene, method: str = "all", fit_friction: bool = False, refine: str = "fit",
             return_track: bool = False):
     """Track a video and recover the strike, v0 and w0 by both methods.
 
@@ -247,5 +252,5 @@ def show(video, scene, png=None, result=None, video_out=None, track=None):
     return show_shot(video, _scene(scene), png=png, result=result, video_out=video_out, track=track)
 
 
-__all__ = ["BallParams", "InputError", "Scene", "Shot", "generate", "make_scene", "read_scene", "recover",
-           "render", "show", "track_dataframe", "track_video", "write_scene"]
+__all__ = ["BallParams", "InputError", "Scene", "Shot", "generate", "make_scene", "read_scene", "recover_video",
+           "render_scene", "show", "track_dataframe", "track_video", "write_scene"]

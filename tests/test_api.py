@@ -43,7 +43,7 @@ def test_import_cuespin_is_light_and_exports_the_api():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     heavy, names = out.splitlines()
     assert heavy == "[]"
-    for name in ("track_video", "recover", "read_scene", "write_scene", "render", "generate",
+    for name in ("track_video", "recover_video", "read_scene", "write_scene", "render_scene", "generate",
                  "track_dataframe", "show"):
         assert name in names and callable(getattr(cuespin, name))
         assert "Parameters" in getattr(cuespin, name).__doc__  # numpydoc
@@ -93,3 +93,15 @@ def test_predictions_beyond_the_last_frame_are_marked():
     assert methods["paper"]["predicted"] == []
     seen_all = mark_predictions({"mle": dict(m)}, t_seen=ph.t2 + 0.001, frame_dt=1 / 120, params=p)
     assert seen_all["mle"]["predicted"] == []
+
+
+def test_api_names_survive_importing_every_stage():
+    """Importing a subpackage rebinds its name on the package: no API function may share one."""
+    code = ("import cuespin, importlib\n"
+            "for s in ('physics', 'data_gen', 'render', 'track', 'fit', 'recover', 'pipeline'):\n"
+            "    importlib.import_module('cuespin.' + s)\n"
+            "import cuespin.render.video, cuespin.recover.api, cuespin.track.video, cuespin.pipeline.show\n"
+            "bad = [n for n in cuespin.__all__ if n != '__version__' and not callable(getattr(cuespin, n))]\n"
+            "print(bad)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"

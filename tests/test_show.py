@@ -17,7 +17,7 @@ def shot_files(tmp_path_factory):
                                fps=120.0, px_per_m=250.0,
                                render={"noise_sigma": 2.0, "codec": "FFV1", "max_duration": 0.8, "seed": 3})
     cuespin.write_scene(d / "s.json", scene)
-    cuespin.render(scene, d / "v.avi")
+    cuespin.render_scene(scene, d / "v.avi")
     return d, scene
 
 
@@ -45,7 +45,7 @@ def test_residuals_of_the_right_answer_are_at_the_stated_errors(shot_files):
     from cuespin.pipeline.show import residuals
 
     d, scene = shot_files
-    result, tr = cuespin.recover(d / "v.avi", scene, return_track=True)
+    result, tr = cuespin.recover_video(d / "v.avi", scene, return_track=True)
     assert result["methods"]["mle"]["status"] == "ok"
     t, r = residuals(result, tr, scene)["mle"]
     far = np.abs(t - result["methods"]["mle"]["t0"]) > 2 / scene.camera.fps  # the strike's frames are left out
