@@ -51,9 +51,9 @@ def generate_dataset(out: Path, n: int, seed: int, preset: str | None = None,
     dict
         ``{"written": int, "skipped": int, "paths": [video paths]}``.
     """
-    from cuespin.pipeline.io import write_scene
     from cuespin.render.draw import render_settings
     from cuespin.render.video import render_video, truth_path, video_suffix
+    from cuespin.sceneio import write_scene
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

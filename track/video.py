@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 from cuespin.physics.scene import Scene
-from cuespin.render.video import quiet_native_stderr
+from cuespin.videoio import quiet_native_stderr
 from cuespin.track.background import Background, FeltAccumulator, learn_background
 from cuespin.track.model import refit_shift
 from cuespin.track.tracker import OK, STATUS_TEXT, BallTracker, TrackerConfig
