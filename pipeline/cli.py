@@ -317,6 +317,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--codec", default=None, help="FourCC, e.g. MJPG (default, lossy) or FFV1 (lossless)")
     g.add_argument("--fps", type=float, default=None, help="frame rate; default: sampled from 60-480")
     g.set_defaults(func=cmd_generate)
+
+    from cuespin.pipeline.calibrate import add_parser as add_calibrate
+    add_calibrate(sub)
     return p
 
 
