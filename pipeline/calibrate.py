@@ -83,6 +83,8 @@ class Calibration:
     edge_rms_px : float or None
         Automatic detection only: RMS distance of the felt's edge points from
         the four fitted lines (px).
+    edge : str or None
+        Automatic detection only: ``noses`` or ``felt`` (:class:`Detection`).
     """
 
     camera: Camera
@@ -91,6 +93,7 @@ class Calibration:
     focal_source: str
     notes: list = field(default_factory=list)
     edge_rms_px: float | None = None
+    edge: str | None = None
 
     @property
     def rms_px(self) -> float:
@@ -460,6 +463,87 @@ def _line_intersection(l1, l2):
     return p + s[0] * d
 
 
+def _smoothed(img):
+    im = np.asarray(img, dtype=np.float32)
+    if im.ndim == 2:
+        im = im[:, :, None]
+    return cv2.GaussianBlur(im, (0, 0), 1.0).reshape(im.shape)
+
+
+def _subpixel_edge(Ds, base, nrm, offs):
+    """Where, along ``nrm`` from each base point, the colour crosses halfway from
+    the inside's (the profile's first 2 px) to the outside's (its last 2 px);
+    points without one clean crossing, or with under 5 levels of contrast, dropped."""
+    pts = base[:, None, :] + offs[None, :, None] * nrm           # (m, k, 2)
+    col = cv2.remap(Ds, pts[..., 0].astype(np.float32), pts[..., 1].astype(np.float32),
+                    cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(pts.shape[:2] + (-1,))
+    q = 8
+    c_in = np.median(col[:, :q], axis=1)
+    c_out = np.median(col[:, -q:], axis=1)
+    span = c_out - c_in
+    n2 = np.sum(span * span, axis=1)
+    # fraction of the way from inside to outside colour (linear in coverage)
+    prof = np.einsum("mkc,mc->mk", col - c_in[:, None, :], span) / np.where(n2 > 0, n2, 1.0)[:, None]
+    above = prof >= 0.5
+    cross = (~above[:, :-1]) & above[:, 1:]
+    good = (n2 > 25.0) & (cross.sum(axis=1) == 1)
+    k = np.argmax(cross, axis=1)
+    r = np.arange(len(base))
+    p0, p1 = prof[r, k], prof[r, k + 1]
+    x = offs[k] + (0.5 - p0) / np.where(p1 != p0, p1 - p0, 1.0) * (offs[1] - offs[0])
+    return (base + x[:, None] * nrm)[good]
+
+
+def cushion_noses(img: np.ndarray, sides: list, search_frac: float = 0.08, reach_px: float = 4.0):
+    """The cushions' noses inside the felt-coloured outline, when they show.
+
+    A table's cushions are often cloth of the felt's colour, so the outline
+    found first can be the cushions' outer edge, a cushion's width beyond the
+    playing surface.  Each side is searched inward (up to ``search_frac`` of
+    the outline's smaller size) for a step in brightness parallel to it, the
+    nose's line (a darker cushion face or top); found on all four sides, at a
+    consistent distance, it is located sub-pixel like the outline.
+
+    Returns
+    -------
+    list of 4 ndarrays or None
+        Edge points of the noses, or None when no such line shows.
+    """
+    Ds = _smoothed(img)
+    grey = Ds.mean(axis=2) if Ds.ndim == 3 else Ds
+    lines = [_fit_line(p)[:2] for p in sides]
+    corners = np.array([_line_intersection(lines[i - 1], lines[i]) for i in range(4)])
+    size = min(np.linalg.norm(corners[2] - corners[0]), np.linalg.norm(corners[3] - corners[1])) / math.sqrt(2)
+    depth = max(search_frac * size, 12.0)
+    out = []
+    for i, pts in enumerate(sides):
+        a, b = corners[i], corners[(i + 1) % 4]
+        d = (b - a) / np.linalg.norm(b - a)
+        nrm = np.array([-d[1], d[0]])                       # outward
+        base = pts[::2]
+        offs = np.arange(-depth, 0.0, 0.5)                  # inside the outline
+        P = base[:, None, :] + offs[None, :, None] * nrm
+        prof = cv2.remap(grey.astype(np.float32), P[..., 0].astype(np.float32),
+                         P[..., 1].astype(np.float32), cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        g = np.abs(np.diff(prof, axis=1))                    # step strength per 0.5 px
+        g[:, -8:] = 0.0                                      # the outline's own edge (last 4 px)
+        k = np.argmax(g, axis=1)
+        strength = g[np.arange(len(base)), k]
+        noise = 1.4826 * np.median(np.abs(np.diff(prof[:, : len(offs) // 3], axis=1))) + 1e-6
+        where = offs[k]
+        ok = strength > 6.0 * noise
+        if ok.mean() < 0.6:
+            return None
+        med = float(np.median(where[ok]))
+        if np.median(np.abs(where[ok] - med)) > 1.5:
+            return None
+        nose = _subpixel_edge(Ds, base[ok] + med * nrm, nrm, np.arange(-reach_px - 3.0, reach_px + 3.0 + 1e-9, 0.25))
+        if len(nose) < 10:
+            return None
+        out.append(nose)
+    return out
+
+
 def edge_points(img: np.ndarray, quad: np.ndarray, contour: np.ndarray,
                 reach_px: float = 4.0, step_px: float = 2.0) -> list:
     """Sub-pixel points of the felt's edge along each side of a rough quadrilateral.
@@ -478,10 +562,7 @@ def edge_points(img: np.ndarray, quad: np.ndarray, contour: np.ndarray,
         Edge points (px, the image's own distorted pixels), side i running from
         ``quad[i]`` to ``quad[i+1]``.
     """
-    im = np.asarray(img, dtype=np.float32)
-    if im.ndim == 2:
-        im = im[:, :, None]
-    Ds = cv2.GaussianBlur(im, (0, 0), 1.0).reshape(im.shape)
+    Ds = _smoothed(img)
     offs = np.arange(-reach_px - 3.0, reach_px + 3.0 + 1e-9, 0.25)
     # nearest side of the quad for every contour point
     dists, along = [], []
@@ -502,26 +583,7 @@ def edge_points(img: np.ndarray, quad: np.ndarray, contour: np.ndarray,
         sel = (side_of == i) & (along[i] > 0.06) & (along[i] < 0.94)
         base = contour[sel]
         base = base[np.argsort(along[i][sel])][:: max(int(step_px), 1)]
-        pts = base[:, None, :] + offs[None, :, None] * nrm           # (m, k, 2)
-        col = cv2.remap(Ds, pts[..., 0].astype(np.float32), pts[..., 1].astype(np.float32),
-                        cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(pts.shape[:2] + (-1,))
-        q = 8  # 2 px at each end of the profile: felt inside, surround outside
-        c_in = np.median(col[:, :q], axis=1)
-        c_out = np.median(col[:, -q:], axis=1)
-        span = c_out - c_in
-        n2 = np.sum(span * span, axis=1)
-        # fraction of the way from felt to surround, per sample (linear in coverage)
-        prof = np.einsum("mkc,mc->mk", col - c_in[:, None, :], span) / np.where(n2 > 0, n2, 1.0)[:, None]
-        inside, outside = np.zeros(len(base)), np.where(n2 > 25.0, 1.0, 0.0)  # contrast >= 5 levels
-        level = np.full(len(base), 0.5)
-        above = prof >= level[:, None]
-        cross = (~above[:, :-1]) & above[:, 1:]
-        good = (outside > inside) & (cross.sum(axis=1) == 1)
-        k = np.argmax(cross, axis=1)
-        r = np.arange(len(base))
-        p0, p1 = prof[r, k], prof[r, k + 1]
-        x = offs[k] + (level - p0) / np.where(p1 != p0, p1 - p0, 1.0) * (offs[1] - offs[0])
-        edge = (base + x[:, None] * nrm)[good]
+        edge = _subpixel_edge(Ds, base, nrm, offs)
         if len(edge) < 10:
             raise CalibrationError("the felt's edge could not be located along a side; give --corners")
         sides.append(edge)
@@ -620,9 +682,36 @@ def _golden(fun, lo: float, hi: float, tol: float) -> float:
     return (lo + hi) / 2.0
 
 
-def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = True):
-    """The felt's four corners in a frame, sub-pixel, counter-clockwise on screen
-    (not yet assigned to table corners).
+@dataclass(frozen=True)
+class Detection:
+    """The table's outline found in a frame.
+
+    Attributes
+    ----------
+    corners : ndarray, shape (4, 2)
+        Sub-pixel corners (px), counter-clockwise on screen, not yet assigned
+        to table corners.
+    edge_rms : float
+        RMS distance of the edge points from the fitted sides (px): how sharp
+        and how straight the edge is.
+    kappa : float
+        Radial distortion about the frame's centre in pixels (``k1 / f^2``)
+        estimated from the sides' bow; 0 with a known lens.
+    edge : str
+        ``noses`` (the cushions' noses: the playing surface itself) or
+        ``felt`` (the felt-coloured outline: the playing surface unless the
+        cushions are cloth-coloured, see ``--felt-margin``).
+    """
+
+    corners: np.ndarray
+    edge_rms: float
+    kappa: float
+    edge: str
+
+
+def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = True,
+                   noses: bool = True) -> Detection:
+    """The playing surface's four corners in a frame (:class:`Detection`).
 
     Parameters
     ----------
@@ -632,27 +721,24 @@ def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = Tru
         A known lens: the edges are straightened with it.
     estimate_lens : bool
         Without ``K``: estimate one radial coefficient from the edges' bow.
-
-    Returns
-    -------
-    corners : ndarray, shape (4, 2)
-    edge_rms : float
-        RMS distance of the edge points from the fitted sides (px): how sharp
-        and how straight the felt's edge is.
-    kappa : float
-        Radial distortion about the frame's centre in pixels (``k1 / f^2``);
-        0 with a known lens or when not estimated.
+    noses : bool
+        Look for the cushions' noses inside the felt-coloured outline.
     """
     D, thr = _felt_distance(img)
     quad, contour = _felt_quad(D, thr)
     sides = edge_points(img, quad, contour)
+    edge = "felt"
+    if noses:
+        inner = cushion_noses(img, sides)
+        if inner is not None:
+            sides, edge = inner, "noses"
     h, w = D.shape
     centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
     kappa = 0.0
     if K is None and estimate_lens:
         kappa = radial_from_edges(sides, centre, (w, h))
     corners, edge_rms = fit_sides(sides, K, dist, kappa, centre)
-    return corners, edge_rms, kappa
+    return Detection(corners=corners, edge_rms=edge_rms, kappa=kappa, edge=edge)
 
 
 def assign_corners(quad: np.ndarray, size, table: Table, **kw) -> Calibration:
@@ -677,8 +763,14 @@ def assign_corners(quad: np.ndarray, size, table: Table, **kw) -> Calibration:
 
 
 def calibrate_video(path, table: Table = Table(), corners=None, *, intrinsics=None, distortion=None,
-                    felt_margin_m: float = 0.0, felt_height_m: float = 0.0, **kw) -> Calibration:
-    """A video's camera: from given corners, or from the felt found in its median frame."""
+                    felt_margin_m: float = 0.0, felt_height_m: float = 0.0, nose_height_m: float = 0.0,
+                    **kw) -> Calibration:
+    """A video's camera: from given corners, or from the table found in its median frame.
+
+    Automatic: the cushions' noses when they show (the playing surface's edge,
+    at ``nose_height_m`` above the cloth), else the felt-coloured outline (the
+    surface grown by ``felt_margin_m`` at ``felt_height_m``).
+    """
     from cuespin.render.video import quiet_native_stderr
 
     with quiet_native_stderr():
@@ -695,7 +787,10 @@ def calibrate_video(path, table: Table = Table(), corners=None, *, intrinsics=No
     if corners is not None:
         return calibrate_corners(corners, size, table, intrinsics=K, distortion=dist, fps=fps, **kw)
     frame = reference_frame(path)
-    quad, edge_rms, kappa = detect_corners(frame, K, dist)
+    det = detect_corners(frame, K, dist)
+    quad, edge_rms, kappa = det.corners, det.edge_rms, det.kappa
+    if det.edge == "noses":
+        felt_margin_m, felt_height_m = 0.0, nose_height_m
     # A corner is where two lines of ~hundreds of edge points meet: its error is
     # about the points' scatter times sqrt(4 / points per side).
     per_side = (size[0] + size[1]) / 2.0 / 2.0
@@ -703,7 +798,81 @@ def calibrate_video(path, table: Table = Table(), corners=None, *, intrinsics=No
     cal = assign_corners(quad, size, table, intrinsics=K, distortion=dist, fps=fps, kappa=kappa,
                          margin_m=felt_margin_m, corner_height_m=felt_height_m, **kw)
     return Calibration(camera=cal.camera, corners_px=cal.corners_px, residual_px=cal.residual_px,
-                       focal_source=cal.focal_source, notes=cal.notes, edge_rms_px=edge_rms)
+                       focal_source=cal.focal_source, notes=cal.notes, edge_rms_px=edge_rms,
+                       edge=det.edge)
+
+
+# --------------------------------------------------------------------------- synthetic frames
+def _inset(p, delta):
+    """A polygon's edges moved ``delta`` inward (vertices along the bisectors)."""
+    d = np.roll(p, -1, axis=0) - p
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    area = np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1])
+    n = np.column_stack([-d[:, 1], d[:, 0]]) * (1.0 if area > 0 else -1.0)   # inward normals
+    n_prev = np.roll(n, 1, axis=0)
+    return p + delta * (n + n_prev) / (1.0 + np.sum(n * n_prev, axis=1))[:, None]
+
+
+def _coverage(polys, w, h, ss):
+    """Fraction of each pixel inside the polygons (px), by ``ss`` x supersampling.
+    cv2.fillPoly also fills the pixels its outline touches (measured: half a
+    subpixel beyond every edge), so the outline is first moved in by that much."""
+    big = np.zeros((h * ss, w * ss), np.uint8)
+    shift = 4
+    pts = [np.round(_inset((p + 0.5) * ss - 0.5, 0.5) * (1 << shift)).astype(np.int32) for p in polys]
+    cv2.fillPoly(big, pts, 255, lineType=cv2.LINE_8, shift=shift)
+    return cv2.resize(big, (w, h), interpolation=cv2.INTER_AREA).astype(np.float32) / 255.0
+
+
+def synthetic_table_frame(cam, table=Table(), seed=0, noise=3.0, ss=4, felt=(40, 120, 30), wood=(40, 75, 125),
+                          balls=((0.6, 0.4), (2.45, 1.2)), cushion_m: float = 0.0,
+                          cushion_shade: float = 0.8, pockets: bool = False):
+    """A frame of the table through ``cam`` to check the detector on: the playing
+    surface's felt (its edge bowed by the lens, sampled every few mm) on wood,
+    optionally cushions ``cushion_m`` wide in ``cushion_shade`` x the felt's
+    colour and black pockets (the renderer's realistic look has both), white
+    balls (radius: the camera's centre height), Gaussian noise.  Everything
+    lies in the cloth's plane.  Coverage by ``ss`` x supersampling,
+    area-averaged (pixel integration); an edge lands on a multiple of
+    ``1/ss`` px (averaged out along edges off the pixel axes).  The renderer
+    draws the realistic table; this is the bare geometry."""
+    rng = np.random.default_rng(seed)
+    w, h = cam.width, cam.height
+    s = np.linspace(0.0, 1.0, 400)[:-1]
+
+    def outline(m):
+        x0, y0, x1, y1 = -m, -m, table.length + m, table.width + m
+        e = np.concatenate([np.column_stack([x0 + (x1 - x0) * s, y0 + 0 * s]),
+                            np.column_stack([x1 + 0 * s, y0 + (y1 - y0) * s]),
+                            np.column_stack([x1 - (x1 - x0) * s, y1 + 0 * s]),
+                            np.column_stack([x0 + 0 * s, y1 - (y1 - y0) * s])])
+        return cam.project(np.column_stack([e, np.zeros(len(e))]))
+
+    felt = np.asarray(felt, np.float32)
+    img = np.empty((h, w, 3), np.float32)
+    img[:] = wood
+    layers = []
+    if cushion_m > 0:
+        layers.append(([outline(cushion_m)], cushion_shade * felt))
+    layers.append(([outline(0.0)], felt))
+    if pockets:
+        th = np.linspace(0.0, 2.0 * np.pi, 120, endpoint=False)
+        polys = []
+        for px, py, r in [(-0.031, -0.031, 0.062), (table.length + 0.031, -0.031, 0.062),
+                          (-0.031, table.width + 0.031, 0.062),
+                          (table.length + 0.031, table.width + 0.031, 0.062),
+                          (table.length / 2, -0.035, 0.058), (table.length / 2, table.width + 0.035, 0.058)]:
+            c = np.column_stack([px + r * np.cos(th), py + r * np.sin(th), np.zeros(len(th))])
+            polys.append(cam.project(c))
+        layers.append((polys, np.array([16.0, 16.0, 18.0], np.float32)))
+    if balls:
+        layers.append(([cam.ball_outline(np.array(xy), cam.centre_height, n=90) for xy in balls],
+                       np.array([235.0, 235.0, 235.0], np.float32)))
+    for polys, colour in layers:
+        c = _coverage(polys, w, h, ss)[..., None]
+        img = img * (1 - c) + colour * c
+    img += rng.normal(0.0, noise, img.shape)
+    return np.clip(np.round(img), 0, 255).astype(np.uint8)
 
 
 # --------------------------------------------------------------------------- command line
@@ -771,7 +940,7 @@ def cmd_calibrate(args) -> int:
         kw["R_nominal"] = args.R
     cal = calibrate_video(video, table, corners, intrinsics=K, distortion=dist, focal_px=args.focal_px,
                           camera_height_m=args.camera_height, felt_margin_m=args.felt_margin,
-                          felt_height_m=args.felt_height, **kw)
+                          felt_height_m=args.felt_height, nose_height_m=args.nose_height, **kw)
     cam = cal.camera
     physics = {k: v for k, v in (("R", args.R), ("mu_s", args.mu_s), ("mu_r", args.mu_r)) if v is not None}
     camd = {"fps": cam.fps, "width": cam.width, "height": cam.height,
@@ -788,7 +957,9 @@ def cmd_calibrate(args) -> int:
     tmp.replace(out)
     for note in cal.notes:
         print(f"calibrate: {note}", file=sys.stderr)
-    found = "given" if corners is not None else f"found in the video (felt edges straight to {cal.edge_rms_px:.2f} px RMS)"
+    what = {"noses": "the cushions' noses", "felt": "the felt's outline"}.get(cal.edge, "")
+    found = ("given" if corners is not None else
+             f"found in the video ({what}, edges straight to {cal.edge_rms_px:.2f} px RMS)")
     print(f"wrote {out}: corners {found}; corner reprojection {cal.rms_px:.2f} px RMS "
           f"(max {np.linalg.norm(cal.residual_px, axis=1).max():.2f} px); camera {cal.height_m:.2f} m above "
           f"the cloth, tilted {cal.tilt_deg:.1f} deg, f = {cam.K[0, 0]:.0f} px (from {cal.focal_source})")
@@ -822,9 +993,13 @@ def add_parser(sub) -> None:
     c.add_argument("--table", default=None, metavar="LENGTH,WIDTH",
                    help="playing surface (m; default 2.54,1.27)")
     c.add_argument("--felt-margin", type=float, default=0.0, metavar="M",
-                   help="automatic only: the felt seen extends this far beyond the playing surface (m)")
+                   help="automatic, when no cushion nose shows: the felt-coloured outline lies this far "
+                        "beyond the playing surface (m; cloth-covered cushions: their width)")
     c.add_argument("--felt-height", type=float, default=0.0, metavar="M",
-                   help="automatic only: height of the felt's visible edge above the cloth (m)")
+                   help="automatic, when no cushion nose shows: that outline's height above the cloth (m)")
+    c.add_argument("--nose-height", type=float, default=0.0, metavar="M",
+                   help="automatic: height of the cushions' noses above the cloth (m; 0 for the "
+                        "renderer's flat table, about 0.036 on a real pool table)")
     c.add_argument("--R", type=float, default=None, help="ball radius (m), written to physics")
     c.add_argument("--mu-s", type=float, default=None, help="sliding friction, written to physics")
     c.add_argument("--mu-r", type=float, default=None, help="rolling friction, written to physics")

@@ -1,7 +1,7 @@
 """``cuespin calibrate``: the camera from the table's corners, clicked or found, and its checks.
 
-Frames are drawn here with cv2 (a felt quadrilateral through a tilted, distorting
-camera on wood, exact to 1/8 px by 8x supersampling, with sensor noise and balls),
+Frames are drawn with cv2 (``synthetic_table_frame``: a felt quadrilateral through a
+tilted, distorting camera on wood, by 4x supersampling, with sensor noise and balls),
 written as real FFV1 video and read back by the command itself.
 """
 
@@ -20,6 +20,7 @@ from cuespin.pipeline.calibrate import (
     CalibrationError,
     calibrate_corners,
     detect_corners,
+    synthetic_table_frame,
     table_corners,
 )
 
@@ -28,46 +29,6 @@ TABLE = Table()
 SIZE = (1280, 720)
 # Automatic corners: the issue's target on rendered scenes.
 AUTO_CORNER_RMS_PX = 0.5
-
-
-def _inset(p, delta):
-    """A polygon's edges moved ``delta`` inward (vertices along the bisectors)."""
-    d = np.roll(p, -1, axis=0) - p
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    area = np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1])
-    n = np.column_stack([-d[:, 1], d[:, 0]]) * (1.0 if area > 0 else -1.0)   # inward normals
-    n_prev = np.roll(n, 1, axis=0)
-    return p + delta * (n + n_prev) / (1.0 + np.sum(n * n_prev, axis=1))[:, None]
-
-
-def _coverage(polys, w, h, ss):
-    """Fraction of each pixel inside the polygons (px), by ``ss`` x supersampling.
-    cv2.fillPoly also fills the pixels its outline touches (measured: half a
-    subpixel beyond every edge), so the outline is first moved in by that much."""
-    big = np.zeros((h * ss, w * ss), np.uint8)
-    shift = 4
-    pts = [np.round(_inset((p + 0.5) * ss - 0.5, 0.5) * (1 << shift)).astype(np.int32) for p in polys]
-    cv2.fillPoly(big, pts, 255, lineType=cv2.LINE_8, shift=shift)
-    return cv2.resize(big, (w, h), interpolation=cv2.INTER_AREA).astype(np.float32) / 255.0
-
-
-def draw_table_frame(cam, table=TABLE, seed=0, noise=3.0, ss=4, felt=(40, 120, 30), wood=(40, 75, 125),
-                     balls=((0.6, 0.4), (2.45, 1.2))):
-    """A frame of the table through ``cam``: the playing surface's felt (its edge
-    bowed by the lens, sampled every few mm) on wood, white balls, noise.
-    Coverage by ``ss`` x supersampling, area-averaged (pixel integration)."""
-    rng = np.random.default_rng(seed)
-    w, h = cam.width, cam.height
-    s = np.linspace(0.0, 1.0, 400)[:-1]
-    L, W = table.length, table.width
-    edge = np.concatenate([np.column_stack([L * s, 0 * s]), np.column_stack([L + 0 * s, W * s]),
-                           np.column_stack([L * (1 - s), W + 0 * s]), np.column_stack([0 * s, W * (1 - s)])])
-    c_felt = _coverage([cam.project(np.column_stack([edge, np.zeros(len(edge))]))], w, h, ss)[..., None]
-    c_ball = _coverage([cam.ball_outline(np.array(xy), R, n=90) for xy in balls], w, h, ss)[..., None]
-    img = np.asarray(wood, np.float32) * (1 - c_felt) + np.asarray(felt, np.float32) * c_felt
-    img = img * (1 - c_ball) + 235.0 * c_ball
-    img += rng.normal(0.0, noise, img.shape)
-    return np.clip(np.round(img), 0, 255).astype(np.uint8)
 
 
 def true_corners(cam, table=TABLE):
@@ -145,11 +106,16 @@ def test_mirrored_and_implausible_corners_refused():
         calibrate_corners(np.roll(c, 1, axis=0), SIZE, intrinsics=true.K)
 
 
-@pytest.mark.parametrize("tilt,k1,height", [(10.0, 0.0, 2.0), (15.0, -0.2, 1.8)])
-def test_automatic_corners_on_a_drawn_frame(tilt, k1, height):
-    true = pinhole_camera(height_m=height, tilt_deg=tilt, k1=k1, R=R, size=SIZE)
-    img = draw_table_frame(true, seed=int(tilt))
-    quad, edge_rms, kappa = detect_corners(img)
+@pytest.mark.parametrize("tilt,k1,height,cushion", [(10.0, 0.0, 2.0, 0.0), (15.0, -0.2, 1.8, 0.05)])
+def test_automatic_corners_on_a_drawn_frame(tilt, k1, height, cushion):
+    # rolled 1 deg: the drawing puts an edge on a multiple of 1/4 px, which
+    # averages out only along edges off the pixel axes
+    true = pinhole_camera(height_m=height, tilt_deg=tilt, k1=k1, R=R, size=SIZE, roll_deg=1.0)
+    img = synthetic_table_frame(true, seed=int(tilt), cushion_m=cushion, pockets=cushion > 0)
+    det = detect_corners(img)
+    quad, edge_rms, kappa = det.corners, det.edge_rms, det.kappa
+    # with darker cushions around it, the playing surface's edge is their noses
+    assert det.edge == ("noses" if cushion else "felt")
     truth = true_corners(true)
     # the detected quad's first corner is wherever the outline starts: match by rotation
     d = min((np.roll(quad, -s, axis=0) - truth for s in range(4)), key=lambda e: np.abs(e).max())
@@ -177,7 +143,7 @@ def run_cli(*args):
 
 def test_cli_calibrate_automatic_and_with_corners(tmp_path):
     true = pinhole_camera(height_m=2.0, tilt_deg=12.0, R=R, size=SIZE, fps=30.0)
-    frames = [draw_table_frame(true, seed=k) for k in range(2)]
+    frames = [synthetic_table_frame(true, seed=k) for k in range(2)]
     video = tmp_path / "table.avi"
     write_video(frames, video)
     out = tmp_path / "scene.json"
@@ -207,7 +173,7 @@ def test_cli_calibrate_automatic_and_with_corners(tmp_path):
 def test_cli_calibrate_with_lens_file(tmp_path):
     true = pinhole_camera(height_m=1.6, tilt_deg=14.0, k1=-0.22, R=R, size=SIZE, fps=30.0)
     video = tmp_path / "table.avi"
-    write_video([draw_table_frame(true, seed=5)], video)
+    write_video([synthetic_table_frame(true, seed=5)], video)
     lens = tmp_path / "lens.json"
     lens.write_text(json.dumps({"intrinsics": true.K.tolist(), "distortion": [list(true.dist)]}))
     out = tmp_path / "scene.json"
