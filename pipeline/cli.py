@@ -367,7 +367,14 @@ def add_generate(sub):
 
 # Each subcommand registers itself by one small function: a new one is one
 # function and one line here.
-SUBCOMMANDS = [add_demo, add_render, add_generate, add_track, add_recover, add_show, add_batch, add_experiment]
+def add_calibrate(sub):
+    from cuespin.pipeline.calibrate import add_parser
+
+    add_parser(sub)
+
+
+SUBCOMMANDS = [add_demo, add_calibrate, add_render, add_generate, add_track, add_recover, add_show, add_batch,
+               add_experiment]
 
 
 def build_parser() -> argparse.ArgumentParser:
