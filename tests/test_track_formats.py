@@ -13,7 +13,7 @@ from cuespin.render import FrameRenderer
 from cuespin.track import video as tv
 from cuespin.track.tracker import NO_BALL
 from cuespin.track.video import track_video, write_track_csv
-from tests.colour_video import colour_frames, write_av
+from cuespin.track.synthetic import colour_frames, write_av
 
 # A yellow ball on grey felt: 17 grey levels apart (luma), 130 in blue.
 YELLOW, GREY_FELT = (40, 200, 220), (170, 170, 170)

@@ -1,7 +1,11 @@
-"""Colour test videos for the tracker: a scene's exact ball coverage (the
-project's renderer) drawn in any ball and felt colours, with independent
-noise per channel, written by PyAV in any codec and pixel format (with
-chosen presentation times, for variable-frame-rate files)."""
+"""Colour videos for the tracker's tests and benchmarks (not the renderer).
+
+A scene's exact ball coverage (the project's renderer's) drawn in any ball
+and felt colours, with independent noise per channel, written by PyAV in any
+codec and pixel format (with chosen presentation times, for
+variable-frame-rate files).  The renderer's realistic looks replace this
+where they exist; this stays the tracker's own minimal colour check.
+"""
 
 from __future__ import annotations
 
@@ -14,7 +18,7 @@ from cuespin.render import FrameRenderer
 
 
 def colour_frames(scene, ball_bgr, felt_bgr, noise: float, seed: int = 0, ramp: float = 0.0,
-                  others=()):
+                  others=(), noise_bank: int = 0):
     """Yield BGR uint8 frames of ``scene``'s shot.
 
     Parameters
@@ -27,6 +31,10 @@ def colour_frames(scene, ball_bgr, felt_bgr, noise: float, seed: int = 0, ramp: 
         Lighting ramp across the frame's width (relative brightness change).
     others : sequence of (u, v, bgr)
         Other balls at rest (centre px, colour), drawn with the same radius.
+    noise_bank : int
+        If > 0, the felt's noise is drawn from this many precomputed noise
+        frames, rolled by a random offset per frame (fast, for long speed
+        benchmarks; not independent between frames).
     """
     r = FrameRenderer(scene)
     h, w = scene.camera.height, scene.camera.width
@@ -40,7 +48,19 @@ def colour_frames(scene, ball_bgr, felt_bgr, noise: float, seed: int = 0, ramp: 
         sl = (slice(v0, v0 + n), slice(u0, u0 + n))
         felt[sl] = felt[sl] * (1 - cov) + np.asarray(col, float) * cov
     ball = np.asarray(ball_bgr, float)
+    bank = [np.clip(np.rint(felt + noise * rng.standard_normal(felt.shape)), 0, 255).astype(np.uint8)
+            for _ in range(noise_bank)]
     for k in range(r.n_frames):
+        if bank:
+            img8 = np.roll(bank[k % len(bank)], int(rng.integers(0, w)), axis=1)
+            cov, u0, v0 = r.ball_patch(k)
+            if cov is not None:
+                ch, cw = cov.shape
+                sl = (slice(v0, v0 + ch), slice(u0, u0 + cw))
+                c = cov[..., None]
+                img8[sl] = np.clip(np.rint(img8[sl] * (1 - c) + ball * light[u0:u0 + cw, None] * c), 0, 255)
+            yield img8
+            continue
         img = felt + (noise * rng.standard_normal(felt.shape) if noise > 0 else 0.0)
         cov, u0, v0 = r.ball_patch(k)
         if cov is not None:
