@@ -85,6 +85,9 @@ class Calibration:
         the four fitted lines (px).
     edge : str or None
         Automatic detection only: ``noses`` or ``felt`` (:class:`Detection`).
+    corner_sigma_px : float or None
+        Error of each corner coordinate (px) assumed (clicked: ``--corner-error``,
+        default 1; automatic: from the edges' scatter).
     """
 
     camera: Camera
@@ -94,6 +97,7 @@ class Calibration:
     notes: list = field(default_factory=list)
     edge_rms_px: float | None = None
     edge: str | None = None
+    corner_sigma_px: float | None = None
 
     @property
     def rms_px(self) -> float:
@@ -348,14 +352,37 @@ def calibrate_corners(corners_px, size, table: Table = Table(), *, intrinsics=No
                  intrinsics=as_tuple(K),
                  distortion=None if dist is None or not np.any(dist) else as_tuple(np.resize(dist, 5)),
                  rvec=as_tuple(rvec), tvec=as_tuple(tvec))
-    return Calibration(camera=cam, corners_px=img, residual_px=res, focal_source=source, notes=notes)
+    return Calibration(camera=cam, corners_px=img, residual_px=res, focal_source=source, notes=notes,
+                       corner_sigma_px=float(corner_sigma_px))
+
+
+def perturbed_cameras(corners_px, sigma_px: float, size, table: Table = Table(), **kw) -> list:
+    """The cameras of the 8 corner coordinates each moved by ``sigma_px``, one at a time.
+
+    For propagating a calibration's error to anything computed through the
+    camera (v0, w0): with ``q`` the quantity through the calibrated camera and
+    ``q_k`` through camera k, its calibration variance is ``sum_k (q_k - q)^2``
+    (first order; the corners' errors independent, ``sigma_px`` per
+    coordinate).  ``kw`` as for :func:`calibrate_corners` (the same lens or
+    focal length source); a corner moved into an implausible camera is skipped.
+    """
+    base = np.asarray(corners_px, dtype=float).reshape(4, 2)
+    cams = []
+    for k in range(8):
+        c = base.copy()
+        c.flat[k] += sigma_px
+        try:
+            cams.append(calibrate_corners(c, size, table, **kw).camera)
+        except CalibrationError:
+            continue
+    return cams
 
 
 # --------------------------------------------------------------------------- automatic
 def reference_frame(path, n: int = 9) -> np.ndarray:
     """The median of ``n`` frames spread over the video: the table without the
     moving ball (and without a cue that crosses the view for a moment)."""
-    from cuespin.render.video import quiet_native_stderr
+    from cuespin.videoio import quiet_native_stderr
 
     with quiet_native_stderr():
         cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
@@ -771,7 +798,7 @@ def calibrate_video(path, table: Table = Table(), corners=None, *, intrinsics=No
     at ``nose_height_m`` above the cloth), else the felt-coloured outline (the
     surface grown by ``felt_margin_m`` at ``felt_height_m``).
     """
-    from cuespin.render.video import quiet_native_stderr
+    from cuespin.videoio import quiet_native_stderr
 
     with quiet_native_stderr():
         cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
@@ -799,7 +826,7 @@ def calibrate_video(path, table: Table = Table(), corners=None, *, intrinsics=No
                          margin_m=felt_margin_m, corner_height_m=felt_height_m, **kw)
     return Calibration(camera=cal.camera, corners_px=cal.corners_px, residual_px=cal.residual_px,
                        focal_source=cal.focal_source, notes=cal.notes, edge_rms_px=edge_rms,
-                       edge=det.edge)
+                       edge=det.edge, corner_sigma_px=cal.corner_sigma_px)
 
 
 # --------------------------------------------------------------------------- synthetic frames
@@ -951,6 +978,7 @@ def cmd_calibrate(args) -> int:
     scene = {"schema": SCHEMA, "physics": physics,
              "table": {"length": table.length, "width": table.width}, "camera": camd,
              "calibration": {"corners_px": cal.corners_px.tolist(), "corner_rms_px": cal.rms_px,
+                             "corner_sigma_px": cal.corner_sigma_px,
                              "focal_from": cal.focal_source, "edge_rms_px": cal.edge_rms_px}}
     tmp = out.with_name(out.name + ".part")
     tmp.write_text(json.dumps(scene, indent=2) + "\n")
