@@ -102,6 +102,7 @@ def auto(args):
     """Automatic calibration on drawn frames: corners, metres, v0 against the exact camera."""
     from cuespin.pipeline.calibrate import assign_corners, detect_corners, synthetic_table_frame
 
+    print(f"cushions {args.cushion} m; {args.n} shots per camera; tracker error {args.track_px} px")
     print("height tilt    k1 | corner_rms_px edge_rms_px k1_est focal_from | max_m_err | "
           "v0_rms exact / auto (m/s), Rw0_rms exact / auto")
     xs, ys = np.meshgrid(np.linspace(0.1, 2.44, 9), np.linspace(0.1, 1.17, 5))
@@ -110,7 +111,8 @@ def auto(args):
                              (2.0, 10.0, -0.25), (1.5, 15.0, -0.25), (2.0, 12.0, 0.25), (2.0, 0.0, -0.25)]:
         true = Scene(physics=sample_shot(0)[1], camera=pinhole_camera(
             height_m=height, tilt_deg=tilt, k1=k1, size=SIZE, fps=FPS, roll_deg=ROLL_DEG)).camera
-        img = synthetic_table_frame(true, seed=int(10 * tilt + 100 * k1))
+        img = synthetic_table_frame(true, seed=int(10 * tilt + 100 * abs(k1)), cushion_m=args.cushion,
+                                    pockets=args.cushion > 0)
         det = detect_corners(img)
         quad, edge_rms, kappa = det.corners, det.edge_rms, det.kappa
         cal = assign_corners(quad, SIZE, Table(), kappa=kappa, fps=FPS,
@@ -131,7 +133,7 @@ def auto(args):
         rv = {k: np.sqrt(np.mean([np.sum(r[0] ** 2) / 2 for r in v])) for k, v in res.items()}
         rw = {k: np.sqrt(np.mean([np.sum(r[1] ** 2) / 2 for r in v])) for k, v in res.items()}
         print(f"{height:6.1f} {tilt:4.0f} {k1:+.2f} | {c_rms:13.3f} {edge_rms:11.3f} "
-              f"{kappa * cal.camera.K[0, 0] ** 2:+.3f} {cal.focal_source:10s} | {m_err:9.1e} | "
+              f"{kappa * cal.camera.K[0, 0] ** 2:+.3f} {cal.focal_source:10s} {det.edge:6s} | {m_err:9.1e} | "
               f"{rv['exact']:.2e} / {rv['auto']:.2e}, {rw['exact']:.2e} / {rw['auto']:.2e}")
 
 
@@ -143,6 +145,8 @@ def main():
     ap.add_argument("--tilt", type=float, default=10.0)
     ap.add_argument("--height", type=float, default=2.0)
     ap.add_argument("--auto", action="store_true", help="automatic calibration on drawn frames instead")
+    ap.add_argument("--cushion", type=float, default=0.05,
+                    help="--auto: cushions this wide (m) in a darker felt, and pockets (0: bare felt)")
     ap.add_argument("--propagate", action="store_true",
                     help="add the calibration's error (8 perturbed cameras) to the stated errors")
     args = ap.parse_args()

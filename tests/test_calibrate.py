@@ -196,3 +196,17 @@ def test_cli_calibrate_with_lens_file(tmp_path, capsys):
     lens.write_text(json.dumps({"distortion": [0.1, 0, 0, 0, 0]}))
     code, _, err_txt = run_main(capsys, "calibrate", video, "-o", out, "--intrinsics", lens)
     assert code == 2 and "intrinsics: required key is missing" in err_txt
+
+
+def test_perturbed_cameras_move_one_corner_each():
+    from cuespin.pipeline.calibrate import perturbed_cameras
+
+    true = pinhole_camera(height_m=2.0, tilt_deg=10.0, R=R, size=SIZE)
+    c = true_corners(true)
+    cams = perturbed_cameras(c, 0.5, SIZE, intrinsics=true.K)
+    assert len(cams) == 8
+    xy = np.array([[1.27, 0.635]])
+    moves = [np.abs(Scene(physics=BallParams(R=R), camera=cam).camera.to_table(true.to_pixels(xy)) - xy).max()
+             for cam in cams]
+    # half a pixel at one corner moves the table's middle by a fraction of a mm, never zero
+    assert all(1e-6 < m < 2e-3 for m in moves), moves
