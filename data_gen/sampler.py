@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from cuespin.data_gen.contacts import CONTACT_PRESETS, contact_render, sample_contact
 from cuespin.physics.motion import BallParams, Shot
 from cuespin.physics.scene import Scene, Table, default_camera
 from cuespin.physics.straight import straight_frame
 
-PRESETS = ("random", "case1", "case2", "case3", "case4", "case5", "masse", "leaves_table")
+PRESETS = ("random", "case1", "case2", "case3", "case4", "case5", "masse", "leaves_table",
+           *CONTACT_PRESETS)
 
 # Spin ratio k = R w0 . j_hat / v0 for each straight case of Figure 4.
 _CASE_K = {
@@ -74,7 +76,9 @@ def sample_shot(seed, preset: str = "random", params: BallParams | None = None,
         up to 2.5 v0/R in any planar direction), ``case1``..``case5`` (straight
         shots in each case of Figure 4), ``masse`` (strong spin along v0: a
         visibly curved path sliding for half a second or more) or ``leaves_table``
-        (fast, aimed at a near cushion).
+        (fast, aimed at a near cushion); ``cushion`` and ``ball_contact``
+        (the first contact, 0.25-2.5 s after the strike, is a cushion or a
+        resting ball: see ``data_gen/contacts.py``).
     params : BallParams, optional
         Fixed friction; sampled (mu_s 0.1-0.3, mu_r 0.005-0.02) when absent.
     table : Table
@@ -88,6 +92,9 @@ def sample_shot(seed, preset: str = "random", params: BallParams | None = None,
     if preset not in PRESETS:
         raise ValueError(f"unknown preset {preset!r}; choose from {', '.join(PRESETS)}")
     rng = _rng(seed)
+    if preset in CONTACT_PRESETS:  # data_gen/contacts.py; the other balls are dropped here
+        shot, params, _ = sample_contact(rng, preset, params, table)
+        return shot, params
     if params is None:
         params = BallParams(mu_s=float(rng.uniform(0.1, 0.3)), mu_r=float(rng.uniform(0.005, 0.02)))
     R = params.R
@@ -160,13 +167,19 @@ def sample_scene(seed, preset: str = "random", fps: float | None = None,
         With ``truth`` set and a ``render`` block carrying its own seed.
     """
     rng = _rng(seed)
-    shot, params = sample_shot(rng, preset)
+    balls = None
+    if preset in CONTACT_PRESETS:
+        shot, params, balls = sample_contact(rng, preset)
+    else:
+        shot, params = sample_shot(rng, preset)
     if fps is None:
         fps = float(rng.choice(FPS_CHOICES))
     render, exposure = _render_settings(rng, fps, noise, blur)
     if codec is not None:
         render["codec"] = codec
     render["preset"] = preset
+    if balls is not None:
+        render.update(contact_render(balls))  # render.contacts on, render.balls listed
     return make_scene(shot, params, fps=fps, px_per_m=px_per_m, exposure_s=exposure, render=render)
 
 
@@ -177,7 +190,8 @@ def sample_scenes(n: int, seed: int, preset: str | None = None, **kwargs) -> lis
     of shot: mostly ``random`` with each named preset mixed in.
     """
     children = np.random.SeedSequence(seed).spawn(n)
-    mix = ["random"] * 4 + [p for p in PRESETS if p != "random"]
+    # Contact shots only when asked for: the default mix is of shots on open cloth.
+    mix = ["random"] * 4 + [p for p in PRESETS if p != "random" and p not in CONTACT_PRESETS]
     scenes = []
     for i, child in enumerate(children):
         p = preset if preset is not None else mix[i % len(mix)]

@@ -100,6 +100,8 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
     (and the TrackResult too, with ``return_track``)."""
     import time
 
+    from cuespin.fit.contact import analysed_frames, find_contact
+    from cuespin.physics.contact import scene_balls
     from cuespin.recover.api import recover_track
     from cuespin.track.tracker import TrackerConfig
     from cuespin.track.video import track_video
@@ -112,12 +114,17 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
     cam = scene.camera
     centre = cam.to_table([[cam.width / 2, cam.height / 2]])[0]
     stderr_m = tr.stderr_px / cam.px_per_m(centre)
-    out = recover_track(tr.t, tr.xy, tr.ok, stderr_m, scene.physics, cam.exposure_s, method,
-                        fit_friction, lossless=tr.lossless)
+    # The analysed motion ends at the first contact (CONVENTIONS.md): fit only the frames before it.
+    contact = find_contact(tr.t, tr.xy, tr.ok, stderr_m, scene.table, scene.physics.R,
+                           scene_balls(scene.render))
+    n = analysed_frames(tr.t, contact, cam.exposure_s)
+    out = recover_track(tr.t[:n], tr.xy[:n], tr.ok[:n], stderr_m[:n], scene.physics, cam.exposure_s,
+                        method, fit_friction, lossless=tr.lossless)
     noise = tr.centroid_noise_px
     result = {"video": Path(video).name,
               "track": {"frames": int(tr.n_frames), "ok_frames": int(tr.ok.sum()),
                         "centroid_noise_px": noise if noise == noise else None,
+                        "contact": None if contact is None else {"t": contact.t, "kind": contact.kind},
                         **({"error": tr.error} if tr.error else {})},
               "methods": out["methods"], "best": out["best"],
               "timing_s": {"track": t_track, **out["timing_s"]}}

@@ -17,7 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtr
 
-from cuespin.physics.motion import Phases, phases, positions
+from cuespin.physics.contact import scene_trajectory
+from cuespin.physics.motion import Phases, phases
 from cuespin.physics.scene import Scene, homography_jacobian, motion_end
 from cuespin.render.timing import frame_times
 
@@ -169,6 +170,8 @@ class FrameRenderer:
         self.cam = scene.camera
         self.H = self.cam.H
         self.ph: Phases = phases(scene.truth, scene.physics)
+        # The path, continued past contacts when render.contacts is on (physics/contact.py).
+        self.trajectory = scene_trajectory(scene)
         J = homography_jacobian(self.H, scene.truth.x0)
         scale = math.sqrt(abs(np.linalg.det(J)))
         if np.abs(np.abs(J.T @ J) - scale**2 * np.eye(2)).max() > SIMILARITY_RTOL * scale**2:
@@ -200,10 +203,10 @@ class FrameRenderer:
     def _truth(self) -> FrameTruth:
         t = frame_times(self.scene, self.n_frames).t  # the writer stamps the same times
         nodes = self._nodes(t)
-        xy_nodes = positions(self.scene.truth, self.scene.physics, nodes.ravel(), self.ph)
+        xy_nodes = self.trajectory.positions(nodes.ravel())
         uv_nodes = self.cam.to_pixels(xy_nodes).reshape(nodes.shape + (2,))
         self._uv_nodes = uv_nodes
-        xy = positions(self.scene.truth, self.scene.physics, t, self.ph)
+        xy = self.trajectory.positions(t)
         return FrameTruth(t=t, uv=uv_nodes.mean(axis=1), xy=xy)
 
     def ball_patch(self, k: int):
@@ -275,6 +278,8 @@ def video_length(scene: Scene) -> int:
     if s["duration"] is not None:
         return max(1, int(round(float(s["duration"]) * fps)))
     end, left = motion_end(scene.truth, scene.physics, scene.table, fps, float(s["max_duration"]))
+    if scene.render.get("contacts"):  # bounced back, not gone: until it stops
+        end, left = min(scene_trajectory(scene).t_rest, float(s["max_duration"])), False
     if not left:
         end = min(end + float(s["tail"]), float(s["max_duration"]))
     return int(math.floor(end * fps)) + 1
