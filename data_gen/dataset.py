@@ -23,7 +23,7 @@ def shot_stem(i: int) -> str:
 
 def generate_dataset(out: Path, n: int, seed: int, preset: str | None = None,
                      codec: str | None = None, fps: float | None = None,
-                     progress=None) -> dict:
+                     progress=None, look: str = "plain") -> dict:
     """Sample ``n`` scenes from ``seed`` and render each into ``out``.
 
     Parameters
@@ -43,19 +43,21 @@ def generate_dataset(out: Path, n: int, seed: int, preset: str | None = None,
         Frame rate for every shot; sampled when None.
     progress : callable, optional
         ``progress(total, desc, unit)`` returning a context-manager bar.
+    look : str
+        ``plain`` or ``realistic`` (see :func:`cuespin.data_gen.sampler.sample_scene`).
 
     Returns
     -------
     dict
         ``{"written": int, "skipped": int, "paths": [video paths]}``.
     """
-    from cuespin.pipeline.io import write_scene
     from cuespin.render.draw import render_settings
     from cuespin.render.video import render_video, truth_path, video_suffix
+    from cuespin.sceneio import write_scene
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    scenes = sample_scenes(n, seed, preset=preset, fps=fps, codec=codec)
+    scenes = sample_scenes(n, seed, preset=preset, fps=fps, codec=codec, look=look)
     written = skipped = 0
     paths = []
     bar = progress(n, "generate", "shot") if progress else None

@@ -12,11 +12,8 @@ noise hide behind the encoder.
 
 from __future__ import annotations
 
-import contextlib
 import csv
-import os
 import queue
-import sys
 import threading
 from fractions import Fraction
 from pathlib import Path
@@ -27,6 +24,7 @@ import numpy as np
 from cuespin.physics.scene import Scene
 from cuespin.render.draw import FrameRenderer, FrameTruth, render_settings
 from cuespin.render.timing import FrameTimes, constant_time_base, frame_times
+from cuespin.videoio import quiet_native_stderr
 
 LOSSLESS_CODECS = ("FFV1",)
 LOSSY_CODECS = ("MJPG", "mp4v", "XVID", "H264")
@@ -44,45 +42,6 @@ _QUEUE_DEPTH = 8
 
 class VideoError(RuntimeError):
     """The video could not be written (codec, path or OpenCV failure)."""
-
-
-_quiet_lock = threading.Lock()
-_quiet_depth = 0
-_quiet_saved: int | None = None
-
-
-@contextlib.contextmanager
-def quiet_native_stderr():
-    """Silence what native code (OpenCV's FFmpeg backend) prints to fd 2.
-
-    Some of its messages are written with fprintf and ignore OpenCV's log
-    level; the caller reports failures itself, in one line.  Reference
-    counted, so the decoder thread and the main thread may both hold it: the
-    first in redirects fd 2, the last out restores it.
-    """
-    global _quiet_depth, _quiet_saved
-    try:
-        fd = sys.stderr.fileno()
-    except (AttributeError, OSError, ValueError):
-        yield
-        return
-    with _quiet_lock:
-        if _quiet_depth == 0:
-            sys.stderr.flush()
-            _quiet_saved = os.dup(fd)
-            devnull = os.open(os.devnull, os.O_WRONLY)
-            os.dup2(devnull, fd)
-            os.close(devnull)
-        _quiet_depth += 1
-    try:
-        yield
-    finally:
-        with _quiet_lock:
-            _quiet_depth -= 1
-            if _quiet_depth == 0:
-                os.dup2(_quiet_saved, fd)
-                os.close(_quiet_saved)
-                _quiet_saved = None
 
 
 def open_writer(path: Path, codec: str, fps: float, size: tuple[int, int],
@@ -106,14 +65,19 @@ def truth_path(video: Path) -> Path:
 
 
 def write_truth_csv(path: Path, truth: FrameTruth) -> None:
-    """Write the sidecar: ``frame,t,u_px,v_px,x_m,y_m`` per frame."""
+    """Write the sidecar: ``frame,t,u_px,v_px,x_m,y_m,uc_px,vc_px`` per frame.
+
+    ``u_px, v_px``: the silhouette's centroid; ``uc_px, vc_px``: the projected
+    true centre (both averaged over the exposure), see :class:`FrameTruth`.
+    """
     with open(path, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["frame", "t", "u_px", "v_px", "x_m", "y_m"])
+        w = csv.writer(f, lineterminator="\n")
+        w.writerow(["frame", "t", "u_px", "v_px", "x_m", "y_m", "uc_px", "vc_px"])
         for k in range(len(truth.t)):
             w.writerow([k, repr(float(truth.t[k])), repr(float(truth.uv[k, 0])),
                         repr(float(truth.uv[k, 1])), repr(float(truth.xy[k, 0])),
-                        repr(float(truth.xy[k, 1]))])
+                        repr(float(truth.xy[k, 1])), repr(float(truth.uvc[k, 0])),
+                        repr(float(truth.uvc[k, 1]))])
 
 
 class _OpenCvWriter:
