@@ -117,7 +117,7 @@ def rendered(n: int, seed: int = 2, fps_choices=(60.0, 120.0, 240.0), codec: str
     import tempfile
     from pathlib import Path
 
-    from cuespin.pipeline.cli import run_recover
+    from cuespin.pipeline.run import run_recover
     from cuespin.render.video import render_video, video_suffix
 
     rng = np.random.default_rng(seed)

@@ -157,3 +157,45 @@ def test_ball_coming_back_is_not_the_shot():
     n = analysed_frames(t, c)
     assert t[n - 1] < traj.first_contact.t
     assert abs(c.index - np.searchsorted(t, traj.first_contact.t)) <= 1
+
+
+def rendered_contact(tmp_path, preset, seed, fps, px_per_m, codec="FFV1"):
+    """Render a contact scene to tail_s after its first contact and recover it."""
+    import dataclasses
+
+    from cuespin.pipeline.run import run_recover
+    from cuespin.render.video import render_video
+
+    scene = sample_scene(seed, preset, fps=fps, px_per_m=px_per_m, noise=2.0, blur=False, codec=codec)
+    first = scene_trajectory(scene).first_contact
+    scene = dataclasses.replace(scene, render={**scene.render, "duration": first.t + 0.3})
+    video = tmp_path / f"{preset}.avi"
+    truth = render_video(scene, video)
+    res = run_recover(video, scene, method="mle")
+    return scene, first, truth, res
+
+
+def check_rendered(scene, first, truth, res):
+    c = res["track"]["contact"]
+    assert c is not None and c["kind"] == first.kind
+    true_index = np.searchsorted(truth.t, first.t)
+    found_index = np.searchsorted(truth.t, c["t"] - 1e-12)
+    assert abs(found_index - true_index) <= 1
+    m = res["methods"]["mle"]
+    assert m["status"] == "ok", m["reason"]
+    # The frames before the contact answer as the paper's shot: within 5
+    # stated standard errors (the bounce's frames, if used, would be off by
+    # metres per second).
+    for key in ("v0", "w0"):
+        err = np.abs(np.array(m[key]) - np.array(getattr(scene.truth, key)))
+        assert (err < 5 * np.array(m["stderr"][key])).all(), (key, err, m["stderr"][key])
+
+
+def test_rendered_cushion_shot_end_to_end(tmp_path):
+    check_rendered(*rendered_contact(tmp_path, "cushion", 1, 60.0, 200.0))
+
+
+@pytest.mark.slow  # two 120 fps renders and tracks: about 50 s on a loaded machine
+@pytest.mark.parametrize("preset,seed", [("cushion", 1), ("ball_contact", 4)])
+def test_rendered_contact_shots_end_to_end_120fps(tmp_path, preset, seed):
+    check_rendered(*rendered_contact(tmp_path, preset, seed, 120.0, 250.0))
