@@ -204,7 +204,7 @@ def change_statistic(t, xy, stderr_m, W: int | None = None, details: bool = Fals
 
 
 def _kink_chi2(t, xy, sig, lo: int, hi: int, tau: float, end_gap: int = 0,
-               kappa_max: float = np.inf) -> float:
+               kappa_max: float = np.inf, stop_below: float = -np.inf) -> float:
     """Smallest chi-square of the model's own motion over frames ``lo..hi-1``:
     one quadratic with position and velocity continuous and the acceleration
     free to change once, at any time ``kappa`` in the window (the end of
@@ -212,33 +212,47 @@ def _kink_chi2(t, xy, sig, lo: int, hi: int, tau: float, end_gap: int = 0,
     four times (to 1/8192 of a frame), so its error costs nothing at any
     noise a tracker reaches.  With ``end_gap``, the kink is kept that many
     frames before the last (a kink at the very end would imitate a jump),
-    and with ``kappa_max`` (s, absolute) no later than that."""
+    and with ``kappa_max`` (s, absolute) no later than that.  Refinement
+    stops once the chi-square is at or below ``stop_below`` (a smaller one
+    would change no decision)."""
     s = t[lo:hi] - tau
     w = 1.0 / sig[lo:hi] ** 2
     y = xy[lo:hi]
     dt = float(np.median(np.diff(t[lo:hi])))
 
+    # One kink column z = (s - kappa)_+^2 added to the quadratic: by the
+    # partitioned least-squares identity the chi-square drops by
+    # (z~' W r0)^2 / (z~' W z~) per axis, z~ being z with the quadratic's
+    # part taken out (vectorised over kappa).
+    X0 = np.stack([np.ones_like(s), s, s * s], axis=1)
+    WX0 = X0 * w[:, None]
+    A0inv = np.linalg.inv(X0.T @ WX0)
+    r0 = y - X0 @ (A0inv @ (WX0.T @ y))
+    chi2_0 = float(np.sum(r0 * r0 * w[:, None]))
+    wr0 = r0 * w[:, None]
+
     def chi2(kappas):
-        X = np.empty((len(kappas), len(s), 4))
-        X[:, :, 0], X[:, :, 1], X[:, :, 2] = 1.0, s, s * s
-        X[:, :, 3] = np.maximum(s[None, :] - kappas[:, None], 0.0) ** 2
-        XwT = np.swapaxes(X * w[None, :, None], 1, 2)
-        A = XwT @ X
-        A[:, 3, 3] += 1e-30 + 1e-12 * A[:, 3, 3]  # a kink beyond the last frame has no column
-        coef = np.linalg.solve(A, XwT @ y)
-        r = y[None] - X @ coef
-        return np.sum(r * r * w[None, :, None], axis=(1, 2))
+        Z = np.maximum(s[None, :] - kappas[:, None], 0.0) ** 2
+        Zt = Z - ((Z @ WX0) @ A0inv) @ X0.T
+        den = np.sum(Zt * Zt * w[None, :], axis=1)
+        num = Zt @ wr0
+        drop = np.where(den > 1e-300, np.sum(num * num, axis=1) / np.maximum(den, 1e-300), 0.0)
+        return chi2_0 - drop
 
     k_max = min(s[max(len(s) - 1 - end_gap, 0)], kappa_max - tau)
     k_max = max(k_max, s[0])
     grid = np.arange(s[0], k_max + 1e-12, dt / 2)
     step = dt / 2
+    best_c = np.inf
     for _ in range(4):
         c = chi2(np.minimum(grid, k_max))
-        best = grid[int(np.argmin(c))]
+        i = int(np.argmin(c))
+        best, best_c = grid[i], min(best_c, float(c[i]))
+        if best_c <= stop_below:
+            break
         step /= 8
         grid = best + step * np.arange(-8, 9)
-    return float(c.min())
+    return best_c
 
 
 def kink_statistic(t, xy, sig, W, b, stat, jump_chi2, scale, screen, first_over=None):
@@ -258,7 +272,10 @@ def kink_statistic(t, xy, sig, W, b, stat, jump_chi2, scale, screen, first_over=
     for i in np.flatnonzero(stat > screen):
         k = int(b[i])
         tau = 0.5 * (t[k - 1] + t[k])
-        stat[i] = (_kink_chi2(t, xy, sig, k - W, k + W, tau) - float(jump_chi2[i])) / scale**2
+        # Refined only while the answer could still exceed ``screen``.
+        stop = float(jump_chi2[i]) + screen * scale**2
+        stat[i] = (_kink_chi2(t, xy, sig, k - W, k + W, tau, stop_below=stop)
+                   - float(jump_chi2[i])) / scale**2
         if first_over is not None and stat[i] > first_over:
             break
     return stat
