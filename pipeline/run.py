@@ -29,7 +29,8 @@ def track_stderr_m(tr, camera) -> np.ndarray:
     Parameters
     ----------
     tr : TrackResult
-        The tracker's result (``xy`` in m, ``stderr_px`` in px, per axis).
+        The tracker's result (``xy`` in m, ``cov_px`` in px^2, or
+        ``stderr_px`` in px per axis).
     camera : Camera
         The scene's camera.
     """
@@ -37,13 +38,16 @@ def track_stderr_m(tr, camera) -> np.ndarray:
     if own is not None:  # a tracker that states its errors in metres itself
         return np.asarray(own, dtype=float).reshape(-1, 2)
     xy = np.asarray(tr.xy, dtype=float)
-    se_px = np.asarray(tr.stderr_px, dtype=float).reshape(-1, 2)
+    cov_px = getattr(tr, "cov_px", None)
+    if cov_px is None:  # per-axis errors only
+        se_px = np.asarray(tr.stderr_px, dtype=float).reshape(-1, 2)
+        cov_px = np.zeros((len(xy), 2, 2))
+        cov_px[:, 0, 0], cov_px[:, 1, 1] = se_px[:, 0] ** 2, se_px[:, 1] ** 2
+    cov_px = np.asarray(cov_px, dtype=float).reshape(-1, 2, 2)
     out = np.full((len(xy), 2), np.nan)
-    good = np.all(np.isfinite(xy), axis=1) & np.all(np.isfinite(se_px), axis=1)
+    good = np.all(np.isfinite(xy), axis=1) & np.all(np.isfinite(cov_px), axis=(1, 2))
     if good.any():
-        cov_px = np.zeros((int(good.sum()), 2, 2))
-        cov_px[:, 0, 0], cov_px[:, 1, 1] = se_px[good, 0] ** 2, se_px[good, 1] ** 2
-        cov_m = camera.cov_to_table(xy[good], cov_px)
+        cov_m = camera.cov_to_table(xy[good], cov_px[good])
         out[good] = np.sqrt(np.stack([cov_m[:, 0, 0], cov_m[:, 1, 1]], axis=1))
     return out
 
@@ -147,7 +151,7 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
         config = TrackerConfig(refine=refine)
     tr = track_video(video, scene, config, progress=progress)
     t_track = time.perf_counter() - clock
-    cam = scene.camera
+    cam = getattr(tr, "camera", None) or scene.camera  # its size filled from the video where the scene leaves it
     stderr_m = track_stderr_m(tr, cam)
     out = recover_track(tr.t, tr.xy, tr.ok, stderr_m, scene.physics, cam.exposure_s, method,
                         fit_friction, lossless=tr.lossless)
