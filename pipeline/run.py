@@ -158,9 +158,12 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
     noise = tr.centroid_noise_px
     track = {"frames": int(tr.n_frames), "ok_frames": int(tr.ok.sum()),
              "centroid_noise_px": _num(noise), "last_tracked_t": last_tracked_t(tr)}
-    for key in ("contact",):  # fields the recovery adds to the track block
+    # Fields the recovery adds to the track block (top level or in its own "track").
+    for key in ("contact",):
         if key in out:
             track[key] = out[key]
+        elif isinstance(out.get("track"), dict) and key in out["track"]:
+            track[key] = out["track"][key]
     if tr.error:
         track["error"] = tr.error
     t_seen = track["last_tracked_t"]
