@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -92,8 +93,11 @@ def mark_predictions(methods: dict, t_seen: float | None, frame_dt: float, param
             continue
         if all(m.get(k) is not None for k in ("x0", "v0", "w0", "t0")) and \
                 any(m.get(x) is None and m.get(t) is not None for t, x in EVENTS):
+            p = params  # the method's own friction when it fitted one (--fit-friction)
+            if m.get("mu_s") is not None and m.get("mu_r") is not None:
+                p = replace(params, mu_s=float(m["mu_s"]), mu_r=float(m["mu_r"]))
             try:
-                ph = phases(Shot(tuple(m["x0"]), tuple(m["v0"]), tuple(m["w0"]), float(m["t0"])), params)
+                ph = phases(Shot(tuple(m["x0"]), tuple(m["v0"]), tuple(m["w0"]), float(m["t0"])), p)
                 for (t, x), pos in zip(EVENTS, (ph.x1, ph.x2)):
                     if m.get(x) is None and m.get(t) is not None and np.all(np.isfinite(pos)):
                         m[x] = [float(v) for v in pos]
