@@ -101,6 +101,7 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
     import time
 
     from cuespin.recover.api import recover_track
+    from cuespin.recover.measurements import table_covariance
     from cuespin.track.tracker import TrackerConfig
     from cuespin.track.video import track_video
 
@@ -110,9 +111,8 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
     tr = track_video(video, scene, config, progress=progress)
     t_track = time.perf_counter() - clock
     cam = scene.camera
-    centre = cam.to_table([[cam.width / 2, cam.height / 2]])[0]
-    stderr_m = tr.stderr_px / cam.px_per_m(centre)
-    out = recover_track(tr.t, tr.xy, tr.ok, stderr_m, scene.physics, cam.exposure_s, method,
+    cov_m = table_covariance(cam, tr.xy, tr.stderr_px)  # through the camera at each position
+    out = recover_track(tr.t, tr.xy, tr.ok, cov_m, scene.physics, cam.exposure_s, method,
                         fit_friction, lossless=tr.lossless)
     noise = tr.centroid_noise_px
     result = {"video": Path(video).name,
