@@ -88,16 +88,25 @@ def t1_in_view(t1: float, t) -> bool:
     return bool(t1 <= t[-1] - T1_END_MARGIN_FRAMES * dt)
 
 
-def sliding_ended(seg, t, t1_fit: float | None = None) -> Decision:
+def sliding_ended(seg, t, t1_fit: float | None = None, friction_known: bool = True) -> Decision:
     """Did sliding end in view?  The segmentation's breakpoint against
     "still sliding when the track ended" (its ``end_F``, F(1, ``end_dof``)),
     with the breakpoint in view (:func:`t1_in_view`), both the
     segmentation's and, when given, the maximum-likelihood fit's ``t1_fit``
-    (a fit whose sliding outlasts the track leaves the slip undetermined)."""
+    (a fit whose sliding outlasts the track leaves the slip undetermined).
+
+    The segmentation assumes the rolling deceleration known; when friction
+    is being estimated (``friction_known`` False) its breakpoint test does
+    not hold and only the fit's ``t1_fit`` in view is asked for.
+    """
     thr = END_FACTOR * float(f_dist.isf(LEVEL, 1, max(seg.end_dof, 1)))
     F = float(seg.end_F) if np.isfinite(seg.end_F) else 0.0
-    in_view = t1_in_view(seg.t1, t) and (t1_fit is None or t1_in_view(t1_fit, t))
-    return Decision(bool(F > thr and in_view), F, thr)
+    fit_in_view = t1_fit is None or t1_in_view(t1_fit, t)
+    if seg.t2 is not None:  # the ball is seen at rest: sliding ended (at the latest there, case 2)
+        return Decision(bool(fit_in_view), F, thr)
+    if not friction_known:
+        return Decision(bool(fit_in_view), F, thr)
+    return Decision(bool(F > thr and t1_in_view(seg.t1, t) and fit_in_view), F, thr)
 
 
 def curved(F: float, n: int) -> Decision:

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from cuespin.fit.decide import Decision, sliding_ended, sliding_seen, strike_in_view
+from cuespin.fit.decide import Decision, sliding_ended, sliding_seen, strike_in_view, t1_in_view
 from cuespin.fit.segment import Segments, segment_track
 from cuespin.physics.motion import BallParams, phases
 from cuespin.recover.measurements import (Measurements, as_covariance, build_measurements,
@@ -136,7 +136,8 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         lr = slip_lr(full, roll)
         decisions["sliding_seen"] = sliding_seen(lr)
         if decisions["sliding_seen"]:
-            decisions["sliding_ended"] = sliding_ended(seg, t, phases(full.shot, full.params).t1)
+            decisions["sliding_ended"] = sliding_ended(seg, t, phases(full.shot, full.params).t1,
+                                                       friction_known=not fit_friction)
             mle = result(full, meas, lr, decisions["sliding_ended"].yes)
         else:
             mle = result(roll, meas, lr, True)
@@ -145,7 +146,11 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
     chosen = seg
     if "sliding_seen" in decisions and not decisions["sliding_seen"]:
         chosen = seg.rolling
-    elif not decisions["sliding_ended"] and seg.unended is not None:
+    elif seg.unended is not None and not (decisions["sliding_ended"]
+                                          and t1_in_view(seg.t1, t if seg.t2 is None else t[t <= seg.t2])):
+        # Still sliding at the end, or (the ball seen at rest) sliding ran
+        # into the rest (case 2): the segmentation's "unended" fit, which
+        # then puts t1 where the sliding velocity vanishes (eq. 29).
         chosen = seg.unended
     paper = None
     if run_paper:

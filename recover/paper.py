@@ -222,6 +222,23 @@ def recover_line(x0, x1, x2, params: BallParams, tol: float, heading=None,
     return PaperResult("ok", "", "line", v0=sols[0]["v0"], w0=sols[0]["w0"], x0=x0, x1=x1, x2=x2)
 
 
+def path_shape(seg, xy, params: BallParams):
+    """The sliding path's shape (fit.conics.classify_path, started from the
+    segmentation's parabola), or None when fewer than 5 frames slide."""
+    from cuespin.fit.conics import classify_path
+    from cuespin.physics.parabola import sliding_parabola
+    from cuespin.recover.mle import initial_guess
+
+    if not (seg and seg.t1 > seg.t0 and seg.slide is not None and len(seg.slide) >= 5):
+        return None
+    x0, t0, v0, w0 = initial_guess(seg, params)
+    try:
+        start = sliding_parabola(x0, v0, w0, params)
+    except ValueError:
+        start = None
+    return classify_path(np.asarray(xy)[seg.slide], start)
+
+
 def paper_from_segments(seg, t, xy, params: BallParams, sigma: float, frame_dt: float,
                         strike_seen: bool = True, lossless: bool = True) -> PaperResult:
     """The paper's method on a segmented track (the segmentation the
@@ -245,10 +262,6 @@ def paper_from_segments(seg, t, xy, params: BallParams, sigma: float, frame_dt: 
         Passed on to the standard errors (a lossy codec's rest frames share
         one error).
     """
-    from cuespin.fit.conics import classify_path
-    from cuespin.physics.parabola import sliding_parabola
-    from cuespin.recover.mle import initial_guess
-
     if not seg:
         return PaperResult("failed", f"the track could not be segmented: {seg.reason}")
     if not strike_seen:
@@ -261,14 +274,8 @@ def paper_from_segments(seg, t, xy, params: BallParams, sigma: float, frame_dt: 
     # forward check are held to that, not to the pixel noise alone.
     tol = CONSISTENCY_SIGMAS * sigma + np.hypot(*seg.v1) * frame_dt
     tau1, tau1_tol = seg.t1 - seg.t0, TIE_T1_FRAMES * frame_dt
-    sliding = seg.t1 > seg.t0 and seg.slide is not None and len(seg.slide) >= 5
-    if sliding:
-        x0, t0, v0, w0 = initial_guess(seg, params)
-        try:
-            start = sliding_parabola(x0, v0, w0, params)
-        except ValueError:
-            start = None
-        shape = classify_path(xy[seg.slide], start)
+    shape = path_shape(seg, xy, params)
+    if shape is not None:
         if shape.curved:
             return recover_parabola(shape.parabola.parabola, seg.x0, seg.x1, params, tol, tau1, tau1_tol)
         why_line = (f"the sliding path is straight within the noise (F = {shape.F:.3g} for "
