@@ -41,12 +41,17 @@ class LineFit:
 
 @dataclass(frozen=True)
 class ParabolaFit:
-    """A constrained parabola fit; falsy when it failed (``reason`` says why)."""
+    """A constrained parabola fit; falsy when it failed (``reason`` says why).
+
+    ``cov`` is the covariance of ``(log a, theta, vertex_x, vertex_y)`` from
+    the fit's Jacobian, at the noise its residuals show.
+    """
 
     ok: bool
     reason: str
     parabola: Parabola | None = None
     residuals: np.ndarray | None = None
+    cov: np.ndarray | None = None
 
     @property
     def sse(self) -> float:
@@ -137,7 +142,12 @@ def fit_parabola(p, start: Parabola) -> ParabolaFit:
     if not np.all(np.isfinite(r.x)):
         return ParabolaFit(False, "parabola fit diverged")
     par = build(r.x)
-    return ParabolaFit(True, "", par, parabola_distances(par, p))
+    res = parabola_distances(par, p)
+    try:
+        cov = np.linalg.inv(r.jac.T @ r.jac) * float(res @ res) / max(len(p) - 4, 1)
+    except np.linalg.LinAlgError:
+        cov = None
+    return ParabolaFit(True, "", par, res, cov)
 
 
 def classify_path(p, start: Parabola | None) -> PathShape:

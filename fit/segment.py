@@ -24,6 +24,10 @@ import numpy as np
 # Consecutive end frames within this many sigma of the final position are at rest.
 REST_SIGMAS = 5.0
 MIN_REST_FRAMES = 5
+# The rest's frames must show no drift: the fitted velocity over them within
+# this many standard errors of zero (two axes: 3.5 leaves a resting ball
+# called moving about 0.2% of the time, chi^2(2) > 12.25).
+REST_DRIFT_Z = 3.5
 # Frames of motion needed before any fit is attempted.
 MIN_MOVING_FRAMES = 6
 # The strike is the first of this many consecutive frames away from the start.
@@ -47,6 +51,10 @@ class Segments:
     ball was still sliding when the track ended.  ``slide`` and ``roll``
     index the frames of each phase; ``sigma`` is the position noise (m) the
     fit's residuals show; ``k_move`` the first frame seen moving.
+    ``geometry_cov`` holds the covariances (m^2, 2x2) of ``x0``, ``x1``,
+    their cross term and ``x2`` (keys ``x0``, ``x1``, ``x0x1``, ``x2``), with
+    every frame's error independent at ``sigma`` (callers floor the rests'
+    for a lossy codec, whose still frames share one error).
     """
 
     ok: bool
@@ -69,6 +77,7 @@ class Segments:
     end_F: float = 0.0
     end_dof: int = 1
     k_move: int = 0
+    geometry_cov: dict | None = None
     rolling: "Segments | None" = None
     unended: "Segments | None" = None
 
@@ -187,7 +196,15 @@ def find_rest_end(t, xy, sigma):
     k = n - 1
     while k > 0 and near[k - 1]:
         k -= 1
-    return k if n - k >= MIN_REST_FRAMES else None
+    if n - k < MIN_REST_FRAMES:
+        return None
+    # A ball still rolling slowly stays within noise of its last position for
+    # a few frames at a high frame rate: at rest only if those frames show
+    # no drift (the fitted slope times their span, in its standard errors).
+    tt = t[k:] - t[k:].mean()
+    slope = (tt @ (xy[k:] - xy[k:].mean(axis=0))) / max(float(tt @ tt), 1e-300)
+    se = sigma / np.sqrt(max(float(tt @ tt), 1e-300))
+    return k if np.hypot(*slope) / se < REST_DRIFT_Z else None
 
 
 def noise_from_track(xy) -> float:
@@ -327,6 +344,8 @@ def _finish(t, xy, tf, xf, t0, t1, beyond, decel, rest_k, k_end, k_move, dof, **
         tau1 = t1 - t0
         v1 = np.zeros(2)
         x1 = x0 + v0 * tau1 + 0.5 * a_s * tau1**2
+    geometry_cov = _geometry_cov(tf, xf, t0, min(t1, beyond), beyond, decel, v1,
+                                 sse / dof, None if rest_k is None else len(xy) - rest_k)
     if rest_k is not None:
         x2 = np.mean(xy[rest_k:], axis=0)
         # The rolling deceleration is along -v1: v = 0 when |v1| = |a_r| (t - t1).
@@ -336,4 +355,43 @@ def _finish(t, xy, tf, xf, t0, t1, beyond, decel, rest_k, k_end, k_move, dof, **
     return Segments(True, "", t0=t0, x0=x0, t1=t1, x1=x1, v0=v0, v1=v1, a_slide=a_s, a_roll=a_r,
                     t2=t2, x2=x2, slide=slide, roll=roll,
                     sigma=float(np.sqrt(sse / dof)), t_last=float(t[k_end - 1]), residuals=res,
-                    k_move=k_move, **extra)
+                    k_move=k_move, geometry_cov=geometry_cov, **extra)
+
+
+def _geometry_cov(tf, xf, t0, t1, beyond, decel, v1, s2, n_rest):
+    """Covariances of the fitted ``x0``, ``x1`` (and ``x2``, the mean of
+    ``n_rest`` frames) with per-axis variance ``s2`` (m^2).
+
+    For fixed breakpoints the fit is linear in ``(x0, v0, a_s)``, so
+    ``x0`` and ``x1 = x0 + v0 tau1 + a_s tau1^2 / 2`` have covariance
+    ``s2 c^T (A^T A)^-1 c``; the breakpoint's own error moves ``x1`` along
+    ``v1``, with ``var(t1) = 2 s2 / (d^2 SSE / d t1^2)`` from the profile's
+    curvature a frame either side.
+    """
+    tau = np.maximum(tf - t0, 0.0)
+    tau1 = max(t1 - t0, 0.0)
+    ts = np.minimum(tau, tau1)
+    cols = [np.ones_like(tau), tau] + ([0.5 * ts**2 + tau1 * (tau - ts)] if tau1 > 0 else [])
+    A = np.stack(cols, axis=1)
+    M = np.linalg.pinv(A.T @ A)
+    c0 = np.zeros(len(cols))
+    c0[0] = 1.0
+    c1 = np.r_[1.0, tau1, 0.5 * tau1**2][:len(cols)]
+    I2 = np.eye(2)
+    out = {"x0": s2 * float(c0 @ M @ c0) * I2, "x1": s2 * float(c1 @ M @ c1) * I2,
+           "x0x1": s2 * float(c0 @ M @ c1) * I2, "x2": None}
+    if 0 < tau1 and t1 < beyond:
+        # The Hessian of the profile over (t0, t1), a frame either side: t1's
+        # marginal variance, with t0 free too (they trade off).
+        h = float(np.median(np.diff(tf)))
+        g0, g1 = np.meshgrid([-h, 0.0, h], [-h, 0.0, h], indexing="ij")
+        S = _solve_many(tf, xf, t0 + g0.ravel(), t1 + g1.ravel(), decel)[0].reshape(3, 3)
+        H = np.array([[S[2, 1] - 2 * S[1, 1] + S[0, 1], (S[2, 2] - S[2, 0] - S[0, 2] + S[0, 0]) / 4],
+                      [0.0, S[1, 2] - 2 * S[1, 1] + S[1, 0]]]) / h**2
+        H[1, 0] = H[0, 1]
+        if np.linalg.det(H) > 0 and H[0, 0] > 0:
+            var_t1 = 2 * s2 * np.linalg.inv(H)[1, 1]
+            out["x1"] = out["x1"] + var_t1 * np.outer(v1, v1)
+    if n_rest:
+        out["x2"] = s2 / n_rest * I2
+    return out

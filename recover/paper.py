@@ -222,6 +222,57 @@ def recover_line(x0, x1, x2, params: BallParams, tol: float, heading=None,
     return PaperResult("ok", "", "line", v0=sols[0]["v0"], w0=sols[0]["w0"], x0=x0, x1=x1, x2=x2)
 
 
+def geometry_covariance(seg, sigma: float, lossless: bool) -> np.ndarray:
+    """Covariance (m^2) of ``(x0, x1, x2)``, shape (6, 6), from the
+    segmentation's (fit.segment: ``geometry_cov``); with a lossy codec the
+    rests' frames share one error, so ``x0`` and ``x2`` are no better than
+    one frame (``sigma``, per axis)."""
+    g = seg.geometry_cov or {}
+    C = np.zeros((6, 6))
+    one = sigma**2 * np.eye(2)
+    C[0:2, 0:2] = g.get("x0", one)
+    C[2:4, 2:4] = g.get("x1", one)
+    C[0:2, 2:4] = C[2:4, 0:2] = g.get("x0x1", np.zeros((2, 2)))
+    C[4:6, 4:6] = g["x2"] if g.get("x2") is not None else one
+    if not lossless:
+        for k in (0, 4):
+            C[k:k + 2, k:k + 2] = np.maximum(C[k:k + 2, k:k + 2], one)
+    return C
+
+
+def with_stderr(res: PaperResult, solve, x, C, params: BallParams) -> PaperResult:
+    """``res`` with standard errors of ``v0`` and ``w0`` by the delta method:
+    the inputs' covariance ``C`` through the numerical Jacobian of
+    ``solve`` (inputs to a PaperResult) at ``x``, following the answer's
+    own root (the solution nearest it)."""
+    from dataclasses import replace
+    if res.status != "ok" or C is None:
+        return res
+    base = np.r_[res.v0, params.R * np.asarray(res.w0)]
+
+    def pick(r):
+        sols = [{"v0": r.v0, "w0": r.w0}] if r.status == "ok" else r.solutions
+        vs = [np.r_[s["v0"], params.R * np.asarray(s["w0"])] for s in sols]
+        return min(vs, key=lambda v: float(np.hypot(*(v - base)[:2]) + np.hypot(*(v - base)[2:]))) \
+            if vs else None
+
+    sd = np.sqrt(np.clip(np.diag(C), 0, None))
+    J = np.zeros((4, len(x)))
+    for i, s in enumerate(sd):
+        if s <= 0:
+            continue
+        h = 1e-3 * s
+        dx = np.zeros(len(x))
+        dx[i] = h
+        a, b = pick(solve(x + dx)), pick(solve(x - dx))
+        if a is None or b is None:
+            return res
+        J[:, i] = (a - b) / (2 * h)
+    cov = J @ C @ J.T
+    se = np.sqrt(np.clip(np.diag(cov), 0, None))
+    return replace(res, stderr={"v0": se[0:2], "w0": se[2:4] / params.R})
+
+
 def path_shape(seg, xy, params: BallParams):
     """The sliding path's shape (fit.conics.classify_path, started from the
     segmentation's parabola), or None when fewer than 5 frames slide."""
@@ -274,10 +325,23 @@ def paper_from_segments(seg, t, xy, params: BallParams, sigma: float, frame_dt: 
     # forward check are held to that, not to the pixel noise alone.
     tol = CONSISTENCY_SIGMAS * sigma + np.hypot(*seg.v1) * frame_dt
     tau1, tau1_tol = seg.t1 - seg.t0, TIE_T1_FRAMES * frame_dt
+    geo = geometry_covariance(seg, sigma, lossless)
     shape = path_shape(seg, xy, params)
     if shape is not None:
         if shape.curved:
-            return recover_parabola(shape.parabola.parabola, seg.x0, seg.x1, params, tol, tau1, tau1_tol)
+            par = shape.parabola
+
+            def solve_par(x):
+                q = Parabola(a=float(np.exp(x[0])), theta=float(x[1]), vertex=x[2:4])
+                return recover_parabola(q, x[4:6], x[6:8], params, tol, tau1, tau1_tol)
+
+            x = np.r_[np.log(par.parabola.a), par.parabola.theta, par.parabola.vertex, seg.x0, seg.x1]
+            C = None
+            if par.cov is not None:
+                C = np.zeros((8, 8))
+                C[:4, :4] = par.cov
+                C[4:, 4:] = geo[:4, :4]
+            return with_stderr(solve_par(x), solve_par, x, C, params)
         why_line = (f"the sliding path is straight within the noise (F = {shape.F:.3g} for "
                     "curvature, under the calibrated threshold)")
     else:
@@ -287,4 +351,9 @@ def paper_from_segments(seg, t, xy, params: BallParams, sigma: float, frame_dt: 
         return PaperResult("degenerate", f"{why_line}, and no rest point is in view: the paper's "
                            "line method needs x2", "line", x0=seg.x0, x1=seg.x1)
     heading = seg.v0 / np.hypot(*seg.v0) if np.hypot(*seg.v0) > 0 else None
-    return recover_line(seg.x0, seg.x1, seg.x2, params, tol, heading, tau1, tau1_tol)
+
+    def solve_line(x):
+        return recover_line(x[0:2], x[2:4], x[4:6], params, tol, heading, tau1, tau1_tol)
+
+    x = np.r_[seg.x0, seg.x1, seg.x2]
+    return with_stderr(solve_line(x), solve_line, x, geo, params)
