@@ -28,6 +28,10 @@ MIN_REST_FRAMES = 5
 # this many standard errors of zero (two axes: 3.5 leaves a resting ball
 # called moving about 0.2% of the time, chi^2(2) > 12.25).
 REST_DRIFT_Z = 3.5
+# A rest must last this long (s): at 480 fps a ball rolling at 5 cm/s stays
+# within 5 sigma (1e-4 m) of its last position for 5 frames (10 ms), and 5
+# frames cannot show its drift (recover.simulate tracks cut while rolling).
+MIN_REST_S = 0.05
 # Frames of motion needed before any fit is attempted.
 MIN_MOVING_FRAMES = 6
 # The strike is the first of this many consecutive frames away from the start.
@@ -196,15 +200,23 @@ def find_rest_end(t, xy, sigma):
     k = n - 1
     while k > 0 and near[k - 1]:
         k -= 1
-    if n - k < MIN_REST_FRAMES:
-        return None
     # A ball still rolling slowly stays within noise of its last position for
-    # a few frames at a high frame rate: at rest only if those frames show
-    # no drift (the fitted slope times their span, in its standard errors).
-    tt = t[k:] - t[k:].mean()
-    slope = (tt @ (xy[k:] - xy[k:].mean(axis=0))) / max(float(tt @ tt), 1e-300)
-    se = sigma / np.sqrt(max(float(tt @ tt), 1e-300))
-    return k if np.hypot(*slope) / se < REST_DRIFT_Z else None
+    # a few frames at a high frame rate, and a stopping ball creeps into its
+    # rest: the rest is the frames from the end that show no drift (their
+    # fitted velocity within REST_DRIFT_Z standard errors of zero), moving
+    # the window's start on while they do, and lasting MIN_REST_S.
+    def drifts(k):
+        tt = t[k:] - t[k:].mean()
+        ss = max(float(tt @ tt), 1e-300)
+        slope = (tt @ (xy[k:] - xy[k:].mean(axis=0))) / ss
+        return np.hypot(*slope) * np.sqrt(ss) / sigma > REST_DRIFT_Z
+
+    step = max(1, (n - k) // 20)  # small steps: frames past the stop in the fit would misfit it
+    while n - k >= 2 * MIN_REST_FRAMES and drifts(k):
+        k += step
+    if n - k < MIN_REST_FRAMES or t[-1] - t[k] < MIN_REST_S or drifts(k):
+        return None
+    return k
 
 
 def noise_from_track(xy) -> float:
