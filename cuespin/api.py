@@ -179,7 +179,7 @@ def track_dataframe(track, scene=None):
 
     n = len(track.t)
     camera = _scene(scene).camera if scene is not None else getattr(track, "camera", None)
-    if camera is not None or getattr(track, "stderr_m", None) is not None:
+    if camera is not None:
         se = track_stderr_m(track, camera)
         stderr_m = np.sqrt(np.mean(se**2, axis=1))
     else:

@@ -355,7 +355,7 @@ def calibrate_corners(corners_px, size, table: Table = Table(), *, intrinsics=No
 def reference_frame(path, n: int = 9) -> np.ndarray:
     """The median of ``n`` frames spread over the video: the table without the
     moving ball (and without a cue that crosses the view for a moment)."""
-    from cuespin.render.video import quiet_native_stderr
+    from cuespin.videoio import quiet_native_stderr
 
     with quiet_native_stderr():
         cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
@@ -771,7 +771,7 @@ def calibrate_video(path, table: Table = Table(), corners=None, *, intrinsics=No
     at ``nose_height_m`` above the cloth), else the felt-coloured outline (the
     surface grown by ``felt_margin_m`` at ``felt_height_m``).
     """
-    from cuespin.render.video import quiet_native_stderr
+    from cuespin.videoio import quiet_native_stderr
 
     with quiet_native_stderr():
         cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)

@@ -22,35 +22,24 @@ EVENTS = (("t1", "x1"), ("t2", "x2"))
 def track_stderr_m(tr, camera) -> np.ndarray:
     """Per-axis standard error of each tracked centre on the table (m), shape (n, 2).
 
-    The tracker states its errors in pixels; each frame's is carried to the
-    table through the camera's Jacobian at that frame's centre
-    (``camera.cov_to_table``), so a tilted camera's varying scale reaches
-    the weights.  NaN where the frame has no centre or no stated error.
-
-    Parameters
-    ----------
-    tr : TrackResult
-        The tracker's result (``xy`` in m, ``cov_px`` in px^2, or
-        ``stderr_px`` in px per axis).
-    camera : Camera
-        The scene's camera.
+    The square root of the diagonal of :func:`track_covariance_m`; NaN where
+    the frame has no centre.
     """
-    own = getattr(tr, "stderr_m", None)
-    if own is not None:  # a tracker that states its errors in metres itself
-        return np.asarray(own, dtype=float).reshape(-1, 2)
-    xy = np.asarray(tr.xy, dtype=float)
-    cov_px = getattr(tr, "cov_px", None)
-    if cov_px is None:  # per-axis errors only
-        se_px = np.asarray(tr.stderr_px, dtype=float).reshape(-1, 2)
-        cov_px = np.zeros((len(xy), 2, 2))
-        cov_px[:, 0, 0], cov_px[:, 1, 1] = se_px[:, 0] ** 2, se_px[:, 1] ** 2
-    cov_px = np.asarray(cov_px, dtype=float).reshape(-1, 2, 2)
-    out = np.full((len(xy), 2), np.nan)
-    good = np.all(np.isfinite(xy), axis=1) & np.all(np.isfinite(cov_px), axis=(1, 2))
-    if good.any():
-        cov_m = camera.cov_to_table(xy[good], cov_px[good])
-        out[good] = np.sqrt(np.stack([cov_m[:, 0, 0], cov_m[:, 1, 1]], axis=1))
-    return out
+    cov = track_covariance_m(tr, camera)
+    return np.sqrt(np.stack([cov[:, 0, 0], cov[:, 1, 1]], axis=1))
+
+
+def track_covariance_m(tr, camera) -> np.ndarray:
+    """Each tracked centre's covariance on the table (m^2), shape (n, 2, 2).
+
+    The tracker states its errors in pixels (``cov_px``); each frame's is
+    carried to the table through the camera's Jacobian at that frame's
+    centre (:func:`cuespin.recover.measurements.table_covariance`), so a
+    tilted camera's varying scale and shear reach the weights.
+    """
+    from cuespin.recover.measurements import table_covariance
+
+    return table_covariance(camera, tr.xy, tr.cov_px)
 
 
 def _num(x):
@@ -156,8 +145,8 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
     tr = track_video(video, scene, config, progress=progress)
     t_track = time.perf_counter() - clock
     cam = getattr(tr, "camera", None) or scene.camera  # its size filled from the video where the scene leaves it
-    stderr_m = track_stderr_m(tr, cam)
-    out = recover_track(tr.t, tr.xy, tr.ok, stderr_m, scene.physics, cam.exposure_s, method,
+    cov_m = track_covariance_m(tr, cam)
+    out = recover_track(tr.t, tr.xy, tr.ok, cov_m, scene.physics, cam.exposure_s, method,
                         fit_friction, lossless=tr.lossless)
     noise = tr.centroid_noise_px
     track = {"frames": int(tr.n_frames), "ok_frames": int(tr.ok.sum()),
