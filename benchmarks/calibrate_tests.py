@@ -19,6 +19,7 @@ Usage: python benchmarks/calibrate_tests.py [--n 1200] [--seed 0] [--which slip,
 """
 
 import argparse
+import sys
 import time
 from collections import defaultdict
 
@@ -104,6 +105,7 @@ def main():
         if name in args.which.split(","):
             clock = time.perf_counter()
             report(name, fn(args.n, args.seed))
+            sys.stdout.flush()
             print(f"  ({time.perf_counter() - clock:.0f} s)", flush=True)
 
 
