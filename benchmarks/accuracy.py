@@ -57,7 +57,7 @@ def one_shot(args):
     # for the bound.
     tr = track_video(video, scene, TrackerConfig())
     cam = scene.camera
-    out, est = recover_track(tr.t, tr.xy, tr.ok, table_covariance(cam, tr.xy, tr.stderr_px), scene.physics,
+    out, est = recover_track(tr.t, tr.xy, tr.ok, table_covariance(cam, tr.xy, tr.cov_px), scene.physics,
                              cam.exposure_s, "all", False, lossless=tr.lossless, return_estimate=True)
     video.unlink()
     truth, p = scene.truth, scene.physics
