@@ -102,20 +102,25 @@ def light_vectors(settings: dict):
     return L, H / np.linalg.norm(H)
 
 
-def shade(normals: np.ndarray, albedo: np.ndarray, settings: dict) -> np.ndarray:
+def shade(normals: np.ndarray, albedo: np.ndarray, settings: dict, view=None) -> np.ndarray:
     """Colour (BGR, float) of the ball's surface with outward ``normals`` (..., 3).
 
     Lambertian diffuse ``albedo (ka + (1 - ka) max(n.L, 0))`` (darker towards
     the rim, the terminator on the side away from the light) plus a Blinn
-    highlight ``255 ks max(n.H, 0)^p`` of the light's own colour.
+    highlight ``255 ks max(n.H, 0)^p`` of the light's own colour; ``view``
+    (..., 3), unit vectors towards the camera, default straight up.
     """
     L, H = light_vectors(settings)
+    if view is not None:
+        H = L + view
+        H = H / np.linalg.norm(H, axis=-1, keepdims=True)
     ka = float(settings["ambient"])
     ndl = np.maximum(normals @ L, 0.0)
     out = albedo * (ka + (1.0 - ka) * ndl)[..., None]
     ks = float(settings["specular"])
     if ks > 0:
-        spec = 255.0 * ks * np.maximum(normals @ H, 0.0) ** float(settings["shininess"])
+        ndh = (normals * H).sum(-1) if H.ndim > 1 else normals @ H
+        spec = 255.0 * ks * np.maximum(ndh, 0.0) ** float(settings["shininess"])
         out = out + spec[..., None]
     return out
 

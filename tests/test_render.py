@@ -244,7 +244,7 @@ def test_markings_move_with_spin():
 
     def marks_at(t):
         rots = r._orient(np.array([t]))
-        cov, colour, iu, iv = r._ball_windows(centre, r._albedo, rots)
+        cov, colour, iu, iv = r._ball_windows(centre, r.cam.to_table(centre), r._albedo, rots)
         return ((cov[0] > 0.99) * (1 - colour[0].mean(-1) / 230)).astype(np.float64)
 
     def shift(a, b):
