@@ -65,7 +65,8 @@ def cmd_generate(args) -> int:
     if args.n < 1:
         raise InputError("--n must be at least 1")
     summary = generate_dataset(Path(args.out), n=args.n, seed=args.seed, preset=args.preset,
-                               codec=args.codec, fps=args.fps, progress=_progress, look=args.look)
+                               codec=args.codec, fps=args.fps, progress=_progress, look=args.look,
+                               camera=args.camera)
     print(f"{summary['written']} written, {summary['skipped']} already there, in {args.out}")
     return 0
 
@@ -317,6 +318,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--codec", default=None, help="FourCC, e.g. MJPG (default, lossy) or FFV1 (lossless)")
     g.add_argument("--fps", type=float, default=None, help="frame rate; default: sampled from 60-480")
     g.add_argument("--look", choices=("plain", "realistic"), default="plain", help="plain grey or realistic colour scenes")
+    g.add_argument("--camera", choices=("topdown", "tilted"), default="topdown", help="top-down or tilted, lens distorted")
     g.set_defaults(func=cmd_generate)
     return p
 
