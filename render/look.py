@@ -15,18 +15,30 @@ symmetric Gaussian PSF and leaves every centroid where it was.
 
 The image's *intensity-weighted* centroid is not the centre: the light comes
 from one side (``light_azimuth``, ``light_elevation``), so the lit half is
-brighter and its highlight sits towards the light.  Measured with
-``benchmarks/render.py --offsets`` (centroid of ``|frame - felt|`` summed
-over the channels, noise-free, top-down camera at 450 px/m, radius 12.9 px,
-ball pointing 45 degrees from the light):
+brighter and the terminator darkens the far half.  Measured with
+``python benchmarks/render.py --offsets`` (centroid of ``|frame - felt|``
+summed over the channels, noise-free, top-down 1280 x 720 view, ball radius
+12.0 px, PSF 0.7 px, light from +u): the offset points towards the light, is
+about 0.1-0.2 R, and depends on the ball/felt pair (on red on green, whose
+grey contrast is tiny, the channels' differences partly cancel)::
 
-=====================================  ==========================
-look                                   centroid - centre (px)
-=====================================  ==========================
-matte (ambient 0.35, no highlight)     see OFFSETS_MEASURED below
-=====================================  ==========================
+    look                                 white/green  red/green  yellow/blue   (du px; dv < 0.002)
+    matte, light overhead (86 deg)           0.27        0.07        0.16
+    matte, light at 60 deg                   1.77        0.43        1.00
+    matte, light at 50 deg, ambient 0.2      2.52        0.69        1.29
+    highlight 0.5, light at 60 deg           1.81        0.44        1.02
+    highlight 0.7, light at 50 deg           2.46        0.61        1.30
 
-(The table is filled in from the measurement; see ``OFFSETS_MEASURED``.)
+So a tracker that takes the intensity centroid (or fits a uniform disc) of a
+realistic ball is off by up to 2.5 px, 200 times the truth's 0.01 px; the
+centre has to come from a model of the ball's look, not its brightness.
+
+Through a real camera (``FrameRenderer`` with a pose camera) the
+silhouette's own centroid (sidecar ``u_px, v_px``) is off the projected
+centre (``uc_px, vc_px``) too, measured over a 25 x 13 grid of the table
+(``camera.silhouette_centroid_offset``): 1.5 m high, 15 deg tilt, k1 -0.25:
+max 0.30 px, median 0.011; 2 m, 8 deg, k1 -0.1: max 0.063, median 0.044;
+3 m straight down, no distortion: max 0.058, median 0.031 (perspective alone).
 """
 
 from __future__ import annotations
