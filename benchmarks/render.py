@@ -58,8 +58,7 @@ def bench(codec: str, look: str, noise: float, seconds: float, repeat: int) -> d
     with tempfile.TemporaryDirectory() as tmp:
         for _ in range(repeat):  # alternating, median of N: the machine is shared
             t = time.perf_counter()
-            encode_frames(iter(frames), Path(tmp) / "enc.avi", codec, 240.0, size,
-                          color=frames[0].ndim == 3)
+            encode_frames(iter(frames), Path(tmp) / "enc.avi", codec, 240.0, size)
             enc.append(time.perf_counter() - t)
             t = time.perf_counter()
             render_video(scene, Path(tmp) / "ren.avi")

@@ -1,6 +1,6 @@
 """Datasets: seeded scenes rendered to videos, with scene files and truth.
 
-Each shot ``i`` is ``shot_NNNN.avi``, ``shot_NNNN.truth.csv`` and
+Each shot ``i`` is ``shot_NNNN.avi`` (``.mp4`` for H264), ``shot_NNNN.truth.csv`` and
 ``shot_NNNN.json``.  The scene file is written last, as the mark that the shot
 is complete, so an interrupted run loses at most the shot in progress and a
 rerun skips every shot already there.
@@ -37,7 +37,8 @@ def generate_dataset(out: Path, n: int, seed: int, preset: str | None = None,
     preset : str, optional
         One preset for every shot; a mix of all presets when None.
     codec : str, optional
-        FourCC for every video; the renderer's default (MJPG) when None.
+        FourCC for every video (or H264, written to .mp4); the renderer's
+        default (MJPG) when None.
     fps : float, optional
         Frame rate for every shot; sampled when None.
     progress : callable, optional
@@ -52,8 +53,9 @@ def generate_dataset(out: Path, n: int, seed: int, preset: str | None = None,
     dict
         ``{"written": int, "skipped": int, "paths": [video paths]}``.
     """
-    from cuespin.pipeline.io import write_scene
-    from cuespin.render.video import render_video, truth_path
+    from cuespin.render.draw import render_settings
+    from cuespin.render.video import render_video, truth_path, video_suffix
+    from cuespin.sceneio import write_scene
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -65,12 +67,13 @@ def generate_dataset(out: Path, n: int, seed: int, preset: str | None = None,
     try:
         for i, scene in enumerate(scenes):
             stem = shot_stem(i)
-            video, scene_file = out / f"{stem}.avi", out / f"{stem}.json"
+            suffix = video_suffix(str(render_settings(scene)["codec"]))  # .mp4 for H264
+            video, scene_file = out / f"{stem}{suffix}", out / f"{stem}.json"
             paths.append(video)
             if _complete(scene_file, video, scene):
                 skipped += 1
             else:
-                part = out / f"{stem}.part.avi"
+                part = out / f"{stem}.part{suffix}"
                 render_video(scene, part)
                 os.replace(truth_path(part), truth_path(video))
                 os.replace(part, video)

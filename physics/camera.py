@@ -142,6 +142,11 @@ def _undistort(nd, dist):
     return n
 
 
+# Public names for the lens model (calibration works with it directly).
+distort = _distort
+undistort = _undistort
+
+
 def rodrigues(rvec) -> np.ndarray:
     """Rotation matrix of a rotation vector (axis times angle, rad), as ``cv2.Rodrigues``."""
     r = np.asarray(rvec, dtype=float).reshape(3)

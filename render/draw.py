@@ -22,6 +22,7 @@ from scipy.special import ndtr
 from cuespin.physics.motion import evaluate, phases
 from cuespin.physics.scene import Scene, motion_end
 from cuespin.render import look as lk
+from cuespin.render.timing import frame_times
 
 # Blur nodes are spaced at most this far apart (px) along the path, so the
 # blurred streak is smooth; the centroid is exact whatever the spacing.
@@ -372,7 +373,7 @@ class FrameRenderer:
         return self.cam.ball_outline(np.atleast_2d(xy), self.scene.physics.R, OUTLINE_VERTICES)
 
     def _truth(self) -> FrameTruth:
-        t = self.cam.frame_times(self.n_frames)
+        t = frame_times(self.scene, self.n_frames).t  # the writer stamps the same times
         nodes = self._nodes(t)
         self._t_nodes = nodes
         xy_nodes = self.motion(nodes.ravel()).x

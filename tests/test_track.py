@@ -226,7 +226,7 @@ def test_track_cli_and_bad_input(tmp_path):
     assert len(out.read_text().splitlines()) == 1 + int(0.5 * 240)
     one_line(cli("track", tmp_path / "none.avi", "--scene", sf, "-o", out), "video not found")
     (tmp_path / "junk.avi").write_bytes(b"not a video at all" * 100)
-    one_line(cli("track", tmp_path / "junk.avi", "--scene", sf, "-o", out), "not a video OpenCV can read")
+    one_line(cli("track", tmp_path / "junk.avi", "--scene", sf, "-o", out), "not a video OpenCV or PyAV can read")
     d = json.loads(sf.read_text())
     d["camera"]["width"] = 640
     (tmp_path / "wrong.json").write_text(json.dumps(d))

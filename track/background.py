@@ -100,8 +100,9 @@ def learn_background(samples: np.ndarray, radius_px: float) -> Background:
 
     Parameters
     ----------
-    samples : ndarray, shape (n, h, w), uint8
-        Grey frames spread over the video (first and last among them).
+    samples : ndarray, shape (n, h, w), uint8 or float32
+        Grey (or projected colour, :mod:`cuespin.track.colour`) frames
+        spread over the video.
     radius_px : float
         Expected ball radius (px).
 
@@ -118,7 +119,7 @@ def learn_background(samples: np.ndarray, radius_px: float) -> Background:
     image = samples.mean(axis=0, dtype=np.float32)
     # The range of n Gaussian samples exceeds ~7.5 sigma in about 1 pixel in
     # 10^4 for n = 25; those few noise pixels are harmless below.
-    spread = (hi.astype(np.int16) - lo.astype(np.int16)) > 7.5 * max(sigma, 0.5) + 2
+    spread = (hi.astype(np.float32) - lo.astype(np.float32)) > 7.5 * max(sigma, 0.5) + 2
     spread = cv2.dilate(spread.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
     ys, xs = np.nonzero(spread)
     if len(ys) < MIN_AREA_FRACTION * np.pi * radius_px**2:
@@ -151,6 +152,16 @@ def learn_background(samples: np.ndarray, radius_px: float) -> Background:
                       n_samples=n, path_pixels=int(len(ys)), weak_samples=weak_samples)
 
 
+def median_u8(img: np.ndarray, k: int) -> np.ndarray:
+    """OpenCV's k x k median (uint8 only for large k) of a float image, mapped
+    affinely onto 0..255 and back (projected colour levels may leave 0..255);
+    the step is at most one level for grey images."""
+    lo, hi = float(img.min()), float(img.max())
+    scale = max((hi - lo) / 255.0, 1.0)
+    u8 = np.clip(np.rint((img - lo) / scale), 0, 255).astype(np.uint8)
+    return cv2.medianBlur(u8, k).astype(np.float32) * scale + lo
+
+
 def hidden_ball(image: np.ndarray, path: np.ndarray, polarity: int, contrast: float, sigma: float,
                 radius_px: float) -> np.ndarray:
     """Pixels near the ball's path that no sample showed as felt.
@@ -177,7 +188,7 @@ def hidden_ball(image: np.ndarray, path: np.ndarray, polarity: int, contrast: fl
     v0, v1 = max(vs.min() - k, 0), min(vs.max() + k + 1, image.shape[0])
     u0, u1 = max(us.min() - k, 0), min(us.max() + k + 1, image.shape[1])
     patch = image[v0:v1, u0:u1]
-    local = cv2.medianBlur(np.clip(np.rint(patch), 0, 255).astype(np.uint8), k).astype(np.float32)
+    local = median_u8(patch, k)
     excess = polarity * (patch - local)
     core = (excess > 0.5 * contrast).astype(np.uint8)
     if not core.any():
@@ -188,43 +199,83 @@ def hidden_ball(image: np.ndarray, path: np.ndarray, polarity: int, contrast: fl
 
 
 class FeltAccumulator:
-    """Running mean of the felt over every tracked frame, the ball masked out.
+    """Running mean of the felt over the tracked frames, the ball masked out.
 
     The sampled background's error (noise / sqrt(samples)) is the same in
     every frame, so frames that see the same pixels (the rest before the
     strike, slow rolling, the final rest) share it as a common bias, which
-    a fit of the whole track would read as signal.  Averaging every frame's
-    felt, hundreds of them, makes that bias negligible.  Cost per frame: one
-    full-frame add and a patch update.
+    a fit of the whole track would read as signal.  Averaging hundreds of
+    frames' felt makes that bias negligible.  Two kinds of frames are added:
+    every fit's projected window (cheap, the felt each fit needs, but only
+    around where the ball is now), and every ``FULL_EVERY``-th whole frame as
+    decoded (BGR or grey; the felt under a rest spot is seen by the frames
+    before the ball arrives there and after it leaves).  A linear projection
+    commutes with the mean, so whole frames are projected once, at the end.
     """
 
     def __init__(self, shape):
-        self.total = np.zeros(shape, np.float32)
-        self.masked = np.zeros(shape, np.int32)
+        self.total = np.zeros(shape[:2], np.float32)
+        self.count = np.zeros(shape[:2], np.int32)
+        self.full = np.zeros(shape, np.float32)
+        self.full_count = np.zeros(shape[:2], np.int32)
         self.n = 0
+        self.n_full = 0
 
-    def add(self, frame: np.ndarray, centre, radius: float) -> None:
-        """Add a grey frame whose ball (centre in px, radius in px) is masked out."""
-        cv2.accumulate(frame, self.total)
+    @staticmethod
+    def _disc(u0, v0, h, w, centre, radius):
+        yy, xx = np.mgrid[v0:v0 + h, u0:u0 + w]
+        return (xx - centre[0]) ** 2 + (yy - centre[1]) ** 2 <= radius * radius
+
+    def add(self, patch: np.ndarray, u0: int, v0: int, centre, radius: float) -> None:
+        """Add a projected window whose top-left pixel is ``(u0, v0)``, the
+        ball (centre, radius in px) masked out."""
+        h, w = patch.shape
+        H, W = self.total.shape
+        if u0 < 0 or v0 < 0 or u0 + w > W or v0 + h > H:
+            return
         self.n += 1
-        H, W = frame.shape
+        felt = ~self._disc(u0, v0, h, w, centre, radius)
+        self.total[v0:v0 + h, u0:u0 + w] += np.where(felt, patch, 0).astype(np.float32)
+        self.count[v0:v0 + h, u0:u0 + w] += felt
+
+    def add_frame(self, frame: np.ndarray, centre, radius: float) -> None:
+        """Add a whole decoded frame (uint8, grey or BGR), the ball masked out."""
+        cv2.accumulate(frame, self.full)
+        self.full_count += 1
+        self.n_full += 1
+        H, W = self.total.shape
         r = int(np.ceil(radius)) + 1
         u, v = int(round(centre[0])), int(round(centre[1]))
         u0, v0, u1, v1 = max(u - r, 0), max(v - r, 0), min(u + r + 1, W), min(v + r + 1, H)
         if u1 <= u0 or v1 <= v0:
             return
-        yy, xx = np.mgrid[v0:v1, u0:u1]
-        disc = (xx - centre[0]) ** 2 + (yy - centre[1]) ** 2 <= radius * radius
-        self.total[v0:v1, u0:u1] -= np.where(disc, frame[v0:v1, u0:u1], 0).astype(np.float32)
-        self.masked[v0:v1, u0:u1] += disc
+        disc = self._disc(u0, v0, v1 - v0, u1 - u0, centre, radius)
+        sub = frame[v0:v1, u0:u1].astype(np.float32)
+        if sub.ndim == 3:
+            self.full[v0:v1, u0:u1] -= sub * disc[..., None]
+        else:
+            self.full[v0:v1, u0:u1] -= sub * disc
+        self.full_count[v0:v1, u0:u1] -= disc
 
-    def felt(self, fallback: np.ndarray, min_frames: int = 20) -> np.ndarray:
-        """The mean felt; ``fallback`` where fewer than ``min_frames`` showed it,
-        and a smooth fill (:func:`fill_unseen`) where no frame did."""
-        count = self.n - self.masked
-        mean = self.total / np.maximum(count, 1)
-        felt = np.where(count >= min_frames, mean, fallback).astype(np.float32)
-        return fill_unseen(felt, count == 0)
+    def felt(self, fallback: np.ndarray, projection, min_frames: int = 20) -> np.ndarray:
+        """The mean felt where at least ``min_frames`` frames showed it, else
+        ``fallback`` (the sampled background); felt that no whole frame
+        showed (a shot stopping within a diameter of its strike) is filled by
+        :func:`fill_unseen`.
+
+        ``projection`` maps the whole frames' sum to the windows' channel
+        (:class:`cuespin.track.colour.Projection`; its offset counts once per frame).
+        """
+        full = projection(self.full) if self.full.ndim == 3 else self.full
+        if projection.w is not None:  # the offset was added once to a sum of many
+            full = full + np.float32(projection.offset) * (self.full_count - 1)
+        total = self.total + np.where(self.full_count > 0, full, 0)
+        count = self.count + self.full_count
+        mean = total / np.maximum(count, 1)
+        out = np.where(count >= min_frames, mean, fallback).astype(np.float32)
+        if self.n_full:  # felt no whole frame showed: a ball that never left it
+            out = fill_unseen(out, self.full_count == 0)
+        return out
 
 
 # Width (px) of the ring of seen felt a plane is fitted to around unseen pixels.

@@ -66,3 +66,61 @@ def centroid_crb(uv_nodes: np.ndarray, radius_px: float, ball_grey: float, felt:
     J = np.stack(cols, axis=1)
     fisher = J.T @ J / (sigma**2 + 1.0 / 12.0)
     return np.sqrt(np.diag(np.linalg.inv(fisher))[:2])
+
+
+def centroid_crb_colour(uv_nodes: np.ndarray, radius_px: float, ball_bgr, felt_bgr: np.ndarray,
+                        noise_cov: np.ndarray, fit_blur: bool) -> np.ndarray:
+    """Per-axis bound (px) for the centre of one colour frame's ball.
+
+    The same rendered image as :func:`centroid_crb`, in every channel: each
+    pixel's three channels are one measurement with covariance
+    ``noise_cov + I/12`` (8-bit rounding per channel), so the information is
+    ``sum over pixels of J_p^T C^-1 J_p``.  Nuisances: the ball's colour
+    (one level per channel) and, where the tracker fits it, the blur vector.
+
+    Parameters
+    ----------
+    uv_nodes : ndarray, shape (K, 2)
+        The exposure's nodes (px).
+    radius_px : float
+    ball_bgr : array_like, shape (3,)
+        The ball's colour (levels).
+    felt_bgr : ndarray, shape (height, width, 3)
+        The felt the ball hides (levels).
+    noise_cov : ndarray, shape (3, 3)
+        Sensor noise covariance per pixel (levels^2), before rounding.
+    fit_blur : bool
+
+    Returns
+    -------
+    ndarray, shape (2,)
+    """
+    uv_nodes = np.asarray(uv_nodes, dtype=float)
+    centre = uv_nodes.mean(axis=0)
+    offs = uv_nodes - centre
+    half = int(np.ceil(radius_px + np.abs(offs).max() + 3))
+    u0, v0 = int(round(centre[0])) - half, int(round(centre[1])) - half
+    n = 2 * half + 1
+    felt = np.asarray(felt_bgr, dtype=float)[v0:v0 + n, u0:u0 + n].reshape(-1, 3)
+    contrast = np.asarray(ball_bgr, float)[None, :] - felt            # (m, 3)
+    taus = (np.arange(len(offs)) + 0.5) / len(offs) - 0.5
+
+    def image(c, db=(0.0, 0.0)):
+        nodes = c + offs + np.outer(taus, db)
+        return np.mean([disc_coverage(p[0], p[1], radius_px, u0, v0, n, n) for p in nodes], axis=0).ravel()
+
+    cols = []  # each (m, 3): the derivative of every pixel's three channels
+    for d in (np.array([_STEP_PX, 0.0]), np.array([0.0, _STEP_PX])):
+        cols.append(contrast * ((image(centre + d) - image(centre - d)) / (2 * _STEP_PX))[:, None])
+    cov0 = image(centre)
+    for ch in range(3):  # the ball's level in each channel
+        col = np.zeros_like(contrast)
+        col[:, ch] = cov0
+        cols.append(col)
+    if fit_blur and len(offs) > 1:
+        for d in (np.array([_STEP_PX, 0.0]), np.array([0.0, _STEP_PX])):
+            cols.append(contrast * ((image(centre, d) - image(centre, -d)) / (2 * _STEP_PX))[:, None])
+    J = np.stack(cols, axis=2)                                         # (m, 3, p)
+    Cinv = np.linalg.inv(np.asarray(noise_cov, float) + np.eye(3) / 12.0)
+    fisher = np.einsum("mcp,cd,mdq->pq", J, Cinv, J)
+    return np.sqrt(np.diag(np.linalg.inv(fisher))[:2])

@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 
 from cuespin.track.background import DETECT_SIGMAS, Background, box_size
+from cuespin.track.colour import GREY, Projection
 from cuespin.track.model import fit_disc, moments, streak_from_moments
 
 OK, NO_BALL, PARTIAL, TWO_BLOBS, GONE, FIT_FAILED = 0, 1, 2, 3, 4, 5
@@ -55,11 +56,22 @@ class TrackerConfig:
 
 @dataclass
 class Observation:
-    """One frame's result: status, centre (px) and its standard error (px)."""
+    """One frame's result: status, centre (px), its covariance (px^2) and
+    standard errors (px, the root of the covariance's diagonal)."""
 
     status: int
     uv: np.ndarray
     stderr: np.ndarray
+    cov: np.ndarray = None
+
+    def __post_init__(self):
+        if self.cov is None:
+            self.cov = np.diag(np.square(self.stderr)) if np.all(np.isfinite(self.stderr)) \
+                else np.full((2, 2), np.nan)
+
+
+def _lost(status: int) -> Observation:
+    return Observation(status, np.full(2, np.nan), np.full(2, np.nan), np.full((2, 2), np.nan))
 
 
 class BallTracker:
@@ -74,10 +86,16 @@ class BallTracker:
     exposure_frames : float
         Exposure as a fraction of the frame interval (for the blur model).
     config : TrackerConfig
+    projection : Projection
+        Frame (grey or BGR) to the one channel the background is learnt in.
+    search_mask : ndarray of bool, shape (h, w), optional
+        Where the ball's centre may be (the playing surface, with a margin);
+        a search finds nothing outside it (rails, pockets, sights).
     """
 
     def __init__(self, background: Background, radius_px: float, exposure_frames: float,
-                 config: TrackerConfig = TrackerConfig()):
+                 config: TrackerConfig = TrackerConfig(), projection: Projection = GREY,
+                 search_mask: np.ndarray | None = None):
         if config.refine not in REFINERS:
             raise ValueError(f"refine must be one of {REFINERS}, got {config.refine!r}")
         self.bg = background
@@ -85,11 +103,15 @@ class BallTracker:
         self.r = float(radius_px)
         self.exposure_frames = float(exposure_frames)
         self.cfg = config
+        self.proj = projection
         self.k = box_size(self.r)
         # Box-filtered noise of a frame minus a (slightly noisy) background.
         self.thresh = max(DETECT_SIGMAS * max(background.sigma, 0.5) * 1.1 / self.k,
                           0.25 * background.contrast)
         self.H, self.W = background.image.shape
+        self.mask = search_mask
+        # The projected window of the last converged fit, for the felt average.
+        self.last_patch: tuple | None = None
         self.history: list[tuple[int, np.ndarray]] = []
         # What each converged disc fit needs to be corrected for a better felt.
         self.last_fit: tuple | None = None
@@ -111,9 +133,11 @@ class BallTracker:
 
     def _peak(self, frame: np.ndarray, u0: int, v0: int, u1: int, v1: int):
         """Box-filtered peak of the ball signal in a window; value and place."""
-        roi = frame[v0:v1, u0:u1].astype(np.float32)
+        roi = self.proj(frame, v0, v1, u0, u1)
         D = self.pol * (roi - self.bg.image[v0:v1, u0:u1])
         sm = cv2.blur(D, (self.k, self.k))
+        if self.mask is not None:
+            sm = np.where(self.mask[v0:v1, u0:u1], sm, -np.inf).astype(np.float32)
         _, val, _, loc = cv2.minMaxLoc(sm)
         return D, sm, val, np.array([loc[0] + u0, loc[1] + v0], float)
 
@@ -125,20 +149,19 @@ class BallTracker:
         mask = np.zeros_like(sm, dtype=np.uint8)
         cv2.circle(mask, (int(loc[0]), int(loc[1])), int(2.5 * self.r + 4), 1, -1)
         sm2 = np.where(mask.astype(bool), -np.inf, sm)
-        if sm2.max() >= max(self.thresh, 0.5 * val):
+        if np.nanmax(sm2) >= max(self.thresh, 0.5 * val):
             return loc, TWO_BLOBS
         return loc, OK
 
     # -- per frame ------------------------------------------------------
     def nothing(self) -> Observation:
         """A frame in which no ball is reported."""
-        return Observation(NO_BALL, np.full(2, np.nan), np.full(2, np.nan))
+        return _lost(NO_BALL)
 
     def step(self, k: int, frame: np.ndarray) -> Observation:
-        """Track frame ``k`` (8-bit grey, full size)."""
-        nan2 = np.full(2, np.nan)
+        """Track frame ``k`` (8-bit grey or BGR, full size)."""
         if self.gone:
-            return Observation(GONE, nan2, nan2)
+            return _lost(GONE)
         pred, vel = self._velocity(k)
         blur = vel * self.exposure_frames
         reach = self.r + 0.5 * np.hypot(*blur) + self.cfg.search_margin_px + 0.5 * np.hypot(*vel)
@@ -155,12 +178,13 @@ class BallTracker:
             if loc is None:
                 if self.was_partial_edge:
                     self.gone = True
-                    return Observation(GONE, nan2, nan2)
-                return Observation(status, nan2, nan2)
+                    return _lost(GONE)
+                return _lost(status)
             if status != OK:
-                return Observation(status, nan2, nan2)
+                return _lost(status)
             blur = None  # no velocity to predict it: measured from the image
         self.last_fit = None
+        self.last_patch = None
         obs = self._refine(frame, loc, blur)
         if obs.status == OK:
             self.history = (self.history + [(k, obs.uv)])[-2:]
@@ -172,7 +196,7 @@ class BallTracker:
             return 0.0
         k = 4 * int(self.r) + 1
         u0, v0 = max(int(loc[0]) - k, 0), max(int(loc[1]) - k, 0)
-        roi = self.pol * (frame[v0:int(loc[1]) + k, u0:int(loc[0]) + k].astype(np.float32)
+        roi = self.pol * (self.proj(frame, v0, int(loc[1]) + k, u0, int(loc[0]) + k)
                           - self.bg.image[v0:int(loc[1]) + k, u0:int(loc[0]) + k])
         on = roi > 0.25 * max(self.bg.contrast, 1.0)  # the streak's faint ends count
         if not on.any():
@@ -182,7 +206,6 @@ class BallTracker:
 
     def _refine(self, frame, loc, blur) -> Observation:
         r = self.r
-        nan2 = np.full(2, np.nan)
         unknown_blur = blur is None
         if unknown_blur:  # size the patch for the longest blur the exposure allows
             blur = np.zeros(2)
@@ -193,15 +216,15 @@ class BallTracker:
         u1, v1 = u0 + 2 * half + 1, v0 + 2 * half + 1
         if u0 < 0 or v0 < 0 or u1 > self.W or v1 > self.H:
             self.was_partial_edge = True
-            return Observation(PARTIAL, nan2, nan2)
-        patch = frame[v0:v1, u0:u1].astype(np.float32)
+            return _lost(PARTIAL)
+        patch = self.proj(frame, v0, v1, u0, u1)
         felt = self.bg.image[v0:v1, u0:u1]
         D = self.pol * (patch - felt)
         c = moments(D, u0, v0, loc, half - 1 if unknown_blur else r + 2 + 0.5 * np.hypot(*blur))
         if unknown_blur and self.exposure_frames > 0:
             blur = streak_from_moments(D, u0, v0, c, r)
         if self.cfg.refine == "moments":
-            se = np.full(2, np.nan)
+            se, cov = np.full(2, np.nan), np.full((2, 2), np.nan)
         else:
             fit_blur = np.hypot(*blur) > FIT_BLUR_PX
             G0 = float(felt.mean()) + self.pol * max(self.bg.contrast, 1.0)
@@ -212,13 +235,14 @@ class BallTracker:
                 fit_blur = np.hypot(*blur) > FIT_BLUR_PX
                 f = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur)
             if not f:
-                return Observation(FIT_FAILED, nan2, nan2)
-            c, se = f.c, f.stderr
+                return _lost(FIT_FAILED)
+            c, se, cov = f.c, f.stderr, f.cov
             self.last_fit = (u0, v0, v1 - v0, u1 - u0, f.c.copy(), f.b.copy(), f.G, bool(fit_blur))
+            self.last_patch = (patch, u0, v0)
         # The whole disc must lie inside the frame for the centre to be trusted.
         if (c[0] - r < -0.5 or c[1] - r < -0.5 or c[0] + r > self.W - 0.5
                 or c[1] + r > self.H - 0.5):
             self.was_partial_edge = True
-            return Observation(PARTIAL, nan2, nan2)
+            return _lost(PARTIAL)
         self.was_partial_edge = False
-        return Observation(OK, c, se)
+        return Observation(OK, c, se, cov)

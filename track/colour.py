@@ -1,0 +1,131 @@
+"""One channel that best separates this video's ball from its felt (pure functions).
+
+For a ball of colour ``b`` over felt ``f`` with sensor noise covariance
+``S`` per pixel (3x3, BGR), the image near the ball is
+``f + (b - f) coverage + noise``, and the information about the centre is
+``(b - f)^T S^-1 (b - f)`` times the coverage's geometric terms.  The
+projection ``p = w . bgr`` with ``w = S^-1 (b - f)`` (Fisher's discriminant)
+keeps all of it: fitting the projected channel is the colour fit's
+maximum-likelihood estimate.  ``b - f`` and ``S`` are learnt from the video
+(the samples the background is learnt from); nothing is read from the
+scene's ``render`` block.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+# 8-bit rounding adds variance 1/12 per channel, whatever the sensor does.
+ROUNDING_VAR = 1.0 / 12.0
+# A sample differs from its pixel's median by more than this many whitened
+# noise sigmas: the ball (or something else moving) covers it.
+BALL_SIGMAS = 6.0
+# The projected felt is placed near this level, so the projected image
+# reads like grey levels (every threshold downstream is in such units).
+FELT_LEVEL = 100.0
+
+
+@dataclass(frozen=True)
+class Projection:
+    """Maps a frame to one float32 channel in which the ball stands out most.
+
+    Attributes
+    ----------
+    w : ndarray, shape (3,), or None
+        Weights on B, G, R; None for grey video (the channel itself).
+    offset : float
+        Added after weighting.
+    noise_cov : ndarray, shape (3, 3), or None
+        Per-pixel noise covariance the weights were learnt with (BGR levels^2).
+    """
+
+    w: np.ndarray | None = None
+    offset: float = 0.0
+    noise_cov: np.ndarray | None = None
+
+    def __call__(self, frame: np.ndarray, v0: int = 0, v1: int | None = None, u0: int = 0,
+                 u1: int | None = None) -> np.ndarray:
+        """The projected window ``frame[v0:v1, u0:u1]`` as float32 (h, w)."""
+        roi = frame[v0:v1, u0:u1]
+        if self.w is None:
+            return roi.astype(np.float32)
+        return (roi.astype(np.float32) @ self.w + np.float32(self.offset)).astype(np.float32, copy=False)
+
+    def many(self, frames: np.ndarray) -> np.ndarray:
+        """Project a stack of frames, shape (n, h, w[, 3]), to (n, h, w) float32."""
+        return np.stack([self(f) for f in frames])
+
+
+GREY = Projection()
+
+
+def noise_covariance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Per-pixel noise covariance (3x3) from two colour frames of the same scene.
+
+    Robust to what moved between them: pixels whose difference is beyond 5
+    MADs in any channel are left out (99.99994% of the noise stays in).
+    The rounding's 1/12 per channel is a floor, so a noise-free video still
+    gets an invertible covariance.
+    """
+    d = (a.astype(np.float32) - b.astype(np.float32)).reshape(-1, 3)
+    med = np.median(d, axis=0)
+    mad = 1.4826 * np.median(np.abs(d - med), axis=0)
+    keep = np.all(np.abs(d - med) <= np.maximum(5 * mad, 1.5), axis=1)
+    d = d[keep].astype(np.float64)
+    cov = (d.T @ d) / max(len(d), 1) / 2.0
+    cov[np.diag_indices(3)] = np.maximum(np.diag(cov), ROUNDING_VAR)
+    return cov
+
+
+def learn_projection(samples: np.ndarray) -> Projection:
+    """The channel combination that best separates the moving ball from the felt.
+
+    Parameters
+    ----------
+    samples : ndarray, shape (n, h, w, 3), uint8
+        BGR frames spread over the video (the background's samples).
+
+    Returns
+    -------
+    Projection
+        ``w`` proportional to ``S^-1 d``, with ``d`` the dominant direction of
+        (whitened) departures from each pixel's median over the samples:
+        where the ball passes, the ball's colour minus the felt's (or its
+        negative, where the ball rests most of the time).  Scaled so that
+        the projected noise has the channels' mean variance, and offset to
+        put the felt near ``FELT_LEVEL``.  Luma weights when nothing moved.
+    """
+    n = len(samples)
+    S = noise_covariance(samples[0], samples[n // 2]) if n > 1 else np.eye(3) * ROUNDING_VAR
+    L = np.linalg.cholesky(S)
+    sd = np.sqrt(np.diag(S))
+    lo = samples.min(axis=0).astype(np.int16)
+    hi = samples.max(axis=0).astype(np.int16)
+    spread = np.any((hi - lo) > 7.5 * np.maximum(sd, 0.5) + 2, axis=-1)
+    ys, xs = np.nonzero(spread)
+    luma = np.array([0.114, 0.587, 0.299])
+    w = None
+    if len(ys):
+        X = samples[:, ys, xs, :].astype(np.float32)        # (n, m, 3)
+        D = (X - np.median(X, axis=0)).reshape(-1, 3).astype(np.float64)
+        Z = np.linalg.solve(L, D.T).T                         # whitened departures
+        big = np.einsum("ij,ij->i", Z, Z) > BALL_SIGMAS**2
+        if big.sum() >= 10:
+            Zb = Z[big]
+            vals, vecs = np.linalg.eigh(Zb.T @ Zb)
+            e = vecs[:, -1]
+            w = np.linalg.solve(L.T, e)                       # w . d = e . z
+    if w is None:
+        w = luma / np.sqrt(luma @ S @ luma)
+    # Projected noise variance w^T S w = 1 here; give it the channels' mean
+    # variance, so the projected image's noise reads like a channel's.
+    w = w / np.sqrt(w @ S @ w) * np.sqrt(np.trace(S) / 3.0)
+    if w.sum() < 0:  # keep bright things bright where it costs nothing (grey-like w)
+        w = -w
+    felt = np.median(samples[0].reshape(-1, 3), axis=0)
+    return Projection(w=w.astype(np.float32), offset=float(FELT_LEVEL - felt @ w), noise_cov=S)
+
+
+__all__ = ["GREY", "Projection", "learn_projection", "noise_covariance"]

@@ -1,0 +1,279 @@
+"""Opening a video and streaming its frames: every pixel format, and its frame times.
+
+OpenCV decodes with its RGB conversion on, so every pixel format FFmpeg
+knows (``bgr0``, ``yuv420p``, ``yuv444p``, ``gray``, ``rgb24``...) arrives
+as 8-bit BGR; a video whose frames are grey (a ``gray`` stream, or colour
+planes that all agree) is read as one channel.  PyAV reads what OpenCV
+cannot open, and gives the container's presentation timestamps, from a
+pass over the packets (no decoding: a few ms per thousand frames).
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+from dataclasses import dataclass
+from fractions import Fraction
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from cuespin.render.video import quiet_native_stderr
+
+# Codecs that store every pixel exactly (FFmpeg's names).
+LOSSLESS_CODECS = {"ffv1", "huffyuv", "ffvhuff", "png", "rawvideo", "utvideo", "magicyuv", "qtrle",
+                   "zlib", "r210", "v210", "libx264rgb"}
+GREY_PIX_FMTS = {"gray", "gray8", "y8", "gray10le", "gray12le", "gray16le", "gray16be", "monow", "monob"}
+
+# A grey video's frames still decode to BGR when its stream is yuv (MJPG
+# with neutral chroma); after YUV to BGR conversion the three planes agree
+# exactly.  Checked on the first frame only.
+
+try:  # OpenCV logs a warning per frame for some streams; failures are reported by us
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+except AttributeError:  # builds without the logging module
+    pass
+
+
+class TrackError(Exception):
+    """The video cannot be tracked; the message is one line saying why."""
+
+
+@dataclass(frozen=True)
+class VideoInfo:
+    """What the container says about a video stream.
+
+    Attributes
+    ----------
+    width, height : int
+        Frame size (px).
+    n_frames : int
+        Frames the container announces (0 when unknown).
+    codec : str
+        FFmpeg's codec name (``mjpeg``, ``ffv1``, ``h264``...), or a FourCC.
+    pix_fmt : str
+        FFmpeg's pixel format ('' when unknown).
+    lossless : bool
+        Every pixel is stored exactly.
+    time_base : Fraction or None
+        Unit of the presentation timestamps (s).
+    backend : str
+        ``cv2`` or ``av``: which decoder reads the frames.
+    """
+
+    width: int
+    height: int
+    n_frames: int
+    codec: str
+    pix_fmt: str
+    lossless: bool
+    time_base: Fraction | None
+    backend: str
+
+
+def _check_path(path) -> Path:
+    path = Path(path)
+    if not path.exists():
+        raise TrackError(f"video not found: {path}")
+    if path.is_dir():
+        raise TrackError(f"expected a video file, got a folder: {path}")
+    return path
+
+
+def _open_cv2(path: Path):
+    with quiet_native_stderr():
+        cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
+        ok = cap.isOpened()
+    if not ok:
+        cap.release()
+        return None
+    return cap
+
+
+def fourcc_of(cap: cv2.VideoCapture) -> str:
+    """The stream's four-character code ('' if unknown)."""
+    code = int(cap.get(cv2.CAP_PROP_FOURCC))
+    return "".join(chr((code >> 8 * i) & 0xFF) for i in range(4)) if code > 0 else ""
+
+
+def probe(path) -> VideoInfo:
+    """Open a video's container and describe its stream, or raise :class:`TrackError`."""
+    import av
+
+    path = _check_path(path)
+    info = None
+    try:
+        with quiet_native_stderr(), av.open(str(path)) as c:
+            if c.streams.video:
+                s = c.streams.video[0]
+                cc = s.codec_context
+                info = dict(width=int(cc.width), height=int(cc.height), n_frames=int(s.frames or 0),
+                            codec=str(cc.name), pix_fmt=str(cc.pix_fmt or ""),
+                            time_base=s.time_base)
+    except (av.error.FFmpegError, OSError, ValueError):
+        info = None
+    cap = _open_cv2(path)
+    if cap is None and info is None:
+        raise TrackError(f"{path}: not a video OpenCV or PyAV can read")
+    if info is None:  # OpenCV alone opens it
+        fcc = fourcc_of(cap)
+        info = dict(width=int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)),
+                    height=int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)),
+                    n_frames=max(int(cap.get(cv2.CAP_PROP_FRAME_COUNT)), 0), codec=fcc.strip(),
+                    pix_fmt="", time_base=None)
+    if cap is not None:
+        if info["n_frames"] <= 0:  # the container's count, else OpenCV's estimate
+            info["n_frames"] = max(int(cap.get(cv2.CAP_PROP_FRAME_COUNT)), 0)
+        cap.release()
+    lossless = info["codec"].lower() in LOSSLESS_CODECS or info["codec"].upper() in {"FFV1", "HFYU", "FFVH"}
+    return VideoInfo(lossless=lossless, backend="cv2" if cap is not None else "av", **info)
+
+
+def frame_times(path, info: VideoInfo, n: int, fps: float) -> np.ndarray:
+    """Timestamps of frames ``0 .. n-1`` (s), by CONVENTIONS.md.
+
+    ``k / fps``, unless the container's presentation timestamps, relative to
+    frame 0, depart from it by more than one tick of the time base (a
+    variable-frame-rate file): then those.  A pass over the packets without
+    decoding; when timestamps are missing or do not count ``n`` frames,
+    ``k / fps``.
+    """
+    nominal = np.arange(n) / fps
+    if info.time_base is None or n == 0:
+        return nominal
+    import av
+
+    try:
+        with quiet_native_stderr(), av.open(str(path)) as c:
+            s = c.streams.video[0]
+            pts = [p.pts for p in c.demux(s) if p.size and p.pts is not None]
+    except (av.error.FFmpegError, OSError, ValueError):
+        return nominal
+    if len(pts) < n:
+        return nominal
+    pts = np.sort(np.array(pts, dtype=np.int64))[:n]
+    tb = info.time_base
+    t = (pts - pts[0]) * float(tb)
+    # Exact rational tick against k/fps: the tolerance is the rounding of
+    # k/fps to whole ticks (half a tick; one, for muxers that truncate).
+    if np.max(np.abs(t - nominal)) <= float(tb) * (1 + 1e-9):
+        return nominal
+    return t
+
+
+class FrameSource:
+    """Frames of a video in order: 8-bit BGR (h, w, 3), or (h, w) when the video is grey.
+
+    Iterate it once; a decoding failure is raised from the iterator.
+    """
+
+    def __init__(self, path, info: VideoInfo):
+        self.path = Path(path)
+        self.info = info
+        self.grey = info.pix_fmt in GREY_PIX_FMTS
+        self._decided = self.grey  # grey-by-content is decided on the first frame
+
+    def _grey_content(self, img) -> bool:
+        return bool(np.array_equal(img[..., 0], img[..., 1]) and np.array_equal(img[..., 0], img[..., 2]))
+
+    def _emit(self, img):
+        if img.ndim == 3 and img.shape[2] == 1:
+            img = img[:, :, 0]
+        if img.ndim == 2:
+            self.grey = True
+            return img
+        if img.shape[2] == 4:
+            img = img[:, :, :3]
+        if not self._decided:
+            self.grey = self._grey_content(img)
+            self._decided = True
+        return cv2.extractChannel(img, 1) if self.grey else img
+
+    def __iter__(self):
+        if self.info.backend == "cv2":
+            yield from self._iter_cv2()
+        else:
+            yield from self._iter_av()
+
+    def _iter_cv2(self):
+        cap = _open_cv2(self.path)
+        if cap is None:
+            raise TrackError(f"{self.path}: OpenCV cannot open the video")
+        try:
+            while True:
+                with quiet_native_stderr():
+                    ok, img = cap.read()
+                if not ok or img is None:
+                    return
+                yield self._emit(img)
+        finally:
+            cap.release()
+
+    def _iter_av(self):
+        import av
+
+        with quiet_native_stderr():
+            c = av.open(str(self.path))
+        try:
+            s = c.streams.video[0]
+            s.thread_type = "AUTO"
+            fmt = "gray" if self.grey else "bgr24"
+            for fr in c.decode(s):
+                yield self._emit(fr.to_ndarray(format=fmt))
+        except av.error.FFmpegError as exc:
+            raise TrackError(str(exc)) from None
+        finally:
+            c.close()
+
+
+class ThreadedFrames:
+    """A :class:`FrameSource` decoded on a second thread into a bounded queue.
+
+    OpenCV and PyAV release the GIL while decoding, so decoding overlaps the
+    tracker's work.  Iterating yields frames; a decoding failure arrives as
+    the exception, raised from the iterator.  :meth:`close` stops the thread.
+    """
+
+    def __init__(self, source, maxsize: int):
+        self.q: queue.Queue = queue.Queue(maxsize=max(int(maxsize), 2))
+        self._stop = threading.Event()
+        self._t = threading.Thread(target=self._run, args=(source,), daemon=True)
+        self._t.start()
+
+    def _run(self, source):
+        try:
+            for img in source:
+                while not self._stop.is_set():
+                    try:
+                        self.q.put(img, timeout=0.1)
+                        break
+                    except queue.Full:
+                        continue
+                if self._stop.is_set():
+                    return
+        except BaseException as exc:  # surfaced on the consumer's thread
+            self.q.put(exc)
+        finally:
+            self.q.put(None)
+
+    def __iter__(self):
+        while True:
+            item = self.q.get()
+            if item is None:
+                return
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+
+    def close(self):
+        self._stop.set()
+        while self._t.is_alive():
+            try:
+                self.q.get_nowait()
+            except queue.Empty:
+                pass
+            self._t.join(timeout=0.05)
+
+
+__all__ = ["FrameSource", "ThreadedFrames", "TrackError", "VideoInfo", "frame_times", "probe"]
