@@ -11,7 +11,7 @@ balls, a highlight, dot markings and the cue.
 ``--offsets`` instead measures how far the intensity-weighted centroid of a
 shaded ball's image lies from its centre, for a few looks (noise-free).
 
-Usage: python benchmarks/render.py [--look realistic] [--codec MJPG] [--codec FFV1] [--noise 5]
+Usage: python benchmarks/render.py [--look realistic] [--codec MJPG] [--codec FFV1] [--codec H264] [--noise 5]
        python benchmarks/render.py --offsets
 """
 
@@ -26,7 +26,7 @@ import numpy as np
 from cuespin.data_gen.sampler import framed_camera, make_scene, realistic_look, sample_shot
 from cuespin.physics.scene import Scene, Table
 from cuespin.render import FrameRenderer, render_video
-from cuespin.render.video import encode_frames
+from cuespin.render.video import encode_frames, video_suffix
 
 
 def realistic_scene(shot, params, fps: float, render: dict, size=(1280, 720), exposure_s=0.0,
@@ -55,13 +55,14 @@ def bench(codec: str, look: str, noise: float, seconds: float, repeat: int) -> d
     n = len(frames)
     size = (scene.camera.width, scene.camera.height)
     enc, ren = [], []
+    ext = video_suffix(codec)                       # .mp4 for H264 (PyAV), else .avi
     with tempfile.TemporaryDirectory() as tmp:
         for _ in range(repeat):  # alternating, median of N: the machine is shared
             t = time.perf_counter()
-            encode_frames(iter(frames), Path(tmp) / "enc.avi", codec, 240.0, size)
+            encode_frames(iter(frames), Path(tmp) / f"enc{ext}", codec, 240.0, size)
             enc.append(time.perf_counter() - t)
             t = time.perf_counter()
-            render_video(scene, Path(tmp) / "ren.avi")
+            render_video(scene, Path(tmp) / f"ren{ext}")
             ren.append(time.perf_counter() - t)
     ratios = [e / r for e, r in zip(enc, ren)]
     return {"codec": codec, "look": look, "frames": n, "encode_fps": n / statistics.median(enc),
@@ -103,7 +104,7 @@ def offsets() -> None:
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--codec", action="append", help="FourCC (repeatable); default MJPG and FFV1")
+    ap.add_argument("--codec", action="append", help="FourCC or H264 (repeatable); default MJPG, FFV1, H264")
     ap.add_argument("--look", choices=("plain", "realistic"), action="append",
                     help="look (repeatable); default both")
     ap.add_argument("--noise", type=float, default=5.0, help="noise sigma, grey levels")
@@ -116,7 +117,7 @@ def main():
         return
     print(f"{'look':9} {'codec':6} {'frames':>6} {'encode fps':>11} {'render fps':>11} {'ratio':>6}  runs")
     for look in args.look or ["plain", "realistic"]:
-        for codec in args.codec or ["MJPG", "FFV1"]:
+        for codec in args.codec or ["MJPG", "FFV1", "H264"]:
             r = bench(codec, look, args.noise, args.seconds, args.repeat)
             runs = " ".join(f"{x:.2f}" for x in r["ratios"])
             print(f"{r['look']:9} {r['codec']:6} {r['frames']:6d} {r['encode_fps']:11.1f} "
