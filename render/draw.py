@@ -60,6 +60,8 @@ def render_settings(scene: Scene) -> dict:
     s.update({k: v for k, v in scene.render.items() if k in s})
     if s["look"] not in ("plain", "realistic"):
         raise ValueError(f"render.look: expected 'plain' or 'realistic', got {s['look']!r}")
+    if s["look"] == "realistic":
+        lk.check_look(s)
     return s
 
 

@@ -100,6 +100,35 @@ LOOK_DEFAULTS = {
 }
 
 
+def check_look(settings: dict) -> None:
+    """Refuse a realistic look's settings that cannot be drawn, one line naming the key.
+
+    Raises
+    ------
+    ValueError
+        ``render.<key>: ...`` for a colour that is not three numbers in
+        0-255, an unknown ``markings``, a negative amount, or a resting ball
+        without ``x`` and ``y``.
+    """
+    for key in ("ball_colour", "felt_colour", "rail_colour", "mark_colour"):
+        c = np.asarray(settings[key], dtype=object)
+        ok = c.shape == (3,) and all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                     and 0 <= v <= 255 for v in c)
+        if not ok:
+            raise ValueError(f"render.{key}: expected three numbers 0-255 (B, G, R), got {settings[key]!r}")
+    if settings["markings"] not in ("none", "dots", "logo"):
+        raise ValueError(f"render.markings: expected 'none', 'dots' or 'logo', got {settings['markings']!r}")
+    for key in ("ambient", "specular", "psf_sigma", "texture", "texture_scale", "ramp", "shininess",
+                "cue_gap", "cue_follow"):
+        v = settings[key]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+            raise ValueError(f"render.{key}: expected a number >= 0, got {v!r}")
+    balls = settings["balls"]
+    if not isinstance(balls, list) or not all(isinstance(b, dict) and "x" in b and "y" in b
+                                              for b in balls):
+        raise ValueError("render.balls: expected a list of {\"x\": m, \"y\": m, \"colour\": [b, g, r]}")
+
+
 def grey_level(bgr) -> float:
     """OpenCV's BGR-to-grey weighting of a colour (levels)."""
     b, g, r = (float(c) for c in bgr)

@@ -361,3 +361,20 @@ def test_tilted_realistic_render_has_rails_through_the_lens(tmp_path):
     rail = scene.camera.project(np.array([[L / 2 + 0.2, -0.1, 0.0]]))[0]
     u, v = np.rint(rail).astype(int)
     assert np.abs(r.background[v, u] - felt).max() > 20
+
+
+def test_bad_look_settings_refused_in_one_line():
+    from cuespin.render.draw import render_settings
+
+    for bad, key in (({"look": "fancy"}, "render.look"),
+                     ({"look": "realistic", "ball_colour": [1, 2]}, "render.ball_colour"),
+                     ({"look": "realistic", "markings": "stripes"}, "render.markings"),
+                     ({"look": "realistic", "psf_sigma": -1}, "render.psf_sigma"),
+                     ({"look": "realistic", "balls": [{"x": 1}]}, "render.balls")):
+        scene = realistic()
+        from cuespin.physics.scene import Scene
+        s = Scene(physics=scene.physics, camera=scene.camera, table=scene.table, render=bad,
+                  truth=scene.truth)
+        with pytest.raises(ValueError, match=key.replace(".", r"\.")) as e:
+            render_settings(s)
+        assert "\n" not in str(e.value)
