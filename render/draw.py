@@ -692,7 +692,7 @@ class FrameRenderer:
         At address ``cue_gap`` behind the ball; it approaches at the cue's
         speed (half the ball's, at least 0.3 m/s) to touch the ball at
         ``t0``, follows through ``cue_follow`` past the contact point (never
-        into the departing ball), then withdraws at 0.6 m/s to 0.3 m behind
+        into the departing ball), then withdraws at 1 m/s to 0.15 m behind
         the contact point and is held there.  Negative is past the contact point.
         """
         s, tr = self.settings, self.scene.truth
@@ -705,7 +705,7 @@ class FrameRenderer:
         gap = np.where(t < tr.t0, np.minimum(g0, vc * (tr.t0 - t)),
                        -f * (1.0 - np.exp(-(t - tr.t0) * vc / f)))
         back = t > tr.t0 + tf
-        gap = np.where(back, np.minimum(-f * (1 - math.exp(-3.0)) + 0.6 * (t - tr.t0 - tf), 0.3),
+        gap = np.where(back, np.minimum(-f * (1 - math.exp(-3.0)) + 1.0 * (t - tr.t0 - tf), 0.15),
                        gap)
         # The tip stays behind the ball's rear point.
         d_hat = v0 / max(speed, 1e-12)
@@ -740,11 +740,14 @@ class FrameRenderer:
         edges = np.arange(0.0, CUE_LENGTH_M + step, step)
         edges[-1] = CUE_LENGTH_M
         pad = self._pad + 2
-        for a0, a1 in zip(edges[:-1], edges[1:]):
-            r1 = cue_radius(a1)
-            corners = np.array([tip - d * a + nrm * c for a in (a0, a1) for c in (-r1, r1)])
-            # The cue's axis at the ball's centre height.
-            uv = self.cam.project(np.c_[corners, np.full(4, R)])
+        # Every stretch's four corners in one projection (the cue's axis at
+        # the ball's centre height).
+        a_c = np.repeat(np.c_[edges[:-1], edges[1:]], 2, axis=1)              # (m, 4)
+        c_c = np.array([-1.0, 1.0, -1.0, 1.0]) * cue_radius(edges[1:])[:, None]
+        xy_c = tip - a_c[..., None] * d + c_c[..., None] * nrm                 # (m, 4, 2)
+        uv_all = self.cam.project(np.c_[xy_c.reshape(-1, 2), np.full(xy_c.size // 2, R)])
+        uv_all = uv_all.reshape(-1, 4, 2)
+        for a0, a1, uv in zip(edges[:-1], edges[1:], uv_all):
             if not np.isfinite(uv).all():
                 continue
             u_lo = max(int(math.floor(uv[:, 0].min())) - pad, 0)
@@ -753,27 +756,39 @@ class FrameRenderer:
             v_hi = min(int(math.ceil(uv[:, 1].max())) + pad, h - 1)
             if u_hi < u_lo or v_hi < v_lo:
                 continue
-            vv, uu = np.mgrid[v_lo:v_hi + 1, u_lo:u_hi + 1]
-            if self.cam.is_pinhole:
-                xy = self._plane_points(v_lo, v_hi + 1, u_lo, u_hi + 1, R).reshape(-1, 2)
+            shape = (v_hi + 1 - v_lo, u_hi + 1 - u_lo)
+            if self.similar:
+                # Affine in the pixel's position: two 1-D ramps, no per-pixel mapping.
+                rel0 = self.cam.to_table(np.array([[u_lo, v_lo]], float))[0] - tip
+                ju, jv = self._Jinv[:, 0], self._Jinv[:, 1]
+                du = np.arange(shape[1], dtype=np.float64)[None, :]
+                dv = np.arange(shape[0], dtype=np.float64)[:, None]
+                a = -(rel0 @ d) - (ju @ d) * du - (jv @ d) * dv     # along the cue from its tip (m)
+                c = (rel0 @ nrm) + (ju @ nrm) * du + (jv @ nrm) * dv  # across (m)
             else:
-                xy = self._cloth_points(np.stack([uu, vv], -1).reshape(-1, 2).astype(float))
-            rel = xy - tip
-            a = -(rel @ d)                       # along the cue from its tip (m)
-            c = rel @ nrm                        # across (m)
+                if self.cam.is_pinhole:
+                    xy = self._plane_points(v_lo, v_hi + 1, u_lo, u_hi + 1, R)
+                else:
+                    vv, uu = np.mgrid[v_lo:v_hi + 1, u_lo:u_hi + 1]
+                    xy = self._cloth_points(np.stack([uu, vv], -1).astype(float))
+                rel = xy - tip
+                a = -(rel @ d)
+                c = rel @ nrm
             own = (a >= a0) & (a < a1) if a0 > 0 else (a < a1)
             ra = cue_radius(np.clip(a, 0, CUE_LENGTH_M))
             cov = np.clip((ra - np.abs(c)) * px_m + 0.5, 0, 1) * np.clip(a * px_m + 0.5, 0, 1) * own
-            if not cov.any():
+            on = cov > 0
+            if not on.any():
                 continue
-            colour = cue_colour(a)
-            across = np.clip(np.abs(c) / ra, 0, 1)
-            colour = colour * (0.55 + 0.45 * np.sqrt(1 - across**2))[:, None]
-            shape = vv.shape
+            # Colour only where the cue is (it is thin): its part, cylinder shading.
+            a_on, c_on, ra_on = a[on], c[on], ra[on]
+            across = np.clip(np.abs(c_on) / ra_on, 0, 1)
+            colour = cue_colour(a_on) * (0.55 + 0.45 * np.sqrt(1 - across**2))[:, None]
             sharp = self._sharp[v_lo + self._border:v_hi + 1 + self._border,
                                 u_lo + self._border:u_hi + 1 + self._border]
-            ramp = self._ramp[v_lo:v_hi + 1, u_lo:u_hi + 1, None]
-            delta = cov.reshape(shape)[..., None] * (colour.reshape(shape + (3,)) * ramp - sharp)
+            ramp = self._ramp[v_lo:v_hi + 1, u_lo:u_hi + 1]
+            delta = np.zeros(shape + (3,), np.float32)
+            delta[on] = cov[on][:, None] * (colour * ramp[on][:, None] - sharp[on])
             add_to_tiles(tiles, gaussian(delta, self._psf, constant=True), u_lo, v_lo)
         self._cue_cache = (gap, tiles)
         return tiles
