@@ -797,7 +797,10 @@ class FrameRenderer:
         import cv2
 
         if self.sigma > 0:
-            frame = cv2.add(self._noise.draw(rng, self._bg16.shape), self._bg16, dtype=cv2.CV_8U)
+            # SFC64 writes random bytes about a third faster than PCG64; seeded
+            # from the caller's generator, so frames stay reproducible.
+            fast = np.random.Generator(np.random.SFC64(int(rng.integers(0, 2**63))))
+            frame = cv2.add(self._noise.draw(fast, self._bg16.shape), self._bg16, dtype=cv2.CV_8U)
         else:
             frame = self.background.copy()
         tiles = dict(self._cue_tiles(k))
