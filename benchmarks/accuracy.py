@@ -31,7 +31,7 @@ def one_shot(args):
     i, seed, tmp, codec = args
     from cuespin.data_gen.sampler import sample_scenes
     from cuespin.physics import phases
-    from cuespin.pipeline.cli import run_recover
+    from cuespin.pipeline.run import run_recover
     from cuespin.render import render_video
     from cuespin.track.video import open_video
 

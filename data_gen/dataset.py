@@ -1,6 +1,6 @@
 """Datasets: seeded scenes rendered to videos, with scene files and truth.
 
-Each shot ``i`` is ``shot_NNNN.avi``, ``shot_NNNN.truth.csv`` and
+Each shot ``i`` is ``shot_NNNN.avi`` (``.mp4`` for H264), ``shot_NNNN.truth.csv`` and
 ``shot_NNNN.json``.  The scene file is written last, as the mark that the shot
 is complete, so an interrupted run loses at most the shot in progress and a
 rerun skips every shot already there.
@@ -23,7 +23,7 @@ def shot_stem(i: int) -> str:
 
 def generate_dataset(out: Path, n: int, seed: int, preset: str | None = None,
                      codec: str | None = None, fps: float | None = None,
-                     progress=None) -> dict:
+                     progress=None, look: str = "plain") -> dict:
     """Sample ``n`` scenes from ``seed`` and render each into ``out``.
 
     Parameters
@@ -37,35 +37,40 @@ def generate_dataset(out: Path, n: int, seed: int, preset: str | None = None,
     preset : str, optional
         One preset for every shot; a mix of all presets when None.
     codec : str, optional
-        FourCC for every video; the renderer's default (MJPG) when None.
+        FourCC for every video (or H264, written to .mp4); the renderer's
+        default (MJPG) when None.
     fps : float, optional
         Frame rate for every shot; sampled when None.
     progress : callable, optional
         ``progress(total, desc, unit)`` returning a context-manager bar.
+    look : str
+        ``plain`` or ``realistic`` (see :func:`cuespin.data_gen.sampler.sample_scene`).
 
     Returns
     -------
     dict
         ``{"written": int, "skipped": int, "paths": [video paths]}``.
     """
-    from cuespin.pipeline.io import write_scene
-    from cuespin.render.video import render_video, truth_path
+    from cuespin.render.draw import render_settings
+    from cuespin.render.video import render_video, truth_path, video_suffix
+    from cuespin.sceneio import write_scene
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    scenes = sample_scenes(n, seed, preset=preset, fps=fps, codec=codec)
+    scenes = sample_scenes(n, seed, preset=preset, fps=fps, codec=codec, look=look)
     written = skipped = 0
     paths = []
     bar = progress(n, "generate", "shot") if progress else None
     try:
         for i, scene in enumerate(scenes):
             stem = shot_stem(i)
-            video, scene_file = out / f"{stem}.avi", out / f"{stem}.json"
+            suffix = video_suffix(str(render_settings(scene)["codec"]))  # .mp4 for H264
+            video, scene_file = out / f"{stem}{suffix}", out / f"{stem}.json"
             paths.append(video)
             if _complete(scene_file, video, scene):
                 skipped += 1
             else:
-                part = out / f"{stem}.part.avi"
+                part = out / f"{stem}.part{suffix}"
                 render_video(scene, part)
                 os.replace(truth_path(part), truth_path(video))
                 os.replace(part, video)

@@ -7,13 +7,19 @@ scene with its truth; nothing touches global random state.
 from __future__ import annotations
 
 
+import math
+
 import numpy as np
 
-from cuespin.physics.motion import BallParams, Shot
-from cuespin.physics.scene import Scene, Table, default_camera
+from cuespin.physics.motion import BallParams, Shot, positions
+from cuespin.physics.scene import Camera, Scene, Table, default_camera, motion_end
 from cuespin.physics.straight import straight_frame
+from cuespin.render import look as lk
 
 PRESETS = ("random", "case1", "case2", "case3", "case4", "case5", "masse", "leaves_table")
+LOOKS = ("plain", "realistic")
+# Frame sizes of the realistic look's cameras (px): HD, qHD and 4:3.
+FRAME_SIZES = ((1280, 720), (960, 540), (800, 600))
 
 # Spin ratio k = R w0 . j_hat / v0 for each straight case of Figure 4.
 _CASE_K = {
@@ -132,9 +138,106 @@ def make_scene(shot: Shot, params: BallParams, fps: float = 240.0, px_per_m: flo
     return Scene(physics=params, camera=camera, table=table, render=dict(render or {}), truth=shot)
 
 
+def _jitter(rng: np.random.Generator, bgr, rel: float = 0.08) -> list[float]:
+    """A colour varied by up to ``rel`` per channel (lighting, dye, white balance)."""
+    return [round(float(np.clip(c * rng.uniform(1 - rel, 1 + rel), 0, 255)), 1) for c in bgr]
+
+
+def framed_camera(rng: np.random.Generator, fps: float, table: Table,
+                  exposure_s: float = 0.0, size: tuple[int, int] | None = None) -> Camera:
+    """A top-down camera that shows the whole table with its rails and a margin.
+
+    The frame size is one of :data:`FRAME_SIZES`; the scale leaves
+    ``CUSHION_WIDTH_M + RAIL_WIDTH_M`` plus 2-10 cm around the playing
+    surface, which is centred.  ``size`` fixes the frame size ``(w, h)``.
+    """
+    w, h = FRAME_SIZES[int(rng.integers(len(FRAME_SIZES)))]
+    if size is not None:
+        w, h = size
+    border = lk.CUSHION_WIDTH_M + lk.RAIL_WIDTH_M + float(rng.uniform(0.02, 0.10))
+    s = min(w / (table.length + 2 * border), h / (table.width + 2 * border))
+    u_off = 0.5 * (w - table.length * s)
+    v_off = 0.5 * (h - table.width * s) + table.width * s
+    H = ((s, 0.0, u_off), (0.0, -s, v_off), (0.0, 0.0, 1.0))
+    return Camera(fps=float(fps), width=w, height=h, homography=H, exposure_s=float(exposure_s))
+
+
+def _resting_balls(rng: np.random.Generator, shot: Shot, params: BallParams, table: Table,
+                   fps: float, n: int) -> list[dict]:
+    """Up to ``n`` balls at rest on open cloth, clear of the shot's path and the cue.
+
+    Each keeps 2R + 3 cm from every point of the path (until the ball stops
+    or leaves), from the cue's line behind the ball, from the other balls
+    and from the pockets, so no contact happens in the forward model.
+    """
+    R = params.R
+    end, _ = motion_end(shot, params, table, fps, 20.0)
+    path = positions(shot, params, np.linspace(shot.t0, max(end, shot.t0), 400))
+    v0 = np.asarray(shot.v0)
+    back = -v0 / max(np.hypot(*v0), 1e-12)
+    cue = np.asarray(shot.x0) + np.linspace(0, 1.5, 150)[:, None] * back
+    keep = np.r_[path, cue]
+    clear = 2 * R + 0.03
+    pk = lk.pockets(table.length, table.width)
+    balls: list[dict] = []
+    for _ in range(50 * n):
+        if len(balls) == n:
+            break
+        p = rng.uniform([R + 0.01, R + 0.01], [table.length - R - 0.01, table.width - R - 0.01])
+        if np.hypot(*(keep - p).T).min() < clear:
+            continue
+        if any(math.hypot(p[0] - b["x"], p[1] - b["y"]) < 2 * R + 0.01 for b in balls):
+            continue
+        if any(math.hypot(p[0] - q[0], p[1] - q[1]) < q[2] + R for q in pk):
+            continue
+        name = list(lk.BALL_COLOURS)[int(rng.integers(len(lk.BALL_COLOURS)))]
+        balls.append({"x": round(float(p[0]), 5), "y": round(float(p[1]), 5),
+                      "colour": _jitter(rng, lk.BALL_COLOURS[name])})
+    return balls
+
+
+def realistic_look(rng: np.random.Generator, shot: Shot, params: BallParams, table: Table,
+                   fps: float) -> dict:
+    """Sample the realistic look's ``render`` keys (see :data:`cuespin.render.look.LOOK_DEFAULTS`).
+
+    Ball and felt from the usual colours (any pair, so some have a grey-level
+    contrast under 25: red on green, for one), lighting from any side at
+    50-80 degrees elevation, a highlight in half the scenes, a 0.5-1 px lens
+    PSF, textured felt under a lighting ramp, rails, 0-4 resting balls,
+    markings on a third of the balls each, a cue in half the scenes.
+    """
+    ball = list(lk.BALL_COLOURS)[int(rng.integers(len(lk.BALL_COLOURS)))]
+    felt = list(lk.FELT_COLOURS)[int(rng.integers(len(lk.FELT_COLOURS)))]
+    look = {
+        "look": "realistic",
+        "ball_name": ball, "felt_name": felt,
+        "ball_colour": _jitter(rng, lk.BALL_COLOURS[ball]),
+        "felt_colour": _jitter(rng, lk.FELT_COLOURS[felt]),
+        "rail_colour": [float(c) for c in lk.RAIL_COLOURS[int(rng.integers(len(lk.RAIL_COLOURS)))]],
+        "ambient": round(float(rng.uniform(0.2, 0.5)), 3),
+        "light_azimuth": round(float(rng.uniform(0, 2 * np.pi)), 4),
+        "light_elevation": round(float(rng.uniform(0.87, 1.4)), 4),
+        "specular": round(float(rng.uniform(0.2, 0.7)), 3) if rng.random() < 0.5 else 0.0,
+        "shininess": round(float(rng.uniform(20, 80)), 1),
+        "psf_sigma": round(float(rng.uniform(0.5, 1.0)), 3),
+        "texture": round(float(rng.uniform(0.01, 0.06)), 4),
+        "texture_scale": round(float(rng.uniform(0.8, 2.5)), 3),
+        "ramp": round(float(rng.uniform(0.0, 0.3)), 3),
+        "ramp_angle": round(float(rng.uniform(0, 2 * np.pi)), 4),
+        "rails": True,
+        "markings": ("none", "dots", "logo")[int(rng.integers(3))],
+        "mark_colour": [float(c) for c in lk.MARK_COLOURS[int(rng.integers(len(lk.MARK_COLOURS)))]],
+        "cue": bool(rng.random() < 0.5),
+        "cue_gap": round(float(rng.uniform(0.04, 0.15)), 3),
+        "cue_follow": round(float(rng.uniform(0.02, 0.06)), 3),
+    }
+    look["balls"] = _resting_balls(rng, shot, params, table, fps, int(rng.integers(0, 5)))
+    return look
+
+
 def sample_scene(seed, preset: str = "random", fps: float | None = None,
                  noise: float | None = None, blur: bool | None = None,
-                 px_per_m: float = 500.0, codec: str | None = None) -> Scene:
+                 px_per_m: float = 500.0, codec: str | None = None, look: str = "plain") -> Scene:
     """Sample a complete scene: shot, friction, camera and renderer settings.
 
     Parameters
@@ -153,12 +256,19 @@ def sample_scene(seed, preset: str = "random", fps: float | None = None,
         Camera scale (px per m).
     codec : str, optional
         FourCC for the video; the renderer's default when absent.
+    look : str
+        ``plain`` (grey disc on grey felt, the conventions' camera) or
+        ``realistic`` (colour, shading, rails and the rest of
+        :func:`realistic_look`, on a camera that shows the rails: ``px_per_m``
+        is then set by the frame size; noise 1-8 per channel when not given).
 
     Returns
     -------
     Scene
         With ``truth`` set and a ``render`` block carrying its own seed.
     """
+    if look not in LOOKS:
+        raise ValueError(f"unknown look {look!r}; choose from {', '.join(LOOKS)}")
     rng = _rng(seed)
     shot, params = sample_shot(rng, preset)
     if fps is None:
@@ -167,7 +277,18 @@ def sample_scene(seed, preset: str = "random", fps: float | None = None,
     if codec is not None:
         render["codec"] = codec
     render["preset"] = preset
-    return make_scene(shot, params, fps=fps, px_per_m=px_per_m, exposure_s=exposure, render=render)
+    if look == "plain":
+        return make_scene(shot, params, fps=fps, px_per_m=px_per_m, exposure_s=exposure,
+                          render=render)
+    # Drawn after the plain look's draws, so plain datasets stay as they were.
+    table = Table()
+    camera = framed_camera(rng, fps, table, exposure)
+    render.update(realistic_look(rng, shot, params, table, fps))
+    for k in ("felt_grey", "ball_grey", "gradient", "gradient_angle"):
+        render.pop(k, None)
+    if noise is None:
+        render["noise_sigma"] = round(float(rng.uniform(1.0, 8.0)), 3)
+    return Scene(physics=params, camera=camera, table=table, render=render, truth=shot)
 
 
 def sample_scenes(n: int, seed: int, preset: str | None = None, **kwargs) -> list[Scene]:

@@ -14,6 +14,15 @@ from typing import Any
 
 import numpy as np
 
+from cuespin.physics.camera import (  # noqa: F401  (re-exported: the camera's old home)
+    Camera,
+    apply_homography,
+    as_tuple,
+    default_camera,
+    homography_jacobian,
+    is_mirrored,
+    pinhole_camera,
+)
 from cuespin.physics.motion import BallParams, Shot, phases, positions
 
 SCHEMA = 1
@@ -37,93 +46,6 @@ class Table:
                 & (xy[..., 1] >= margin) & (xy[..., 1] <= self.width - margin))
 
 
-@dataclass(frozen=True)
-class Camera:
-    """A video's timing and its table-to-image homography.
-
-    Attributes
-    ----------
-    fps : float
-        Frames per second; frame ``k`` is stamped ``k / fps`` (s).
-    width, height : int
-        Image size (px).
-    homography : tuple of tuple
-        3x3 matrix mapping table ``[x, y, 1]`` (m) to homogeneous pixels.
-    exposure_s : float
-        Exposure time (s), centred on the frame's timestamp.
-    """
-
-    fps: float
-    width: int
-    height: int
-    homography: tuple
-    exposure_s: float = 0.0
-
-    @property
-    def H(self) -> np.ndarray:
-        """The homography as a 3x3 array."""
-        return np.array(self.homography, dtype=float)
-
-    def to_pixels(self, xy):
-        """Table points (m), shape (n, 2), to pixels ``(u, v)``, shape (n, 2)."""
-        return apply_homography(self.H, xy)
-
-    def to_table(self, uv):
-        """Pixels ``(u, v)``, shape (n, 2), to table points (m), shape (n, 2)."""
-        return apply_homography(np.linalg.inv(self.H), uv)
-
-    def px_per_m(self, xy) -> float:
-        """Local scale (px per m) at a table point: sqrt of the Jacobian's |det|."""
-        return float(np.sqrt(abs(np.linalg.det(homography_jacobian(self.H, xy)))))
-
-    def jacobian(self, xy) -> np.ndarray:
-        """d(pixels)/d(metres) at table points.
-
-        Parameters
-        ----------
-        xy : array_like, shape (n, 2) or (2,)
-            Ball-centre positions (m).
-
-        Returns
-        -------
-        ndarray, shape (n, 2, 2) or (2, 2)
-            ``J[k, i, j] = d uv_i / d xy_j`` (px per m) at each point.
-        """
-        xy = np.asarray(xy, dtype=float)
-        one = xy.ndim == 1
-        pts = np.atleast_2d(xy)
-        H = self.H
-        num = pts @ H[:2, :2].T + H[:2, 2]                       # (n, 2)
-        den = pts @ H[2, :2] + H[2, 2]                           # (n,)
-        J = (H[None, :2, :2] * den[:, None, None] - num[:, :, None] * H[None, 2, :2][:, None, :]) \
-            / (den**2)[:, None, None]
-        return J[0] if one else J
-
-    def cov_to_table(self, xy, cov_px) -> np.ndarray:
-        """Pixel covariances (px^2) at table points to table covariances (m^2).
-
-        ``C_m = J^-1 C_px J^-T`` with the camera's Jacobian at each point, so a
-        tilted camera's varying scale and shear reach the weights.
-
-        Parameters
-        ----------
-        xy : array_like, shape (n, 2)
-            Ball-centre positions (m).
-        cov_px : array_like, shape (n, 2, 2)
-            Covariance of each pixel centre (px^2).
-
-        Returns
-        -------
-        ndarray, shape (n, 2, 2)
-        """
-        Jinv = np.linalg.inv(self.jacobian(np.atleast_2d(xy)))
-        return Jinv @ np.asarray(cov_px, dtype=float) @ np.swapaxes(Jinv, -1, -2)
-
-    def frame_times(self, n: int) -> np.ndarray:
-        """Timestamps ``k / fps`` (s) of frames ``0 .. n-1``."""
-        return np.arange(n) / self.fps
-
-
 def motion_end(shot: Shot, params: BallParams, table: Table, fps: float,
                max_duration: float) -> tuple[float, bool]:
     """When the scene's motion ends: the ball stops, or its centre leaves the table.
@@ -144,48 +66,26 @@ def motion_end(shot: Shot, params: BallParams, table: Table, fps: float,
 
 
 
-def default_camera(fps: float = 240.0, px_per_m: float = 500.0, margin_px: float = 5.0,
-                   table: Table = Table(), exposure_s: float = 0.0) -> Camera:
-    """The top-down camera of CONVENTIONS.md, y flipped.
-
-    ``[[s, 0, m], [0, -s, s W], [0, 0, 1]]`` with ``s`` px per metre and
-    margin ``m``: the table's far side (y = W) lies on row 0 and a margin of
-    ``m`` px is left on the three other sides, sizes rounded up to even (video
-    codecs need even sizes).  With the defaults this is exactly the
-    conventions' 1280 x 640 view, ``[[500, 0, 5], [0, -500, 635], [0, 0, 1]]``.
-    """
-    s = float(px_per_m)
-    width = 2 * int(math.ceil((table.length * s + 2 * margin_px) / 2 - 1e-9))
-    height = 2 * int(math.ceil((table.width * s + margin_px) / 2 - 1e-9))
-    H = ((s, 0.0, float(margin_px)), (0.0, -s, s * table.width), (0.0, 0.0, 1.0))
-    return Camera(fps=float(fps), width=width, height=height, homography=H,
-                  exposure_s=float(exposure_s))
-
-
-def apply_homography(H, pts):
-    """Map points, shape (n, 2), through a 3x3 homography (vectorised)."""
-    pts = np.asarray(pts, dtype=float)
-    p = pts @ H[:, :2].T + H[:, 2]
-    return p[..., :2] / p[..., 2:3]
-
-
-def homography_jacobian(H, xy):
-    """2x2 Jacobian d(pixels)/d(metres) of a homography at one table point."""
-    x, y = float(xy[0]), float(xy[1])
-    num = H[:2, 0] * x + H[:2, 1] * y + H[:2, 2]
-    den = H[2, 0] * x + H[2, 1] * y + H[2, 2]
-    return (H[:2, :2] * den - np.outer(num, H[2, :2])) / den**2
-
-
 @dataclass(frozen=True)
 class Scene:
-    """One shot: physics, table, camera, renderer settings and (optionally) truth."""
+    """One shot: physics, table, camera, renderer settings and (optionally) truth.
+
+    The camera's ``centre_height`` is set to ``physics.R`` here, so the plane
+    the camera converts in is always the ball's centre plane of this scene.
+    ``defaulted`` lists the ``(key, value)`` pairs :func:`parse_scene` filled
+    in because the file left them out (the reader says so on stderr); it
+    takes no part in comparisons.
+    """
 
     physics: BallParams
     camera: Camera
     table: Table = Table()
     render: dict = field(default_factory=dict)
     truth: Shot | None = None
+    defaulted: tuple = field(default=(), compare=False)
+
+    def __post_init__(self):
+        object.__setattr__(self, "camera", self.camera.with_centre_height(float(self.physics.R)))
 
 
 def _number(d: dict, key: str, path: str, default=None, *, positive=False, nonneg=False,
@@ -208,13 +108,17 @@ def _number(d: dict, key: str, path: str, default=None, *, positive=False, nonne
     return int(val) if integer else float(val)
 
 
-def _vector(d: dict, key: str, path: str, shape: tuple) -> np.ndarray:
+def _vector(d: dict, key: str, path: str, shape: tuple, also: tuple = ()) -> np.ndarray:
+    """A numeric array of ``shape``; shapes in ``also`` (what OpenCV returns, e.g.
+    a (3, 1) rvec) are accepted and flattened to it."""
     if key not in d:
         raise SceneError(f"{path}.{key}: required key is missing")
     try:
         arr = np.array(d[key], dtype=float)
     except (TypeError, ValueError):
         raise SceneError(f"{path}.{key}: expected numbers of shape {shape}, got {json_repr(d[key])}")
+    if arr.shape in also:
+        arr = arr.reshape(shape)
     if arr.shape != shape:
         raise SceneError(f"{path}.{key}: expected shape {list(shape)}, got {list(arr.shape)}")
     if not np.all(np.isfinite(arr)):
@@ -238,6 +142,64 @@ def json_repr(val: Any, limit: int = 40) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
+def _parse_camera(cam: dict, table: Table, R: float) -> Camera:
+    """The ``camera`` block: timing, size, and a homography or a real camera."""
+    fps = _number(cam, "fps", "camera", positive=True)
+    size = [None if k not in cam else _number(cam, k, "camera", positive=True, integer=True)
+            for k in ("width", "height")]
+    K = dist = rvec = tvec = None
+    if "intrinsics" in cam:
+        K = _vector(cam, "intrinsics", "camera", (3, 3))
+        if not (K[0, 0] > 0 and K[1, 1] > 0 and K[0, 1] == 0 and K[1, 0] == 0
+                and K[2, 0] == 0 and K[2, 1] == 0 and K[2, 2] == 1):
+            raise SceneError("camera.intrinsics: expected [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] "
+                             "with fx, fy > 0 (OpenCV's camera matrix)")
+    if "distortion" in cam:
+        if K is None:
+            raise SceneError("camera.distortion: needs camera.intrinsics (the camera matrix "
+                             "from the same lens calibration)")
+        dist = _vector(cam, "distortion", "camera", (5,), also=((1, 5),))
+    for key in ("rvec", "tvec"):
+        if key in cam and K is None:
+            raise SceneError(f"camera.{key}: a pose needs camera.intrinsics (the camera matrix)")
+    if ("rvec" in cam) != ("tvec" in cam):
+        missing = "tvec" if "rvec" in cam else "rvec"
+        raise SceneError(f"camera.{missing}: required with camera.{'rvec' if missing == 'tvec' else 'tvec'}")
+    if "rvec" in cam:
+        rvec = _vector(cam, "rvec", "camera", (3,), also=((3, 1), (1, 3)))
+        tvec = _vector(cam, "tvec", "camera", (3,), also=((3, 1), (1, 3)))
+    H = None
+    if rvec is None:
+        # With a pose the homography is ignored (CONVENTIONS.md); without, it is required.
+        H = _vector(cam, "homography", "camera", (3, 3))
+        if abs(np.linalg.det(H)) < 1e-12 * max(1.0, np.abs(H).max()) ** 3:
+            raise SceneError("camera.homography: matrix is singular")
+    tup = as_tuple
+    camera = Camera(fps=fps, width=size[0], height=size[1], homography=tup(H),
+                    exposure_s=_number(cam, "exposure_s", "camera", 0.0, nonneg=True),
+                    intrinsics=tup(K), distortion=tup(dist), rvec=tup(rvec), tvec=tup(tvec),
+                    centre_height=R)
+    corners = np.array([[0.0, 0.0], [table.length, 0.0], [table.length, table.width], [0.0, table.width]])
+    if camera.is_pinhole:
+        # The table must lie in front of a camera above the ball-centre plane.
+        if camera.centre[2] <= R:
+            raise SceneError(f"camera.tvec: the camera's centre is {camera.centre[2]:.3g} m above "
+                             f"the cloth, not above the ball (R = {R:g} m); is the pose inverted?")
+        depth = (np.column_stack([corners, np.full(4, R)]) @ camera.rotation.T + tvec)[:, 2]
+        if not np.all(depth > 0):
+            raise SceneError("camera.rvec: the table is (partly) behind the camera; is the pose "
+                             "the table-to-camera one OpenCV's solvePnP returns?")
+    else:
+        Hn = np.asarray(H)
+        den = corners @ Hn[2, :2] + Hn[2, 2]
+        if not (np.all(den > 0) or np.all(den < 0)):
+            raise SceneError("camera.homography: the table's corners straddle the horizon line")
+        if is_mirrored(camera.H, [table.length / 2, table.width / 2]):
+            raise SceneError("camera.homography: mirrored (orientation-reversing: the table seen "
+                             "from below, or corners in mirrored order); spin signs would flip")
+    return camera
+
+
 def parse_scene(d: Any) -> Scene:
     """Validate a decoded scene object (CONVENTIONS.md) and build a :class:`Scene`.
 
@@ -255,7 +217,14 @@ def parse_scene(d: Any) -> Scene:
     SceneError
         One line naming the key: a missing required key, a wrong shape, a
         non-finite number, ``R <= 0``, ``mu_s <= 0``, ``mu_r < 0``, ``g <= 0``,
-        ``fps <= 0`` or a singular homography.
+        ``fps <= 0``, a singular or mirrored homography, and the real camera's
+        keys (see :func:`_parse_camera`).
+
+    Notes
+    -----
+    ``camera.width``/``height`` may be left out (None: the video's size is
+    used, :meth:`Camera.with_size`); ``physics.R``, ``mu_s``, ``mu_r`` left
+    out take the conventions' defaults and are listed in ``Scene.defaulted``.
     """
     if not isinstance(d, dict):
         raise SceneError(f"scene: expected a JSON object, got {json_repr(d)}")
@@ -267,36 +236,47 @@ def parse_scene(d: Any) -> Scene:
                         mu_s=_number(ph, "mu_s", "physics", dflt.mu_s, positive=True),
                         mu_r=_number(ph, "mu_r", "physics", dflt.mu_r, nonneg=True),
                         g=_number(ph, "g", "physics", dflt.g, positive=True))
-    cam = _block(d, "camera", required=True)
-    H = _vector(cam, "homography", "camera", (3, 3))
-    if abs(np.linalg.det(H)) < 1e-12 * max(1.0, np.abs(H).max()) ** 3:
-        raise SceneError("camera.homography: matrix is singular")
-    camera = Camera(fps=_number(cam, "fps", "camera", positive=True),
-                    width=_number(cam, "width", "camera", positive=True, integer=True),
-                    height=_number(cam, "height", "camera", positive=True, integer=True),
-                    homography=tuple(tuple(float(c) for c in row) for row in H),
-                    exposure_s=_number(cam, "exposure_s", "camera", 0.0, nonneg=True))
+    # R, mu_s and mu_r change the answer (a pool ball's R on a 61.5 mm ball moved
+    # w0 by 7-9%): the reader tells the user which were assumed.  g is a constant.
+    defaulted = tuple((f"physics.{k}", getattr(params, k)) for k in ("R", "mu_s", "mu_r") if k not in ph)
     tb = _block(d, "table", required=False) or {}
     table = Table(length=_number(tb, "length", "table", Table.length, positive=True),
                   width=_number(tb, "width", "table", Table.width, positive=True))
+    camera = _parse_camera(_block(d, "camera", required=True), table, params.R)
     render = _block(d, "render", required=False) or {}
     tr = _block(d, "truth", required=False)
     truth = None
     if tr is not None:
         truth = Shot(x0=_vector(tr, "x0", "truth", (2,)), v0=_vector(tr, "v0", "truth", (2,)),
                      w0=_vector(tr, "w0", "truth", (2,)), t0=_number(tr, "t0", "truth", nonneg=True))
-    return Scene(physics=params, camera=camera, table=table, render=dict(render), truth=truth)
+    return Scene(physics=params, camera=camera, table=table, render=dict(render), truth=truth,
+                 defaulted=defaulted)
 
 
 def scene_to_dict(scene: Scene) -> dict:
-    """The JSON object of a :class:`Scene` (inverse of :func:`parse_scene`)."""
+    """The JSON object of a :class:`Scene` (inverse of :func:`parse_scene`).
+
+    Only the keys the camera has are written: a size left to the video stays
+    out, and a pose camera is written without a homography.
+    """
     p, c = scene.physics, scene.camera
+    cam = {"fps": c.fps}
+    if c.width is not None:
+        cam["width"] = c.width
+    if c.height is not None:
+        cam["height"] = c.height
+    if c.homography is not None and not c.is_pinhole:
+        cam["homography"] = [list(r) for r in c.homography]
+    cam["exposure_s"] = c.exposure_s
+    for key in ("intrinsics", "distortion", "rvec", "tvec"):
+        val = getattr(c, key)
+        if val is not None:
+            cam[key] = [list(r) for r in val] if key == "intrinsics" else list(val)
     d = {
         "schema": SCHEMA,
         "physics": {"R": p.R, "mu_s": p.mu_s, "mu_r": p.mu_r, "g": p.g},
         "table": {"length": scene.table.length, "width": scene.table.width},
-        "camera": {"fps": c.fps, "width": c.width, "height": c.height,
-                   "homography": [list(r) for r in c.homography], "exposure_s": c.exposure_s},
+        "camera": cam,
     }
     if scene.render:
         d["render"] = dict(scene.render)

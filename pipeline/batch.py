@@ -1,7 +1,11 @@
 """Batch recovery over many videos: local worker processes or a Dask cluster.
 
 One writer (this process) appends each finished video's rows to the results
-CSV and flushes them, so a killed run loses only videos in flight.  A rerun
+CSV and flushes them, so a killed run loses only videos in flight.  On a
+Dask cluster the videos travel in chunks, one task per chunk (see
+:func:`chunk_size`), and each chunk's rows are written as it ends: one task
+per video costs the scheduler milliseconds each, and 100,000 of them take
+tens of seconds before any worker starts.  A rerun
 reads the file back, keeps only videos with a complete set of rows (one per
 method; a group cut short by a kill is dropped), rewrites it, and skips
 those videos by content hash.  Workers return rows, never raise: a bad video
@@ -13,12 +17,20 @@ from __future__ import annotations
 import csv
 import glob
 import hashlib
+import math
 import os
 from pathlib import Path
 
 import numpy as np
 
 VIDEO_EXTENSIONS = (".avi", ".mp4", ".mkv", ".mov", ".m4v")
+# Chunks per worker thread: enough that a slow chunk does not leave the other
+# threads idle at the end, few enough that the scheduler's per-task cost
+# (about 1 ms, benchmarks/dask_batch.py) is shared by many videos.
+CHUNKS_PER_THREAD = 4
+# Most videos in one chunk: a chunk is also the unit a killed run loses and
+# the unit results stream back in.
+MAX_CHUNK = 200
 METHOD_NAMES = ("paper", "mle")
 COLUMNS = ["video", "hash", "method", "status", "reason",
            "v0_x", "v0_y", "w0_x", "w0_y", "se_v0_x", "se_v0_y", "se_w0_x", "se_w0_y",
@@ -46,7 +58,12 @@ def expand_inputs(inputs) -> list[Path]:
         else:
             raise BatchInputError(f"no such file, folder or match: {item}")
         found += [q for q in cands if q.suffix.lower() in VIDEO_EXTENSIONS and ".part" not in q.name]
-    out = sorted({q.resolve() for q in found})
+    # The paths as given (made absolute, never resolved): a video's scene is
+    # looked for beside the path the user named, a symbolic link included.
+    unique = {}
+    for q in found:
+        unique.setdefault(os.path.normpath(os.path.abspath(q)), q)
+    out = [Path(k) for k in sorted(unique)]
     if not out:
         raise BatchInputError("no videos found in the inputs (looked for " + ", ".join(VIDEO_EXTENSIONS) + ")")
     return out
@@ -91,7 +108,7 @@ def process_video(video: str, scene_path: str, threaded: bool = True) -> list[di
         os.environ.setdefault("OPENCV_FFMPEG_CAPTURE_OPTIONS", "threads;1")
         import cv2
         cv2.setNumThreads(1)
-    from cuespin.pipeline.cli import run_recover
+    from cuespin.pipeline.run import run_recover
     from cuespin.pipeline.io import InputError, read_scene
     from cuespin.track.tracker import TrackerConfig
     from cuespin.track.video import TrackError
@@ -164,7 +181,7 @@ def load_done(out: Path) -> dict[str, list[dict]]:
 
 
 def run_batch(videos, out: Path, shared_scene: Path | None = None, workers: int | None = None,
-              scheduler: str | None = None, progress=True) -> dict:
+              scheduler: str | None = None, progress=True, chunk: int | None = None) -> dict:
     """Process videos into ``out``, resuming what is already there.
 
     Returns ``{"done": n, "skipped": n, "failed": n, "rows": n}``; ``failed``
@@ -175,9 +192,9 @@ def run_batch(videos, out: Path, shared_scene: Path | None = None, workers: int 
     out = Path(out)
     done = load_done(out)
     todo = []
-    for v in videos:
+    for v in videos:  # hashing reads every file: only worth it when resuming
         try:
-            h = content_hash(v)
+            h = content_hash(v) if done else None
         except OSError:
             h = None
         if h is None or h not in done:
@@ -207,7 +224,7 @@ def run_batch(videos, out: Path, shared_scene: Path | None = None, workers: int 
     jobs = [(str(v), str(scene_for(Path(v), shared_scene))) for v in todo]
     try:
         if scheduler:
-            _run_dask(jobs, scheduler, emit)
+            _run_dask(jobs, scheduler, emit, chunk)
         else:
             _run_local(jobs, workers or os.cpu_count() or 1, emit)
     finally:
@@ -228,18 +245,62 @@ def _run_local(jobs, workers, emit):
             emit(fut.result())
 
 
-def _run_dask(jobs, address, emit):
+def chunk_size(n_videos: int, n_threads: int, max_chunk: int = MAX_CHUNK) -> int:
+    """Videos per Dask task: about ``CHUNKS_PER_THREAD`` chunks per worker thread, at most ``max_chunk``.
+
+    Parameters
+    ----------
+    n_videos : int
+        Videos to process.
+    n_threads : int
+        Worker threads on the cluster (all workers together).
+    max_chunk : int
+        Cap on a chunk's size.
+    """
+    return max(1, min(max_chunk, math.ceil(n_videos / (CHUNKS_PER_THREAD * max(n_threads, 1)))))
+
+
+def process_chunk(jobs, task=None) -> list[list[dict]]:
+    """Process a chunk of ``(video, scene)`` jobs on one worker: each video's rows, in order.
+
+    ``task(video, scene, threaded)`` is :func:`process_video` unless given
+    (the benchmark passes a no-op); it never raises.
+    """
+    task = task or process_video
+    return [task(v, s, False) for v, s in jobs]
+
+
+def _run_dask(jobs, address, emit, chunk: int | None = None, task=None) -> dict:
+    """Send ``jobs`` to a Dask cluster in chunks; ``emit`` each video's rows as its chunk ends.
+
+    Returns timings (s): ``first`` (first chunk back, from the call) and
+    ``total``, and the ``chunk`` size used.
+    """
+    import time
     try:
         from dask.distributed import Client, as_completed
     except ImportError:
         raise BatchInputError("--scheduler needs Dask: pip install 'cuespin[dask]'")
+    clock = time.perf_counter()
     try:
         client = Client(address, timeout="10s")
     except (OSError, TimeoutError) as exc:
         raise BatchInputError(f"cannot reach the Dask scheduler at {address}: {exc}")
+    stats = {"first": None}
     try:
-        futs = [client.submit(process_video, v, s, False, pure=False) for v, s in jobs]
+        threads = sum(client.nthreads().values()) or 1
+        size = chunk or chunk_size(len(jobs), threads)
+        chunks = [jobs[i:i + size] for i in range(0, len(jobs), size)]
+        # pure=False: a rerun must run again, not reuse a cached result.
+        futs = client.map(process_chunk, chunks, task=task, pure=False)
         for fut in as_completed(futs):
-            emit(fut.result())
+            rows = fut.result()
+            fut.release()  # the chunk's rows are written: let the cluster forget them
+            if stats["first"] is None:
+                stats["first"] = time.perf_counter() - clock
+            for r in rows:
+                emit(r)
     finally:
         client.close()
+    stats.update(total=time.perf_counter() - clock, chunk=size)
+    return stats

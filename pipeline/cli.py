@@ -17,6 +17,8 @@ os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
 from pathlib import Path
 
 from cuespin.pipeline.io import InputError
+# The library side lives in pipeline.run; importable from here for older callers.
+from cuespin.pipeline.run import format_recover, run_recover  # noqa: F401
 
 DEMO_SEED = 20261122
 
@@ -65,7 +67,7 @@ def cmd_generate(args) -> int:
     if args.n < 1:
         raise InputError("--n must be at least 1")
     summary = generate_dataset(Path(args.out), n=args.n, seed=args.seed, preset=args.preset,
-                               codec=args.codec, fps=args.fps, progress=_progress)
+                               codec=args.codec, fps=args.fps, progress=_progress, look=args.look)
     print(f"{summary['written']} written, {summary['skipped']} already there, in {args.out}")
     return 0
 
@@ -94,62 +96,6 @@ def cmd_track(args) -> int:
     return 0
 
 
-def run_recover(video, scene, method="all", fit_friction=False, refine="fit", progress=None,
-                return_track=False, config=None):
-    """Track a video and recover v0 and w0: the JSON object of CONVENTIONS.md
-    (and the TrackResult too, with ``return_track``)."""
-    import time
-
-    from cuespin.recover.api import recover_track
-    from cuespin.track.tracker import TrackerConfig
-    from cuespin.track.video import track_video
-
-    clock = time.perf_counter()
-    if config is None:
-        config = TrackerConfig(refine=refine)
-    tr = track_video(video, scene, config, progress=progress)
-    t_track = time.perf_counter() - clock
-    cam = scene.camera
-    centre = cam.to_table([[cam.width / 2, cam.height / 2]])[0]
-    stderr_m = tr.stderr_px / cam.px_per_m(centre)
-    out = recover_track(tr.t, tr.xy, tr.ok, stderr_m, scene.physics, cam.exposure_s, method,
-                        fit_friction, lossless=tr.lossless)
-    noise = tr.centroid_noise_px
-    result = {"video": Path(video).name,
-              "track": {"frames": int(tr.n_frames), "ok_frames": int(tr.ok.sum()),
-                        "centroid_noise_px": noise if noise == noise else None,
-                        **({"error": tr.error} if tr.error else {})},
-              "methods": out["methods"], "best": out["best"],
-              "timing_s": {"track": t_track, **out["timing_s"]}}
-    return (result, tr) if return_track else result
-
-
-def format_recover(result: dict, truth=None) -> str:
-    """A readable table of a recover result (and the truth beside it, if known)."""
-    def vec(v, nd=4, fmt="f"):
-        return "null" if v is None else "[" + ", ".join(f"{c:.{nd}{fmt}}" for c in v) + "]"
-
-    lines = [f"{result['video']}: {result['track']['ok_frames']}/{result['track']['frames']} frames "
-             f"tracked, centroid noise "
-             f"{result['track']['centroid_noise_px'] or float('nan'):.4f} px"]
-    lines.append(f"{'method':6} {'status':10} {'v0 (m/s)':>22} {'w0 (rad/s)':>24}  t0 (s)")
-    if truth is not None:
-        lines.append(f"{'truth':6} {'':10} {vec(truth.v0):>22} {vec(truth.w0, 2):>24}  {truth.t0:.4f}")
-    for name, m in result["methods"].items():
-        t0 = m.get("t0")
-        lines.append(f"{name:6} {m['status']:10} {vec(m.get('v0')):>22} {vec(m.get('w0'), 2):>24}  "
-                     + ("null" if t0 is None else f"{t0:.4f}"))
-        if name == "mle" and m.get("stderr", {}).get("v0"):
-            se = m["stderr"]
-            lines.append(f"{'  +/-':6} {m.get('model') or '':10} {vec(se.get('v0'), 1, 'e'):>22} "
-                         f"{vec(se.get('w0'), 1, 'e'):>24}")
-        if m["reason"]:
-            lines.append(f"{'':6} reason: {m['reason']}")
-    lines.append(f"best: {result['best']}; time (s): "
-                 + ", ".join(f"{k} {v:.3f}" for k, v in result["timing_s"].items()))
-    return "\n".join(lines)
-
-
 def cmd_recover(args) -> int:
     import json
 
@@ -157,18 +103,55 @@ def cmd_recover(args) -> int:
     from cuespin.track.video import TrackError
 
     scene = read_scene(args.scene)
+    _check_outputs(args.plot, args.video_out)
     try:
         with _progress(None, f"track {Path(args.video).name}") as bar:
-            result = run_recover(args.video, scene, args.method, args.fit_friction, args.refine,
-                                 progress=bar.update)
+            result, tr = run_recover(args.video, scene, args.method, args.fit_friction, args.refine,
+                                     progress=bar.update, return_track=True)
     except TrackError as exc:
         raise InputError(str(exc))
     if args.json:
         print(json.dumps(result, indent=2))
     else:
-        print(format_recover(result, scene.truth))
+        print(format_recover(result, scene.truth, scene.physics))
+    if args.plot or args.video_out:
+        _draw(args.video, scene, result, tr, args.plot, args.video_out, quiet=args.json)
     if result["track"].get("error"):
         raise InputError(f"{args.video}: {result['track']['error']}")
+    return 0
+
+
+def _check_outputs(*paths):
+    for p in paths:
+        if p is not None and not Path(p).parent.exists():
+            raise InputError(f"output folder does not exist: {Path(p).parent}")
+
+
+def _draw(video, scene, result, tr, png, video_out, quiet=False):
+    from cuespin.pipeline.show import show_shot
+
+    try:
+        show_shot(video, scene, png=png, result=result, video_out=video_out, track=tr)
+    except (OSError, ValueError) as exc:
+        raise InputError(f"cannot draw {video}: {exc}")
+    if not quiet:
+        print("wrote " + " and ".join(str(p) for p in (png, video_out) if p))
+
+
+def cmd_show(args) -> int:
+    from cuespin.pipeline.io import read_scene
+    from cuespin.track.video import TrackError
+
+    scene = read_scene(args.scene)
+    if args.output is None and args.video_out is None:
+        raise InputError("nothing to write: give -o SHOT.png and/or --video OUT.mp4")
+    _check_outputs(args.output, args.video_out)
+    try:
+        with _progress(None, f"track {Path(args.video).name}") as bar:
+            result, tr = run_recover(args.video, scene, progress=bar.update, return_track=True)
+    except TrackError as exc:
+        raise InputError(str(exc))
+    _draw(args.video, scene, result, tr, args.output, args.video_out)
     return 0
 
 
@@ -182,8 +165,10 @@ def cmd_batch(args) -> int:
         out = Path(args.output)
         if not out.parent.exists():
             raise InputError(f"output folder does not exist: {out.parent}")
+        if args.chunk is not None and args.chunk < 1:
+            raise InputError("--chunk must be at least 1")
         counts = run_batch(videos, out, Path(args.scene) if args.scene else None, args.workers,
-                           args.scheduler)
+                           args.scheduler, chunk=args.chunk)
     except BatchInputError as exc:
         raise InputError(str(exc))
     print(f"{len(videos)} videos: {counts['done']} processed, {counts['skipped']} already in {args.output}, "
@@ -220,32 +205,51 @@ def cmd_demo(args) -> int:
     print(f"rendered {n} frames to {video}; scene {scene_path}; truth {truth_path(video)}")
     with _progress(n, "track demo") as bar:
         result = run_recover(video, scene, progress=bar.update)
-    print(format_recover(result, scene.truth))
+    print(format_recover(result, scene.truth, scene.physics))
     print(f"again, with JSON: cuespin recover {video} --scene {scene_path} --json")
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="cuespin",
-        description="Recover a billiard ball's initial velocity v0 and spin w0 from top-down video. "
-                    "Units are SI; files follow CONVENTIONS.md.")
-    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+RECOVER_EPILOG = """\
+JSON (--json), every field in docs/output.md:
+  video                   the video's file name
+  track.frames, .ok_frames  frames read; frames with the ball found
+  track.centroid_noise_px the tracker's stated standard error of a centre, median over frames (px, per axis)
+  track.last_tracked_t    time of the last frame with the ball found (s)
+  track.contact           {t, kind}: the first contact, after which frames are not used (null: none)
+  track.error             present when the video ended early or showed no ball
+  methods.paper, .mle     status (ok | ambiguous | degenerate | failed), reason (why, when not ok),
+                          x0 (m), t0 (s): the strike; v0 (m/s), w0 (rad/s): the answer;
+                          t1/x1: sliding ends; t2/x2: the ball stops (s, m);
+                          predicted: which of t1, x1, t2, x2 lie after the last frame seen
+                          (the fitted model's extrapolation, not seen in the video)
+  methods.paper           trajectory (parabola | line), solutions (every consistent [v0, w0])
+  methods.mle             stderr (1 standard error of x0, t0, v0, w0), model (full: slip fitted;
+                          rolling: no slip), slip_lr, chi2_per_dof, codec_noise_m
+  best                    the method to trust (mle before paper, first that is ok); null if none is
+  timing_s                track, fit, recover: wall time (s)
+"""
 
+
+def add_demo(sub):
     d = sub.add_parser("demo", help="generate, render, track and recover one shot",
                        description="Generate one curved (masse) shot, render it to video, track it and "
                                    "recover v0 and w0 by both methods, printed beside the truth.")
     d.add_argument("--out", default="cuespin-demo", help="folder for the demo's files (default: %(default)s)")
     d.set_defaults(func=cmd_demo)
 
+
+def add_render(sub):
     r = sub.add_parser("render", help="render a scene file to a video and its .truth.csv",
                        description="Render SCENE (a scene file with a truth block) to VIDEO; writes "
                                    "<VIDEO without extension>.truth.csv beside it. The codec is the "
                                    "scene's render.codec (MJPG lossy by default; FFV1 lossless).")
-    r.add_argument("scene", help="scene file (JSON, CONVENTIONS.md)")
+    r.add_argument("scene", help="scene file (JSON, docs/conventions.md)")
     r.add_argument("-o", "--output", required=True, help="video file to write, e.g. shot.avi")
     r.set_defaults(func=cmd_render)
 
+
+def add_track(sub):
     t = sub.add_parser("track", help="track the ball through a video: per-frame centroids in px and m",
                        description="Find the ball in every frame of VIDEO (any video OpenCV reads) and "
                                    "write frame,t,u_px,v_px,x_m,y_m,ok to TRACK.csv. Only the scene's "
@@ -259,51 +263,92 @@ def build_parser() -> argparse.ArgumentParser:
                         "Cramer-Rao bound) or grey-weighted moments (about 2x worse)")
     t.set_defaults(func=cmd_track)
 
+
+def add_recover(sub):
     rc = sub.add_parser("recover", help="track a video and recover v0 and w0 (paper and MLE)",
+                        formatter_class=argparse.RawDescriptionHelpFormatter, epilog=RECOVER_EPILOG,
                         description="Track VIDEO, then recover the strike (x0, t0), v0 and w0 by the "
                                     "paper's closed form and by a maximum-likelihood fit of the "
                                     "forward model to the time-stamped track, with standard errors. "
                                     "Each method says ok, ambiguous, degenerate or failed, with a "
-                                    "reason. Friction comes from the scene unless --fit-friction.")
+                                    "reason. Friction comes from the scene unless --fit-friction. "
+                                    "Times marked * are after the last frame seen: predicted by the "
+                                    "fitted model.")
     rc.add_argument("video", help="video file")
     rc.add_argument("--scene", required=True, help="scene file (JSON) with physics and camera")
     rc.add_argument("--method", choices=("paper", "mle", "all"), default="all",
                     help="which recovery to run (default: %(default)s)")
-    rc.add_argument("--json", action="store_true", help="print the JSON object of CONVENTIONS.md")
+    rc.add_argument("--json", action="store_true", help="print the JSON object (fields below)")
     rc.add_argument("--fit-friction", action="store_true",
                     help="estimate mu_s and mu_r too (maximum likelihood only)")
     rc.add_argument("--refine", choices=("fit", "moments"), default="fit",
                     help="tracker refinement (default: %(default)s)")
+    rc.add_argument("--plot", metavar="PNG", default=None,
+                    help="also draw the shot (as cuespin show does) to PNG")
+    rc.add_argument("--video", dest="video_out", metavar="OUT.mp4", default=None,
+                    help="also write the video with the fit drawn over it")
     rc.set_defaults(func=cmd_recover)
 
+
+def add_show(sub):
+    s = sub.add_parser("show", help="draw one shot: track, fitted paths, x0/x1/x2, v0 and spin, residuals",
+                       description="Track and recover VIDEO and draw it: the tracked centres over the "
+                                   "video's felt (a median of frames), each method's path from the "
+                                   "forward model with its own x0, v0, w0, t0 (sliding solid, rolling "
+                                   "dashed, faint after the last frame seen), x0, x1, x2 and any contact "
+                                   "marked, v0 and the spin axis as arrows with +/- 2 standard-error "
+                                   "wedges, and below, per method, the residuals (track minus "
+                                   "prediction) divided by the tracker's stated error against time.")
+    s.add_argument("video", help="video file")
+    s.add_argument("--scene", required=True, help="scene file (JSON) with physics and camera")
+    s.add_argument("-o", "--output", default=None, metavar="SHOT.png", help="picture to write (PNG)")
+    s.add_argument("--video", dest="video_out", metavar="OUT.mp4", default=None,
+                   help="write the video with the track and fitted paths drawn over it (H.264)")
+    s.set_defaults(func=cmd_show)
+
+
+def add_batch(sub):
     b = sub.add_parser("batch", help="recover every video in folders/globs into one CSV (resumable)",
                        description="Track and recover many videos, one row per video and method in "
-                                   "RESULTS.csv. Each video's scene is <stem>.json beside it unless --scene "
-                                   "is given. Rows are written as videos finish; rerunning with the same "
+                                   "RESULTS.csv. Each video's scene is <stem>.json beside it (beside the "
+                                   "path as given: a symbolic link is not followed) unless --scene is "
+                                   "given. Rows are written as videos finish; rerunning with the same "
                                    "output skips videos already there (by content hash). A video that "
                                    "cannot be processed becomes a 'failed' row; the exit status is the "
-                                   "number of such videos (0: all processed).")
+                                   "number of such videos (0: all processed). Columns: docs/output.md.")
     b.add_argument("inputs", nargs="+", metavar="INPUT", help="video files, folders or glob patterns")
     b.add_argument("-o", "--output", required=True, help="results CSV (appended to and resumed)")
     b.add_argument("--scene", default=None, help="one scene file for every video")
-    b.add_argument("--workers", type=int, default=None, help="local worker processes, one core each (default: all cores)")
+    b.add_argument("--workers", type=int, default=None,
+                   help="local worker processes, one core each (default: all cores)")
     b.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="run on a Dask distributed cluster, e.g. tcp://HOST:8786 (needs cuespin[dask])")
+                   help="run on a Dask distributed cluster, e.g. tcp://HOST:8786 (needs cuespin[dask]); "
+                        "videos go to workers in chunks")
+    b.add_argument("--chunk", type=int, default=None,
+                   help="videos per Dask task (default: about 4 chunks per worker thread, at most 200)")
     b.set_defaults(func=cmd_batch)
+
+
+def add_experiment(sub):
+    from cuespin.pipeline.experiments import DEFAULT_N, EXPERIMENTS
 
     e = sub.add_parser("experiment", help="accuracy against noise/speed, failure maps: CSV + PNG charts",
                        description="noise: errors against noise sigma, frame rate, resolution and codec, "
                                    "with the Cramer-Rao bound. speed-accuracy: time per video against "
                                    "error, Pareto front marked. stability: error and failure rate over "
-                                   "spin direction and magnitude. Writes OUT/trials.csv and OUT/*.png.")
-    from cuespin.pipeline.experiments import EXPERIMENTS
+                                   "spin direction and magnitude. Writes OUT/trials.csv and OUT/*.png; "
+                                   "every point is a median over N shots with its interquartile range.")
     e.add_argument("name", choices=EXPERIMENTS, help="which experiment")
     e.add_argument("--out", required=True, help="output folder")
-    e.add_argument("--n", type=int, default=4, help="shots per setting (default: %(default)s)")
+    e.add_argument("--n", type=int, default=DEFAULT_N, help="shots per setting (default: %(default)s)")
     e.add_argument("--seed", type=int, default=0, help="seed (default: %(default)s)")
     e.add_argument("--workers", type=int, default=None, help="worker processes (default: all cores)")
     e.add_argument("--quick", action="store_true", help="a small grid, for a smoke test")
     e.set_defaults(func=cmd_experiment)
+
+
+def add_generate(sub):
+    from cuespin.data_gen import PRESETS
 
     g = sub.add_parser("generate", help="write a seeded dataset of videos, scene files and truth",
                        description="Sample N shots from SEED and render each: DIR/shot_NNNN.{avi,json,truth.csv}. "
@@ -311,12 +356,28 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--n", type=int, required=True, help="number of shots")
     g.add_argument("--seed", type=int, default=0, help="dataset seed (default: %(default)s)")
     g.add_argument("--out", required=True, help="output folder (created if absent)")
-    from cuespin.data_gen import PRESETS
     g.add_argument("--preset", choices=PRESETS, default=None,
                    help="one kind of shot for all; default: a mix of every preset")
-    g.add_argument("--codec", default=None, help="FourCC, e.g. MJPG (default, lossy) or FFV1 (lossless)")
+    g.add_argument("--codec", default=None,
+                   help="MJPG (default, lossy), FFV1 (lossless) or H264 (lossy, .mp4 files, CRF 20)")
     g.add_argument("--fps", type=float, default=None, help="frame rate; default: sampled from 60-480")
+    g.add_argument("--look", choices=("plain", "realistic"), default="plain", help="plain grey or realistic colour scenes")
     g.set_defaults(func=cmd_generate)
+
+
+# Each subcommand registers itself by one small function: a new one is one
+# function and one line here.
+SUBCOMMANDS = [add_demo, add_render, add_generate, add_track, add_recover, add_show, add_batch, add_experiment]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="cuespin",
+        description="Recover a billiard ball's initial velocity v0 and spin w0 from top-down video. "
+                    "Units are SI; files follow docs/conventions.md; output fields: docs/output.md.")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+    for add in SUBCOMMANDS:
+        add(sub)
     return p
 
 

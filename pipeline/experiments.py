@@ -26,6 +26,9 @@ from pathlib import Path
 import numpy as np
 
 EXPERIMENTS = ("noise", "speed-accuracy", "stability")
+# Shots per setting: 20 gives a median and an interquartile range that a
+# different seed does not reorder (3 did: issue 13).
+DEFAULT_N = 20
 BASE = {"noise": 5.0, "fps": 240.0, "px_per_m": 500.0, "codec": "MJPG", "refine": "fit"}
 MAX_SECONDS = 3.0
 
@@ -60,7 +63,7 @@ def trial(spec: dict) -> dict:
     (``noise fps px_per_m codec refine``) plus labels copied to the row.
     """
     from cuespin.data_gen.sampler import make_scene
-    from cuespin.pipeline.cli import run_recover
+    from cuespin.pipeline.run import run_recover
     from cuespin.physics import BallParams, Shot
     from cuespin.pipeline.measure import mle_bound
     from cuespin.render import render_video, truth_path
@@ -189,44 +192,86 @@ def _plt():
     return plt
 
 
-def _median(rows, key):
+def _values(rows, key):
     v = [r.get(key, math.nan) for r in rows]
-    v = [x for x in v if isinstance(x, float) and np.isfinite(x)]
-    return float(np.median(v)) if v else math.nan
+    return np.array([x for x in v if isinstance(x, (int, float)) and np.isfinite(x)], dtype=float)
+
+
+def _median(rows, key):
+    v = _values(rows, key)
+    return float(np.median(v)) if v.size else math.nan
+
+
+def _quartiles(rows, key):
+    """(25th percentile, median, 75th percentile, n) of a column's finite values."""
+    v = _values(rows, key)
+    if not v.size:
+        return math.nan, math.nan, math.nan, 0
+    q1, q2, q3 = np.percentile(v, [25, 50, 75])
+    return float(q1), float(q2), float(q3), int(v.size)
 
 
 STYLE = {"paper": dict(color="tab:orange", marker="s"), "mle": dict(color="tab:blue", marker="o"),
          "crb": dict(color="k", ls="--", marker="")}
+NAMES = {"paper": "paper", "mle": "MLE", "crb": "Cramer-Rao bound (MLE)"}
 
 
 def chart_noise(rows, out):
+    """Median error per level with its interquartile band, per method, and the bound.
+
+    Numeric factors are lines over their values; the codec is a category
+    (points with interquartile bars, never joined).  Each point's ``n`` is
+    the number of shots answered ``ok`` it summarises.
+    """
     plt = _plt()
     factors = ["noise", "fps", "px_per_m", "codec"]
     xlabels = {"noise": "image noise sigma (grey levels)", "fps": "frame rate (fps)",
-               "px_per_m": "resolution (px per m)", "codec": "codec"}
-    fig, axes = plt.subplots(2, 4, figsize=(15, 6.5), sharey="row")
+               "px_per_m": "resolution (px per m)", "codec": "codec (category)"}
+    fig, axes = plt.subplots(2, 4, figsize=(16, 7.5), sharey="row")
     for j, f in enumerate(factors):
         sub = [r for r in rows if r.get("factor") == f]
+        if not sub:
+            continue
         levels = sorted({r["level"] for r in sub}, key=lambda s: (float(s) if _isnum(s) else s))
-        xs = [float(lv) if _isnum(lv) else i for i, lv in enumerate(levels)]
+        categorical = not all(_isnum(lv) for lv in levels)
+        xs = np.arange(len(levels), dtype=float) if categorical else np.array([float(lv) for lv in levels])
         for i, (qty, lab) in enumerate((("v0", "|dv0| / |v0|"), ("rw0", "R |dw0| / |v0|"))):
             ax = axes[i, j]
-            for m in ("paper", "mle"):
-                ys = [_median([r for r in sub if r["level"] == lv and r.get(f"status_{m}") == "ok"],
-                              f"err_{qty}_{m}") for lv in levels]
-                ax.plot(xs, ys, label=f"{m} (median over ok)", **STYLE[m])
-            ys = [_median([r for r in sub if r["level"] == lv], f"crb_{qty}") for lv in levels]
-            ax.plot(xs, ys, label="Cramer-Rao bound (MLE)", **STYLE["crb"])
+            for k, m in enumerate(("paper", "mle", "crb")):
+                stats = []
+                for lv in levels:
+                    cell = [r for r in sub if r["level"] == lv]
+                    if m == "crb":
+                        stats.append(_quartiles(cell, f"crb_{qty}"))
+                    else:
+                        stats.append(_quartiles([r for r in cell if r.get(f"status_{m}") == "ok"], f"err_{qty}_{m}"))
+                q1, q2, q3, n = (np.array(c) for c in zip(*stats))
+                st = STYLE[m]
+                if categorical:
+                    dx = (k - 1) * 0.12
+                    ax.errorbar(xs + dx, q2, yerr=[q2 - q1, q3 - q2], fmt=st["marker"] or "_", color=st["color"],
+                                capsize=4, ms=6 if st["marker"] else 14, label=NAMES[m])
+                else:
+                    ax.plot(xs, q2, color=st["color"], marker=st["marker"], ls=st.get("ls", "-"), label=NAMES[m])
+                    ax.fill_between(xs, q1, q3, color=st["color"], alpha=0.15 if m != "crb" else 0.08, lw=0)
+                if m != "crb":
+                    for x, y, nn in zip(xs + ((k - 1) * 0.12 if categorical else 0), q2, n):
+                        if np.isfinite(y):
+                            ax.annotate(f"{nn}", (x, y), fontsize=6, color=st["color"], xytext=(3, 3 if m == "mle"
+                                        else -8), textcoords="offset points")
             ax.set_yscale("log")
-            if not _isnum(levels[0]):
+            if categorical:
                 ax.set_xticks(xs, levels)
+                ax.set_xlim(-0.6, len(levels) - 0.4)
             ax.set_xlabel(xlabels[f])
             if j == 0:
                 ax.set_ylabel(f"relative error {lab}")
             ax.grid(True, which="both", alpha=0.3)
-    axes[0, 0].legend(fontsize=8)
-    fig.suptitle("Recovery error against image noise, frame rate, resolution and codec "
-                 "(one factor at a time; base sigma 5, 240 fps, 500 px/m, MJPG)")
+    axes[0, 0].legend(fontsize=8, title="median, band/bars: 25-75%", title_fontsize=7)
+    n_shots = len({r.get("shot") for r in rows})
+    fig.suptitle("Recovery error against image noise, frame rate, resolution and codec (one factor at a time; "
+                 f"base sigma 5, 240 fps, 500 px/m, MJPG; {n_shots} shots per level; small numbers: shots "
+                 "answered ok)", fontsize=10)
     fig.tight_layout()
     fig.savefig(out / "noise.png", dpi=80)
     plt.close(fig)
@@ -250,31 +295,38 @@ def pareto(points):
 
 
 def chart_speed(rows, out):
+    """Median time against median error per setting and method, with interquartile bars
+    on both axes and the number of shots answered ok; the Pareto front of the medians."""
     plt = _plt()
-    pts, labels = [], []
+    pts, labels, bars, ns = [], [], [], []
     for cfg in sorted({r["config"] for r in rows if "config" in r}):
         sub = [r for r in rows if r.get("config") == cfg]
-        t = _median(sub, "t_total")
         for m in ("paper", "mle"):
-            e = _median([r for r in sub if r.get(f"status_{m}") == "ok"], f"err_v0_{m}")
-            if np.isfinite(e):
-                pts.append((t, e))
-                labels.append(f"{m}: {cfg}")
+            ok = [r for r in sub if r.get(f"status_{m}") == "ok"]
+            e1, e2, e3, n = _quartiles(ok, f"err_v0_{m}")
+            t1, t2, t3, _ = _quartiles(sub, "t_total")
+            if np.isfinite(e2):
+                pts.append((t2, e2))
+                bars.append(((t2 - t1, t3 - t2), (e2 - e1, e3 - e2)))
+                labels.append((m, cfg))
+                ns.append((n, len(sub)))
     front = set(pareto(pts))
-    fig, ax = plt.subplots(figsize=(9, 6))
-    for i, ((t, e), lab) in enumerate(zip(pts, labels)):
-        m = lab.split(":")[0]
-        ax.scatter([t], [e], s=70 if i in front else 30, edgecolor="k" if i in front else "none", **{
-            k: v for k, v in STYLE[m].items() if k != "ls"})
-        ax.annotate(lab.split(": ")[1], (t, e), fontsize=7, xytext=(4, 2), textcoords="offset points")
+    fig, ax = plt.subplots(figsize=(10, 6.5))
+    for i, ((t, e), (m, cfg), (xb, yb), (n, tot)) in enumerate(zip(pts, labels, bars, ns)):
+        st = STYLE[m]
+        ax.errorbar([t], [e], xerr=[[xb[0]], [xb[1]]], yerr=[[yb[0]], [yb[1]]], fmt=st["marker"], color=st["color"],
+                    ms=9 if i in front else 5, mec="k" if i in front else st["color"], capsize=2, lw=0.8, alpha=0.9)
+        ax.annotate(f"{cfg} (n={n}/{tot})", (t, e), fontsize=7, xytext=(5, 3), textcoords="offset points",
+                    color=st["color"])
     fp = sorted(pts[i] for i in front)
-    ax.plot([p[0] for p in fp], [p[1] for p in fp], "k-", lw=1, label="Pareto front")
-    ax.scatter([], [], label="paper", **{k: v for k, v in STYLE["paper"].items() if k != "ls"})
-    ax.scatter([], [], label="MLE", **{k: v for k, v in STYLE["mle"].items() if k != "ls"})
+    ax.plot([p[0] for p in fp], [p[1] for p in fp], "k-", lw=1, label="Pareto front (medians)")
+    for m in ("paper", "mle"):
+        ax.errorbar([], [], fmt=STYLE[m]["marker"], color=STYLE[m]["color"], label=NAMES[m])
     ax.set_yscale("log")
-    ax.set_xlabel("time per video: track + fit + recover (s, median)")
-    ax.set_ylabel("|dv0| / |v0| (median over answers ok)")
-    ax.set_title("Speed against accuracy: tracker refinement, resolution, frame rate, method")
+    ax.set_xlabel("time per video: track + fit + recover (s); median, bars 25-75%")
+    ax.set_ylabel("|dv0| / |v0| over answers ok; median, bars 25-75%")
+    ax.set_title("Speed against accuracy: tracker refinement, resolution, frame rate, method "
+                 "(n = shots answered ok / shots)", fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
     fig.tight_layout()
@@ -283,37 +335,62 @@ def chart_speed(rows, out):
 
 
 def chart_stability(rows, out):
+    """Per spin direction and magnitude: each method's median error of w0 over its ok
+    answers (cells with none hatched, in the legend) and the share not ok, with the
+    counts and the sliding time written in each cell."""
     plt = _plt()
+    from matplotlib.patches import Patch
+
     angles = sorted({r["angle"] for r in rows})
     mags = sorted({r["mag"] for r in rows})
-    fig, axes = plt.subplots(2, 2, figsize=(12, 8))
+    fig, axes = plt.subplots(2, 2, figsize=(16, 9))
     for j, m in enumerate(("paper", "mle")):
         err = np.full((len(mags), len(angles)), np.nan)
         fail = np.zeros_like(err)
+        counts = np.zeros(err.shape, dtype=int)
+        totals = np.zeros(err.shape, dtype=int)
         t1 = np.zeros_like(err)
         for a_i, a in enumerate(angles):
             for k_i, k in enumerate(mags):
                 cell = [r for r in rows if r["angle"] == a and r["mag"] == k]
                 ok = [r for r in cell if r.get(f"status_{m}") == "ok"]
                 err[k_i, a_i] = _median(ok, f"err_rw0_{m}")
+                counts[k_i, a_i], totals[k_i, a_i] = len(ok), len(cell)
                 fail[k_i, a_i] = 1 - len(ok) / max(len(cell), 1)
                 t1[k_i, a_i] = _median(cell, "t1")
         ax = axes[0, j]
-        im = ax.imshow(np.log10(err), origin="lower", cmap="viridis", aspect="auto", vmin=-5, vmax=0)
-        fig.colorbar(im, ax=ax, label="log10 R|dw0|/|v0| (answers ok)")
+        ax.set_facecolor("0.85")
+        # Hatched underneath: shows only where the image is blank (no ok answer).
+        ax.add_patch(plt.Rectangle((-0.5, -0.5), len(angles), len(mags), fill=False, hatch="//", color="0.55", lw=0,
+                                   zorder=0))
+        im = ax.imshow(np.log10(err), origin="lower", cmap="viridis", aspect="auto", vmin=-5, vmax=0, zorder=1)
+        fig.colorbar(im, ax=ax, label="log10 median R|dw0|/|v0| over answers ok")
         ax2 = axes[1, j]
         im2 = ax2.imshow(fail, origin="lower", cmap="Reds", aspect="auto", vmin=0, vmax=1)
         fig.colorbar(im2, ax=ax2, label="share not ok (degenerate, ambiguous, failed)")
         for a_i in range(len(angles)):
             for k_i in range(len(mags)):
-                ax2.text(a_i, k_i, f"{t1[k_i, a_i] * 1000:.0f} ms", ha="center", va="center", fontsize=7)
+                e = err[k_i, a_i]
+                if np.isfinite(e):
+                    light = np.log10(e) > -2.0  # viridis is light at its top
+                    ax.text(a_i, k_i, f"{e:.0e}\nn={counts[k_i, a_i]}", ha="center", va="center", fontsize=8,
+                            color="k" if light else "w", zorder=2)
+                else:
+                    ax.text(a_i, k_i, f"no ok\n0/{totals[k_i, a_i]}", ha="center", va="center", fontsize=8,
+                            color="k", zorder=2)
+                f = fail[k_i, a_i]
+                ax2.text(a_i, k_i, f"{totals[k_i, a_i] - counts[k_i, a_i]}/{totals[k_i, a_i]}\n"
+                         f"{t1[k_i, a_i] * 1000:.0f} ms", ha="center", va="center", fontsize=8,
+                         color="w" if f > 0.6 else "k")
         for a in (ax, ax2):
             a.set_xticks(range(len(angles)), [f"{x:.0f}" for x in angles])
             a.set_yticks(range(len(mags)), [f"{x:g}" for x in mags])
             a.set_xlabel("spin direction relative to v0 (deg)")
             a.set_ylabel("spin magnitude R|w0|/|v0|")
-        ax.set_title(f"{m}: error of w0")
-        ax2.set_title(f"{m}: failure rate (cells: sliding time)")
+        ax.legend(handles=[Patch(facecolor="0.85", hatch="//", edgecolor="0.55", label="no ok answer in the cell")],
+                  loc="upper right", fontsize=8, framealpha=0.9)
+        ax.set_title(f"{NAMES[m]}: error of w0 (cells: median, n answers ok)")
+        ax2.set_title(f"{NAMES[m]}: share not ok (cells: not ok / shots, sliding time)")
     fig.suptitle("Where each method breaks: 90/270 deg = pure top/back spin (straight sliding), "
                  "0/180 deg = side spin (curved)")
     fig.tight_layout()

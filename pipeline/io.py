@@ -1,40 +1,5 @@
-"""Reading and writing scene files: the one place the JSON is touched."""
+"""Scene files for the command line: re-exported from :mod:`cuespin.sceneio`."""
 
-from __future__ import annotations
+from cuespin.sceneio import InputError, read_scene, write_scene
 
-import json
-import os
-from pathlib import Path
-
-from cuespin.physics.scene import Scene, SceneError, parse_scene, scene_to_dict
-
-
-class InputError(Exception):
-    """Bad input from the user: the message is one line saying what to do."""
-
-
-def read_scene(path) -> Scene:
-    """Read and validate a scene file; raise :class:`InputError` with one line."""
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise InputError(f"scene file not found: {path}")
-    except (IsADirectoryError, PermissionError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read scene file {path}: {exc.__class__.__name__}")
-    try:
-        d = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{path}: not valid JSON (line {exc.lineno}: {exc.msg})")
-    try:
-        return parse_scene(d)
-    except SceneError as exc:
-        raise InputError(f"{path}: {exc}")
-
-
-def write_scene(path, scene: Scene) -> None:
-    """Write a scene file atomically (a reader never sees half a file)."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".part")
-    tmp.write_text(json.dumps(scene_to_dict(scene), indent=2) + "\n")
-    os.replace(tmp, path)
+__all__ = ["InputError", "read_scene", "write_scene"]

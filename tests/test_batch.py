@@ -90,7 +90,7 @@ def test_torn_file_is_repaired(tmp_path):
     assert [r["hash"] for r in rows_of(out)] == ["aa", "aa"]
 
 
-def test_dask_cluster_gives_the_same_rows(dataset, tmp_path):
+def test_dask_cluster_in_chunks_gives_the_same_rows_and_resumes(dataset, tmp_path):
     distributed = pytest.importorskip("dask.distributed")
     videos = sorted(p for p in dataset.iterdir() if p.suffix == ".avi")[:3]
     local, remote = tmp_path / "local.csv", tmp_path / "dask.csv"
@@ -98,7 +98,10 @@ def test_dask_cluster_gives_the_same_rows(dataset, tmp_path):
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
                                   dashboard_address=None) as cluster:
         assert cluster.scheduler_address.startswith("tcp://127.0.0.1")
-        run_batch(videos, remote, scheduler=cluster.scheduler_address, progress=False)
+        # Two videos in chunks of 2 (one task), then all three: only the third is sent.
+        first = run_batch(videos[:2], remote, scheduler=cluster.scheduler_address, progress=False, chunk=2)
+        again = run_batch(videos, remote, scheduler=cluster.scheduler_address, progress=False, chunk=2)
+    assert (first["done"], again["done"], again["skipped"]) == (2, 1, 2)
     key = ("hash", "method")
     a = {tuple(r[k] for k in key): r for r in rows_of(local)}
     b = {tuple(r[k] for k in key): r for r in rows_of(remote)}
@@ -114,3 +117,28 @@ def test_bad_batch_input(tmp_path):
     (tmp_path / "empty").mkdir()
     res = cli("batch", tmp_path / "empty", "-o", tmp_path / "r.csv")
     assert res.returncode == 2 and "no videos found" in res.stderr
+
+
+def test_chunk_size_from_count_and_threads():
+    from cuespin.pipeline.batch import MAX_CHUNK, chunk_size
+    assert chunk_size(3, 1) == 1                      # few videos: one each, every thread busy
+    assert chunk_size(2000, 2) == MAX_CHUNK           # capped
+    assert chunk_size(800, 100) == 2                  # ~4 chunks per thread
+    assert chunk_size(100_000, 1000) == 25
+
+
+def test_scene_is_looked_for_beside_the_path_given(dataset, tmp_path):
+    """A symbolic link to a video elsewhere, its scene beside the link: batch keeps the link's path."""
+    from cuespin.pipeline.batch import expand_inputs
+    links, store = tmp_path / "links", tmp_path / "store"  # the store has videos only, no scenes
+    links.mkdir()
+    store.mkdir()
+    (store / "blob.avi").write_bytes((dataset / "shot_0001.avi").read_bytes())
+    (links / "mine.avi").symlink_to(store / "blob.avi")
+    (links / "mine.json").write_bytes((dataset / "shot_0001.json").read_bytes())
+    videos = expand_inputs([links])
+    assert videos == [links / "mine.avi"]
+    out = tmp_path / "r.csv"
+    counts = run_batch(videos, out, workers=1, progress=False)
+    rows = rows_of(out)
+    assert counts["failed"] == 0 and {r["video"] for r in rows} == {str(links / "mine.avi")}

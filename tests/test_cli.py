@@ -35,7 +35,7 @@ def test_render_writes_video_and_truth(tmp_path):
     assert res.returncode == 0, res.stderr
     assert (tmp_path / "v.avi").stat().st_size > 0
     lines = (tmp_path / "v.truth.csv").read_text().splitlines()
-    assert lines[0] == "frame,t,u_px,v_px,x_m,y_m" and len(lines) == 31
+    assert lines[0] == "frame,t,u_px,v_px,x_m,y_m,uc_px,vc_px" and len(lines) == 31
 
 
 @pytest.mark.parametrize("content,needle", [
@@ -43,7 +43,7 @@ def test_render_writes_video_and_truth(tmp_path):
     ("{not json", "not valid JSON"),
     ({"camera": CONVENTIONS_EXAMPLE["camera"]}, "physics: required key is missing"),
     ({"physics": {"mu_s": 0}, "camera": CONVENTIONS_EXAMPLE["camera"]}, "physics.mu_s: must be > 0"),
-    ({"physics": {}, "camera": CONVENTIONS_EXAMPLE["camera"]}, "truth: required key is missing"),
+    ({"physics": CONVENTIONS_EXAMPLE["physics"], "camera": CONVENTIONS_EXAMPLE["camera"]}, "truth: required key is missing"),
 ])
 def test_render_bad_input_one_line_exit_2(tmp_path, content, needle):
     scene = tmp_path / "s.json"

@@ -82,3 +82,63 @@ def test_presets_listed():
     # contact velocity of a case4 shot is zero: rolls from the strike
     shot, p = sample_shot(0, "case4")
     np.testing.assert_allclose(contact_velocity(shot.v0, shot.w0, p.R), 0.0, atol=1e-12)
+
+
+def test_realistic_look_sampled_reproducibly_and_covers_the_colours():
+    from cuespin.render.look import BALL_COLOURS, FELT_COLOURS, grey_level
+
+    a = sample_scenes(40, seed=7, look="realistic")
+    assert a == sample_scenes(40, seed=7, look="realistic")
+    assert a != sample_scenes(40, seed=8, look="realistic")
+    # The plain look's draws are untouched by the option.
+    assert sample_scenes(3, seed=7) == sample_scenes(3, seed=7, look="plain")
+    looks = [s.render for s in a]
+    assert all(r["look"] == "realistic" for r in looks)
+    assert {r["ball_name"] for r in looks} == set(BALL_COLOURS)
+    assert {r["felt_name"] for r in looks} == set(FELT_COLOURS)
+    contrast = [abs(grey_level(r["ball_colour"]) - grey_level(r["felt_colour"])) for r in looks]
+    assert min(contrast) < 25
+    assert {r["markings"] for r in looks} == {"none", "dots", "logo"}
+    assert any(r["cue"] for r in looks) and not all(r["cue"] for r in looks)
+    assert all(1.0 <= r["noise_sigma"] <= 8.0 for r in looks)
+    # The camera shows the rails: the playing surface's corners lie inside
+    # the frame, at least the rail's width from its edges.
+    for s in a:
+        from cuespin.render.look import CUSHION_WIDTH_M, RAIL_WIDTH_M
+        b = CUSHION_WIDTH_M + RAIL_WIDTH_M
+        corners = np.array([[-b, -b], [s.table.length + b, s.table.width + b]])
+        uv = s.camera.to_pixels(corners)
+        assert (uv >= -0.5).all() and (uv[:, 0] <= s.camera.width - 0.5).all()
+        assert (uv[:, 1] <= s.camera.height - 0.5).all()
+
+
+def test_resting_balls_are_off_the_path_and_on_the_cloth():
+    from cuespin.physics import positions
+
+    n_balls = 0
+    for s in sample_scenes(30, seed=3, look="realistic"):
+        end, _ = motion_end(s.truth, s.physics, s.table, 240.0, 20.0)
+        path = positions(s.truth, s.physics, np.linspace(s.truth.t0, end, 2000))
+        R = s.physics.R
+        for b in s.render["balls"]:
+            p = np.array([b["x"], b["y"]])
+            assert np.hypot(*(path - p).T).min() >= 2 * R + 0.03 - 1e-3
+            assert s.table.contains(p[None], margin=R)[0]
+            n_balls += 1
+        xy = [(b["x"], b["y"]) for b in s.render["balls"]]
+        for i in range(len(xy)):
+            for j in range(i):
+                assert np.hypot(xy[i][0] - xy[j][0], xy[i][1] - xy[j][1]) >= 2 * R
+    assert n_balls >= 20
+
+
+def test_generate_realistic_dataset(tmp_path):
+    import cv2
+
+    r = generate_dataset(tmp_path, n=1, seed=2, preset="leaves_table", fps=60.0, look="realistic")
+    cap = cv2.VideoCapture(str(r["paths"][0]))
+    ok, im = cap.read()
+    cap.release()
+    assert ok and im.ndim == 3
+    # Colour: the channels differ (the grey look's are equal).
+    assert np.abs(im[..., 0].astype(int) - im[..., 2]).mean() > 5

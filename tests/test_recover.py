@@ -227,7 +227,7 @@ def test_strike_frames_left_out_where_the_fit_puts_the_strike(tmp_path):
     # before: free slip passed the test (LR 20.8) on that frame alone and v0
     # came out 1.6% off, at 9 stated errors.
     from cuespin.data_gen.sampler import sample_scenes
-    from cuespin.pipeline.cli import run_recover
+    from cuespin.pipeline.run import run_recover
     scene = sample_scenes(151, 0)[150]
     scene.render["max_duration"] = 6.0
     video = tmp_path / "shot.avi"

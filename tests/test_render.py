@@ -109,12 +109,14 @@ def test_lossless_video_bit_exact_and_sidecar(tmp_path):
         for ch in range(b.shape[2]):
             assert np.array_equal(a, b[:, :, ch])
     side = read_truth_csv(truth_path(video))
-    assert list(side) == ["frame", "t", "u_px", "v_px", "x_m", "y_m"]
+    assert list(side) == ["frame", "t", "u_px", "v_px", "x_m", "y_m", "uc_px", "vc_px"]
     np.testing.assert_array_equal(side["frame"], np.arange(len(frames)))
     np.testing.assert_allclose(side["t"], np.arange(len(frames)) / 60.0, rtol=0, atol=1e-15)
     xy = positions(scene.truth, scene.physics, side["t"])
     np.testing.assert_allclose(np.c_[side["x_m"], side["y_m"]], xy, atol=1e-15)
     np.testing.assert_allclose(np.c_[side["u_px"], side["v_px"]], truth.uv, atol=1e-12)
+    # Top-down: the projected centre is the silhouette's centroid.
+    np.testing.assert_allclose(np.c_[side["uc_px"], side["vc_px"]], truth.uv, atol=1e-12)
 
 
 def test_lossy_video_reads_back_frame_for_frame(tmp_path):
@@ -142,3 +144,144 @@ def test_video_length_follows_motion():
     r = FrameRenderer(scene)
     inside = scene.table.contains(r.truth.xy)
     assert inside[:-1].all() and not inside[-1]
+
+
+# --- the realistic look ----------------------------------------------------
+
+def realistic(seed=3, preset="case3", **over):
+    """A sampled realistic scene with some render keys overridden."""
+    from cuespin.physics.scene import Scene
+
+    sc = sample_scene(seed, preset, fps=over.pop("fps", 120.0), look="realistic",
+                      blur=over.pop("blur", True), noise=over.pop("noise", None))
+    render = dict(sc.render)
+    render.update(over)
+    return Scene(physics=sc.physics, camera=sc.camera, table=sc.table, render=render, truth=sc.truth)
+
+
+def test_realistic_frames_are_colour_with_rails_in_view():
+    scene = realistic(noise=3.0)
+    r = FrameRenderer(scene, n_frames=3)
+    f = next(r.frames())
+    assert f.shape == (scene.camera.height, scene.camera.width, 3) and f.dtype == np.uint8
+    # The cloth has the felt's colour, the frame's corner is outside the table.
+    felt = np.asarray(scene.render["felt_colour"])
+    mid = r.background[scene.camera.height // 2 - 5:scene.camera.height // 2 + 5,
+                       scene.camera.width // 2 - 5:scene.camera.width // 2 + 5].reshape(-1, 3)
+    ramp = 1 + scene.render["ramp"]
+    assert np.all(np.abs(mid.mean(0) - felt) <= felt * (ramp - 1) / 2 + 6 * scene.render["texture"] * felt + 2)
+    assert np.abs(r.background[2, 2].astype(float) - felt).max() > 20
+
+
+@pytest.mark.parametrize("exposure_blur", [False, True])
+def test_realistic_silhouette_centroid_equals_truth(exposure_blur):
+    # Flat shading (ambient 1, no highlight, no markings, no texture or ramp):
+    # the image is the exact coverage times the ball's colour, then the lens
+    # PSF, which keeps centroids: the centroid per channel is the truth.
+    scene = realistic(blur=exposure_blur, ambient=1.0, specular=0.0, markings="none",
+                      texture=0.0, ramp=0.0, noise_sigma=0.0, cue=False, balls=[])
+    r = FrameRenderer(scene)
+    bg = r.background.astype(float)
+    rng = np.random.default_rng(0)
+    moving = np.flatnonzero(r.truth.t > scene.truth.t0)[::9][:12]
+    for k in moving:
+        # The drawing itself (before 8 bits): pixel integration's own error,
+        # measured max 1.3e-3 px.
+        d, u0, v0 = r._ball_delta(k)
+        for c in range(3):
+            assert np.abs(centroid(d[..., c]) + [u0, v0] - r.truth.uv[k]).max() < CENTROID_TOL_PX
+        # The 8-bit frame: a 7.5-px ball on 100 levels of contrast per
+        # channel; measured max 0.0155 px on one channel, all channels
+        # together within the plain look's tolerance.
+        q = r.render(k, rng).astype(float) - bg
+        assert np.abs(centroid(q.sum(-1)) - r.truth.uv[k]).max() < QUANTISED_CENTROID_TOL_PX
+
+
+def test_realistic_noise_is_independent_per_channel():
+    scene = realistic(noise=4.0, cue=False)
+    r = FrameRenderer(scene, n_frames=2)
+    f = next(r.frames(seed=3)).astype(float) - r.background
+    e = f[200:300, 300:500].reshape(-1, 3)
+    assert e.std(0) == pytest.approx(np.full(3, np.sqrt(16 + 1 / 12)), rel=0.05)
+    rho = np.corrcoef(e.T)
+    assert np.abs(rho[np.triu_indices(3, 1)]).max() < 0.03
+
+
+def test_orientation_of_a_rolling_ball_turns_by_distance_over_R():
+    from cuespin.physics import phases
+    from cuespin.render.draw import ball_motion
+    from cuespin.render.look import Orientation
+
+    shot, params = sample_shot(0, "case4")          # rolls from the strike
+    scene = make_scene(shot, params)
+    motion = ball_motion(scene)
+    ph = phases(shot, params)
+    t = np.linspace(shot.t0, min(ph.t2, shot.t0 + 1.0), 7)
+    rot = Orientation(lambda tt: motion(tt).w, 0.0, float(t[-1]))(t)
+    dist = np.hypot(*(motion(t).x - shot.x0).T)
+    ang = np.arccos(np.clip((np.trace(rot, axis1=1, axis2=2) - 1) / 2, -1, 1))
+    # Angle mod 2 pi against distance / R; axis z x v_hat (eq. 12).
+    expect = np.mod(dist / params.R + np.pi, 2 * np.pi) - np.pi
+    # The integration step straddling the strike's jump in w: up to one step.
+    from cuespin.render.look import ORIENT_STEP_RAD
+    np.testing.assert_allclose(ang, np.abs(expect), atol=ORIENT_STEP_RAD)
+    axis = np.array([-shot.v0[1], shot.v0[0], 0.0]) / np.hypot(*shot.v0)
+    k = np.argmax(np.abs(np.sin(ang)))
+    A = rot[k]
+    w = np.array([A[2, 1] - A[1, 2], A[0, 2] - A[2, 0], A[1, 0] - A[0, 1]]) / (2 * np.sin(ang[k]))
+    np.testing.assert_allclose(w * np.sign(np.sin(expect[k])), axis, atol=1e-6)
+
+
+def test_markings_move_with_spin():
+    # A rolling ball's top moves at 2 v: the marks seen from above run ahead
+    # of the centre in the direction of motion, and a still ball's do not move.
+    scene = realistic(seed=0, preset="case4", blur=False, ambient=1.0, specular=0.0,
+                      markings="dots", mark_colour=[0, 0, 0], ball_colour=[230, 230, 230],
+                      noise_sigma=0.0, cue=False, balls=[])
+    r = FrameRenderer(scene)
+    R = scene.physics.R
+    centre = np.array([[200.3, 150.6]])
+
+    def marks_at(t):
+        rots = r._orient(np.array([t]))
+        cov, colour, iu, iv = r._ball_windows(centre, r._albedo, rots)
+        return ((cov[0] > 0.99) * (1 - colour[0].mean(-1) / 230)).astype(np.float64)
+
+    def shift(a, b):
+        # Dominant translation of the marks (phase correlation): the
+        # centroid of dark pixels would mislead, as a mark growing towards
+        # the middle outweighs one shrinking to the rim.
+        (du, dv), _ = cv2.phaseCorrelate(a, b)
+        return np.array([du, dv])
+
+    t0 = scene.truth.t0
+    assert np.array_equal(marks_at(0.2 * t0), marks_at(0.9 * t0))
+    for t in t0 + np.linspace(0.02, 0.5, 5):
+        st = r.motion(np.array([t]))
+        dt = 0.1 * R / np.hypot(*st.v[0])                       # a tenth of a radian
+        d = shift(marks_at(t), marks_at(t + dt))
+        move_img = scene.camera.jacobian(st.x[0]) @ st.v[0]
+        assert np.linalg.norm(d) > 0.2
+        assert np.dot(d, move_img) > 0.8 * np.linalg.norm(d) * np.linalg.norm(move_img)
+
+
+@pytest.mark.parametrize("codec", ["FFV1", "MJPG"])
+def test_realistic_render_round_trips_through_a_real_file(tmp_path, codec):
+    # A few frames around the strike, cue in view (FFV1 encodes colour
+    # noise slowly: 0.18 s a frame here).
+    scene = realistic(seed=5, preset="leaves_table", fps=60.0, noise=3.0, codec=codec,
+                      duration=0.25, cue=True)
+    video = tmp_path / "shot.avi"
+    truth = render_video(scene, video)
+    frames = list(FrameRenderer(scene).frames())
+    back = read_all(video)
+    assert len(back) == len(frames) == len(truth.t)
+    if codec == "FFV1":
+        assert all(np.array_equal(a, b) for a, b in zip(frames, back))
+    else:
+        # Colour JPEG at OpenCV's default quality (chroma subsampled): mean
+        # error per channel measured 2.2-2.4 at noise 3.
+        err = np.mean([np.abs(a.astype(float) - b).mean() for a, b in zip(frames, back)])
+        assert err < 4.0
+    side = read_truth_csv(truth_path(video))
+    np.testing.assert_allclose(np.c_[side["uc_px"], side["vc_px"]], truth.uvc, atol=1e-12)

@@ -83,3 +83,38 @@ def test_invalid_scene_names_the_key(path, value, expect):
 
 def test_mu_r_zero_is_allowed():
     assert parse_scene(broken("physics.mu_r", 0.0)).physics.mu_r == 0.0
+
+
+def test_defaults_said_on_stderr_and_size_from_video(tmp_path, capsys):
+    """Item 7: physics values left out are said in one line; the frame size comes
+    from the video when the scene leaves it out (a real rendered file, tracked)."""
+    from dataclasses import replace
+
+    from cuespin.data_gen.sampler import make_scene
+    from cuespin.physics.motion import BallParams, Shot
+    from cuespin.pipeline.io import read_scene
+    from cuespin.render import render_video
+    from cuespin.track.video import track_video
+
+    scene = make_scene(Shot(x0=(0.3, 0.3), v0=(0.5, 0.1), w0=(0.0, 0.0), t0=0.02), BallParams(),
+                       fps=60.0, px_per_m=100.0,
+                       render={"noise_sigma": 1.0, "codec": "FFV1", "duration": 0.3, "seed": 1})
+    video = tmp_path / "v.avi"
+    render_video(scene, video)
+    d = scene_to_dict(scene)
+    del d["camera"]["width"], d["camera"]["height"], d["physics"]["R"], d["physics"]["mu_r"]
+    (tmp_path / "s.json").write_text(json.dumps(d))
+    capsys.readouterr()
+    read = read_scene(tmp_path / "s.json")
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "physics.R = 0.028575" in err and "physics.mu_r = 0.01" in err
+    assert "mu_s" not in err
+    assert read.camera.width is None
+    res = track_video(video, read)
+    assert res.ok.sum() > 10
+    full = track_video(video, scene)
+    np.testing.assert_allclose(res.xy[res.ok], full.xy[full.ok], atol=1e-12)
+    # A size the scene states is still checked against the video.
+    from cuespin.track.video import TrackError
+    with pytest.raises(TrackError):
+        track_video(video, replace(read, camera=read.camera.with_size(640, 480)))

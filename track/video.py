@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 
 from cuespin.physics.scene import Scene
-from cuespin.render.video import quiet_native_stderr
+from cuespin.videoio import quiet_native_stderr
 from cuespin.track.background import Background, FeltAccumulator, learn_background
 from cuespin.track.colour import GREY, Projection, learn_projection
 from cuespin.track.model import refit_shift
@@ -129,15 +129,6 @@ def open_video(path) -> cv2.VideoCapture:
         return cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
 
 
-def _sized(cam, w: int, h: int):
-    """The camera with its size taken from the video where the scene leaves it out."""
-    if getattr(cam, "with_size", None) is not None:
-        return cam.with_size(w, h)
-    if cam.width is None or cam.height is None:
-        return replace(cam, width=cam.width or w, height=cam.height or h)
-    return cam
-
-
 def search_mask(cam, table, R: float, shape) -> np.ndarray:
     """Pixels where the ball's centre may be: the playing surface's image, grown by R.
 
@@ -216,7 +207,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     w, h = info.width, info.height
     if info.n_frames <= 0 and w == 0:
         raise TrackError(f"{path}: the video has no frames")
-    cam = _sized(scene.camera, w, h)
+    cam = scene.camera.with_size(w, h)  # a scene may leave the size to the video (CONVENTIONS.md)
     if (w, h) != (cam.width, cam.height):
         raise TrackError(f"{path}: frames are {w}x{h} but the scene's camera says "
                          f"{cam.width}x{cam.height}; is this the right scene file?")

@@ -1,0 +1,298 @@
+"""The realistic look: colour felt, rails, pockets, sights, other balls, a shaded ball.
+
+Everything here draws *into arrays* (no files); :mod:`cuespin.render.draw`
+uses it for scenes whose ``render.look`` is ``"realistic"``.  The look's
+settings live in the scene's ``render`` block (the tracker never reads it);
+:data:`LOOK_DEFAULTS` lists every key with its default.
+
+Geometry of the image of a ball
+-------------------------------
+The ball's silhouette is drawn with exact pixel coverage (the plain look's
+``disc_coverage`` on a top-down camera), and shading, highlight and markings
+only modulate the colour *inside* it, so the silhouette's centroid (the
+truth sidecar's ``u_px, v_px``) stays exact.  The optical blur is a
+symmetric Gaussian PSF and leaves every centroid where it was.
+
+The image's *intensity-weighted* centroid is not the centre: the light comes
+from one side (``light_azimuth``, ``light_elevation``), so the lit half is
+brighter and its highlight sits towards the light.  Measured with
+``benchmarks/render.py --offsets`` (centroid of ``|frame - felt|`` summed
+over the channels, noise-free, top-down camera at 450 px/m, radius 12.9 px,
+ball pointing 45 degrees from the light):
+
+=====================================  ==========================
+look                                   centroid - centre (px)
+=====================================  ==========================
+matte (ambient 0.35, no highlight)     see OFFSETS_MEASURED below
+=====================================  ==========================
+
+(The table is filled in from the measurement; see ``OFFSETS_MEASURED``.)
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+# Ball and felt colours (BGR, 0-255) of the usual sets.  Grey level
+# (0.114 B + 0.587 G + 0.299 R, OpenCV's) contrast of some pairs is under 25:
+# red on green (88 vs 92), orange on grey felt, blue on blue.
+BALL_COLOURS = {
+    "white": (228, 232, 235),
+    "yellow": (30, 205, 240),
+    "red": (45, 40, 200),
+    "orange": (30, 125, 240),
+    "blue": (165, 75, 25),
+}
+FELT_COLOURS = {
+    "green": (60, 130, 35),
+    "blue": (150, 95, 25),
+    "grey": (125, 122, 118),
+    "red": (45, 45, 150),
+}
+RAIL_COLOURS = ((25, 55, 95), (30, 45, 70), (20, 30, 45), (60, 60, 62))   # woods, black
+MARK_COLOURS = ((30, 30, 200), (25, 25, 25))                             # red, black dots
+
+# Real table dimensions (m): cushion nose to rail, rail to outer edge,
+# pocket mouths, sights (WPA: diamonds every 1/8 of the length).
+CUSHION_WIDTH_M = 0.05
+RAIL_WIDTH_M = 0.11
+CORNER_POCKET_R_M = 0.062
+SIDE_POCKET_R_M = 0.058
+SIGHT_R_M = 0.009
+
+LOOK_DEFAULTS = {
+    "look": "plain",                 # "plain" (uniform grey disc) or "realistic"
+    "ball_colour": [228, 232, 235],  # BGR albedo of the tracked ball
+    "felt_colour": [60, 130, 35],    # BGR of the cloth
+    "rail_colour": [25, 55, 95],     # BGR of the wooden rail
+    "noise_sigma": 2.0,              # Gaussian sensor noise per channel (levels)
+    "ambient": 0.35,                 # share of light that does not depend on the normal
+    "light_azimuth": 0.6,            # direction of the light in the table frame (rad)
+    "light_elevation": 1.1,          # above the cloth (rad); pi/2 is straight overhead
+    "specular": 0.5,                 # highlight strength (0: none), fraction of 255
+    "shininess": 40.0,               # Blinn exponent: larger, smaller highlight
+    "psf_sigma": 0.7,                # optical blur, Gaussian PSF sigma (px)
+    "texture": 0.04,                 # felt texture, relative std of brightness
+    "texture_scale": 1.5,            # its correlation length (px)
+    "ramp": 0.15,                    # lighting ramp: relative peak-to-peak across the frame
+    "ramp_angle": 0.0,               # its direction in the image (rad)
+    "rails": True,                   # cushions, rails, pockets and sights around the cloth
+    "balls": [],                     # other balls at rest: [{"x", "y", "colour": [b, g, r]}]
+    "markings": "none",              # "none", "dots" or "logo" on the tracked ball
+    "mark_colour": [30, 30, 200],    # BGR of the markings
+    "cue": False,                    # a cue along the shot line at the strike
+    "cue_gap": 0.08,                 # cue tip's distance behind the ball before it moves (m)
+    "cue_follow": 0.04,              # follow-through past the contact point (m)
+}
+
+
+def grey_level(bgr) -> float:
+    """OpenCV's BGR-to-grey weighting of a colour (levels)."""
+    b, g, r = (float(c) for c in bgr)
+    return 0.114 * b + 0.587 * g + 0.299 * r
+
+
+def light_vectors(settings: dict):
+    """Unit light direction ``L`` and Blinn half vector ``H`` (view from +z), table frame."""
+    az, el = float(settings["light_azimuth"]), float(settings["light_elevation"])
+    L = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
+    H = L + np.array([0.0, 0.0, 1.0])
+    return L, H / np.linalg.norm(H)
+
+
+def shade(normals: np.ndarray, albedo: np.ndarray, settings: dict) -> np.ndarray:
+    """Colour (BGR, float) of the ball's surface with outward ``normals`` (..., 3).
+
+    Lambertian diffuse ``albedo (ka + (1 - ka) max(n.L, 0))`` (darker towards
+    the rim, the terminator on the side away from the light) plus a Blinn
+    highlight ``255 ks max(n.H, 0)^p`` of the light's own colour.
+    """
+    L, H = light_vectors(settings)
+    ka = float(settings["ambient"])
+    ndl = np.maximum(normals @ L, 0.0)
+    out = albedo * (ka + (1.0 - ka) * ndl)[..., None]
+    ks = float(settings["specular"])
+    if ks > 0:
+        spec = 255.0 * ks * np.maximum(normals @ H, 0.0) ** float(settings["shininess"])
+        out = out + spec[..., None]
+    return out
+
+
+# --- orientation of a spinning ball --------------------------------------
+
+def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product ``a b`` of quaternions ``(w, x, y, z)``, broadcast."""
+    aw, ax, ay, az = np.moveaxis(a, -1, 0)
+    bw, bx, by, bz = np.moveaxis(b, -1, 0)
+    return np.stack([aw * bw - ax * bx - ay * by - az * bz,
+                     aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw], axis=-1)
+
+
+def quat_from_rotvec(r: np.ndarray) -> np.ndarray:
+    """Quaternions of rotation vectors ``r`` (..., 3) (axis times angle, rad)."""
+    th = np.linalg.norm(r, axis=-1, keepdims=True)
+    # sin(th/2)/th, with its limit 1/2 at th -> 0.
+    s = np.where(th > 1e-12, np.sin(0.5 * th) / np.maximum(th, 1e-300), 0.5)
+    return np.concatenate([np.cos(0.5 * th), r * s], axis=-1)
+
+
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) of unit quaternions (..., 4)."""
+    w, x, y, z = np.moveaxis(q, -1, 0)
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+    ], -2)
+
+
+def prefix_product(dq: np.ndarray) -> np.ndarray:
+    """``Q[i] = dq[i] dq[i-1] ... dq[0]`` for every ``i`` (later rotations on the left).
+
+    Hillis-Steele scan: log2(n) vectorised steps instead of n Python ones.
+    """
+    q = dq.copy()
+    d = 1
+    while d < len(q):
+        q[d:] = quat_mul(q[d:], q[:-d])
+        q /= np.linalg.norm(q, axis=-1, keepdims=True)
+        d *= 2
+    return q
+
+
+# Largest rotation (rad) of one integration step: the midpoint rule's error
+# per step is O(|w'| dt^3), far below a pixel's angle on the ball; where w
+# jumps (the strike) the step that straddles the jump is off by at most this
+# angle (0.03 px on the rim of a 14-px ball).
+ORIENT_STEP_RAD = 0.002
+MAX_ORIENT_STEPS = 2_000_000
+
+
+class Orientation:
+    """Body-to-table rotation of a spinning ball at any time.
+
+    Integrates ``dR/dt = [w(t)]x R`` from ``R(t_start) = I`` on a grid fine
+    enough that each step turns the ball by at most ``ORIENT_STEP_RAD``
+    (midpoint rule), with ``w`` the forward model's planar angular velocity
+    (its z part is not modelled and taken as 0).
+
+    Parameters
+    ----------
+    spin : callable
+        ``spin(t)`` -> angular velocity (rad/s), shape (n, 2), at times (n,).
+    t_start, t_end : float
+        Span of times (s) that will be asked for.
+    """
+
+    def __init__(self, spin, t_start: float, t_end: float):
+        self.spin = spin
+        probe = np.linspace(t_start, t_end, 8192)
+        wmax = max(float(np.hypot(*spin(probe).T).max()), 1e-9)
+        n = int(min(MAX_ORIENT_STEPS, max(1, math.ceil((t_end - t_start) * wmax / ORIENT_STEP_RAD))))
+        self.grid = np.linspace(t_start, t_end, n + 1)
+        dt = np.diff(self.grid)
+        w_mid = spin(0.5 * (self.grid[1:] + self.grid[:-1]))
+        rv = np.c_[w_mid * dt[:, None], np.zeros(n)]
+        self.Q = np.concatenate([[[1.0, 0.0, 0.0, 0.0]], prefix_product(quat_from_rotvec(rv))])
+
+    def __call__(self, t) -> np.ndarray:
+        """Rotation matrices, shape ``t.shape + (3, 3)``, at times ``t`` (s)."""
+        t = np.asarray(t, dtype=float)
+        flat = t.ravel()
+        n = len(self.grid) - 1
+        k = np.clip(np.searchsorted(self.grid, flat, side="right") - 1, 0, n)
+        # The last bit from the grid point to the time asked, at its own w.
+        rest = np.c_[self.spin(flat) * (flat - self.grid[k])[:, None], np.zeros(len(flat))]
+        q = quat_mul(quat_from_rotvec(rest), self.Q[k])
+        return quat_to_matrix(q).reshape(t.shape + (3, 3))
+
+
+def marks(kind: str) -> list[tuple[np.ndarray, float]]:
+    """Markings in the ball's body frame: ``[(unit centre, angular radius rad)]``.
+
+    ``dots``: six small dots on the axes (a measles training ball);
+    ``logo``: one large disc and a small one beside it (a maker's mark).
+    """
+    if kind == "dots":
+        e = np.eye(3)
+        return [(s * e[i], 0.17) for i in range(3) for s in (1.0, -1.0)]
+    if kind == "logo":
+        side = np.array([math.sin(0.55), 0.0, math.cos(0.55)])
+        return [(np.array([0.0, 0.0, 1.0]), 0.33), (side, 0.12)]
+    return []
+
+
+def mark_mask(normals_body: np.ndarray, kind: str, radius_px: float) -> np.ndarray:
+    """Fraction (0-1) of each pixel a marking covers; edges antialiased over one pixel."""
+    out = np.zeros(normals_body.shape[:-1])
+    for c, a in marks(kind):
+        ang = np.arccos(np.clip(normals_body @ c, -1.0, 1.0))
+        out = np.maximum(out, np.clip((a - ang) * radius_px + 0.5, 0.0, 1.0))
+    return out
+
+
+# --- static scene: cloth, cushions, rails, pockets, sights ----------------
+
+def pockets(length: float, width: float) -> list[tuple[float, float, float]]:
+    """Pocket centres and radii (m), table frame: four corners and two sides."""
+    c, s = CORNER_POCKET_R_M, SIDE_POCKET_R_M
+    d = 0.5 * c   # corner pocket centres sit just outside the corner, on the diagonal
+    return [(-d, -d, c), (length + d, -d, c), (-d, width + d, c), (length + d, width + d, c),
+            (0.5 * length, -0.6 * s, s), (0.5 * length, width + 0.6 * s, s)]
+
+
+def sights(length: float, width: float) -> np.ndarray:
+    """Diamond sights (m) on the rails' centre lines: every 1/8 of the length, 1/4 of the width."""
+    off = CUSHION_WIDTH_M + 0.5 * RAIL_WIDTH_M
+    pts = []
+    for k in range(1, 8):
+        if k != 4:
+            pts += [(k * length / 8, -off), (k * length / 8, width + off)]
+    for k in range(1, 4):
+        pts += [(-off, k * width / 4), (length + off, k * width / 4)]
+    return np.array(pts)
+
+
+def table_layers(xy: np.ndarray, length: float, width: float) -> dict[str, np.ndarray]:
+    """Boolean masks of the table's parts at table points ``xy`` (..., 2) on the cloth's plane."""
+    x, y = xy[..., 0], xy[..., 1]
+    dx = np.maximum(np.maximum(-x, x - length), 0.0)
+    dy = np.maximum(np.maximum(-y, y - width), 0.0)
+    out = np.maximum(dx, dy)                      # distance outside the playing surface (m)
+    cushion = (out > 0) & (out <= CUSHION_WIDTH_M)
+    rail = (out > CUSHION_WIDTH_M) & (out <= CUSHION_WIDTH_M + RAIL_WIDTH_M)
+    pocket = np.zeros(x.shape, dtype=bool)
+    for px, py, r in pockets(length, width):
+        near = out < 2 * r          # pockets lie at the edge: test only the points near it
+        pocket[near] |= (x[near] - px) ** 2 + (y[near] - py) ** 2 <= r * r
+    sight = np.zeros(x.shape, dtype=bool)
+    xs, ys = x[rail], y[rail]
+    hit = np.zeros(xs.shape, dtype=bool)
+    for px, py in sights(length, width):
+        hit |= (np.abs(xs - px) + np.abs(ys - py)) <= SIGHT_R_M   # a diamond
+    sight[rail] = hit
+    beyond = out > CUSHION_WIDTH_M + RAIL_WIDTH_M
+    return {"cushion": cushion & ~pocket, "rail": rail & ~pocket & ~sight,
+            "sight": sight & ~pocket, "pocket": pocket, "beyond": beyond & ~pocket}
+
+
+def felt_texture(shape: tuple[int, int], scale: float, rng: np.random.Generator) -> np.ndarray:
+    """Unit-variance Gaussian texture correlated over ``scale`` px."""
+    import cv2
+
+    tex = rng.standard_normal(shape).astype(np.float32)
+    if scale > 0:
+        tex = cv2.GaussianBlur(tex, (0, 0), float(scale))
+    return tex / max(float(tex.std()), 1e-12)
+
+
+def ramp_image(h: int, w: int, ramp: float, angle: float) -> np.ndarray:
+    """Multiplicative lighting ramp ``1 + ramp * p``, ``p`` in [-1/2, 1/2] across the frame."""
+    vv, uu = np.mgrid[0:h, 0:w].astype(np.float32)
+    p = (uu - (w - 1) / 2) * math.cos(angle) + (vv - (h - 1) / 2) * math.sin(angle)
+    span = max(float(p.max() - p.min()), 1.0)
+    return 1.0 + float(ramp) * p / span
