@@ -105,6 +105,7 @@ class BallTracker:
         self.cfg = config
         self.proj = projection
         self.k = box_size(self.r)
+        self.k_out = box_size(2 * self.r) | 1  # the ring around the ball's box
         # Box-filtered noise of a frame minus a (slightly noisy) background.
         self.thresh = max(DETECT_SIGMAS * max(background.sigma, 0.5) * 1.1 / self.k,
                           0.25 * background.contrast)
@@ -142,14 +143,27 @@ class BallTracker:
         return D, sm, val, np.array([loc[0] + u0, loc[1] + v0], float)
 
     def _full_search(self, frame):
-        D, sm, val, loc = self._peak(frame, 0, 0, self.W, self.H)
+        """The most ball-like blob on the playing surface: a box the ball fills
+        (as in :meth:`_peak`) less the ring of felt around it.  A stick (the
+        cue) or an edge fills the ring as much as the box and scores near 0;
+        the ball scores ~0.8 of its contrast."""
+        roi = self.proj(frame)
+        D = self.pol * (roi - self.bg.image)
+        k, K = self.k, self.k_out
+        inner = cv2.blur(D, (k, k))
+        outer = cv2.boxFilter(D, -1, (K, K), normalize=False)
+        sm = inner - (outer - inner * (k * k)) / (K * K - k * k)
+        if self.mask is not None:
+            sm[~self.mask] = -np.inf
+        _, val, _, at = cv2.minMaxLoc(sm)
+        loc = np.array(at, float)
         if val < self.thresh:
             return None, NO_BALL
         # A second ball-like blob away from the first: flag, don't guess.
         mask = np.zeros_like(sm, dtype=np.uint8)
         cv2.circle(mask, (int(loc[0]), int(loc[1])), int(2.5 * self.r + 4), 1, -1)
-        sm2 = np.where(mask.astype(bool), -np.inf, sm)
-        if np.nanmax(sm2) >= max(self.thresh, 0.5 * val):
+        sm[mask.astype(bool)] = -np.inf
+        if sm.max() >= max(self.thresh, 0.5 * val):
             return loc, TWO_BLOBS
         return loc, OK
 
@@ -182,10 +196,16 @@ class BallTracker:
                 return _lost(status)
             if status != OK:
                 return _lost(status)
-            blur = None  # no velocity to predict it: measured from the image
+            # No velocity to predict the blur.  Before the ball is first found
+            # it rests (a shot is struck from rest), and a streak measured from
+            # the image there would take the cue, or the ball's shading, for
+            # motion: try it sharp first.  Once lost in flight, measure it.
+            blur = np.zeros(2) if not self.history else None
         self.last_fit = None
         self.last_patch = None
         obs = self._refine(frame, loc, blur)
+        if obs.status != OK and blur is not None and not self.history:
+            obs = self._refine(frame, loc, None)
         if obs.status == OK:
             self.history = (self.history + [(k, obs.uv)])[-2:]
         return obs

@@ -161,7 +161,7 @@ def learn_model(frames: list, radius_px: float, n_samples: int) -> tuple[Project
     idx = np.unique(np.linspace(0, n - 1, n_samples).round().astype(int))
     colour = frames[0].ndim == 3
     samples = np.stack([frames[i] for i in idx])
-    proj = learn_projection(samples) if colour else GREY
+    proj = learn_projection(samples, radius_px) if colour else GREY
     P = proj.many(samples) if colour else samples
     bg = learn_background(P, radius_px)
     if bg.weak_samples.any():
