@@ -310,10 +310,10 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     if fits and felt.n >= 20:
         # The felt averaged over the tracked frames: correct each fit for it.
         better = felt.felt(bg.image, proj)
-        for kk, (pu, pv, ph, pw, c, b, G, fb) in fits:
+        for kk, (pu, pv, ph, pw, c, b, G, fb, shade) in fits:
             old = bg.image[pv:pv + ph, pu:pu + pw]
             new = better[pv:pv + ph, pu:pu + pw]
-            uv[kk] = c + refit_shift(old, new, pu, pv, c, b, G, radius_px, fb)
+            uv[kk] = c + refit_shift(old, new, pu, pv, c, b, G, radius_px, fb, shade)
         bg = replace(bg, image=better)
     t_track = time.perf_counter() - t_start
     status = np.array(status, np.int8)
