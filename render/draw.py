@@ -20,7 +20,6 @@ import numpy as np
 from scipy.special import ndtr
 
 from cuespin.physics.contact import scene_trajectory
-from cuespin.physics.motion import evaluate, phases
 from cuespin.physics.scene import Scene, motion_end
 from cuespin.render import look as lk
 from cuespin.render.timing import frame_times
