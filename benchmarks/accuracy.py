@@ -14,6 +14,7 @@ a fraction of decoding the same video (target <= 0.1).  Videos are capped at
 6 s; shots run in worker processes.
 
 Usage: python benchmarks/accuracy.py [--n 200] [--seed 0] [--workers 2] [--csv out.csv] [--codec FFV1]
+       python benchmarks/accuracy.py --summarize out.csv
 """
 
 import argparse
@@ -112,19 +113,38 @@ def main():
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--csv", default=None, help="write every shot's row here")
     ap.add_argument("--codec", default=None, help="render every shot with this FourCC (default: the scene's, MJPG)")
+    ap.add_argument("--summarize", default=None, help="only print the tables of a CSV written before "
+                    "(a run cut short keeps its finished rows)")
     args = ap.parse_args()
+    if args.summarize:
+        import pandas as pd
+        summarize(pd.read_csv(args.summarize).to_dict("records"), args.seed)
+        return
     from tqdm import tqdm
+    rows = []
+    out = None
     with tempfile.TemporaryDirectory() as tmp, Pool(args.workers) as pool:
-        rows = list(tqdm(pool.imap_unordered(one_shot, [(i, args.seed, tmp, args.codec) for i in range(args.n)]),
-                         total=args.n, desc="shots", disable=None))
-    rows.sort(key=lambda r: r["i"])
-    if args.csv:
-        with open(args.csv, "w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=sorted({k for r in rows for k in r}))
-            w.writeheader()
-            w.writerows(rows)
+        # Rows are written as shots finish, so a run cut short keeps them.
+        for row in tqdm(pool.imap_unordered(one_shot, [(i, args.seed, tmp, args.codec) for i in range(args.n)]),
+                        total=args.n, desc="shots", disable=None):
+            rows.append(row)
+            if args.csv:
+                if out is None:
+                    out = open(args.csv, "w", newline="")
+                    w = csv.DictWriter(out, fieldnames=sorted(row))
+                    w.writeheader()
+                w.writerow(row)
+                out.flush()
+    if out is not None:
+        out.close()
+    summarize(rows, args.seed)
+
+
+def summarize(rows, seed=0):
+    """Print the tables for finished rows (also: python -c 'from accuracy import ...' on a CSV)."""
+    rows = sorted(rows, key=lambda r: r["i"])
     n = len(rows)
-    print(f"\n{n} shots (seed {args.seed}); errors over shots answered ok")
+    print(f"\n{n} shots (seed {seed}); errors over shots answered ok")
     print(f"{'method':6} {'ok':>5} {'v0 med':>9} {'v0 p95':>9} {'Rw0 med':>9} {'Rw0 p95':>9}  other statuses")
     for m in ("paper", "mle"):
         ok = [r for r in rows if r[f"{m}_status"] == "ok"]

@@ -301,9 +301,6 @@ def segment_track(t, xy, decel: float, sigma: float | None = None,
         c = _solve_many(tf, xf, t0s, np.minimum(t1s, beyond), decel)[0]
         return np.where(np.asarray(t1s) < np.asarray(t0s), np.inf, c)
 
-    def cost(t0, t1):
-        return float(cost_many(t0, t1)[0])
-
     # A t1 past the last frame means "still sliding when the track ends".
     beyond = tf[-1] + dt
     # Coarse scan of t1 at the t0 guess, then joint refinement.
@@ -323,16 +320,21 @@ def segment_track(t, xy, decel: float, sigma: float | None = None,
     t0, t1, best_sse = _zoom(cost_many, t0_guess, t1_guess, dt, gap, 1e-3 * dt)
     t_roll, _, _ = _zoom(cost_many, t0, t0, 3 * dt, 0.0, 1e-2 * dt)
     dof = max(2 * len(tf) - 8, 1)
-    end_F = 0.0
+    end_F, t_un = 0.0, t0
     if t1 < beyond:
-        # (t0, t1) is still the refinement's optimum here: its cost is best_sse.
-        end_F = max(cost(t0, beyond) - best_sse, 0.0) / max(best_sse / dof, 1e-300)
+        # "Still sliding at the end" at its own best strike time (a breakpoint
+        # fit may have moved t0 to suit its kink).
+        def cost_unended(t0s, _t1s):
+            return cost_many(t0s, np.full(np.shape(t0s), beyond))
+
+        t_un, _, sse_un = _zoom(cost_unended, t0, t0, dt, 0.0, 1e-3 * dt)
+        end_F = max(sse_un - best_sse, 0.0) / max(best_sse / dof, 1e-300)
 
     def finish(t0, t1, **extra):
         return _finish(t, xy, tf, xf, t0, t1, beyond, decel, rest_k, k_end, k_move, dof, **extra)
 
     return finish(t0, t1, end_F=end_F, end_dof=dof, rolling=finish(t_roll, t_roll),
-                  unended=finish(t0, beyond) if t1 < beyond else None)
+                  unended=finish(t_un, beyond) if t1 < beyond else None)
 
 
 def _finish(t, xy, tf, xf, t0, t1, beyond, decel, rest_k, k_end, k_move, dof, **extra) -> Segments:

@@ -67,7 +67,8 @@ def cmd_generate(args) -> int:
     if args.n < 1:
         raise InputError("--n must be at least 1")
     summary = generate_dataset(Path(args.out), n=args.n, seed=args.seed, preset=args.preset,
-                               codec=args.codec, fps=args.fps, progress=_progress, look=args.look)
+                               codec=args.codec, fps=args.fps, progress=_progress, look=args.look,
+                               camera=args.camera)
     print(f"{summary['written']} written, {summary['skipped']} already there, in {args.out}")
     return 0
 
@@ -363,6 +364,7 @@ def add_generate(sub):
                    help="MJPG (default, lossy), FFV1 (lossless) or H264 (lossy, .mp4 files, CRF 20)")
     g.add_argument("--fps", type=float, default=None, help="frame rate; default: sampled from 60-480")
     g.add_argument("--look", choices=("plain", "realistic"), default="plain", help="plain grey or realistic colour scenes")
+    g.add_argument("--camera", choices=("topdown", "tilted"), default="topdown", help="top-down or tilted, lens distorted")
     g.set_defaults(func=cmd_generate)
 
 

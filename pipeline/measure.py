@@ -103,7 +103,7 @@ def mle_bound(scene: Scene, track, mle: dict | None = None, independent: bool = 
             meas = build_measurements(meas.t, meas.xy, meas.cov)
     else:
         t, xy = track.t[track.ok], track.xy[track.ok]
-        cov = table_covariance(cam, xy, track.stderr_px[track.ok])
+        cov = table_covariance(cam, xy, track.cov_px[track.ok])
         mle = mle or {}
         if independent or mle.get("t0") is None:
             meas = build_measurements(t, xy, cov)

@@ -133,7 +133,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
     except FIT_ERRORS as exc:
         mle = MLEResult("failed", f"the fit did not run: {exc}")
     if mle is None:
-        lr = slip_lr(full, roll)
+        lr = slip_lr(full, roll, meas)
         decisions["sliding_seen"] = sliding_seen(lr)
         if decisions["sliding_seen"]:
             decisions["sliding_ended"] = sliding_ended(seg, t, phases(full.shot, full.params).t1,

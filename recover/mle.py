@@ -212,16 +212,29 @@ def fit_models(meas: Measurements, params: BallParams, start, exposure_s: float 
     return full, roll
 
 
-def slip_lr(full: ModelFit, roll: ModelFit) -> float:
+def slip_lr(full: ModelFit, roll: ModelFit, meas: Measurements | None = None) -> float:
     """Likelihood-ratio statistic of free slip against rolling from the strike.
 
     The chi-square difference, in the residuals' own scale when they are
     larger than stated (quasi-likelihood: divided by the full fit's reduced
-    chi-square when that exceeds 1).  Its reference distribution is not
-    chi^2(2) (t1 is not identified at zero slip); fit.decide holds the
-    threshold calibrated by simulation.
+    chi-square when that exceeds 1), and, when the residuals are
+    autocorrelated (``meas`` given; see :func:`covariance`), divided by how
+    much the HAC sandwich widens w0's variance over the independent-error
+    one: correlated errors inflate the chi-square difference as much.  Its
+    reference distribution is not chi^2(2) (t1 is not identified at zero
+    slip); fit.decide holds the threshold calibrated by simulation.
     """
-    return float((roll.chi2 - full.chi2) / max(1.0, full.chi2 / full.dof))
+    scale = max(1.0, full.chi2 / full.dof)
+    if meas is not None:
+        rho, z = lag1_autocorrelation(meas, full.residuals)
+        if z > AUTOCORR_Z:
+            try:
+                base = np.linalg.inv(full.jac.T @ full.jac) * scale
+                hac = hac_covariance(full.jac, full.residuals, rho)
+                scale *= max(1.0, float(np.mean(np.diag(hac)[5:7] / np.diag(base)[5:7])))
+            except np.linalg.LinAlgError:
+                pass
+    return float((roll.chi2 - full.chi2) / scale)
 
 
 def lag1_autocorrelation(meas: Measurements, residuals) -> tuple[float, float]:
@@ -395,7 +408,7 @@ def fit_mle(t, xy, sigma, params: BallParams, start, exposure_s: float = 0.0,
         full, roll = fit_models(meas, params, start, exposure_s, fit_friction, start_rolling)
     except (ValueError, np.linalg.LinAlgError, FloatingPointError) as exc:
         return MLEResult("failed", f"the fit did not run: {exc}")
-    lr = slip_lr(full, roll)
+    lr = slip_lr(full, roll, meas)
     chosen = full if sliding_seen(lr).yes else roll
     return result(chosen, meas, lr, sliding_ended and not _t1_beyond(chosen, meas))
 
