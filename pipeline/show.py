@@ -92,6 +92,11 @@ def background_frame(video, n_frames: int, k: int = BACKGROUND_FRAMES) -> np.nda
     return np.median(np.stack(frames), axis=0).astype(np.uint8)
 
 
+def _camera(tr, scene):
+    """The track's camera (its size filled from the video), else the scene's."""
+    return getattr(tr, "camera", None) or scene.camera
+
+
 def seen_until(result: dict, tr) -> float:
     """Time (s) of the last frame the analysis used: the last tracked one, or the contact."""
     ok = np.asarray(tr.ok, bool)
@@ -116,7 +121,7 @@ def residuals(result: dict, tr, scene) -> dict:
     """
     from cuespin.pipeline.run import track_stderr_m
 
-    se = track_stderr_m(tr, scene.camera)
+    se = track_stderr_m(tr, _camera(tr, scene))
     t = np.asarray(tr.t, float)
     xy = np.asarray(tr.xy, float)
     use = np.asarray(tr.ok, bool) & np.all(np.isfinite(xy), axis=1) & (t <= seen_until(result, tr) + 1e-9)
@@ -127,7 +132,7 @@ def residuals(result: dict, tr, scene) -> dict:
         sp = method_shot(m, scene.physics)
         if sp is None or not use.any():
             continue
-        pred = predicted_xy(sp[0], sp[1], t[use], scene.camera.exposure_s)
+        pred = predicted_xy(sp[0], sp[1], t[use], _camera(tr, scene).exposure_s)
         out[name] = (t[use], (xy[use] - pred) / se[use])
     return out
 
@@ -192,7 +197,7 @@ def draw_shot(result: dict, tr, scene, background: np.ndarray, png) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    cam = scene.camera
+    cam = _camera(tr, scene)
     R = scene.physics.R
     methods = {k: v for k, v in (result.get("methods") or {}).items() if isinstance(v, dict)}
     res = residuals(result, tr, scene)
@@ -306,7 +311,7 @@ def write_overlay_video(video, out, result: dict, tr, scene) -> int:
     from cuespin.physics.motion import phases
     from cuespin.videoio import quiet_native_stderr
 
-    cam = scene.camera
+    cam = _camera(tr, scene)
     paths = {}
     for name, m in (result.get("methods") or {}).items():
         sp = method_shot(m, scene.physics)
