@@ -270,7 +270,7 @@ def test_realistic_render_round_trips_through_a_real_file(tmp_path, codec):
     # A few frames around the strike, cue in view (FFV1 encodes colour
     # noise slowly: 0.18 s a frame here).
     scene = realistic(seed=5, preset="leaves_table", fps=60.0, noise=3.0, codec=codec,
-                      duration=0.25, cue=True)
+                      duration=0.1, cue=True)
     video = tmp_path / "shot.avi"
     truth = render_video(scene, video)
     frames = list(FrameRenderer(scene).frames())
