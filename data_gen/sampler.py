@@ -11,12 +11,14 @@ import math
 
 import numpy as np
 
+from cuespin.data_gen.contacts import CONTACT_PRESETS, contact_render, sample_contact
 from cuespin.physics.motion import BallParams, Shot, positions
 from cuespin.physics.scene import Camera, Scene, Table, default_camera, motion_end, pinhole_camera
 from cuespin.physics.straight import straight_frame
 from cuespin.render import look as lk
 
-PRESETS = ("random", "case1", "case2", "case3", "case4", "case5", "masse", "leaves_table")
+PRESETS = ("random", "case1", "case2", "case3", "case4", "case5", "masse", "leaves_table",
+           *CONTACT_PRESETS)
 LOOKS = ("plain", "realistic")
 CAMERAS = ("topdown", "tilted")
 # Frame sizes of the realistic look's cameras (px): HD, qHD and 4:3.
@@ -81,7 +83,9 @@ def sample_shot(seed, preset: str = "random", params: BallParams | None = None,
         up to 2.5 v0/R in any planar direction), ``case1``..``case5`` (straight
         shots in each case of Figure 4), ``masse`` (strong spin along v0: a
         visibly curved path sliding for half a second or more) or ``leaves_table``
-        (fast, aimed at a near cushion).
+        (fast, aimed at a near cushion); ``cushion`` and ``ball_contact``
+        (the first contact, 0.25-2.5 s after the strike, is a cushion or a
+        resting ball: see ``data_gen/contacts.py``).
     params : BallParams, optional
         Fixed friction; sampled (mu_s 0.1-0.3, mu_r 0.005-0.02) when absent.
     table : Table
@@ -95,6 +99,9 @@ def sample_shot(seed, preset: str = "random", params: BallParams | None = None,
     if preset not in PRESETS:
         raise ValueError(f"unknown preset {preset!r}; choose from {', '.join(PRESETS)}")
     rng = _rng(seed)
+    if preset in CONTACT_PRESETS:  # data_gen/contacts.py; the other balls are dropped here
+        shot, params, _ = sample_contact(rng, preset, params, table)
+        return shot, params
     if params is None:
         params = BallParams(mu_s=float(rng.uniform(0.1, 0.3)), mu_r=float(rng.uniform(0.005, 0.02)))
     R = params.R
@@ -293,13 +300,19 @@ def sample_scene(seed, preset: str = "random", fps: float | None = None,
     if camera not in CAMERAS:
         raise ValueError(f"unknown camera {camera!r}; choose from {', '.join(CAMERAS)}")
     rng = _rng(seed)
-    shot, params = sample_shot(rng, preset)
+    balls = None
+    if preset in CONTACT_PRESETS:
+        shot, params, balls = sample_contact(rng, preset)
+    else:
+        shot, params = sample_shot(rng, preset)
     if fps is None:
         fps = float(rng.choice(FPS_CHOICES))
     render, exposure = _render_settings(rng, fps, noise, blur)
     if codec is not None:
         render["codec"] = codec
     render["preset"] = preset
+    if balls is not None:
+        render.update(contact_render(balls))  # render.contacts on, render.balls listed
     table = Table()
     if look == "plain":
         scene = make_scene(shot, params, fps=fps, px_per_m=px_per_m, exposure_s=exposure,
@@ -311,6 +324,10 @@ def sample_scene(seed, preset: str = "random", fps: float | None = None,
                      render=render, truth=shot)
     cam = (framed_camera if camera == "topdown" else tilted_camera)(rng, fps, table, exposure)
     render.update(realistic_look(rng, shot, params, table, fps))
+    if balls is not None:  # the struck ball first, in a colour of the look's
+        name = list(lk.BALL_COLOURS)[int(rng.integers(len(lk.BALL_COLOURS)))]
+        struck = [{**b, "colour": _jitter(rng, lk.BALL_COLOURS[name])} for b in contact_render(balls)["balls"]]
+        render["balls"] = struck + render["balls"]
     for k in ("felt_grey", "ball_grey", "gradient", "gradient_angle"):
         render.pop(k, None)
     if noise is None:
@@ -325,7 +342,8 @@ def sample_scenes(n: int, seed: int, preset: str | None = None, **kwargs) -> lis
     of shot: mostly ``random`` with each named preset mixed in.
     """
     children = np.random.SeedSequence(seed).spawn(n)
-    mix = ["random"] * 4 + [p for p in PRESETS if p != "random"]
+    # Contact shots only when asked for: the default mix is of shots on open cloth.
+    mix = ["random"] * 4 + [p for p in PRESETS if p != "random" and p not in CONTACT_PRESETS]
     scenes = []
     for i, child in enumerate(children):
         p = preset if preset is not None else mix[i % len(mix)]

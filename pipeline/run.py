@@ -135,6 +135,8 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
     TrackError
         The video cannot be read at all (see ``cuespin.track.video.track_video``).
     """
+    from cuespin.fit.contact import analysed_frames, find_contact
+    from cuespin.physics.contact import scene_balls
     from cuespin.recover.api import recover_track
     from cuespin.track.tracker import TrackerConfig
     from cuespin.track.video import track_video
@@ -146,8 +148,13 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
     t_track = time.perf_counter() - clock
     cam = getattr(tr, "camera", None) or scene.camera  # its size filled from the video where the scene leaves it
     cov_m = track_covariance_m(tr, cam)
-    out = recover_track(tr.t, tr.xy, tr.ok, cov_m, scene.physics, cam.exposure_s, method,
-                        fit_friction, lossless=tr.lossless)
+    # The analysed motion ends at the first contact (CONVENTIONS.md): fit only the frames before it.
+    contact = find_contact(tr.t, tr.xy, tr.ok, track_stderr_m(tr, cam), scene.table, scene.physics.R,
+                           scene_balls(scene.render))
+    n = analysed_frames(tr.t, contact, cam.exposure_s)
+    out = recover_track(tr.t[:n], tr.xy[:n], tr.ok[:n], cov_m[:n], scene.physics, cam.exposure_s,
+                        method, fit_friction, lossless=tr.lossless)
+    out["contact"] = None if contact is None else {"t": contact.t, "kind": contact.kind}
     noise = tr.centroid_noise_px
     track = {"frames": int(tr.n_frames), "ok_frames": int(tr.ok.sum()),
              "centroid_noise_px": _num(noise), "last_tracked_t": last_tracked_t(tr)}

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtr
 
-from cuespin.physics.motion import evaluate, phases
+from cuespin.physics.contact import scene_trajectory
 from cuespin.physics.scene import Scene, motion_end
 from cuespin.render import look as lk
 from cuespin.render.timing import frame_times
@@ -71,8 +71,7 @@ def ball_motion(scene: Scene):
     Every position and spin the renderer draws comes from here, so a motion
     with cushion or ball contacts is swapped in on this one line.
     """
-    ph = phases(scene.truth, scene.physics)
-    return lambda t: evaluate(scene.truth, scene.physics, np.atleast_1d(np.asarray(t, float)), ph)
+    return scene_trajectory(scene).state  # continued past contacts when render.contacts is on
 
 
 def quadrant_area(x, y, r):
@@ -950,6 +949,8 @@ def video_length(scene: Scene) -> int:
     if s["duration"] is not None:
         return max(1, int(round(float(s["duration"]) * fps)))
     end, left = motion_end(scene.truth, scene.physics, scene.table, fps, float(s["max_duration"]))
+    if scene.render.get("contacts"):  # bounced back, not gone: until it stops
+        end, left = min(scene_trajectory(scene).t_rest, float(s["max_duration"])), False
     if not left:
         end = min(end + float(s["tail"]), float(s["max_duration"]))
     return int(math.floor(end * fps)) + 1
