@@ -453,6 +453,16 @@ class FrameRenderer:
         self._pad = int(math.ceil(4 * self._psf)) + 1 if self._psf > 0 else 0
         self._border = 2 * self._half + self._pad + 4
         self._rays = self._ray_map() if cam.is_pinhole else None
+        self._struck = {}
+        if self.scene.render.get("contacts") and s["balls"]:
+            # Balls the shot strikes move after the contact: their own paths,
+            # at the tracked ball's exposure nodes.
+            from cuespin.physics.contact import scene_trajectory
+            for other, path in scene_trajectory(self.scene).struck:
+                xy = path.positions(self._t_nodes.ravel()).reshape(self._t_nodes.shape + (2,))
+                uv = cam.to_pixels(xy.reshape(-1, 2)).reshape(xy.shape)
+                albedo = np.asarray(s["balls"][other].get("colour", [228, 232, 235]), float)
+                self._struck[other] = (xy, uv, albedo)
         self._albedo = np.asarray(s["ball_colour"], dtype=np.float64)
         self._mark_colour = np.asarray(s["mark_colour"], dtype=np.float64)
         self._ramp = lk.ramp_image(h, w, float(s["ramp"]), float(s["ramp_angle"]))
@@ -578,8 +588,11 @@ class FrameRenderer:
             tex = lk.felt_texture((h, w), float(s["texture_scale"]), rng)
             img *= (1.0 + tex_amp * tex * felt_share)[..., None]
         img *= self._ramp[..., None]
-        # Other balls at rest, lit like the tracked one, drawn with exact coverage.
-        for b in s["balls"]:
+        # Other balls at rest, lit like the tracked one, drawn with exact
+        # coverage; a ball the shot strikes (render.contacts) is drawn per frame.
+        for i, b in enumerate(s["balls"]):
+            if i in self._struck:
+                continue
             xy = np.array([[float(b["x"]), float(b["y"])]])
             albedo = np.asarray(b.get("colour", [228, 232, 235]), dtype=np.float64)
             self._composite_ball(img, cam.to_pixels(xy), xy, albedo, None, 0)
@@ -677,22 +690,29 @@ class FrameRenderer:
         Returns ``(delta (h, w, 3) float32, u0, v0)`` in frame pixels, or
         ``(None, 0, 0)`` when the ball is out of view.
         """
-        uv = self._uv_nodes[k]
+        orient = self._orient if self._orient is not None else None
+        return self._delta_of(self._uv_nodes[k], self._xy_nodes[k], self._t_nodes[k],
+                              self._albedo, orient)
+
+    def _delta_of(self, uv, xy, t, albedo, orient):
+        """:meth:`_ball_delta` for any ball: nodes imaged at ``uv`` (K, 2) px,
+        centred at ``xy`` (K, 2) m at times ``t`` (K,), its albedo and its
+        :class:`~cuespin.render.look.Orientation` (None: no markings)."""
         B, half, pad = self._border, self._half, self._pad
         h, w = self.cam.height, self.cam.width
+        K = len(uv)
         vis = ((uv[:, 0] + half >= 0) & (uv[:, 0] - half <= w - 1)
                & (uv[:, 1] + half >= 0) & (uv[:, 1] - half <= h - 1))
         if not vis.any():
             return None, 0, 0
         uv = uv[vis]
-        rots = self._orient(self._t_nodes[k][vis]) if self._orient is not None else None
-        cov, colour, iu, iv = self._ball_windows(uv, self._xy_nodes[k][vis], self._albedo, rots)
+        rots = orient(t[vis]) if orient is not None else None
+        cov, colour, iu, iv = self._ball_windows(uv, xy[vis], albedo, rots)
         n = cov.shape[1]
         pu0, pv0 = int(iu.min()) - pad, int(iv.min()) - pad       # frame coords of the patch
         pw, ph = int(iu.max()) + n + pad - pu0, int(iv.max()) + n + pad - pv0
         sharp = self._sharp[pv0 + B:pv0 + B + ph, pu0 + B:pu0 + B + pw]
         delta = np.zeros((ph, pw, 3), np.float32)
-        K = len(self._uv_nodes[k])
         ramp = self._ramp
         for i in range(len(uv)):
             a, b = iu[i] - pu0, iv[i] - pv0
@@ -826,6 +846,10 @@ class FrameRenderer:
         else:
             frame = self.background.copy()
         tiles = dict(self._cue_tiles(k))
+        for xy, uv, albedo in self._struck.values():
+            delta, u0, v0 = self._delta_of(uv[k], xy[k], self._t_nodes[k], albedo, None)
+            if delta is not None:
+                add_to_tiles(tiles, delta, u0, v0)
         delta, u0, v0 = self._ball_delta(k)
         if delta is not None:
             add_to_tiles(tiles, delta, u0, v0)

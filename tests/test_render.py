@@ -378,3 +378,28 @@ def test_bad_look_settings_refused_in_one_line():
         with pytest.raises(ValueError, match=key.replace(".", r"\.")) as e:
             render_settings(s)
         assert "\n" not in str(e.value)
+
+
+def test_struck_ball_moves_after_the_contact():
+    # A ball_contact shot (render.contacts): the struck ball rests until the
+    # contact, then is drawn along its own path; it is not in the static scene.
+    from cuespin.physics.contact import scene_trajectory
+
+    scene = sample_scene(2, "ball_contact", fps=60.0, look="realistic", noise=0.0, blur=False)
+    r = FrameRenderer(scene)
+    assert list(r._struck) == [0]
+    tc = scene_trajectory(scene).first_contact.t
+    xy, uv, albedo = r._struck[0]
+    before = r.truth.t < tc
+    rest = np.array([scene.render["balls"][0]["x"], scene.render["balls"][0]["y"]])
+    np.testing.assert_allclose(xy[before, 0], np.broadcast_to(rest, xy[before, 0].shape), atol=1e-12)
+    assert np.hypot(*(xy[-1, 0] - rest)) > 2 * scene.physics.R
+    # Drawn where its path says: the frame differs from the background there.
+    k = len(r.truth.t) - 1
+    f = r.render(k, np.random.default_rng(0)).astype(float)
+    u, v = np.rint(uv[k, 0]).astype(int)
+    if 0 <= u < scene.camera.width and 0 <= v < scene.camera.height:
+        assert np.abs(f[v, u] - r.background[v, u]).max() > 20
+    u, v = np.rint(scene.camera.to_pixels(rest)).astype(int)
+    felt = np.asarray(scene.render["felt_colour"], float)
+    assert np.abs(r.background[v, u] - felt).max() < 0.5 * felt.max()
