@@ -56,7 +56,10 @@ RENDER_DEFAULTS = {
 def render_settings(scene: Scene) -> dict:
     """The scene's ``render`` block with every default filled in (both looks' keys)."""
     s = dict(RENDER_DEFAULTS)
-    s.update(lk.LOOK_DEFAULTS)
+    # The realistic look's defaults; the keys both looks share (texture,
+    # noise_sigma) keep the plain look's defaults in the plain look.
+    realistic = scene.render.get("look", "plain") == "realistic"
+    s.update({k: v for k, v in lk.LOOK_DEFAULTS.items() if realistic or k not in RENDER_DEFAULTS})
     s.update({k: v for k, v in scene.render.items() if k in s})
     if s["look"] not in ("plain", "realistic"):
         raise ValueError(f"render.look: expected 'plain' or 'realistic', got {s['look']!r}")

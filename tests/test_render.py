@@ -403,3 +403,16 @@ def test_struck_ball_moves_after_the_contact():
     u, v = np.rint(scene.camera.to_pixels(rest)).astype(int)
     felt = np.asarray(scene.render["felt_colour"], float)
     assert np.abs(r.background[v, u] - felt).max() < 0.5 * felt.max()
+
+
+def test_plain_look_keeps_its_own_defaults():
+    # Keys both looks know (texture: grey levels in the plain look, a
+    # relative amount in the realistic one) default per look.
+    from cuespin.render.draw import RENDER_DEFAULTS, render_settings
+    from cuespin.render.look import LOOK_DEFAULTS
+
+    shot, params = sample_shot(1, "case3")
+    plain = render_settings(make_scene(shot, params))
+    assert plain["texture"] == RENDER_DEFAULTS["texture"] == 0.0
+    assert render_settings(realistic())["texture"] == realistic().render["texture"]
+    assert LOOK_DEFAULTS["texture"] != 0.0
