@@ -24,6 +24,8 @@ MAX_ITER = 16
 # shaded ball) the undamped iteration can cycle between two centres
 # 0.002-0.01 px apart (measured on yuv420p FFV1 video) instead of converging.
 DAMP_AFTER = 6
+# Block size (px) of the cluster-robust sandwich used with the shaded look.
+CLUSTER_PX = 3
 # A fit still stepping after MAX_ITER is kept if its last step is below this
 # fraction of the centre's standard error (it adds < 0.5% to its variance).
 NO_CONVERGENCE_SE = 0.07
@@ -278,9 +280,22 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
     # every frame show almost none: one pooled RMS stated errors 3.6x too
     # small at noise 0.08 (benchmarks/track.py accuracy, column err/se).  It
     # equals the sandwich when the noise is the same everywhere.
+    # With the look fitted (shaded), what the model leaves (the lens's blur
+    # on the edge, markings turning with the spin) is correlated between
+    # neighbouring pixels, which HC1 counts as independent: the residuals
+    # are then summed over blocks of CLUSTER_PX x CLUSTER_PX pixels first
+    # (the cluster-robust sandwich, CR1).
     try:
         A = np.linalg.inv(JtJ)
-        meat = J.T @ (J * (res * res)[:, None]) * (len(y) / dof)
+        if shade:
+            B = CLUSTER_PX
+            S = (J * res[:, None]).reshape(h, w, -1)
+            S = np.pad(S, ((0, -h % B), (0, -w % B), (0, 0)))
+            S = S.reshape(S.shape[0] // B, B, S.shape[1] // B, B, -1).sum(axis=(1, 3)).reshape(-1, J.shape[1])
+            nb = len(S)
+            meat = S.T @ S * (len(y) / dof) * nb / max(nb - 1, 1)
+        else:
+            meat = J.T @ (J * (res * res)[:, None]) * (len(y) / dof)
         cov = (A @ meat @ A)[:2, :2]
         cov = 0.5 * (cov + cov.T)
         se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
