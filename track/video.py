@@ -29,10 +29,11 @@ from cuespin.track.model import refit_shift
 from cuespin.track.reader import FrameSource, ThreadedFrames, TrackError, frame_times, probe
 from cuespin.track.tracker import OK, STATUS_TEXT, BallTracker, TrackerConfig
 
-# Bytes of decoded frames held before the background is learnt: 480 grey or
-# 80 BGR frames at 1280 x 720 (at 240 fps, 2 s or 0.33 s of video).  A fixed
-# cap: memory does not grow with the video's length.
-LOOKAHEAD_BYTES = 224 * 2**20
+# Bytes of decoded frames held before the background is learnt: 437 grey or
+# 145 BGR frames at 1280 x 720 (at 240 fps, 1.8 s or 0.6 s of video; the
+# realistic look's strike comes 0.1-0.5 s in).  A fixed cap: memory does not
+# grow with the video's length.
+LOOKAHEAD_BYTES = 384 * 2**20
 LOOKAHEAD_MIN_FRAMES = 24
 # Bytes the decoder may run ahead while the background is learnt and the
 # look-ahead tracked, so that it does not stall meanwhile.
