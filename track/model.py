@@ -18,7 +18,7 @@ import numpy as np
 
 from cuespin.render.draw import quadrant_area
 
-MAX_ITER = 16
+MAX_ITER = 24
 # After this many full Gauss-Newton steps the steps are halved: where the
 # look departs from the model (chroma subsampled at half resolution, a
 # shaded ball) the undamped iteration can cycle between two centres
@@ -27,8 +27,8 @@ DAMP_AFTER = 6
 # Block size (px) of the cluster-robust sandwich used with the shaded look.
 CLUSTER_PX = 3
 # A fit still stepping after MAX_ITER is kept if its last step is below this
-# fraction of the centre's standard error (it adds < 0.5% to its variance).
-NO_CONVERGENCE_SE = 0.07
+# fraction of the centre's standard error (it adds at most 4% to its variance).
+NO_CONVERGENCE_SE = 0.2
 # Gauss-Newton stops when the centre moves less than this (px).  It
 # converges quadratically from the moments start (~0.02 px off), so the
 # error left after a step this small is ~1e-6 px, far below any bound.
