@@ -38,10 +38,10 @@ def check_track(res, scene, truth_uv, tol=CENTRE_TOL_PX):
 
 @pytest.mark.parametrize("codec,pix_fmt,ext", [
     ("ffv1", "bgr0", "avi"),        # the 4-channel format OpenCV once read as one channel
-    ("ffv1", "yuv444p", "mkv"),
+    pytest.param("ffv1", "yuv444p", "mkv", marks=pytest.mark.slow),
     ("ffv1", "yuv420p", "avi"),     # chroma at half resolution: the fit converges slowly (damped)
-    ("libx264", "yuv420p", "mp4"),
-    ("rawvideo", "bgr24", "nut"),
+    pytest.param("libx264", "yuv420p", "mp4", marks=pytest.mark.slow),
+    pytest.param("rawvideo", "bgr24", "nut", marks=pytest.mark.slow),
 ])
 def test_colour_pixel_formats(tmp_path, codec, pix_fmt, ext):
     scene = small_scene()
@@ -67,6 +67,7 @@ def test_grey_pixel_format(tmp_path):
     check_track(res, scene, truth.uv)
 
 
+@pytest.mark.slow
 def test_colour_beats_grey_on_a_low_luma_contrast_pair(tmp_path):
     # Luma alone (17 levels at noise 4) leaves the stated errors ~3x those
     # of the learnt colour channel (Fisher: blue carries most of it).
