@@ -5,12 +5,12 @@ moved to the vertex, so the constraint is built in.  Each point's residual
 is its signed distance to the curve, from the foot point that solves
 ``2 a^2 x^3 + (1 - 2 a Y) x - X = 0`` in the parabola's frame.
 
-Curved or straight: an F-test on the sums of squared orthogonal distances
-of the line (2 parameters) and the parabola (4 parameters),
-``F = ((SSE_line - SSE_par) / 2) / (SSE_par / (n - 4))``, against F(2, n - 4)
-at the 1% level; the parabola is kept only above it.  The F form takes the
-noise from the residuals themselves, so it holds when the tracker's stated
-noise is optimistic (lossy codecs).  Pure functions of arrays.
+Curved or straight: the F statistic of the sums of squared orthogonal
+distances of the line (2 parameters) and the parabola (4 parameters),
+``F = ((SSE_line - SSE_par) / 2) / (SSE_par / (n - 4))``, decided by
+fit.decide.curved (threshold calibrated by simulation).  The F form takes
+the noise from the residuals themselves, so it holds when the tracker's
+stated noise is optimistic (lossy codecs).  Pure functions of arrays.
 """
 
 from __future__ import annotations
@@ -21,9 +21,8 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.stats import f as f_dist
 
+from cuespin.fit.decide import curved as decide_curved
 from cuespin.physics.parabola import Parabola
-
-CURVE_TEST_LEVEL = 0.01
 
 
 @dataclass(frozen=True)
@@ -42,12 +41,17 @@ class LineFit:
 
 @dataclass(frozen=True)
 class ParabolaFit:
-    """A constrained parabola fit; falsy when it failed (``reason`` says why)."""
+    """A constrained parabola fit; falsy when it failed (``reason`` says why).
+
+    ``cov`` is the covariance of ``(log a, theta, vertex_x, vertex_y)`` from
+    the fit's Jacobian, at the noise its residuals show.
+    """
 
     ok: bool
     reason: str
     parabola: Parabola | None = None
     residuals: np.ndarray | None = None
+    cov: np.ndarray | None = None
 
     @property
     def sse(self) -> float:
@@ -61,8 +65,8 @@ class ParabolaFit:
 class PathShape:
     """The decision between parabola and line for a sliding path.
 
-    ``F`` is the F statistic and ``p_value`` its upper tail; ``curved`` when
-    ``p_value < CURVE_TEST_LEVEL``.
+    ``F`` is the F statistic and ``p_value`` its nominal F(2, n - 4) upper
+    tail (for reports); ``curved`` is fit.decide.curved's verdict.
     """
 
     curved: bool
@@ -138,11 +142,16 @@ def fit_parabola(p, start: Parabola) -> ParabolaFit:
     if not np.all(np.isfinite(r.x)):
         return ParabolaFit(False, "parabola fit diverged")
     par = build(r.x)
-    return ParabolaFit(True, "", par, parabola_distances(par, p))
+    res = parabola_distances(par, p)
+    try:
+        cov = np.linalg.inv(r.jac.T @ r.jac) * float(res @ res) / max(len(p) - 4, 1)
+    except np.linalg.LinAlgError:
+        cov = None
+    return ParabolaFit(True, "", par, res, cov)
 
 
 def classify_path(p, start: Parabola | None) -> PathShape:
-    """Fit line and parabola to a sliding path and choose by the F-test.
+    """Fit line and parabola to a sliding path and choose (fit.decide.curved).
 
     Parameters
     ----------
@@ -160,5 +169,5 @@ def classify_path(p, start: Parabola | None) -> PathShape:
     F = max(line.sse - par.sse, 0.0) / 2.0 / max(par.sse / (n - 4), 1e-300)
     pval = float(f_dist.sf(F, 2, n - 4))
     sigma = float(np.sqrt(par.sse / (n - 4)))
-    return PathShape(curved=pval < CURVE_TEST_LEVEL, F=float(F), p_value=pval, line=line,
+    return PathShape(curved=decide_curved(F, n).yes, F=float(F), p_value=pval, line=line,
                      parabola=par, sigma=sigma)

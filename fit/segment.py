@@ -20,17 +20,22 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import f as f_dist
 
 # Consecutive end frames within this many sigma of the final position are at rest.
 REST_SIGMAS = 5.0
 MIN_REST_FRAMES = 5
+# The rest's frames must show no drift: the fitted velocity over them within
+# this many standard errors of zero (two axes: 3.5 leaves a resting ball
+# called moving about 0.2% of the time, chi^2(2) > 12.25).
+REST_DRIFT_Z = 3.5
+# A rest must last this long (s): at 480 fps a ball rolling at 5 cm/s stays
+# within 5 sigma (1e-4 m) of its last position for 5 frames (10 ms), and 5
+# frames cannot show its drift (recover.simulate tracks cut while rolling).
+MIN_REST_S = 0.05
 # Frames of motion needed before any fit is attempted.
 MIN_MOVING_FRAMES = 6
 # The strike is the first of this many consecutive frames away from the start.
 MOVE_CONFIRM_FRAMES = 3
-# A sliding phase must beat rolling-from-the-strike by an F-test at this level.
-SLIDING_TEST_LEVEL = 0.01
 
 
 @dataclass(frozen=True)
@@ -38,13 +43,22 @@ class Segments:
     """Phases found in a track; falsy when it could not be segmented.
 
     Times in s, positions in m, velocities in m/s, accelerations in m/s^2.
-    ``sliding_p`` is the F-test's p-value for "no sliding phase" (rolling
-    from the strike); ``t1 == t0`` when it is not below the test level.
-    ``t2``/``x2`` are None when no rest is in view; ``t1`` is ``inf`` (and
-    ``x1``, ``v1`` extrapolated to the last frame) when the ball was still
-    sliding when the track ended.  ``slide`` and ``roll``
+    This is the fit with a sliding phase at its best breakpoints; the
+    questions "is sliding seen at all?" and "did it end in view?" are
+    decided elsewhere (fit.decide) and answered by choosing among the
+    alternatives kept here: ``rolling`` (rolling from the strike, ``t1 ==
+    t0``) and ``unended`` (still sliding when the track ended, ``t1`` inf);
+    ``end_F`` is the F statistic of the breakpoint found against
+    ``unended`` (1 and ``end_dof`` degrees of freedom; 0 when the best fit is
+    already unended).  ``t2``/``x2`` are None when no rest is in view; ``t1``
+    is ``inf`` (and ``x1``, ``v1`` extrapolated to the last frame) when the
+    ball was still sliding when the track ended.  ``slide`` and ``roll``
     index the frames of each phase; ``sigma`` is the position noise (m) the
-    fit's residuals show.
+    fit's residuals show; ``k_move`` the first frame seen moving.
+    ``geometry_cov`` holds the covariances (m^2, 2x2) of ``x0``, ``x1``,
+    their cross term and ``x2`` (keys ``x0``, ``x1``, ``x0x1``, ``x2``), with
+    every frame's error independent at ``sigma`` (callers floor the rests'
+    for a lossy codec, whose still frames share one error).
     """
 
     ok: bool
@@ -64,7 +78,12 @@ class Segments:
     sigma: float = float("nan")
     t_last: float = float("nan")
     residuals: np.ndarray | None = None
-    sliding_p: float = float("nan")
+    end_F: float = 0.0
+    end_dof: int = 1
+    k_move: int = 0
+    geometry_cov: dict | None = None
+    rolling: "Segments | None" = None
+    unended: "Segments | None" = None
 
     def __bool__(self):
         return self.ok
@@ -181,15 +200,30 @@ def find_rest_end(t, xy, sigma):
     k = n - 1
     while k > 0 and near[k - 1]:
         k -= 1
-    return k if n - k >= MIN_REST_FRAMES else None
+    # A ball still rolling slowly stays within noise of its last position for
+    # a few frames at a high frame rate, and a stopping ball creeps into its
+    # rest: the rest is the frames from the end that show no drift (their
+    # fitted velocity within REST_DRIFT_Z standard errors of zero), moving
+    # the window's start on while they do, and lasting MIN_REST_S.
+    def drifts(k):
+        tt = t[k:] - t[k:].mean()
+        ss = max(float(tt @ tt), 1e-300)
+        slope = (tt @ (xy[k:] - xy[k:].mean(axis=0))) / ss
+        return np.hypot(*slope) * np.sqrt(ss) / sigma > REST_DRIFT_Z
+
+    step = max(1, (n - k) // 20)  # small steps: frames past the stop in the fit would misfit it
+    while n - k >= 2 * MIN_REST_FRAMES and drifts(k):
+        k += step
+    if n - k < MIN_REST_FRAMES or t[-1] - t[k] < MIN_REST_S or drifts(k):
+        return None
+    return k
 
 
-def noise_from_track(xy):
-    """Position noise (m) from second differences of consecutive positions.
-
-    Motion contributes ``a dt^2``, tiny at video rates, so the robust spread
-    of second differences is ``sqrt(6)`` times the per-axis noise.
-    """
+def noise_from_track(xy) -> float:
+    """Per-axis position noise (m) from second differences of consecutive
+    positions: motion contributes ``a dt^2``, tiny at video rates, so the
+    robust spread of second differences is ``sqrt(6)`` times the noise."""
+    xy = np.asarray(xy, dtype=float)
     d2 = xy[2:] - 2 * xy[1:-1] + xy[:-2]
     if len(d2) < 3:
         return float("nan")
@@ -267,9 +301,6 @@ def segment_track(t, xy, decel: float, sigma: float | None = None,
         c = _solve_many(tf, xf, t0s, np.minimum(t1s, beyond), decel)[0]
         return np.where(np.asarray(t1s) < np.asarray(t0s), np.inf, c)
 
-    def cost(t0, t1):
-        return float(cost_many(t0, t1)[0])
-
     # A t1 past the last frame means "still sliding when the track ends".
     beyond = tf[-1] + dt
     # Coarse scan of t1 at the t0 guess, then joint refinement.
@@ -287,36 +318,33 @@ def segment_track(t, xy, decel: float, sigma: float | None = None,
     # Joint refinement to a thousandth of a frame (the maximum-likelihood fit
     # refines both times further with the full model).
     t0, t1, best_sse = _zoom(cost_many, t0_guess, t1_guess, dt, gap, 1e-3 * dt)
-    # A breakpoint within two frames of the track's end is not observed.
-    if t1 > tf[-1] - 2 * dt:
-        t1 = beyond
-    # Is a sliding phase seen at all?  F-test of "rolling from the strike"
-    # (case 4) against the fit with sliding, which adds a_s and t1 (3
-    # parameters), at the 1% level, with the noise from the residuals.
-    # Without it, a huge a_s over a sliver of time fits noise and trades off
-    # against v0.
-    t_roll, _, sse_roll = _zoom(cost_many, t0, t0, 3 * dt, 0.0, 1e-2 * dt)
-    dof_full = max(2 * len(tf) - 9, 1)
-    F = max(sse_roll - best_sse, 0.0) / 3.0 / max(best_sse / dof_full, 1e-300)
-    lr = float(f_dist.sf(F, 3, dof_full))  # p-value of "no sliding"
-    rolling_from_strike = lr >= SLIDING_TEST_LEVEL
-    if rolling_from_strike:
-        t0 = t1 = t_roll
-    # Is the end of sliding seen?  F-test of "still sliding when the track
-    # ends" against the breakpoint found (one more parameter), at the 1%
-    # level: a kink fitted into noise near the end must not pass for one.
-    if t1 < beyond and not rolling_from_strike:
-        dof_bp = max(2 * len(tf) - 8, 1)
-        # (t0, t1) is still the refinement's optimum here: its cost is best_sse.
-        F_end = max(cost(t0, beyond) - best_sse, 0.0) / max(best_sse / dof_bp, 1e-300)
-        if f_dist.sf(F_end, 1, dof_bp) >= SLIDING_TEST_LEVEL:
-            t1 = beyond
+    t_roll, _, _ = _zoom(cost_many, t0, t0, 3 * dt, 0.0, 1e-2 * dt)
+    dof = max(2 * len(tf) - 8, 1)
+    end_F, t_un = 0.0, t0
+    if t1 < beyond:
+        # "Still sliding at the end" at its own best strike time (a breakpoint
+        # fit may have moved t0 to suit its kink).
+        def cost_unended(t0s, _t1s):
+            return cost_many(t0s, np.full(np.shape(t0s), beyond))
+
+        t_un, _, sse_un = _zoom(cost_unended, t0, t0, dt, 0.0, 1e-3 * dt)
+        end_F = max(sse_un - best_sse, 0.0) / max(best_sse / dof, 1e-300)
+
+    def finish(t0, t1, **extra):
+        return _finish(t, xy, tf, xf, t0, t1, beyond, decel, rest_k, k_end, k_move, dof, **extra)
+
+    return finish(t0, t1, end_F=end_F, end_dof=dof, rolling=finish(t_roll, t_roll),
+                  unended=finish(t_un, beyond) if t1 < beyond else None)
+
+
+def _finish(t, xy, tf, xf, t0, t1, beyond, decel, rest_k, k_end, k_move, dof, **extra) -> Segments:
+    """The Segments of the fit with breakpoints ``(t0, t1)`` (``t1 >=
+    beyond``: still sliding at the end of the track)."""
     sse, coef, res = _solve(tf, xf, t0, t1, decel)
     x0, v0, a_s, a_r = coef
     tau1 = min(t1, beyond) - t0
     v1 = v0 + a_s * tau1
     x1 = x0 + v0 * tau1 + 0.5 * a_s * tau1**2
-    dof = max(2 * len(tf) - 8, 1)
     if t1 >= beyond:
         t1 = float("inf")  # sliding had not ended when the track did
     slide = np.flatnonzero((t >= t0) & (t < t1))
@@ -330,6 +358,8 @@ def segment_track(t, xy, decel: float, sigma: float | None = None,
         tau1 = t1 - t0
         v1 = np.zeros(2)
         x1 = x0 + v0 * tau1 + 0.5 * a_s * tau1**2
+    geometry_cov = _geometry_cov(tf, xf, t0, min(t1, beyond), beyond, decel, v1,
+                                 sse / dof, None if rest_k is None else len(xy) - rest_k)
     if rest_k is not None:
         x2 = np.mean(xy[rest_k:], axis=0)
         # The rolling deceleration is along -v1: v = 0 when |v1| = |a_r| (t - t1).
@@ -339,4 +369,43 @@ def segment_track(t, xy, decel: float, sigma: float | None = None,
     return Segments(True, "", t0=t0, x0=x0, t1=t1, x1=x1, v0=v0, v1=v1, a_slide=a_s, a_roll=a_r,
                     t2=t2, x2=x2, slide=slide, roll=roll,
                     sigma=float(np.sqrt(sse / dof)), t_last=float(t[k_end - 1]), residuals=res,
-                    sliding_p=lr)
+                    k_move=k_move, geometry_cov=geometry_cov, **extra)
+
+
+def _geometry_cov(tf, xf, t0, t1, beyond, decel, v1, s2, n_rest):
+    """Covariances of the fitted ``x0``, ``x1`` (and ``x2``, the mean of
+    ``n_rest`` frames) with per-axis variance ``s2`` (m^2).
+
+    For fixed breakpoints the fit is linear in ``(x0, v0, a_s)``, so
+    ``x0`` and ``x1 = x0 + v0 tau1 + a_s tau1^2 / 2`` have covariance
+    ``s2 c^T (A^T A)^-1 c``; the breakpoint's own error moves ``x1`` along
+    ``v1``, with ``var(t1) = 2 s2 / (d^2 SSE / d t1^2)`` from the profile's
+    curvature a frame either side.
+    """
+    tau = np.maximum(tf - t0, 0.0)
+    tau1 = max(t1 - t0, 0.0)
+    ts = np.minimum(tau, tau1)
+    cols = [np.ones_like(tau), tau] + ([0.5 * ts**2 + tau1 * (tau - ts)] if tau1 > 0 else [])
+    A = np.stack(cols, axis=1)
+    M = np.linalg.pinv(A.T @ A)
+    c0 = np.zeros(len(cols))
+    c0[0] = 1.0
+    c1 = np.r_[1.0, tau1, 0.5 * tau1**2][:len(cols)]
+    I2 = np.eye(2)
+    out = {"x0": s2 * float(c0 @ M @ c0) * I2, "x1": s2 * float(c1 @ M @ c1) * I2,
+           "x0x1": s2 * float(c0 @ M @ c1) * I2, "x2": None}
+    if 0 < tau1 and t1 < beyond:
+        # The Hessian of the profile over (t0, t1), a frame either side: t1's
+        # marginal variance, with t0 free too (they trade off).
+        h = float(np.median(np.diff(tf)))
+        g0, g1 = np.meshgrid([-h, 0.0, h], [-h, 0.0, h], indexing="ij")
+        S = _solve_many(tf, xf, t0 + g0.ravel(), t1 + g1.ravel(), decel)[0].reshape(3, 3)
+        H = np.array([[S[2, 1] - 2 * S[1, 1] + S[0, 1], (S[2, 2] - S[2, 0] - S[0, 2] + S[0, 0]) / 4],
+                      [0.0, S[1, 2] - 2 * S[1, 1] + S[1, 0]]]) / h**2
+        H[1, 0] = H[0, 1]
+        if np.linalg.det(H) > 0 and H[0, 0] > 0:
+            var_t1 = 2 * s2 * np.linalg.inv(H)[1, 1]
+            out["x1"] = out["x1"] + var_t1 * np.outer(v1, v1)
+    if n_rest:
+        out["x2"] = s2 / n_rest * I2
+    return out

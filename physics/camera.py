@@ -142,6 +142,11 @@ def _undistort(nd, dist):
     return n
 
 
+# Public names for the lens model (calibration works with it directly).
+distort = _distort
+undistort = _undistort
+
+
 def rodrigues(rvec) -> np.ndarray:
     """Rotation matrix of a rotation vector (axis times angle, rad), as ``cv2.Rodrigues``."""
     r = np.asarray(rvec, dtype=float).reshape(3)
@@ -353,6 +358,33 @@ class Camera:
         uv = np.asarray(uv, dtype=float)
         pts = np.atleast_2d(uv)
         xy = apply_homography(self._Ginv, self._from_px(pts))
+        return xy[0] if uv.ndim == 1 else xy
+
+    def to_plane(self, uv, z: float = 0.0):
+        """Pixels ``(u, v)`` to the points ``(x, y)`` (m) of the horizontal plane ``z``
+        (m above the cloth) they see: the cloth at 0, a cushion's nose at its height.
+
+        For a pose camera, the ray through each pixel (lens undone) cut with
+        that plane.  A camera without a pose knows only the ball-centre plane,
+        so ``z`` is ignored (as in :meth:`project`): the result is
+        :meth:`to_table`'s.
+
+        Parameters
+        ----------
+        uv : array_like, shape (n, 2) or (2,)
+        z : float
+
+        Returns
+        -------
+        ndarray, shape (n, 2) or (2,)
+        """
+        if not self.is_pinhole:
+            return self.to_table(uv)
+        uv = np.asarray(uv, dtype=float)
+        pts = np.atleast_2d(uv)
+        Rm, t = self.rotation, np.asarray(self.tvec, dtype=float)
+        G = np.column_stack([Rm[:, 0], Rm[:, 1], Rm[:, 2] * float(z) + t])
+        xy = apply_homography(np.linalg.inv(G), self._from_px(pts))
         return xy[0] if uv.ndim == 1 else xy
 
     def jacobian(self, xy) -> np.ndarray:

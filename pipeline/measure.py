@@ -6,7 +6,7 @@ Shared by the tests, the benchmarks and the experiments: one definition of
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -65,17 +65,20 @@ def tracker_accuracy(scene: Scene, video: Path, refine: str = "fit", n_eval: int
                            stated_z=float(np.sqrt(np.mean(z**2))))
 
 
-def mle_bound(scene: Scene, track: TrackResult, mle: dict | None = None, independent: bool = False):
+def mle_bound(scene: Scene, track, mle: dict | None = None, independent: bool = False):
     """Cramer-Rao covariance of ``(x0, t0, v0[, w0])`` at the scene's truth.
 
     The inverse Fisher information of the maximum-likelihood fit's model
-    (its Jacobian at the truth) for the measurements it used: by default the
-    per-frame errors it weights by (recover.api.mle_noise: the tracker's,
-    plus the codec's own error from ``mle["codec_noise_m"]``, each rest
-    counted once for a lossy codec, the strike's frames out around the
-    fit's ``t0``).  With ``independent``, the tracker's stated errors with
-    every frame independent, the bound a lossy codec's shared errors put out
-    of reach.
+    (its Jacobian at the truth) for the measurements it used
+    (recover.measurements): pass the fit's own
+    :class:`~cuespin.recover.measurements.Measurements` as ``track``
+    (``recover_track(..., return_estimate=True)`` gives them), or a
+    TrackResult and the fit's JSON ``mle``, from which they are rebuilt
+    the same way (strike window at its ``t0``, the rest after its ``t2``
+    shared for a lossy codec, its ``codec_noise_m`` added); nothing is
+    segmented again.  With ``independent``, the tracker's errors with every
+    frame its own measurement, the bound a lossy codec's shared errors put
+    out of reach (a reference).
 
     Returns
     -------
@@ -88,20 +91,25 @@ def mle_bound(scene: Scene, track: TrackResult, mle: dict | None = None, indepen
     numpy.linalg.LinAlgError
         When the information matrix is singular.
     """
-    from cuespin.fit.segment import segment_track
     from cuespin.physics import contact_velocity
-    from cuespin.recover.api import mle_noise, track_noise
+    from cuespin.recover.measurements import Measurements, build_measurements, table_covariance
     from cuespin.recover.mle import crb_covariance
 
     truth, p, cam = scene.truth, scene.physics, scene.camera
     rolling = bool(np.hypot(*contact_velocity(np.array(truth.v0), np.array(truth.w0), p.R)) < 1e-9)
-    centre = cam.to_table([[cam.width / 2, cam.height / 2]])[0]
-    t, xy = track.t[track.ok], track.xy[track.ok]
-    se = track_noise(track.stderr_px[track.ok] / cam.px_per_m(centre), xy)
-    if not independent:
-        seg = segment_track(t, xy, 5.0 / 7.0 * p.mu_r * p.g, float(np.median(se)), cam.exposure_s)
-        if (mle or {}).get("t0") is not None:  # the fit leaves out the strike's frames around its t0
-            seg = replace(seg, t0=mle["t0"])
-        se = mle_noise(t, se, seg, cam.exposure_s, 1.0 / cam.fps, track.lossless,
-                       (mle or {}).get("codec_noise_m") or 0.0)
-    return crb_covariance(truth, p, t, se, cam.exposure_s, rolling=rolling), rolling
+    if isinstance(track, Measurements):
+        meas = track
+        if independent:
+            meas = build_measurements(meas.t, meas.xy, meas.cov)
+    else:
+        t, xy = track.t[track.ok], track.xy[track.ok]
+        cov = table_covariance(cam, xy, track.cov_px[track.ok])
+        mle = mle or {}
+        if independent or mle.get("t0") is None:
+            meas = build_measurements(t, xy, cov)
+        else:
+            c = mle.get("codec_noise_m") or 0.0
+            meas = build_measurements(t, xy, cov, t0=mle["t0"], t_rest=mle.get("t2"),
+                                      exposure_s=cam.exposure_s, frame_dt=1.0 / cam.fps,
+                                      shared_rest=not track.lossless).with_codec(np.sign(c) * c * c)
+    return crb_covariance(truth, p, meas, cam.exposure_s, rolling=rolling), rolling

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -21,31 +22,24 @@ EVENTS = (("t1", "x1"), ("t2", "x2"))
 def track_stderr_m(tr, camera) -> np.ndarray:
     """Per-axis standard error of each tracked centre on the table (m), shape (n, 2).
 
-    The tracker states its errors in pixels; each frame's is carried to the
-    table through the camera's Jacobian at that frame's centre
-    (``camera.cov_to_table``), so a tilted camera's varying scale reaches
-    the weights.  NaN where the frame has no centre or no stated error.
-
-    Parameters
-    ----------
-    tr : TrackResult
-        The tracker's result (``xy`` in m, ``stderr_px`` in px, per axis).
-    camera : Camera
-        The scene's camera.
+    The square root of the diagonal of :func:`track_covariance_m`; NaN where
+    the frame has no centre.
     """
-    own = getattr(tr, "stderr_m", None)
-    if own is not None:  # a tracker that states its errors in metres itself
-        return np.asarray(own, dtype=float).reshape(-1, 2)
-    xy = np.asarray(tr.xy, dtype=float)
-    se_px = np.asarray(tr.stderr_px, dtype=float).reshape(-1, 2)
-    out = np.full((len(xy), 2), np.nan)
-    good = np.all(np.isfinite(xy), axis=1) & np.all(np.isfinite(se_px), axis=1)
-    if good.any():
-        cov_px = np.zeros((int(good.sum()), 2, 2))
-        cov_px[:, 0, 0], cov_px[:, 1, 1] = se_px[good, 0] ** 2, se_px[good, 1] ** 2
-        cov_m = camera.cov_to_table(xy[good], cov_px)
-        out[good] = np.sqrt(np.stack([cov_m[:, 0, 0], cov_m[:, 1, 1]], axis=1))
-    return out
+    cov = track_covariance_m(tr, camera)
+    return np.sqrt(np.stack([cov[:, 0, 0], cov[:, 1, 1]], axis=1))
+
+
+def track_covariance_m(tr, camera) -> np.ndarray:
+    """Each tracked centre's covariance on the table (m^2), shape (n, 2, 2).
+
+    The tracker states its errors in pixels (``cov_px``); each frame's is
+    carried to the table through the camera's Jacobian at that frame's
+    centre (:func:`cuespin.recover.measurements.table_covariance`), so a
+    tilted camera's varying scale and shear reach the weights.
+    """
+    from cuespin.recover.measurements import table_covariance
+
+    return table_covariance(camera, tr.xy, tr.cov_px)
 
 
 def _num(x):
@@ -88,8 +82,11 @@ def mark_predictions(methods: dict, t_seen: float | None, frame_dt: float, param
             continue
         if all(m.get(k) is not None for k in ("x0", "v0", "w0", "t0")) and \
                 any(m.get(x) is None and m.get(t) is not None for t, x in EVENTS):
+            p = params  # the method's own friction when it fitted one (--fit-friction)
+            if m.get("mu_s") is not None and m.get("mu_r") is not None:
+                p = replace(params, mu_s=float(m["mu_s"]), mu_r=float(m["mu_r"]))
             try:
-                ph = phases(Shot(tuple(m["x0"]), tuple(m["v0"]), tuple(m["w0"]), float(m["t0"])), params)
+                ph = phases(Shot(tuple(m["x0"]), tuple(m["v0"]), tuple(m["w0"]), float(m["t0"])), p)
                 for (t, x), pos in zip(EVENTS, (ph.x1, ph.x2)):
                     if m.get(x) is None and m.get(t) is not None and np.all(np.isfinite(pos)):
                         m[x] = [float(v) for v in pos]
@@ -138,7 +135,10 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
     TrackError
         The video cannot be read at all (see ``cuespin.track.video.track_video``).
     """
+    from cuespin.fit.contact import analysed_frames, find_contact
+    from cuespin.physics.contact import scene_balls
     from cuespin.recover.api import recover_track
+    from cuespin.recover.calibration import add_calibration_error
     from cuespin.track.tracker import TrackerConfig
     from cuespin.track.video import track_video
 
@@ -147,16 +147,27 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
         config = TrackerConfig(refine=refine)
     tr = track_video(video, scene, config, progress=progress)
     t_track = time.perf_counter() - clock
-    cam = scene.camera
-    stderr_m = track_stderr_m(tr, cam)
-    out = recover_track(tr.t, tr.xy, tr.ok, stderr_m, scene.physics, cam.exposure_s, method,
-                        fit_friction, lossless=tr.lossless)
+    cam = getattr(tr, "camera", None) or scene.camera  # its size filled from the video where the scene leaves it
+    cov_m = track_covariance_m(tr, cam)
+    # The analysed motion ends at the first contact (CONVENTIONS.md): fit only the frames before it.
+    contact = find_contact(tr.t, tr.xy, tr.ok, track_stderr_m(tr, cam), scene.table, scene.physics.R,
+                           scene_balls(scene.render))
+    n = analysed_frames(tr.t, contact, cam.exposure_s)
+    out = recover_track(tr.t[:n], tr.xy[:n], tr.ok[:n], cov_m[:n], scene.physics, cam.exposure_s,
+                        method, fit_friction, lossless=tr.lossless)
+    if scene.calibration:
+        add_calibration_error(out["methods"], lambda c: _refit_through(c, tr, n, scene, method, fit_friction),
+                              scene.calibration)
+    out["contact"] = None if contact is None else {"t": contact.t, "kind": contact.kind}
     noise = tr.centroid_noise_px
     track = {"frames": int(tr.n_frames), "ok_frames": int(tr.ok.sum()),
              "centroid_noise_px": _num(noise), "last_tracked_t": last_tracked_t(tr)}
-    for key in ("contact",):  # fields the recovery adds to the track block
+    # Fields the recovery adds to the track block (top level or in its own "track").
+    for key in ("contact",):
         if key in out:
             track[key] = out[key]
+        elif isinstance(out.get("track"), dict) and key in out["track"]:
+            track[key] = out["track"][key]
     if tr.error:
         track["error"] = tr.error
     t_seen = track["last_tracked_t"]
@@ -167,6 +178,21 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
     result = {"video": Path(video).name, "track": track, "methods": out["methods"], "best": out["best"],
               "timing_s": {"track": t_track, **out["timing_s"]}}
     return (result, tr) if return_track else result
+
+
+def _refit_through(camera, tr, n: int, scene, method: str, fit_friction: bool) -> dict:
+    """The methods' answers for the first ``n`` frames of a track seen through
+    another camera (the tracked pixels converted anew)."""
+    from cuespin.recover.api import recover_track
+    from cuespin.recover.measurements import table_covariance
+
+    uv = np.asarray(tr.uv, dtype=float)[:n]
+    xy = np.full_like(uv, np.nan)
+    good = np.all(np.isfinite(uv), axis=1)
+    xy[good] = camera.to_table(uv[good])
+    cov = table_covariance(camera, xy, np.asarray(tr.cov_px)[:n])
+    return recover_track(tr.t[:n], xy, np.asarray(tr.ok)[:n], cov, scene.physics, scene.camera.exposure_s,
+                         method, fit_friction, lossless=tr.lossless)["methods"]
 
 
 MODEL_TEXT = {"full": "slip fitted (sliding, then rolling)", "rolling": "rolling from the strike (no slip)"}

@@ -1,19 +1,21 @@
-"""Maximum-likelihood fit of the forward model to the time-stamped track.
+"""Maximum-likelihood fit of the forward model to the measurements of a track.
 
 Unknowns ``x0, t0, v0, w0`` (and ``mu_s, mu_r`` with ``fit_friction``).  Each
-observed centroid is the exposure-average of the ball's centre, with
-Gaussian noise of the tracker's measured standard error; the fit minimises
-the weighted squared residuals (scipy's least_squares), and standard errors
-come from the Jacobian at the optimum, scaled up by the reduced chi-square
-when the residuals are larger than the stated noise.
+measurement (recover.measurements: a frame's centre, or a rest's mean) is
+the exposure-averaged ball centre plus Gaussian error of its stated 2x2
+covariance; the fit minimises the whitened squared residuals (scipy's
+least_squares).  Standard errors come from the Jacobian at the optimum,
+scaled up by the reduced chi-square when the residuals are larger than
+stated; when the residuals are autocorrelated (a lossy codec's error varies
+slowly along the path at low noise), from a Newey-West (HAC) sandwich over
+the same Jacobian instead.
 
-Model no more than the data supports: a full fit with free slip is compared
-with rolling from the strike (``w0 = z_hat x v0 / R``, paper case 4) by a
-likelihood-ratio test; rolling is kept unless the full model improves the
-chi-square by more than chi^2(2) at the 1% level (9.21), the chi-square
-difference divided by the full fit's reduced chi-square when that exceeds 1.  When the track
-ends before sliding does, the slip's magnitude (so ``w0``) is not determined
-and the answer is ``degenerate`` with ``w0`` withheld.
+Two models are fitted: free slip (``full``) and rolling from the strike
+(``w0 = z_hat x v0 / R``, paper case 4); which one the track shows is
+decided once, in fit.decide, from their likelihood ratio
+(:func:`slip_lr`).  When the track ends before sliding does, the slip's
+magnitude (so ``w0``) is not determined and the answer is ``degenerate``
+with ``w0`` withheld.
 """
 
 from __future__ import annotations
@@ -24,9 +26,8 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from cuespin.physics.motion import BallParams, Shot, phases, positions, z_cross
+from cuespin.recover.measurements import Measurements, build_measurements
 
-# chi^2(2) at the 1% level: free slip must beat rolling-from-the-strike by this.
-SLIP_LR_THRESHOLD = 9.21
 # A fit whose residuals are this many times the stated variance does not
 # describe the track (it stopped far from the shot, or the track is not one
 # shot); it is reported as failed, never as an answer.  Good fits measured
@@ -38,8 +39,12 @@ MAX_CHI2_PER_DOF = 100.0
 # mid-shot extrapolates back to an unseen strike and trades t0 against v0
 # (measured: 25 m/s of error on a 0.07 m/s shot).
 MAX_REL_STDERR_V0 = 0.5
-# Convergence tolerances of the Levenberg-Marquardt fit (see _fit).
+# Convergence tolerances of the Levenberg-Marquardt fit (see fit_model).
 LM_TOL = 1e-7
+# Residual autocorrelation at lag 1 is "shown" beyond this many of its
+# standard errors under independence (one-sided 1%: 2.33); then the
+# HAC sandwich replaces the independent-error covariance.
+AUTOCORR_Z = 2.33
 # Gauss-Legendre nodes for averaging the model over the exposure: exact for
 # the (quadratic) motion within a phase.
 _GL_T, _GL_W = np.polynomial.legendre.leggauss(3)
@@ -51,10 +56,10 @@ class MLEResult:
 
     Vectors are ndarrays or None when not determined; ``stderr`` holds the
     same keys as the estimates.  ``model`` is ``full`` (free slip) or
-    ``rolling`` (rolling from the strike, chosen by the likelihood ratio
-    ``slip_lr``).  ``residuals`` are the normalised residuals per frame
-    (shape (n, 2)), ``cov`` the covariance of the fitted parameters in the
-    order ``names``.
+    ``rolling`` (rolling from the strike).  ``residuals`` are the whitened
+    residuals per measurement (shape (m, 2)), ``cov`` the covariance of the
+    fitted parameters in the order ``names``; ``hac`` when it is the HAC
+    sandwich (residual lag-1 autocorrelation ``rho1``).
     """
 
     status: str
@@ -76,9 +81,32 @@ class MLEResult:
     residuals: np.ndarray | None = None
     cov: np.ndarray | None = None
     names: tuple = ()
+    hac: bool = False
+    rho1: float = float("nan")
 
     def __bool__(self):
         return self.status == "ok"
+
+
+@dataclass(frozen=True)
+class ModelFit:
+    """One model fitted to the measurements (before any decision).
+
+    ``jac`` is the Jacobian of the whitened residuals (2m, p), ``residuals``
+    the whitened residuals (m, 2); ``chi2`` their sum of squares.
+    """
+
+    rolling: bool
+    x: np.ndarray
+    shot: Shot
+    params: BallParams
+    chi2: float
+    dof: int
+    jac: np.ndarray
+    residuals: np.ndarray
+    converged: bool
+    message: str
+    names: tuple
 
 
 def _unpack(p, rolling, fit_friction, params: BallParams):
@@ -96,6 +124,11 @@ def _unpack(p, rolling, fit_friction, params: BallParams):
     return Shot(x0=x0, v0=v0, w0=w0, t0=float(t0)), params
 
 
+def _names(rolling: bool, fit_friction: bool) -> tuple:
+    return ("x0x", "x0y", "t0", "v0x", "v0y") + (() if rolling else ("w0x", "w0y")) + \
+        ((("mu_r",) if rolling else ("mu_s", "mu_r")) if fit_friction else ())
+
+
 def model_track(shot: Shot, params: BallParams, t, exposure_s: float = 0.0):
     """Observed centre (m) at frame times: the position averaged over the exposure."""
     t = np.asarray(t, dtype=float)
@@ -106,10 +139,23 @@ def model_track(shot: Shot, params: BallParams, t, exposure_s: float = 0.0):
     return np.einsum("k,nkd->nd", 0.5 * _GL_W, x)
 
 
-def _fit(t, xy, sig, p0, rolling, fit_friction, params, exposure_s):
+def fit_model(meas: Measurements, params: BallParams, start, exposure_s: float, rolling: bool,
+              fit_friction: bool = False) -> ModelFit:
+    """Fit one model (free slip or rolling from the strike) to the measurements.
+
+    ``start`` is ``(x0, t0, v0, w0)`` (``w0`` ignored when rolling);
+    friction starts from ``params``.  Raises ValueError or LinAlgError when
+    the fit cannot run.
+    """
+    t = meas.t_used
+    x0, t0, v0, w0 = (np.asarray(s, dtype=float) for s in start)
+    p0 = np.r_[x0, t0, v0] if rolling else np.r_[x0, t0, v0, w0]
+    if fit_friction:
+        p0 = np.r_[p0, [params.mu_r] if rolling else [params.mu_s, params.mu_r]]
+
     def resid(p):
         shot, pr = _unpack(p, rolling, fit_friction, params)
-        return ((model_track(shot, pr, t, exposure_s) - xy) / sig).ravel()
+        return meas.whiten(model_track(shot, pr, t, exposure_s)).ravel()
 
     lo = np.full(len(p0), -np.inf)
     hi = np.full(len(p0), np.inf)
@@ -125,14 +171,180 @@ def _fit(t, xy, sig, p0, rolling, fit_friction, params, exposure_s):
         x_scale = np.r_[x_scale, 1e-2, 1e-3]
     if fit_friction:  # bounded: trust-region reflective
         p0 = np.clip(p0, lo + 1e-9, hi - 1e-9)
-        return least_squares(resid, p0, bounds=(lo, hi), x_scale=x_scale, method="trf",
-                             diff_step=1e-7, xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=60)
-    # max_nfev counts residual evaluations, Jacobians included: ~12 iterations,
-    # plenty from the segmentation's start; beyond that the fit is lost anyway.
-    # Tolerances 1e-7: answers within 5e-6 standard errors of those at 1e-10
-    # (10 benchmark shots, both codecs), in 25% less time.
-    return least_squares(resid, p0, x_scale=x_scale, method="lm", diff_step=1e-7,
-                         xtol=LM_TOL, ftol=LM_TOL, gtol=LM_TOL, max_nfev=100)
+        r = least_squares(resid, p0, bounds=(lo, hi), x_scale=x_scale, method="trf",
+                          diff_step=1e-7, xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=60)
+    else:
+        # max_nfev counts residual evaluations, Jacobians included: ~12
+        # iterations, plenty from the segmentation's start.  Tolerances 1e-7:
+        # answers within 5e-6 standard errors of those at 1e-10 (10 benchmark
+        # shots, both codecs), in 25% less time.
+        r = least_squares(resid, p0, x_scale=x_scale, method="lm", diff_step=1e-7,
+                          xtol=LM_TOL, ftol=LM_TOL, gtol=LM_TOL, max_nfev=100)
+    shot, pr = _unpack(r.x, rolling, fit_friction, params)
+    return ModelFit(rolling=rolling, x=r.x, shot=shot, params=pr, chi2=float(2 * r.cost),
+                    dof=meas.dof(len(r.x)), jac=r.jac, residuals=r.fun.reshape(-1, 2),
+                    converged=bool(r.success or r.status > 0), message=str(r.message),
+                    names=_names(rolling, fit_friction))
+
+
+def fit_models(meas: Measurements, params: BallParams, start, exposure_s: float = 0.0,
+               fit_friction: bool = False, start_rolling=None):
+    """Both models: free slip from ``start`` and rolling from the strike from
+    ``start_rolling`` (default ``start``).  Returns ``(full, rolling)``.
+
+    Rolling is nested in free slip, so a full fit worse than the rolling one
+    stopped in a local minimum: it is restarted from the rolling answer,
+    nudged along the start's slip, and the better kept.
+    """
+    full = fit_model(meas, params, start, exposure_s, False, fit_friction)
+    roll = fit_model(meas, params, start_rolling if start_rolling is not None else start,
+                     exposure_s, True, fit_friction)
+    if full.chi2 > roll.chi2:
+        s = roll.shot
+        w_roll = np.asarray(s.w0)
+        d = np.asarray(start[3], float) - w_roll
+        nudge = 0.05 * np.hypot(*s.v0) / params.R
+        w_start = w_roll + nudge * d / max(np.hypot(*d), 1e-12)
+        again = fit_model(meas, roll.params, (s.x0, s.t0, s.v0, w_start), exposure_s, False,
+                          fit_friction)
+        if again.chi2 < full.chi2:
+            full = again
+    return full, roll
+
+
+def slip_lr(full: ModelFit, roll: ModelFit, meas: Measurements | None = None) -> float:
+    """Likelihood-ratio statistic of free slip against rolling from the strike.
+
+    The chi-square difference, in the residuals' own scale when they are
+    larger than stated (quasi-likelihood: divided by the full fit's reduced
+    chi-square when that exceeds 1), and, when the residuals are
+    autocorrelated (``meas`` given; see :func:`covariance`), divided by how
+    much the HAC sandwich widens w0's variance over the independent-error
+    one: correlated errors inflate the chi-square difference as much.  Its
+    reference distribution is not chi^2(2) (t1 is not identified at zero
+    slip); fit.decide holds the threshold calibrated by simulation.
+    """
+    scale = max(1.0, full.chi2 / full.dof)
+    if meas is not None:
+        rho, z = lag1_autocorrelation(meas, full.residuals)
+        if z > AUTOCORR_Z:
+            try:
+                base = np.linalg.inv(full.jac.T @ full.jac) * scale
+                hac = hac_covariance(full.jac, full.residuals, rho)
+                scale *= max(1.0, float(np.mean(np.diag(hac)[5:7] / np.diag(base)[5:7])))
+            except np.linalg.LinAlgError:
+                pass
+    return float((roll.chi2 - full.chi2) / scale)
+
+
+def lag1_autocorrelation(meas: Measurements, residuals) -> tuple[float, float]:
+    """Lag-1 autocorrelation of the whitened residuals over consecutive
+    single-frame measurements (both axes pooled), and its z score under
+    independence (``rho sqrt(N)``, N pairs)."""
+    r = np.asarray(residuals, dtype=float)[meas.single]
+    if len(r) < 4:
+        return 0.0, 0.0
+    num = float(np.sum(r[1:] * r[:-1]))
+    den = float(np.sum(r * r))
+    rho = num / den if den > 0 else 0.0
+    return rho, rho * np.sqrt(2 * (len(r) - 1))
+
+
+def hac_covariance(jac, residuals, rho: float) -> np.ndarray:
+    """Newey-West (Bartlett kernel) sandwich covariance of the parameters.
+
+    ``(J^T J)^-1 S (J^T J)^-1`` with ``S`` the long-run covariance of the
+    per-measurement scores ``J_k^T r_k``; bandwidth by Andrews' (1991) AR(1)
+    plug-in rule from the residuals' lag-1 autocorrelation ``rho``, with
+    the small-sample factor ``2m / (2m - p)``.
+    """
+    J = np.asarray(jac, dtype=float)
+    r = np.asarray(residuals, dtype=float).ravel()
+    m, p = len(r) // 2, J.shape[1]
+    scores = (J * r[:, None]).reshape(m, 2, p).sum(axis=1)  # (m, p)
+    rho = float(np.clip(rho, 0.0, 0.97))
+    alpha = 4 * rho**2 / ((1 - rho) ** 2 * (1 + rho) ** 2)
+    L = int(min(np.ceil(1.1447 * (alpha * m) ** (1 / 3)), m // 4))
+    S = scores.T @ scores
+    for lag in range(1, L + 1):
+        G = scores[lag:].T @ scores[:-lag]
+        S += (1 - lag / (L + 1)) * (G + G.T)
+    A = np.linalg.inv(J.T @ J)
+    return A @ S @ A * (2 * m / max(2 * m - p, 1))
+
+
+def covariance(fit: ModelFit, meas: Measurements):
+    """The parameters' covariance: ``(J^T J)^-1`` scaled by the reduced
+    chi-square when that exceeds 1, or, when the residuals show lag-1
+    autocorrelation, the HAC sandwich (its variances never below the
+    former's: a sandwich estimated from one track can come out small by
+    chance).  Returns ``(cov, hac, rho1)``; raises LinAlgError when the
+    information matrix is singular."""
+    rho, z = lag1_autocorrelation(meas, fit.residuals)
+    base = np.linalg.inv(fit.jac.T @ fit.jac) * max(1.0, fit.chi2 / fit.dof)
+    if not z > AUTOCORR_Z:
+        return base, False, rho
+    hac = hac_covariance(fit.jac, fit.residuals, rho)
+    v = np.maximum(np.diag(hac), 1e-300)
+    d = np.sqrt(np.maximum(v, np.diag(base)) / v)
+    return hac * d[:, None] * d[None, :], True, rho
+
+
+def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool) -> MLEResult:
+    """The MLEResult of the chosen model: standard errors, and ``degenerate``
+    when v0 or w0 is not determined (``sliding_ended`` False: w0 withheld)."""
+    rolling = fit.rolling
+    shot, pr = fit.shot, fit.params
+    if not fit.converged:
+        return MLEResult("failed", f"the fit did not converge: {fit.message}")
+    chi2, dof = fit.chi2, fit.dof
+    if chi2 / dof > MAX_CHI2_PER_DOF:
+        return MLEResult("failed", f"the fitted shot does not describe the track (residuals "
+                         f"{np.sqrt(chi2 / dof):.0f} times the stated noise): the fit stopped far "
+                         "from the shot, or the track is not one shot", chi2=float(chi2), dof=int(dof))
+    try:
+        cov, hac, rho = covariance(fit, meas)
+    except np.linalg.LinAlgError:
+        return MLEResult("degenerate", "the track does not determine the shot (singular information matrix)")
+    ph = phases(shot, pr)
+    se = np.sqrt(np.clip(np.diag(cov), 0, None))
+    stderr = {"x0": se[0:2], "t0": float(se[2]), "v0": se[3:5]}
+    if rolling:
+        # w0 = z x v0 / R: its errors are v0's, rotated and scaled.
+        Rz = np.array([[0.0, -1.0], [1.0, 0.0]]) / pr.R
+        stderr["w0"] = np.sqrt(np.diag(Rz @ cov[3:5, 3:5] @ Rz.T))
+    else:
+        stderr["w0"] = se[5:7]
+    fit_friction = "mu_r" in fit.names
+    if fit_friction:
+        stderr["mu_r"] = float(se[-1])
+        if not rolling:
+            stderr["mu_s"] = float(se[-2])
+    common = dict(stderr=stderr, model="rolling" if rolling else "full", slip_lr=float(lr),
+                  chi2=float(chi2), dof=int(dof), residuals=fit.residuals, cov=cov, names=fit.names,
+                  hac=hac, rho1=float(rho))
+    out = dict(v0=np.asarray(shot.v0, float), w0=np.asarray(shot.w0, float),
+               x0=np.asarray(shot.x0, float), t0=shot.t0,
+               t1=ph.t1, t2=ph.t2 if np.isfinite(ph.t2) else None,
+               x2=ph.x2 if np.isfinite(ph.t2) else None,
+               mu_s=pr.mu_s if fit_friction and not rolling else None,
+               mu_r=pr.mu_r if fit_friction else None, **common)
+    speed = float(np.hypot(*shot.v0))
+    se_speed = float(np.hypot(*stderr["v0"]))
+    if not se_speed < MAX_REL_STDERR_V0 * speed:
+        return MLEResult("degenerate",
+                         f"the track does not determine v0 (standard error {se_speed:.3g} m/s for "
+                         f"|v0| = {speed:.3g} m/s): the strike at t0 is not in view, or the ball "
+                         f"was tracked in too few frames", **common)
+    if not rolling and not sliding_ended:
+        t_end = float(meas.t_used[-1])
+        lower = 3.5 * pr.mu_s * pr.g * (t_end - shot.t0)
+        out.update(w0=None)
+        out["stderr"] = {k: v for k, v in stderr.items() if k != "w0"}
+        return MLEResult("degenerate",
+                         f"the track ends (t = {t_end:.3f} s) before sliding does: the slip, so w0, "
+                         f"is not determined (|u0| > {lower:.2f} m/s); v0 is", **out)
+    return MLEResult("ok", "", **out)
 
 
 def initial_guess(seg, params: BallParams):
@@ -152,9 +364,11 @@ def initial_guess(seg, params: BallParams):
 
 
 def fit_mle(t, xy, sigma, params: BallParams, start, exposure_s: float = 0.0,
-            fit_friction: bool = False, sliding_ended: bool = True,
-            sliding_obvious: bool = False) -> MLEResult:
-    """Maximum-likelihood estimate of the shot from a track.
+            fit_friction: bool = False, sliding_ended: bool = True, start_rolling=None) -> MLEResult:
+    """Maximum-likelihood estimate of the shot from a track, every frame its
+    own measurement (no strike window, no rest grouping: for those, build
+    :class:`~cuespin.recover.measurements.Measurements` and use
+    recover.estimate).
 
     Parameters
     ----------
@@ -162,8 +376,8 @@ def fit_mle(t, xy, sigma, params: BallParams, start, exposure_s: float = 0.0,
         Frame times (s) of frames where the ball was found.
     xy : ndarray, shape (n, 2)
         Observed centres (m).
-    sigma : float or ndarray, shape (n,)
-        Per-axis standard error of each centre (m).
+    sigma : float or ndarray, shape (n,), (n, 2) or (n, 2, 2)
+        Per-axis standard error of each centre (m), or its covariance (m^2).
     params : BallParams
         Known constants (start values of mu_s and mu_r with ``fit_friction``).
     start : tuple
@@ -173,132 +387,47 @@ def fit_mle(t, xy, sigma, params: BallParams, start, exposure_s: float = 0.0,
     fit_friction : bool
         Estimate ``mu_s`` and ``mu_r`` too.
     sliding_ended : bool
-        Whether the track shows sliding end (the segmentation's verdict).
-        Sliding that outlasts the track leaves the slip's magnitude, so
-        ``w0``, undetermined: the fit then has a flat valley along it and
-        may stop anywhere in it, even with ``t1`` just inside the track.
-    sliding_obvious : bool
-        The segmentation already rejected rolling from the strike
-        overwhelmingly; the rolling fit (only there to be rejected by the
-        likelihood ratio) is skipped.
+        Whether the track shows sliding end (fit.decide's verdict).
 
     Returns
     -------
     MLEResult
         Never raises for bad data.
     """
+    from cuespin.fit.decide import sliding_seen
     t = np.asarray(t, dtype=float)
     xy = np.asarray(xy, dtype=float)
-    sig = np.broadcast_to(np.asarray(sigma, dtype=float), t.shape)[:, None]
-    good = np.all(np.isfinite(xy), axis=1) & np.isfinite(sig[:, 0]) & (sig[:, 0] > 0)
-    t, xy, sig = t[good], xy[good], sig[good]
-    if len(t) < 8:
-        return MLEResult("failed", f"only {len(t)} usable frames in the track")
-    x0, t0, v0, w0 = (np.asarray(s, dtype=float) for s in start)
-    extra = [params.mu_s, params.mu_r] if fit_friction else []
-    extra_roll = [params.mu_r] if fit_friction else []
+    s = np.asarray(sigma, dtype=float)
+    if s.ndim == 0:
+        s = np.full(len(t), float(s))
+    good = np.all(np.isfinite(xy), axis=1) & np.isfinite(t)
+    if good.sum() < 8:
+        return MLEResult("failed", f"only {int(good.sum())} usable frames in the track")
+    meas = build_measurements(t[good], xy[good], s[good])
     try:
-        full = _fit(t, xy, sig, np.r_[x0, t0, v0, w0, extra], False, fit_friction, params, exposure_s)
-        roll = None if sliding_obvious else \
-            _fit(t, xy, sig, np.r_[x0, t0, v0, extra_roll], True, fit_friction, params, exposure_s)
-        if roll is not None and full.cost > roll.cost:
-            # Rolling is nested in the full model, so the full fit stopped in a
-            # local minimum: restart it from the rolling answer, nudged along
-            # the segmentation's slip, and keep the better.
-            shot_r, pr_r = _unpack(roll.x, True, fit_friction, params)
-            nudge = 0.05 * np.hypot(*shot_r.v0) / params.R
-            w_start = np.asarray(shot_r.w0) + nudge * (np.asarray(w0) - np.asarray(shot_r.w0)) / \
-                max(np.hypot(*(np.asarray(w0) - np.asarray(shot_r.w0))), 1e-12)
-            fr = [pr_r.mu_s, pr_r.mu_r] if fit_friction else []
-            again = _fit(t, xy, sig, np.r_[roll.x[:5], w_start, fr], False, fit_friction, params,
-                         exposure_s)
-            if again.cost < full.cost:
-                full = again
+        full, roll = fit_models(meas, params, start, exposure_s, fit_friction, start_rolling)
     except (ValueError, np.linalg.LinAlgError, FloatingPointError) as exc:
         return MLEResult("failed", f"the fit did not run: {exc}")
-    chi_full = 2 * full.cost
-    chi_roll = 2 * roll.cost if roll is not None else np.inf
-    # Quasi-likelihood: when the residuals are larger than the stated noise
-    # (lossy codecs), the ratio is measured in the residuals' own scale.
-    dof_full = max(2 * len(t) - len(full.x), 1)
-    lr = (chi_roll - chi_full) / max(1.0, chi_full / dof_full)
-    rolling = lr < SLIP_LR_THRESHOLD
-    res = roll if rolling else full
-    if not res.success and res.status <= 0:
-        return MLEResult("failed", f"the fit did not converge: {res.message}")
-    shot, pr = _unpack(res.x, rolling, fit_friction, params)
-    ph = phases(shot, pr)
-    n_par = len(res.x)
-    dof = max(2 * len(t) - n_par, 1)
-    chi2 = 2 * res.cost
-    if chi2 / dof > MAX_CHI2_PER_DOF:
-        return MLEResult("failed", f"the fitted shot does not describe the track (residuals "
-                         f"{np.sqrt(chi2 / dof):.0f} times the stated noise): the fit stopped far "
-                         "from the shot, or the track is not one shot", chi2=float(chi2), dof=int(dof))
-    J = res.jac
-    try:
-        cov = np.linalg.inv(J.T @ J) * max(1.0, chi2 / dof)
-    except np.linalg.LinAlgError:
-        return MLEResult("degenerate", "the track does not determine the shot (singular information matrix)")
-    se = np.sqrt(np.clip(np.diag(cov), 0, None))
-    stderr = {"x0": se[0:2], "t0": float(se[2]), "v0": se[3:5]}
-    if rolling:
-        # w0 = z x v0 / R: its errors are v0's, rotated and scaled.
-        cv = cov[3:5, 3:5]
-        Rz = np.array([[0.0, -1.0], [1.0, 0.0]]) / pr.R
-        stderr["w0"] = np.sqrt(np.diag(Rz @ cv @ Rz.T))
-    else:
-        stderr["w0"] = se[5:7]
-    if fit_friction:
-        stderr["mu_r"] = float(se[-1])
-        if not rolling:
-            stderr["mu_s"] = float(se[-2])
-    resid = res.fun.reshape(-1, 2)
-    names = ("x0x", "x0y", "t0", "v0x", "v0y") + (() if rolling else ("w0x", "w0y")) + \
-        ((("mu_r",) if rolling else ("mu_s", "mu_r")) if fit_friction else ())
-    out = dict(v0=shot_vec(shot.v0), w0=shot_vec(shot.w0), x0=shot_vec(shot.x0), t0=shot.t0,
-               t1=ph.t1, t2=ph.t2 if np.isfinite(ph.t2) else None,
-               x2=ph.x2 if np.isfinite(ph.t2) else None,
-               mu_s=pr.mu_s if fit_friction and not rolling else None,
-               mu_r=pr.mu_r if fit_friction else None,
-               stderr=stderr, model="rolling" if rolling else "full", slip_lr=float(lr),
-               chi2=float(chi2), dof=int(dof), residuals=resid, cov=cov, names=names)
-    speed = float(np.hypot(*shot.v0))
-    se_speed = float(np.hypot(*stderr["v0"]))
-    if not se_speed < MAX_REL_STDERR_V0 * speed:
-        return MLEResult("degenerate",
-                         f"the track does not determine v0 (standard error {se_speed:.3g} m/s for "
-                         f"|v0| = {speed:.3g} m/s): the strike at t0 is not in view, or the ball "
-                         f"was tracked in too few frames", stderr=stderr, model=out["model"],
-                         slip_lr=float(lr), chi2=float(chi2), dof=int(dof), residuals=resid,
-                         cov=cov, names=names)
-    t_end = float(t[-1])
-    frame = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
-    if not rolling and (ph.t1 > t_end - 2 * frame or not sliding_ended):
-        lower = 3.5 * pr.mu_s * pr.g * (t_end - shot.t0)
-        out.update(w0=None)
-        out["stderr"] = {k: v for k, v in stderr.items() if k != "w0"}
-        return MLEResult("degenerate",
-                         f"the track ends (t = {t_end:.3f} s) before sliding does: the slip, so w0, "
-                         f"is not determined (|u0| > {lower:.2f} m/s); v0 is",
-                         **out)
-    return MLEResult("ok", "", **out)
+    lr = slip_lr(full, roll, meas)
+    chosen = full if sliding_seen(lr).yes else roll
+    return result(chosen, meas, lr, sliding_ended and not _t1_beyond(chosen, meas))
 
 
-def shot_vec(v):
-    """A shot's tuple as an ndarray."""
-    return np.asarray(v, dtype=float)
+def _t1_beyond(fit: ModelFit, meas: Measurements) -> bool:
+    """The fitted end of sliding lies beyond the track's last two frames."""
+    from cuespin.fit.decide import t1_in_view
+    return not fit.rolling and not t1_in_view(phases(fit.shot, fit.params).t1, meas.t_used)
 
 
-def crb_covariance(shot: Shot, params: BallParams, t, sigma, exposure_s: float = 0.0,
+def crb_covariance(shot: Shot, params: BallParams, meas: Measurements, exposure_s: float = 0.0,
                    rolling: bool = False) -> np.ndarray:
     """Cramer-Rao covariance of ``(x0, t0, v0[, w0])`` at the true shot.
 
-    The inverse Fisher information ``(J^T J)^-1`` of the same model and noise
-    the fit uses, with ``J`` by central differences at the truth.
+    The inverse Fisher information ``(J^T J)^-1`` of the same model and the
+    same measurements the fit uses, with ``J`` by central differences at
+    the truth.
     """
-    t = np.asarray(t, dtype=float)
-    sig = np.broadcast_to(np.asarray(sigma, dtype=float), t.shape)[:, None]
+    t = meas.t_used
     p = np.r_[shot.x0, shot.t0, shot.v0] if rolling else np.r_[shot.x0, shot.t0, shot.v0, shot.w0]
     steps = np.r_[1e-7, 1e-7, 1e-8, 1e-7, 1e-7, 1e-5, 1e-5][:len(p)]
     cols = []
@@ -307,6 +436,6 @@ def crb_covariance(shot: Shot, params: BallParams, t, sigma, exposure_s: float =
         dp[i] = h
         a = model_track(_unpack(p + dp, rolling, False, params)[0], params, t, exposure_s)
         b = model_track(_unpack(p - dp, rolling, False, params)[0], params, t, exposure_s)
-        cols.append(((a - b) / (2 * h) / sig).ravel())
+        cols.append(meas.whiten_delta((a - b) / (2 * h)).ravel())
     J = np.stack(cols, axis=1)
     return np.linalg.inv(J.T @ J)

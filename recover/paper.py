@@ -30,6 +30,19 @@ from cuespin.physics.parabola import Parabola
 # position-noise sigmas of the measured one (the measured x1 is itself an
 # estimate; callers add a frame's travel); every candidate within it is kept.
 CONSISTENCY_SIGMAS = 6.0
+# Roots that reproduce the geometry equally well are told apart by their
+# sliding time t1 - t0 = 2 |u0| / (7 mu_s g) (eq. 10) against the one the
+# segmentation measured (eq. 26): a root is kept only within this many
+# frames of it.  The segmentation places t1 to within 1.5e-3 s at 240 fps
+# (tests/test_fit.py), under a frame; the spurious roots seen on exact
+# tracks slide 0.06-0.13 s longer or shorter (issue 11), 4-8 frames at 60 fps.
+TIE_T1_FRAMES = 2.0
+# Theorem 1 fixes the vertex's offset across the slip: |p . n_hat| =
+# alpha |beta| / (mu_s g).  A fitted parabola whose vertex is off by more
+# than this fraction of it (plus the position tolerance) does not fit
+# Theorem 1 and is not an answer.  The fitted vertex is extrapolated beyond
+# the sliding arc, so it is loose: 0.5 rejects only gross misfits.
+THEOREM1_RTOL = 0.5
 
 
 @dataclass(frozen=True)
@@ -38,6 +51,7 @@ class PaperResult:
 
     ``solutions`` lists every consistent ``(v0, w0)`` pair when there is more
     than one (status ``ambiguous``).  ``trajectory`` is ``parabola`` or ``line``.
+    ``stderr`` holds standard errors of ``v0`` and ``w0`` when ``ok``.
     """
 
     status: str
@@ -50,6 +64,7 @@ class PaperResult:
     x2: np.ndarray | None = None
     u0: float | None = None
     solutions: list = field(default_factory=list)
+    stderr: dict = field(default_factory=dict)
 
     def __bool__(self):
         return self.status == "ok"
@@ -60,7 +75,8 @@ def w0_from(v0, u0_vec, R):
     return z_cross(np.asarray(v0, float) - np.asarray(u0_vec, float)) / R
 
 
-def recover_parabola(par: Parabola, x0, x1, params: BallParams, tol: float) -> PaperResult:
+def recover_parabola(par: Parabola, x0, x1, params: BallParams, tol: float,
+                     tau1: float | None = None, tau1_tol: float = 0.0) -> PaperResult:
     """Section 2.1: v0 and w0 from the sliding parabola, ``x0`` and ``x1``.
 
     Parameters
@@ -73,6 +89,9 @@ def recover_parabola(par: Parabola, x0, x1, params: BallParams, tol: float) -> P
         ``mu_s``, ``g`` and ``R``.
     tol : float
         Distance (m) within which eq. 37 counts as satisfied.
+    tau1, tau1_tol : float, optional
+        Measured sliding time ``t1 - t0`` (s, eq. 26) and how far a root's
+        may be from it (s): breaks ties between roots that satisfy eq. 37.
     """
     x0 = np.asarray(x0, float)
     x1 = np.asarray(x1, float)
@@ -86,6 +105,11 @@ def recover_parabola(par: Parabola, x0, x1, params: BallParams, tol: float) -> P
                            "(p . u_hat <= 0): the parabola does not fit Theorem 1", "parabola")
     alpha = np.sqrt(2 * mu_g * pu)  # |v0 . u_hat|, eq. 33
     beta = np.sqrt(mu_g / (2 * par.a)) * np.sign(float(p @ n_hat) or 1.0)  # eq. 34 and the vertex
+    pn = alpha * abs(beta) / mu_g  # Theorem 1: the vertex's offset across the slip
+    if abs(abs(float(p @ n_hat)) - pn) > tol + THEOREM1_RTOL * pn:
+        return PaperResult("failed", f"the fitted vertex is {abs(float(p @ n_hat)) * 1e3:.1f} mm across "
+                           f"the slip where Theorem 1 puts it at {pn * 1e3:.1f} mm: the parabola does "
+                           "not fit Theorem 1", "parabola", x0=x0, x1=x1)
     d = x1 - x0
     cands = []
     for sgn in (1.0, -1.0):
@@ -111,14 +135,32 @@ def recover_parabola(par: Parabola, x0, x1, params: BallParams, tol: float) -> P
     distinct = [s for i, s in enumerate(sols)
                 if all(np.hypot(*(s["v0"] - o["v0"])) > 1e-6 * (1 + np.hypot(*o["v0"]))
                        or abs(s["u0"] - o["u0"]) > 1e-6 * (1 + o["u0"]) for o in sols[:i])]
+    distinct = break_tie(distinct, params, tau1, tau1_tol)
     if len(distinct) > 1:
-        return PaperResult("ambiguous", f"{len(distinct)} solutions satisfy eq. 37 within the noise",
+        return PaperResult("ambiguous", f"{len(distinct)} solutions satisfy eq. 37 within the noise "
+                           "and the measured sliding time",
                            "parabola", x0=x0, x1=x1, solutions=distinct)
     s = distinct[0]
     return PaperResult("ok", "", "parabola", v0=s["v0"], w0=s["w0"], x0=x0, x1=x1, u0=s["u0"])
 
 
-def recover_line(x0, x1, x2, params: BallParams, tol: float, heading=None) -> PaperResult:
+def sliding_time(v0, w0, params: BallParams) -> float:
+    """Eq. 10: ``t1 - t0 = 2 |u0| / (7 mu_s g)``, ``u0 = v0 + R z_hat x w0``."""
+    u0 = np.asarray(v0, float) + params.R * z_cross(np.asarray(w0, float))
+    return 2.0 * float(np.hypot(*u0)) / (7.0 * params.mu_s * params.g)
+
+
+def break_tie(sols: list, params: BallParams, tau1: float | None, tau1_tol: float) -> list:
+    """The solutions whose sliding time is within ``tau1_tol`` of the
+    measured ``tau1`` (all of them when none is, or no time is given)."""
+    if tau1 is None or not np.isfinite(tau1) or len(sols) < 2:
+        return sols
+    near = [s for s in sols if abs(sliding_time(s["v0"], s["w0"], params) - tau1) <= tau1_tol]
+    return near or sols
+
+
+def recover_line(x0, x1, x2, params: BallParams, tol: float, heading=None,
+                 tau1: float | None = None, tau1_tol: float = 0.0) -> PaperResult:
     """Section 2.2: v0 and w0 of a straight shot from ``x0``, ``x1``, ``x2``.
 
     Both hypotheses of eq. 43 are tried, along both orientations of the line
@@ -130,7 +172,9 @@ def recover_line(x0, x1, x2, params: BallParams, tol: float, heading=None) -> Pa
     was seen to leave ``x0`` in (the video shows the order of the path, if
     not its timing), rejects solutions whose ``v0`` points the other way;
     without it, reversed-orientation solutions can reproduce the same three
-    points (status ``ambiguous``).
+    points (status ``ambiguous``).  ``tau1`` (s), the sliding time the
+    segmentation measured (eq. 26), breaks the remaining ties: roots whose
+    own sliding time (eq. 10) is further than ``tau1_tol`` from it go.
     """
     x0, x1, x2 = (np.asarray(v, float) for v in (x0, x1, x2))
     R, mu_s, mu_r, g = params.R, params.mu_s, params.mu_r, params.g
@@ -170,7 +214,146 @@ def recover_line(x0, x1, x2, params: BallParams, tol: float, heading=None) -> Pa
     if not sols:
         return PaperResult("failed", "no hypothesis of eq. 43 is consistent with x1 and x2", "line",
                            x0=x0, x1=x1, x2=x2)
+    sols = break_tie(sols, params, tau1, tau1_tol)
     if len(sols) > 1:
-        return PaperResult("ambiguous", f"{len(sols)} solutions reproduce x1 and x2 (eq. 43 hypotheses)",
+        return PaperResult("ambiguous", f"{len(sols)} solutions reproduce x1 and x2 (eq. 43 "
+                           "hypotheses) and the measured sliding time",
                            "line", x0=x0, x1=x1, x2=x2, solutions=sols)
     return PaperResult("ok", "", "line", v0=sols[0]["v0"], w0=sols[0]["w0"], x0=x0, x1=x1, x2=x2)
+
+
+def geometry_covariance(seg, sigma: float, lossless: bool) -> np.ndarray:
+    """Covariance (m^2) of ``(x0, x1, x2)``, shape (6, 6), from the
+    segmentation's (fit.segment: ``geometry_cov``); with a lossy codec the
+    rests' frames share one error, so ``x0`` and ``x2`` are no better than
+    one frame (``sigma``, per axis)."""
+    g = seg.geometry_cov or {}
+    C = np.zeros((6, 6))
+    one = sigma**2 * np.eye(2)
+    C[0:2, 0:2] = g.get("x0", one)
+    C[2:4, 2:4] = g.get("x1", one)
+    C[0:2, 2:4] = C[2:4, 0:2] = g.get("x0x1", np.zeros((2, 2)))
+    C[4:6, 4:6] = g["x2"] if g.get("x2") is not None else one
+    if not lossless:
+        for k in (0, 4):
+            C[k:k + 2, k:k + 2] = np.maximum(C[k:k + 2, k:k + 2], one)
+    return C
+
+
+def with_stderr(res: PaperResult, solve, x, C, params: BallParams) -> PaperResult:
+    """``res`` with standard errors of ``v0`` and ``w0`` by the delta method:
+    the inputs' covariance ``C`` through the numerical Jacobian of
+    ``solve`` (inputs to a PaperResult) at ``x``, following the answer's
+    own root (the solution nearest it)."""
+    from dataclasses import replace
+    if res.status != "ok" or C is None:
+        return res
+    base = np.r_[res.v0, params.R * np.asarray(res.w0)]
+
+    def pick(r):
+        sols = [{"v0": r.v0, "w0": r.w0}] if r.status == "ok" else r.solutions
+        vs = [np.r_[s["v0"], params.R * np.asarray(s["w0"])] for s in sols]
+        return min(vs, key=lambda v: float(np.hypot(*(v - base)[:2]) + np.hypot(*(v - base)[2:]))) \
+            if vs else None
+
+    sd = np.sqrt(np.clip(np.diag(C), 0, None))
+    J = np.zeros((4, len(x)))
+    for i, s in enumerate(sd):
+        if s <= 0:
+            continue
+        h = 1e-3 * s
+        dx = np.zeros(len(x))
+        dx[i] = h
+        a, b = pick(solve(x + dx)), pick(solve(x - dx))
+        if a is None or b is None:
+            return res
+        J[:, i] = (a - b) / (2 * h)
+    cov = J @ C @ J.T
+    se = np.sqrt(np.clip(np.diag(cov), 0, None))
+    return replace(res, stderr={"v0": se[0:2], "w0": se[2:4] / params.R})
+
+
+def path_shape(seg, xy, params: BallParams):
+    """The sliding path's shape (fit.conics.classify_path, started from the
+    segmentation's parabola), or None when fewer than 5 frames slide."""
+    from cuespin.fit.conics import classify_path
+    from cuespin.physics.parabola import sliding_parabola
+    from cuespin.recover.mle import initial_guess
+
+    if not (seg and seg.t1 > seg.t0 and seg.slide is not None and len(seg.slide) >= 5):
+        return None
+    x0, t0, v0, w0 = initial_guess(seg, params)
+    try:
+        start = sliding_parabola(x0, v0, w0, params)
+    except ValueError:
+        start = None
+    return classify_path(np.asarray(xy)[seg.slide], start)
+
+
+def paper_from_segments(seg, t, xy, params: BallParams, sigma: float, frame_dt: float,
+                        strike_seen: bool = True, lossless: bool = True) -> PaperResult:
+    """The paper's method on a segmented track (the segmentation the
+    decisions chose): parabola or line by fit.decide.curved, the sliding
+    time breaking ties, with the status and reason CONVENTIONS.md asks for.
+
+    Parameters
+    ----------
+    seg : Segments
+        The chosen segmentation (rolling from the strike, or sliding).
+    t, xy : ndarray
+        The track's frame times (s) and centres (m) that ``seg`` indexes.
+    sigma : float
+        Per-axis position noise (m).
+    frame_dt : float
+        Frame interval (s).
+    strike_seen : bool
+        The strike is in view (fit.decide.strike_in_view): without it,
+        ``x0`` is an extrapolation and the method has no answer.
+    lossless : bool
+        Passed on to the standard errors (a lossy codec's rest frames share
+        one error).
+    """
+    if not seg:
+        return PaperResult("failed", f"the track could not be segmented: {seg.reason}")
+    if not strike_seen:
+        return PaperResult("degenerate", "the strike is not in view (the first frames already show "
+                           "the ball moving): x0 is not measured, and the paper's method needs it")
+    if not np.isfinite(seg.t1):
+        return PaperResult("degenerate", "sliding had not ended when the track did: x1, and so "
+                           "the paper's method, is not determined", x0=seg.x0)
+    # x1 is itself estimated (to about a frame's travel), so eq. 37 and the line's
+    # forward check are held to that, not to the pixel noise alone.
+    tol = CONSISTENCY_SIGMAS * sigma + np.hypot(*seg.v1) * frame_dt
+    tau1, tau1_tol = seg.t1 - seg.t0, TIE_T1_FRAMES * frame_dt
+    geo = geometry_covariance(seg, sigma, lossless)
+    shape = path_shape(seg, xy, params)
+    if shape is not None:
+        if shape.curved:
+            par = shape.parabola
+
+            def solve_par(x):
+                q = Parabola(a=float(np.exp(x[0])), theta=float(x[1]), vertex=x[2:4])
+                return recover_parabola(q, x[4:6], x[6:8], params, tol, tau1, tau1_tol)
+
+            x = np.r_[np.log(par.parabola.a), par.parabola.theta, par.parabola.vertex, seg.x0, seg.x1]
+            C = None
+            if par.cov is not None:
+                C = np.zeros((8, 8))
+                C[:4, :4] = par.cov
+                C[4:, 4:] = geo[:4, :4]
+            return with_stderr(solve_par(x), solve_par, x, C, params)
+        why_line = (f"the sliding path is straight within the noise (F = {shape.F:.3g} for "
+                    "curvature, under the calibrated threshold)")
+    else:
+        why_line = "no sliding seen (rolling from the strike)" if seg.t1 <= seg.t0 else \
+            "sliding too short to fit a parabola (fewer than 5 frames)"
+    if seg.x2 is None:
+        return PaperResult("degenerate", f"{why_line}, and no rest point is in view: the paper's "
+                           "line method needs x2", "line", x0=seg.x0, x1=seg.x1)
+    heading = seg.v0 / np.hypot(*seg.v0) if np.hypot(*seg.v0) > 0 else None
+
+    def solve_line(x):
+        return recover_line(x[0:2], x[2:4], x[4:6], params, tol, heading, tau1, tau1_tol)
+
+    x = np.r_[seg.x0, seg.x1, seg.x2]
+    return with_stderr(solve_line(x), solve_line, x, geo, params)

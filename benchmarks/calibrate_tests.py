@@ -1,0 +1,115 @@
+"""Calibrate fit.decide's thresholds by simulation (the project's own generator).
+
+For each decision, simulate tracks under its null hypothesis with
+recover.simulate (forward model + Gaussian noise; frame rates 60-480,
+per-axis noise 2e-5-6e-4 m, half the tracks with an exposure of 0.3-1
+frame), compute the decision's statistic over its nominal quantile (the
+ratio a factor must exceed to say "yes"), and print the 99th percentile of
+that ratio pooled and per frame rate x noise cell.  A factor in
+fit/decide.py stays 1 when the share above 1 is within the nominal rate
+plus two binomial standard errors in every cell; otherwise it is the
+largest per-cell q99, rounded up:
+
+- SLIP_FACTOR: recover.mle.slip_lr on rolling-from-the-strike tracks (case 4),
+  over chi^2(2)'s 1% point;
+- END_FACTOR: the segmentation's end_F on tracks that end while sliding,
+  over F(1, dof)'s;
+- CURVE_FACTOR: the conics F on straight sliding paths (cases 1, 3, 5),
+  over F(2, n - 4)'s.
+
+Usage: python benchmarks/calibrate_tests.py [--n 1200] [--seed 0] [--which slip,end,curve]
+"""
+
+import argparse
+import sys
+import time
+from collections import defaultdict
+
+import numpy as np
+from scipy.stats import chi2, f as f_dist
+
+
+def slip_ratios(n, seed):
+    from cuespin.recover.estimate import estimate
+    from cuespin.recover.simulate import null_rolling_tracks
+    out = defaultdict(list)
+    for tr in null_rolling_tracks(n, seed):
+        est = estimate(tr.t, tr.xy, np.full(len(tr.t), tr.sigma), tr.params, tr.exposure_s,
+                       run_paper=False)
+        d = est.decisions.get("sliding_seen")
+        if d is not None:
+            out[(tr.fps, tr.sigma)].append(d.statistic / chi2.isf(0.01, 2))
+    return out
+
+
+def end_ratios(n, seed):
+    from cuespin.data_gen.sampler import sample_shot
+    from cuespin.fit.segment import segment_track
+    from cuespin.physics import phases
+    from cuespin.recover.simulate import FPS_GRID, SIGMA_GRID_M, simulate_track
+    rng = np.random.default_rng(seed)
+    out = defaultdict(list)
+    for i in range(n):
+        fps = FPS_GRID[i % len(FPS_GRID)]
+        sigma = SIGMA_GRID_M[(i // len(FPS_GRID)) % len(SIGMA_GRID_M)]
+        shot, p = sample_shot(rng, ("masse", "random")[i % 2])
+        ph = phases(shot, p)
+        if ph.t1 - shot.t0 < 12 / fps:  # too short to cut inside
+            continue
+        cut = shot.t0 + float(rng.uniform(0.4, 0.95)) * (ph.t1 - shot.t0)
+        exposure = float(rng.uniform(0.3, 1.0) / fps) if rng.random() < 0.5 else 0.0
+        tr = simulate_track(shot, p, fps, sigma, rng, exposure, t_end=cut)
+        seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, sigma, exposure)
+        if seg:
+            from cuespin.fit.decide import t1_in_view
+            r = seg.end_F / f_dist.isf(0.01, 1, max(seg.end_dof, 1)) if t1_in_view(seg.t1, tr.t) else 0.0
+            out[(fps, sigma)].append(r)
+    return out
+
+
+def curve_ratios(n, seed):
+    from cuespin.fit.segment import segment_track
+    from cuespin.recover.paper import path_shape
+    from cuespin.recover.simulate import sliding_tracks
+    out = defaultdict(list)
+    for tr in sliding_tracks(n, seed, presets=("case1", "case3", "case5")):
+        p = tr.params
+        seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, tr.sigma, tr.exposure_s)
+        shape = path_shape(seg, tr.xy, p) if seg else None
+        if shape is not None:
+            k = len(seg.slide)
+            r = shape.F / f_dist.isf(0.01, 2, k - 4) if k > 5 and np.isfinite(shape.F) else 0.0
+            out[(tr.fps, tr.sigma)].append(r)
+    return out
+
+
+def report(name, cells):
+    allv = np.concatenate([np.asarray(v) for v in cells.values()])
+    print(f"\n{name}: {len(allv)} null tracks; ratio statistic / nominal 1% point: "
+          f"pooled q99 {np.percentile(allv, 99):.3f}, share above 1: {np.mean(allv > 1):.2%}")
+    worst = 0.0
+    for k in sorted(cells):
+        v = np.asarray(cells[k])
+        q = np.percentile(v, 99)
+        worst = max(worst, q)
+        print(f"  fps {k[0]:5.0f} sigma {k[1]:.0e}: n {len(v):4d} q99 {q:7.3f} max {v.max():7.3f} "
+              f"share>1 {np.mean(v > 1):6.2%}")
+    print(f"  largest per-cell q99: {worst:.3f}")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, default=1200)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--which", default="slip,end,curve")
+    args = ap.parse_args()
+    for name, fn in (("slip", slip_ratios), ("end", end_ratios), ("curve", curve_ratios)):
+        if name in args.which.split(","):
+            clock = time.perf_counter()
+            report(name, fn(args.n, args.seed))
+            sys.stdout.flush()
+            print(f"  ({time.perf_counter() - clock:.0f} s)", flush=True)
+
+
+if __name__ == "__main__":
+    main()

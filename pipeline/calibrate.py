@@ -1,0 +1,1115 @@
+"""``cuespin calibrate``: the camera of a scene file, found from the table itself.
+
+The playing surface's four corners (clicked by the user, ``--corners``, or
+found in the video: the felt's quadrilateral) fix the camera's pose.  The
+corners lie on the cloth (z = 0) and the ball's centre moves at z = R, so the
+camera written is always a full pinhole camera (``intrinsics``, ``rvec``,
+``tvec``; CONVENTIONS.md), which converts in the ball-centre plane exactly:
+
+* with ``--intrinsics`` (a lens calibration: camera matrix and distortion),
+  the pose is solved from the corners (``cv2.solvePnP``), exact;
+* without, the camera matrix is square-pixel with its principal point at the
+  image centre, and its focal length comes from ``--focal-px``, or from
+  ``--camera-height`` (the lens's height above the cloth, measured), or from
+  the corners themselves when the view is tilted enough to fix it, else a
+  phone's nominal focal length, said on stderr with what it may cost.
+
+A homography fitted to the cloth's corners and used for the ball's centre would
+make every distance too small by ``R / D`` (D the camera's height: 1.4% at 2 m),
+which is why the pose is needed at all.
+
+Checks (a refused camera is one line and exit status 2): corners that do not
+form a convex quadrilateral in the frame, a mirrored order (the table seen
+from below: every spin sign would flip), a camera below the cloth or behind
+the table, corners that no rectangle of the table's size fits through the
+camera (wrong order, wrong table size or wrong lens) and implausible focal
+lengths or tilts.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from cuespin.physics.camera import Camera, as_tuple, distort, undistort
+from cuespin.physics.scene import SCHEMA, Table, camera_to_dict
+from cuespin.pipeline.io import InputError
+
+# A pose whose corners reproject worse than this (px RMS) is not the table's
+# rectangle seen through the camera: clicked corners are good to 1-2 px, the
+# automatic ones to 0.1 px; wrong order or table size gives tens of px.
+MAX_CORNER_RMS_PX = 4.0
+# Focal lengths outside this range of the image's larger side are not a camera
+# anyone films with (a 26 mm-equivalent phone lens is 0.75; 0.2 is a 150-degree
+# fisheye, 5 a long telephoto).
+FOCAL_RANGE = (0.2, 5.0)
+# A phone's main camera: 26 mm equivalent, 69 degrees across the larger side.
+NOMINAL_FOCAL = 0.73
+# Tilt of the optical axis from straight down beyond which the table is too
+# foreshortened to track a ball on (deg).
+MAX_TILT_DEG = 70.0
+# The focal length counts as fixed by the corners when its 1-sigma interval
+# (at the stated corner error) is within this factor.
+FOCAL_DETERMINED = 1.10
+
+
+class CalibrationError(InputError):
+    """A camera the corners cannot give, or one refused as implausible."""
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """A camera found from the table's corners, and how sure it is.
+
+    Attributes
+    ----------
+    camera : Camera
+        Pinhole camera (intrinsics, distortion, rvec, tvec) of the video.
+    corners_px : ndarray, shape (4, 2)
+        The measured corners (px), in table order: (0, 0), (L, 0), (L, W), (0, W).
+    residual_px : ndarray, shape (4, 2)
+        Measured minus reprojected corners (px).
+    focal_source : str
+        Where the focal length came from: ``intrinsics``, ``focal``,
+        ``camera-height``, ``corners`` or ``nominal``.
+    notes : list of str
+        Assumptions worth telling the user.
+    edge_rms_px : float or None
+        Automatic detection only: RMS distance of the felt's edge points from
+        the four fitted lines (px).
+    edge : str or None
+        Automatic detection only: ``noses`` or ``felt`` (:class:`Detection`).
+    corner_sigma_px : float or None
+        Error of each corner coordinate (px) assumed (clicked: ``--corner-error``,
+        default 1; automatic: from the edges' scatter).
+    perturbed : tuple of Camera
+        The camera re-solved with each of the 8 corner coordinates moved by
+        ``corner_sigma_px`` in turn (:func:`perturbed_cameras`), written to the
+        scene file's ``calibration.perturbed`` for the recovery's errors.
+    """
+
+    camera: Camera
+    corners_px: np.ndarray
+    residual_px: np.ndarray
+    focal_source: str
+    notes: list = field(default_factory=list)
+    edge_rms_px: float | None = None
+    edge: str | None = None
+    corner_sigma_px: float | None = None
+    perturbed: tuple = ()
+
+    @property
+    def rms_px(self) -> float:
+        """Corner reprojection error, RMS over the 4 corners' distances (px)."""
+        return float(np.sqrt(np.mean(np.sum(self.residual_px**2, axis=1))))
+
+    @property
+    def height_m(self) -> float:
+        """Camera centre above the cloth (m)."""
+        return float(self.camera.centre[2])
+
+    @property
+    def tilt_deg(self) -> float:
+        """Optical axis from straight down (deg)."""
+        axis = self.camera.rotation[2]
+        return float(np.degrees(np.arccos(np.clip(-axis[2], -1.0, 1.0))))
+
+
+def table_corners(table: Table, margin_m: float = 0.0, height_m: float = 0.0) -> np.ndarray:
+    """The playing surface's corners (m, z up) in the order ``--corners`` takes them:
+    (0, 0), (L, 0), (L, W), (0, W), grown by ``margin_m`` on every side, at ``height_m``."""
+    m = margin_m
+    return np.array([[-m, -m, height_m], [table.length + m, -m, height_m],
+                     [table.length + m, table.width + m, height_m], [-m, table.width + m, height_m]])
+
+
+def signed_area(poly) -> float:
+    """Shoelace area of an image polygon in (u, v); negative when it runs counter-clockwise
+    on the screen (v down), as a true view of the table's corners in order does."""
+    p = np.asarray(poly, dtype=float)
+    q = np.roll(p, -1, axis=0)
+    return float(np.sum(p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1]) / 2.0)
+
+
+def _check_quad(corners: np.ndarray, size: tuple) -> None:
+    w, h = size
+    for i, (u, v) in enumerate(corners):
+        if not (-0.5 <= u <= w - 0.5 and -0.5 <= v <= h - 0.5):
+            raise CalibrationError(f"--corners: corner {i + 1} ({u:g}, {v:g}) is outside the "
+                                   f"{w}x{h} frame")
+    # Convex and simple: every turn the same way.
+    turns = []
+    for i in range(4):
+        a, b, c = corners[i], corners[(i + 1) % 4], corners[(i + 2) % 4]
+        turns.append((b[0] - a[0]) * (c[1] - b[1]) - (b[1] - a[1]) * (c[0] - b[0]))
+    if not (all(t > 0 for t in turns) or all(t < 0 for t in turns)):
+        raise CalibrationError("--corners: the four points do not form a convex quadrilateral; "
+                               "give them in order around the table")
+    if signed_area(corners) > 0:
+        raise CalibrationError("--corners: mirrored order (clockwise on the screen): the table would "
+                               "be seen from below and every spin sign would flip; give (0,0), "
+                               "(length,0), (length,width), (0,width) counter-clockwise as seen")
+
+
+def _homography_dlt(src, dst):
+    """Exact homography of 4 point pairs (direct linear transform, normalised)."""
+    def norm(p):
+        c = p.mean(axis=0)
+        s = math.sqrt(2.0) / np.mean(np.linalg.norm(p - c, axis=1))
+        return np.array([[s, 0.0, -s * c[0]], [0.0, s, -s * c[1]], [0.0, 0.0, 1.0]])
+    Ts, Td = norm(src), norm(dst)
+    a = np.column_stack([src, np.ones(len(src))]) @ Ts.T
+    b = np.column_stack([dst, np.ones(len(dst))]) @ Td.T
+    rows = []
+    for (x, y, w), (u, v, z) in zip(a, b):
+        rows.append([0, 0, 0, -z * x, -z * y, -z * w, v * x, v * y, v * w])
+        rows.append([z * x, z * y, z * w, 0, 0, 0, -u * x, -u * y, -u * w])
+    _, _, vt = np.linalg.svd(np.array(rows))
+    H = vt[-1].reshape(3, 3)
+    return np.linalg.solve(Td, H @ Ts)
+
+
+def _pose(obj, img, K, dist):
+    """Pose of the 4 coplanar points (all at one height): the plane's homography in
+    normalised coordinates decomposed (Zhang), the table in front of the camera,
+    then refined by Levenberg-Marquardt; one solution branch for every K, so the
+    fit's error is a smooth function of the focal length.
+
+    Returns ``(rvec, tvec, residual (4, 2) = measured - reprojected px)``.
+    """
+    h = float(obj[0, 2])
+    und = img if dist is None or not np.any(dist) else _undistort_px(img, K, dist)
+    n = np.column_stack([(und[:, 0] - K[0, 2]) / K[0, 0], (und[:, 1] - K[1, 2]) / K[1, 1]])
+    M = _homography_dlt(obj[:, :2], n)
+    lam = 2.0 / (np.linalg.norm(M[:, 0]) + np.linalg.norm(M[:, 1]))
+    if M[2, 2] < 0:  # the plane's origin in front of the camera (t_z > 0)
+        lam = -lam
+    r1, r2, t = lam * M[:, 0], lam * M[:, 1], lam * M[:, 2]
+    U, _, Vt = np.linalg.svd(np.column_stack([r1, r2, np.cross(r1, r2)]))
+    Rm = U @ Vt
+    if np.linalg.det(Rm) < 0:
+        Rm = U @ np.diag([1.0, 1.0, -1.0]) @ Vt
+    t = t - Rm[:, 2] * h
+    rvec, _ = cv2.Rodrigues(Rm)
+    o = np.ascontiguousarray(obj, dtype=np.float64).reshape(-1, 1, 3)
+    u = np.ascontiguousarray(und, dtype=np.float64).reshape(-1, 1, 2)
+    rvec, tvec = cv2.solvePnPRefineLM(o, u, K, np.zeros(5), rvec, t.reshape(3, 1).copy())
+    proj, _ = cv2.projectPoints(o, rvec, tvec, K, np.zeros(5) if dist is None else _lens(dist))
+    return rvec.ravel(), tvec.ravel(), img - proj[:, 0]
+
+
+def _K(f, size):
+    w, h = size
+    return np.array([[f, 0.0, (w - 1) / 2.0], [0.0, f, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
+
+
+def _camera_height(obj, img, f, size) -> float:
+    r, t, _ = _pose(obj, img, _K(f, size), None)
+    Rm, _ = cv2.Rodrigues(r)
+    return float((-Rm.T @ t)[2])
+
+
+def _chi2(obj, img, f, size) -> float:
+    return float(np.sum(_pose(obj, img, _K(f, size), None)[2] ** 2))
+
+
+def focal_from_corners(obj, img, size, sigma_px: float):
+    """Focal length (px) that best fits 4 corners with square pixels and a centred
+    principal point, and its 1-sigma interval at corner error ``sigma_px``.
+
+    Four corners give 8 numbers for 6 pose parameters and f: a tilted view
+    fixes f, a view from straight above does not (the interval is then wide).
+    """
+    big = max(size)
+    grid = big * np.exp(np.linspace(np.log(FOCAL_RANGE[0]), np.log(FOCAL_RANGE[1]), 65))
+    chi = np.array([_chi2(obj, img, f, size) for f in grid]) / sigma_px**2
+    i = int(np.argmin(chi))
+    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
+    f = math.exp(_golden(lambda lf: _chi2(obj, img, math.exp(lf), size), math.log(lo), math.log(hi), 1e-7))
+    c0 = _chi2(obj, img, f, size) / sigma_px**2
+    inside = grid[chi <= c0 + 1.0]
+    return f, (float(min(inside.min(), f)), float(max(inside.max(), f))) if inside.size else (f, f)
+
+
+def calibrate_corners(corners_px, size, table: Table = Table(), *, intrinsics=None, distortion=None,
+                      focal_px: float | None = None, camera_height_m: float | None = None,
+                      corner_sigma_px: float = 1.0, margin_m: float = 0.0,
+                      corner_height_m: float = 0.0, fps: float = 30.0,
+                      R_nominal: float = 0.028575, kappa: float = 0.0,
+                      homography: bool = False) -> Calibration:
+    """The camera from the playing surface's four corners in pixels.
+
+    Parameters
+    ----------
+    corners_px : array_like, shape (4, 2)
+        Pixels of the table points (0, 0), (L, 0), (L, W), (0, W) (m), i.e.
+        counter-clockwise as seen on the screen, starting at the origin corner.
+    size : (int, int)
+        Frame ``(width, height)`` (px).
+    table : Table
+    intrinsics, distortion : array_like, optional
+        A lens calibration (OpenCV's camera matrix and ``[k1, k2, p1, p2, k3]``).
+    focal_px, camera_height_m : float, optional
+        Without intrinsics: the focal length (px), or the lens's height above
+        the cloth (m), to fix the focal length where the corners cannot.
+    corner_sigma_px : float
+        Error of each corner coordinate (px), for the focal length's interval.
+    margin_m, corner_height_m : float
+        Where the measured quadrilateral lies: the surface grown by
+        ``margin_m`` (m) at ``corner_height_m`` (m) above the cloth (0, 0: the
+        playing surface itself).
+    fps : float
+        The video's nominal rate, for the camera written.
+    R_nominal : float
+        Ball radius (m) used only to state what an assumed focal length costs.
+    kappa : float
+        Without intrinsics: radial distortion about the frame's centre in
+        pixels (``k1 / f^2``, e.g. from the felt's bowed edges); the camera
+        written has ``k1 = kappa f^2``.
+    homography : bool
+        Write the corners' plane homography instead of a pose: the ball's
+        centre plane taken as the corners' plane.  Exact for an orthographic
+        view (the renderer's top-down camera, a camera far above); for a real
+        camera D above the cloth every distance comes out short by R / D.
+
+    Returns
+    -------
+    Calibration
+
+    Raises
+    ------
+    CalibrationError
+        One line: the corners or the camera they give fail a check.
+    """
+    img = np.asarray(corners_px, dtype=float).reshape(4, 2)
+    if not np.all(np.isfinite(img)):
+        raise CalibrationError("--corners: must be finite numbers")
+    size = (int(size[0]), int(size[1]))
+    _check_quad(img, size)
+    obj = table_corners(table, margin_m, corner_height_m)
+    if homography:
+        return _homography_calibration(obj, img, size, intrinsics, distortion, kappa, fps,
+                                       corner_sigma_px)
+    notes = []
+    dist = None
+    if intrinsics is not None:
+        K = np.asarray(intrinsics, dtype=float)
+        dist = None if distortion is None else np.asarray(distortion, dtype=float).ravel()
+        source = "intrinsics"
+    else:
+        big = max(size)
+        img_meas = img
+        if kappa:
+            img = _undistort_radial(img, np.array([(size[0] - 1) / 2.0, (size[1] - 1) / 2.0]), kappa)
+        if focal_px is not None:
+            f, source = float(focal_px), "focal"
+        elif camera_height_m is not None:
+            if not camera_height_m > corner_height_m:
+                raise CalibrationError("--camera-height: must be above the cloth (m)")
+            # height(f) grows with f (a longer lens sees the same table from further away)
+            lo, hi = FOCAL_RANGE[0] * big, FOCAL_RANGE[1] * big
+            if not (_camera_height(obj, img, lo, size) < camera_height_m < _camera_height(obj, img, hi, size)):
+                raise CalibrationError(f"--camera-height: no focal length in {FOCAL_RANGE[0]}-"
+                                       f"{FOCAL_RANGE[1]} x {big} px puts the camera {camera_height_m:g} m "
+                                       f"above these corners")
+            for _ in range(60):
+                mid = math.sqrt(lo * hi)
+                if _camera_height(obj, img, mid, size) < camera_height_m:
+                    lo = mid
+                else:
+                    hi = mid
+            f, source = math.sqrt(lo * hi), "camera-height"
+        else:
+            f, (f_lo, f_hi) = focal_from_corners(obj, img, size, corner_sigma_px)
+            source = "corners"
+            if f_hi / f_lo > FOCAL_DETERMINED ** 2:
+                f_nom = NOMINAL_FOCAL * big
+                f = min(max(f_nom, f_lo), f_hi)
+                source = "nominal"
+                d_nom = _camera_height(obj, img, f, size)
+                spread = [_camera_height(obj, img, g, size) for g in (max(f_lo, 0.5 * big),
+                                                                      min(f_hi, 1.2 * big))]
+                scale = R_nominal * abs(1.0 / min(spread) - 1.0 / max(spread)) / 2.0
+                notes.append(f"the corners do not fix the focal length (camera nearly overhead); "
+                             f"assumed f = {f:.0f} px (a phone's main camera), camera {d_nom:.2f} m "
+                             f"above the cloth; the ball-plane scale may be off by up to "
+                             f"{100 * scale:.2g}%: give --camera-height or --intrinsics")
+        if not (FOCAL_RANGE[0] * big <= f <= FOCAL_RANGE[1] * big):
+            raise CalibrationError(f"implausible camera: focal length {f:.0f} px is outside "
+                                   f"{FOCAL_RANGE[0]}-{FOCAL_RANGE[1]} x the frame's {big} px")
+        K = _K(f, size)
+        if kappa:
+            dist = np.array([kappa * f * f, 0.0, 0.0, 0.0, 0.0])
+        img = img_meas
+    rvec, tvec, res = _pose(obj, img, K, dist)
+    Rm, _ = cv2.Rodrigues(rvec)
+    centre = -Rm.T @ tvec
+    if centre[2] <= corner_height_m:
+        raise CalibrationError("--corners: mirrored order or a camera below the table; give "
+                               "(0,0), (length,0), (length,width), (0,width) counter-clockwise as seen")
+    rms = float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
+    if rms > MAX_CORNER_RMS_PX:
+        raise CalibrationError(f"--corners: no {table.length:g} x {table.width:g} m rectangle fits them "
+                               f"through this camera (corner RMS {rms:.1f} px): check the order "
+                               f"(start at a corner, go along a long side), the table size and the lens")
+    tilt = float(np.degrees(np.arccos(np.clip(-Rm[2, 2], -1.0, 1.0))))
+    if tilt > MAX_TILT_DEG:
+        raise CalibrationError(f"implausible camera: it looks {tilt:.0f} deg from straight down "
+                               f"(more than {MAX_TILT_DEG:g})")
+    cam = Camera(fps=float(fps), width=size[0], height=size[1], homography=None, exposure_s=0.0,
+                 intrinsics=as_tuple(K),
+                 distortion=None if dist is None or not np.any(dist) else as_tuple(np.resize(dist, 5)),
+                 rvec=as_tuple(rvec), tvec=as_tuple(tvec))
+    return Calibration(camera=cam, corners_px=img, residual_px=res, focal_source=source, notes=notes,
+                       corner_sigma_px=float(corner_sigma_px))
+
+
+def _homography_calibration(obj, img, size, intrinsics, distortion, kappa, fps, sigma):
+    """The corners' plane homography as the camera (see ``homography`` above),
+    through the lens when one is known or estimated (a homography in
+    undistorted pixels, with intrinsics and distortion)."""
+    K = dist = None
+    und = img
+    if intrinsics is not None:
+        K = np.asarray(intrinsics, dtype=float)
+        dist = None if distortion is None else np.asarray(distortion, dtype=float).ravel()
+        und = img if dist is None else _undistort_px(img, K, dist)
+    elif kappa:
+        f = NOMINAL_FOCAL * max(size)
+        K = _K(f, size)
+        dist = np.array([kappa * f * f, 0.0, 0.0, 0.0, 0.0])
+        und = _undistort_radial(img, K[:2, 2], kappa)
+    H = _homography_dlt(obj[:, :2], und)
+    H = H / H[2, 2]
+    cam = Camera(fps=float(fps), width=int(size[0]), height=int(size[1]), homography=as_tuple(H),
+                 intrinsics=None if K is None else as_tuple(K),
+                 distortion=None if dist is None or not np.any(dist) else as_tuple(_lens(dist)))
+    proj = cam.with_centre_height(0.0).to_pixels(obj[:, :2])
+    notes = ["homography: the ball's centre plane is taken as the corners' plane (exact for a "
+             "top-down render or a far camera; a real camera D m above the cloth reads every "
+             "distance short by R / D)"]
+    return Calibration(camera=cam, corners_px=img, residual_px=img - proj, focal_source="homography",
+                       notes=notes, corner_sigma_px=float(sigma))
+
+
+def perturbed_cameras(corners_px, sigma_px: float, size, table: Table = Table(), **kw) -> list:
+    """The cameras of the 8 corner coordinates each moved by ``sigma_px``, one at a time.
+
+    For propagating a calibration's error to anything computed through the
+    camera (v0, w0): with ``q`` the quantity through the calibrated camera and
+    ``q_k`` through camera k, its calibration variance is ``sum_k (q_k - q)^2``
+    (first order; the corners' errors independent, ``sigma_px`` per
+    coordinate).  ``kw`` as for :func:`calibrate_corners` (the same lens or
+    focal length source); a corner moved into an implausible camera is skipped.
+    """
+    base = np.asarray(corners_px, dtype=float).reshape(4, 2)
+    cams = []
+    for k in range(8):
+        c = base.copy()
+        c.flat[k] += sigma_px
+        try:
+            cams.append(calibrate_corners(c, size, table, **kw).camera)
+        except CalibrationError:
+            continue
+    return cams
+
+
+# --------------------------------------------------------------------------- automatic
+def reference_frame(path, n: int = 9) -> np.ndarray:
+    """The median of ``n`` frames spread over the video: the table without the
+    moving ball (and without a cue that crosses the view for a moment)."""
+    from cuespin.videoio import quiet_native_stderr
+
+    with quiet_native_stderr():
+        cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
+    if not cap.isOpened():
+        raise InputError(f"{path}: not a video OpenCV can read")
+    try:
+        count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+        idx = set(np.unique(np.linspace(0, max(count - 1, 0), n).round().astype(int)).tolist())
+        frames = []
+        with quiet_native_stderr():
+            if count <= 4 * n:  # short: decoding straight through beats seeking
+                for i in range(max(count, 1)):
+                    ok, img = cap.read()
+                    if not ok or img is None:
+                        break
+                    if i in idx:
+                        frames.append(img if img.ndim == 3 else img[:, :, None])
+            else:
+                for i in sorted(idx):
+                    cap.set(cv2.CAP_PROP_POS_FRAMES, float(i))
+                    ok, img = cap.read()
+                    if ok and img is not None:
+                        frames.append(img if img.ndim == 3 else img[:, :, None])
+    finally:
+        cap.release()
+    if not frames:
+        raise InputError(f"{path}: no frame could be decoded")
+    return np.median(np.stack(frames), axis=0).astype(np.float32)
+
+
+def _felt_distance(img: np.ndarray) -> tuple[np.ndarray, float]:
+    """Per-pixel colour distance from the felt (the central region's median
+    colour, in Lab) and the threshold between felt and surround (Otsu)."""
+    img = np.clip(np.asarray(img, dtype=np.float32), 0, 255).astype(np.uint8)
+    if img.ndim == 2 or img.shape[2] == 1:
+        img = np.repeat(img.reshape(img.shape[0], img.shape[1], 1), 3, axis=2)
+    lab = cv2.cvtColor(img, cv2.COLOR_BGR2Lab).astype(np.float32)
+    h, w = lab.shape[:2]
+    centre = lab[int(0.35 * h):int(0.65 * h), int(0.35 * w):int(0.65 * w)].reshape(-1, 3)
+    felt = np.median(centre, axis=0)
+    D = np.linalg.norm(lab - felt, axis=2)
+    top = float(np.percentile(D, 99.5)) or 1.0
+    D8 = np.clip(D / top * 255.0, 0, 255).astype(np.uint8)
+    thr, _ = cv2.threshold(D8, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
+    return D, float(thr) * top / 255.0
+
+
+def _felt_quad(D: np.ndarray, thr: float):
+    """The felt region's outline as 4 corners (px), counter-clockwise on screen,
+    and the region's contour (px, shape (m, 2))."""
+    mask = (D < thr).astype(np.uint8)
+    k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
+    mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, k)
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=4)
+    if n < 2:
+        raise CalibrationError("no felt found in the frame; give --corners")
+    h, w = mask.shape
+    c = lab[h // 2, w // 2]
+    best = c if c > 0 else 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    region = (lab == best).astype(np.uint8)
+    contours, _ = cv2.findContours(region, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    cnt = max(contours, key=cv2.contourArea)
+    hull = cv2.convexHull(cnt)  # balls and a cue on the felt are holes or bites: the hull closes them
+    peri = cv2.arcLength(hull, True)
+    for eps in np.linspace(0.005, 0.08, 40):
+        quad = cv2.approxPolyDP(hull, eps * peri, True)
+        if len(quad) == 4:
+            break
+    else:
+        raise CalibrationError("the felt's outline is not a quadrilateral (the table is cut by the "
+                               "frame's edge or hidden); give --corners")
+    quad = quad[:, 0, :].astype(float)
+    if signed_area(quad) > 0:
+        quad = quad[::-1]
+    return quad, cnt[:, 0, :].astype(float)
+
+
+def _lens(dist):
+    d = np.zeros(5)
+    if dist is not None:
+        v = np.asarray(dist, dtype=float).ravel()
+        d[: v.size] = v
+    return d
+
+
+def _undistort_px(uv, K, dist):
+    """Image pixels to the pixels of the same camera without its distortion."""
+    n = undistort(np.column_stack([(uv[:, 0] - K[0, 2]) / K[0, 0], (uv[:, 1] - K[1, 2]) / K[1, 1]]),
+                  _lens(dist))
+    return n * np.diag(K)[:2] + K[:2, 2]
+
+
+def _distort_px(uv, K, dist):
+    """Undistorted pixels back to the image's (inverse of :func:`_undistort_px`)."""
+    nd, _ = distort(np.column_stack([(uv[:, 0] - K[0, 2]) / K[0, 0], (uv[:, 1] - K[1, 2]) / K[1, 1]]),
+                    _lens(dist))
+    return nd * np.diag(K)[:2] + K[:2, 2]
+
+
+def _line_intersection(l1, l2):
+    """Lines as (point, unit direction)."""
+    (p, d), (q, e) = l1, l2
+    A = np.column_stack([d, -e])
+    s = np.linalg.solve(A, q - p)
+    return p + s[0] * d
+
+
+def _smoothed(img):
+    im = np.asarray(img, dtype=np.float32)
+    if im.ndim == 2:
+        im = im[:, :, None]
+    return cv2.GaussianBlur(im, (0, 0), 1.0).reshape(im.shape)
+
+
+def _subpixel_edge(Ds, base, nrm, offs):
+    """Where, along ``nrm`` from each base point, the colour crosses halfway from
+    the inside's (the profile's first 2 px) to the outside's (its last 2 px);
+    points without one clean crossing, or with under 5 levels of contrast, dropped."""
+    pts = base[:, None, :] + offs[None, :, None] * nrm           # (m, k, 2)
+    col = cv2.remap(Ds, pts[..., 0].astype(np.float32), pts[..., 1].astype(np.float32),
+                    cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(pts.shape[:2] + (-1,))
+    q = 8
+    c_in = np.median(col[:, :q], axis=1)
+    c_out = np.median(col[:, -q:], axis=1)
+    span = c_out - c_in
+    n2 = np.sum(span * span, axis=1)
+    # fraction of the way from inside to outside colour (linear in coverage)
+    prof = np.einsum("mkc,mc->mk", col - c_in[:, None, :], span) / np.where(n2 > 0, n2, 1.0)[:, None]
+    above = prof >= 0.5
+    cross = (~above[:, :-1]) & above[:, 1:]
+    good = (n2 > 25.0) & (cross.sum(axis=1) == 1)
+    k = np.argmax(cross, axis=1)
+    r = np.arange(len(base))
+    p0, p1 = prof[r, k], prof[r, k + 1]
+    x = offs[k] + (0.5 - p0) / np.where(p1 != p0, p1 - p0, 1.0) * (offs[1] - offs[0])
+    return (base + x[:, None] * nrm)[good]
+
+
+def cushion_noses(img: np.ndarray, sides: list, search_frac: float = 0.08, reach_px: float = 4.0):
+    """The cushions' noses inside the felt-coloured outline, when they show.
+
+    A table's cushions are often cloth of the felt's colour, so the outline
+    found first can be the cushions' outer edge, a cushion's width beyond the
+    playing surface.  Each side is searched inward (up to ``search_frac`` of
+    the outline's smaller size) for a step in brightness parallel to it, the
+    nose's line (a darker cushion face or top); found on all four sides, at a
+    consistent distance, it is located sub-pixel like the outline.
+
+    Returns
+    -------
+    list of 4 ndarrays or None
+        Edge points of the noses, or None when no such line shows.
+    """
+    Ds = _smoothed(img)
+    grey = Ds.mean(axis=2) if Ds.ndim == 3 else Ds
+    lines = [_fit_line(p)[:2] for p in sides]
+    corners = np.array([_line_intersection(lines[i - 1], lines[i]) for i in range(4)])
+    size = min(np.linalg.norm(corners[2] - corners[0]), np.linalg.norm(corners[3] - corners[1])) / math.sqrt(2)
+    depth = max(search_frac * size, 12.0)
+    out = []
+    for i, pts in enumerate(sides):
+        a, b = corners[i], corners[(i + 1) % 4]
+        d = (b - a) / np.linalg.norm(b - a)
+        nrm = np.array([-d[1], d[0]])                       # outward
+        base = pts[::2]
+        offs = np.arange(-depth, 0.0, 0.5)                  # inside the outline
+        P = base[:, None, :] + offs[None, :, None] * nrm
+        prof = cv2.remap(grey.astype(np.float32), P[..., 0].astype(np.float32),
+                         P[..., 1].astype(np.float32), cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        # The side's median profile (felt texture and noise averaged away along
+        # the side); the step: the largest difference of the means over 3 px
+        # either side, away from the outline's own edge (its last 5 px).
+        med_prof = np.median(prof, axis=0)
+        w = 6
+        cs = np.concatenate([[0.0], np.cumsum(med_prof)])
+        g = np.zeros_like(med_prof)
+        g[w:-w] = np.abs((cs[2 * w + 1:] - cs[w + 1:-w]) - (cs[w:-w - 1] - cs[:-2 * w - 1])) / w
+        g[-10:] = 0.0
+        k = int(np.argmax(g))
+        inner = g[w: max(len(offs) // 3, w + 4)]
+        noise = np.median(inner) + 1.4826 * np.median(np.abs(inner - np.median(inner))) + 1e-3
+        # a cushion's face or top: a step of at least 3 grey levels, 8x the flat felt's
+        if not (g[k] > max(3.0, 8.0 * noise)):
+            return None
+        med = float(offs[k])
+        nose = _subpixel_edge(Ds, base + med * nrm, nrm, np.arange(-reach_px - 3.0, reach_px + 3.0 + 1e-9, 0.25))
+        if len(nose) < max(10, 0.3 * len(base)):
+            return None
+        out.append(nose)
+    return out
+
+
+def edge_points(img: np.ndarray, quad: np.ndarray, contour: np.ndarray,
+                reach_px: float = 4.0, step_px: float = 2.0) -> list:
+    """Sub-pixel points of the felt's edge along each side of a rough quadrilateral.
+
+    The felt region's contour (whole pixels) is followed, so a side bowed by
+    the lens is followed too; at every ``step_px`` along it the edge is
+    located along the side's normal, where the (lightly smoothed) colour
+    crosses halfway from the felt's to the surround's, measured along the
+    line between the two colours in the frame's own (linear) values: a pixel
+    half covered by felt sits exactly there, which a perceptual distance
+    (Lab) would not give.
+
+    Returns
+    -------
+    list of 4 ndarrays, shape (m_i, 2)
+        Edge points (px, the image's own distorted pixels), side i running from
+        ``quad[i]`` to ``quad[i+1]``.
+    """
+    Ds = _smoothed(img)
+    offs = np.arange(-reach_px - 3.0, reach_px + 3.0 + 1e-9, 0.25)
+    # nearest side of the quad for every contour point
+    dists, along = [], []
+    for i in range(4):
+        a, b = quad[i], quad[(i + 1) % 4]
+        L = float(np.linalg.norm(b - a))
+        d = (b - a) / L
+        rel = contour - a
+        t = rel @ d
+        dists.append(np.abs(rel @ np.array([-d[1], d[0]])) + np.where((t < 0) | (t > L), 1e9, 0.0))
+        along.append(t / L)
+    side_of = np.argmin(np.array(dists), axis=0)
+    sides = []
+    for i in range(4):
+        a, b = quad[i], quad[(i + 1) % 4]
+        d = (b - a) / np.linalg.norm(b - a)
+        nrm = np.array([-d[1], d[0]])       # outward for a counter-clockwise (on screen) quad
+        sel = (side_of == i) & (along[i] > 0.06) & (along[i] < 0.94)
+        base = contour[sel]
+        base = base[np.argsort(along[i][sel])][:: max(int(step_px), 1)]
+        edge = _subpixel_edge(Ds, base, nrm, offs)
+        if len(edge) < 10:
+            raise CalibrationError("the felt's edge could not be located along a side; give --corners")
+        sides.append(edge)
+    return sides
+
+
+def _fit_line(pts):
+    """Total-least-squares line, far points (a pocket, a ball on the edge) dropped:
+    ``(centre, unit direction, residuals of the kept points)``."""
+    keep = np.ones(len(pts), bool)
+    for _ in range(3):
+        c = pts[keep].mean(axis=0)
+        evals, evecs = np.linalg.eigh((pts[keep] - c).T @ (pts[keep] - c))
+        dirn = evecs[:, 1]
+        dist = (pts - c) @ np.array([-dirn[1], dirn[0]])
+        mad = np.median(np.abs(dist[keep])) + 1e-3
+        keep = np.abs(dist) < max(6.0 * 1.4826 * mad, 0.05)
+    return c, dirn, dist[keep]
+
+
+def _undistort_radial(uv, centre, kappa):
+    """Undo a radial distortion given in pixels: ``u_d = c + (u - c)(1 + kappa |u - c|^2)``
+    (OpenCV's k1 = kappa f^2 for a focal length f), by Newton's method."""
+    if kappa == 0.0:
+        return uv
+    d = uv - centre
+    rd = np.linalg.norm(d, axis=1)
+    r = rd.copy()
+    for _ in range(30):
+        step = (r * (1.0 + kappa * r * r) - rd) / (1.0 + 3.0 * kappa * r * r)
+        r -= step
+        if np.all(np.abs(step) < 1e-12):
+            break
+    scale = np.where(rd > 0, r / np.where(rd > 0, rd, 1.0), 1.0)
+    return centre + d * scale[:, None]
+
+
+def fit_sides(sides, K=None, dist=None, kappa: float = 0.0, centre=None):
+    """Corners from four sides' edge points: the points undistorted (by the
+    known lens, or by ``kappa`` about ``centre``), a line per side, adjacent
+    lines intersected, the corners distorted back.
+
+    Returns
+    -------
+    corners : ndarray, shape (4, 2)
+        Image (distorted) pixels; corner i is where side i-1 meets side i.
+    edge_rms : float
+        RMS distance of the kept edge points from their lines (px).
+    """
+    lines, res = [], []
+    for pts in sides:
+        if K is not None:
+            pts = _undistort_px(pts, K, dist)
+        elif kappa:
+            pts = _undistort_radial(pts, centre, kappa)
+        c, d, r = _fit_line(pts)
+        lines.append((c, d))
+        res.append(r)
+    corners = np.array([_line_intersection(lines[i - 1], lines[i]) for i in range(4)])
+    if K is not None:
+        corners = _distort_px(corners, K, dist)
+    elif kappa:
+        dd = corners - centre
+        corners = centre + dd * (1.0 + kappa * np.sum(dd * dd, axis=1))[:, None]
+    allres = np.concatenate(res)
+    return corners, float(np.sqrt(np.mean(allres**2)))
+
+
+def radial_from_edges(sides, centre, size) -> float:
+    """The radial distortion (``kappa``, px^-2) that makes the felt's four sides
+    straightest: a phone's wide lens bows them by several pixels; one
+    coefficient about the frame's centre (OpenCV's k1, without k2) is what
+    four lines can fix."""
+    big = float(max(size))
+    scale = (0.5 * big) ** 2   # kappa in units of k1 for a focal length of half the frame
+
+    def cost(k):
+        return fit_sides(sides, kappa=k / scale, centre=centre)[1]
+    return _golden(cost, -0.6, 0.6, 1e-6) / scale
+
+
+def _golden(fun, lo: float, hi: float, tol: float) -> float:
+    """Minimum of a unimodal function on [lo, hi] by golden-section search."""
+    g = (math.sqrt(5.0) - 1.0) / 2.0
+    a, b = hi - g * (hi - lo), lo + g * (hi - lo)
+    fa, fb = fun(a), fun(b)
+    while hi - lo > tol:
+        if fa < fb:
+            hi, b, fb = b, a, fa
+            a = hi - g * (hi - lo)
+            fa = fun(a)
+        else:
+            lo, a, fa = a, b, fb
+            b = lo + g * (hi - lo)
+            fb = fun(b)
+    return (lo + hi) / 2.0
+
+
+@dataclass(frozen=True)
+class Detection:
+    """The table's outline found in a frame.
+
+    Attributes
+    ----------
+    corners : ndarray, shape (4, 2)
+        Sub-pixel corners (px), counter-clockwise on screen, not yet assigned
+        to table corners.
+    edge_rms : float
+        RMS distance of the edge points from the fitted sides (px): how sharp
+        and how straight the edge is.
+    kappa : float
+        Radial distortion about the frame's centre in pixels (``k1 / f^2``)
+        estimated from the sides' bow; 0 with a known lens.
+    edge : str
+        ``noses`` (the cushions' noses: the playing surface itself) or
+        ``felt`` (the felt-coloured outline: the playing surface unless the
+        cushions are cloth-coloured, see ``--felt-margin``).
+    """
+
+    corners: np.ndarray
+    edge_rms: float
+    kappa: float
+    edge: str
+
+
+def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = True,
+                   noses: bool = True) -> Detection:
+    """The playing surface's four corners in a frame (:class:`Detection`).
+
+    Parameters
+    ----------
+    img : ndarray
+        The frame (BGR or grey).
+    K, dist : optional
+        A known lens: the edges are straightened with it.
+    estimate_lens : bool
+        Without ``K``: estimate one radial coefficient from the edges' bow.
+    noses : bool
+        Look for the cushions' noses inside the felt-coloured outline.
+    """
+    D, thr = _felt_distance(img)
+    quad, contour = _felt_quad(D, thr)
+    sides = edge_points(img, quad, contour)
+    edge = "felt"
+    if noses:
+        inner = cushion_noses(img, sides)
+        if inner is not None:
+            sides, edge = inner, "noses"
+    h, w = D.shape
+    centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
+    kappa = 0.0
+    if K is None and estimate_lens:
+        kappa = radial_from_edges(sides, centre, (w, h))
+    corners, edge_rms = fit_sides(sides, K, dist, kappa, centre)
+    return Detection(corners=corners, edge_rms=edge_rms, kappa=kappa, edge=edge)
+
+
+def assign_corners(quad: np.ndarray, size, table: Table, **kw) -> Calibration:
+    """Which detected corner is the table's origin: every counter-clockwise
+    start is tried and the best-fitting camera kept; of the two that fit
+    equally (the table turned half round) the one with the origin nearest the
+    frame's bottom-left, as in the default camera."""
+    tries = []
+    for s in range(4):
+        order = np.roll(quad, -s, axis=0)
+        try:
+            cal = calibrate_corners(order, size, table, **kw)
+        except CalibrationError:
+            continue
+        u, v = order[0]
+        if kw.get("homography"):
+            # every order fits 4 points exactly: the one whose view is closest to
+            # square pixels (the long side along x) wins
+            sv = np.linalg.svd(cal.camera.with_centre_height(0.0).jacobian(
+                [table.length / 2, table.width / 2]), compute_uv=False)
+            tries.append((round(float(sv[0] / sv[1]), 3), u - v, cal))
+        else:
+            tries.append((round(cal.rms_px, 1), u - v, cal))
+    if not tries:
+        raise CalibrationError("no camera fits the felt's outline as a "
+                               f"{table.length:g} x {table.width:g} m table; give --corners")
+    tries.sort(key=lambda x: (x[0], x[1]))
+    return tries[0][2]
+
+
+def calibrate_video(path, table: Table = Table(), corners=None, *, intrinsics=None, distortion=None,
+                    felt_margin_m: float = 0.0, felt_height_m: float = 0.0, nose_height_m: float = 0.0,
+                    **kw) -> Calibration:
+    """A video's camera: from given corners, or from the table found in its median frame.
+
+    Automatic: the cushions' noses when they show (the playing surface's edge,
+    at ``nose_height_m`` above the cloth), else the felt-coloured outline (the
+    surface grown by ``felt_margin_m`` at ``felt_height_m``).
+    """
+    from cuespin.videoio import quiet_native_stderr
+
+    with quiet_native_stderr():
+        cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
+    if not cap.isOpened():
+        raise InputError(f"{path}: not a video OpenCV can read")
+    size = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
+    fps = float(cap.get(cv2.CAP_PROP_FPS)) or 30.0
+    cap.release()
+    if size[0] <= 0 or size[1] <= 0:
+        raise InputError(f"{path}: the video has no frames")
+    K = None if intrinsics is None else np.asarray(intrinsics, dtype=float)
+    dist = None if distortion is None else np.asarray(distortion, dtype=float).ravel()
+    if corners is not None:
+        cal = calibrate_corners(corners, size, table, intrinsics=K, distortion=dist, fps=fps, **kw)
+        return _with_perturbed(cal, size, table, intrinsics=K, distortion=dist, fps=fps, **kw)
+    frame = reference_frame(path)
+    det = detect_corners(frame, K, dist)
+    quad, edge_rms, kappa = det.corners, det.edge_rms, det.kappa
+    if det.edge == "noses":
+        felt_margin_m, felt_height_m = 0.0, nose_height_m
+    # A corner is where two lines of ~hundreds of edge points meet: its error is
+    # about the points' scatter times sqrt(4 / points per side).
+    per_side = (size[0] + size[1]) / 2.0 / 2.0
+    kw.setdefault("corner_sigma_px", max(edge_rms * math.sqrt(4.0 / per_side), 0.02))
+    same = dict(intrinsics=K, distortion=dist, fps=fps, kappa=kappa, margin_m=felt_margin_m,
+                corner_height_m=felt_height_m, **kw)
+    cal = assign_corners(quad, size, table, **same)
+    cal = Calibration(camera=cal.camera, corners_px=cal.corners_px, residual_px=cal.residual_px,
+                      focal_source=cal.focal_source, notes=cal.notes, edge_rms_px=edge_rms,
+                      edge=det.edge, corner_sigma_px=cal.corner_sigma_px)
+    return _with_perturbed(cal, size, table, **same)
+
+
+def _with_perturbed(cal: Calibration, size, table: Table, **kw) -> Calibration:
+    """The calibration with its :func:`perturbed_cameras` (solved as ``cal`` was),
+    which the recovery uses to carry the corners' error into v0 and w0."""
+    if not cal.corner_sigma_px:
+        return cal
+    kw.pop("corner_sigma_px", None)
+    cams = perturbed_cameras(cal.corners_px, cal.corner_sigma_px, size, table,
+                             corner_sigma_px=cal.corner_sigma_px, **kw)
+    return replace(cal, perturbed=tuple(cams))
+
+
+# --------------------------------------------------------------------------- synthetic frames
+def _inset(p, delta):
+    """A polygon's edges moved ``delta`` inward (vertices along the bisectors)."""
+    d = np.roll(p, -1, axis=0) - p
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    area = np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1])
+    n = np.column_stack([-d[:, 1], d[:, 0]]) * (1.0 if area > 0 else -1.0)   # inward normals
+    n_prev = np.roll(n, 1, axis=0)
+    return p + delta * (n + n_prev) / (1.0 + np.sum(n * n_prev, axis=1))[:, None]
+
+
+def _coverage(polys, w, h, ss):
+    """Fraction of each pixel inside the polygons (px), by ``ss`` x supersampling.
+    cv2.fillPoly also fills the pixels its outline touches (measured: half a
+    subpixel beyond every edge), so the outline is first moved in by that much."""
+    big = np.zeros((h * ss, w * ss), np.uint8)
+    shift = 4
+    pts = [np.round(_inset((p + 0.5) * ss - 0.5, 0.5) * (1 << shift)).astype(np.int32) for p in polys]
+    cv2.fillPoly(big, pts, 255, lineType=cv2.LINE_8, shift=shift)
+    return cv2.resize(big, (w, h), interpolation=cv2.INTER_AREA).astype(np.float32) / 255.0
+
+
+def synthetic_table_frame(cam, table=Table(), seed=0, noise=3.0, ss=4, felt=(40, 120, 30), wood=(40, 75, 125),
+                          balls=((0.6, 0.4), (2.45, 1.2)), cushion_m: float = 0.0,
+                          cushion_shade: float = 0.8, pockets: bool = False):
+    """A frame of the table through ``cam`` to check the detector on: the playing
+    surface's felt (its edge bowed by the lens, sampled every few mm) on wood,
+    optionally cushions ``cushion_m`` wide in ``cushion_shade`` x the felt's
+    colour and black pockets (the renderer's realistic look has both), white
+    balls (radius: the camera's centre height), Gaussian noise.  Everything
+    lies in the cloth's plane.  Coverage by ``ss`` x supersampling,
+    area-averaged (pixel integration); an edge lands on a multiple of
+    ``1/ss`` px (averaged out along edges off the pixel axes).  The renderer
+    draws the realistic table; this is the bare geometry."""
+    rng = np.random.default_rng(seed)
+    w, h = cam.width, cam.height
+    s = np.linspace(0.0, 1.0, 400)[:-1]
+
+    def outline(m):
+        x0, y0, x1, y1 = -m, -m, table.length + m, table.width + m
+        e = np.concatenate([np.column_stack([x0 + (x1 - x0) * s, y0 + 0 * s]),
+                            np.column_stack([x1 + 0 * s, y0 + (y1 - y0) * s]),
+                            np.column_stack([x1 - (x1 - x0) * s, y1 + 0 * s]),
+                            np.column_stack([x0 + 0 * s, y1 - (y1 - y0) * s])])
+        return cam.project(np.column_stack([e, np.zeros(len(e))]))
+
+    felt = np.asarray(felt, np.float32)
+    img = np.empty((h, w, 3), np.float32)
+    img[:] = wood
+    layers = []
+    if cushion_m > 0:
+        layers.append(([outline(cushion_m)], cushion_shade * felt))
+    layers.append(([outline(0.0)], felt))
+    if pockets:
+        th = np.linspace(0.0, 2.0 * np.pi, 120, endpoint=False)
+        polys = []
+        for px, py, r in [(-0.031, -0.031, 0.062), (table.length + 0.031, -0.031, 0.062),
+                          (-0.031, table.width + 0.031, 0.062),
+                          (table.length + 0.031, table.width + 0.031, 0.062),
+                          (table.length / 2, -0.035, 0.058), (table.length / 2, table.width + 0.035, 0.058)]:
+            c = np.column_stack([px + r * np.cos(th), py + r * np.sin(th), np.zeros(len(th))])
+            polys.append(cam.project(c))
+        layers.append((polys, np.array([16.0, 16.0, 18.0], np.float32)))
+    if balls:
+        layers.append(([cam.ball_outline(np.array(xy), cam.centre_height, n=90) for xy in balls],
+                       np.array([235.0, 235.0, 235.0], np.float32)))
+    for polys, colour in layers:
+        c = _coverage(polys, w, h, ss)[..., None]
+        img = img * (1 - c) + colour * c
+    img += rng.normal(0.0, noise, img.shape)
+    return np.clip(np.round(img), 0, 255).astype(np.uint8)
+
+
+# --------------------------------------------------------------------------- command line
+def _floats(text: str, n: int | None, what: str) -> list:
+    try:
+        vals = [float(v) for v in text.replace(";", ",").split(",") if v.strip()]
+    except ValueError:
+        raise InputError(f"{what}: expected comma-separated numbers, got {text!r}")
+    if n is not None and len(vals) != n:
+        raise InputError(f"{what}: expected {n} numbers, got {len(vals)}")
+    if not all(math.isfinite(v) for v in vals):
+        raise InputError(f"{what}: must be finite numbers")
+    return vals
+
+
+def read_intrinsics(path):
+    """A lens calibration file: JSON with ``intrinsics`` (3x3) and optional
+    ``distortion`` (the keys of a scene file's camera block, so a scene file
+    itself works too)."""
+    path = Path(path)
+    try:
+        d = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise InputError(f"intrinsics file not found: {path}")
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"{path}: not a readable JSON file ({exc.__class__.__name__})")
+    if isinstance(d, dict) and isinstance(d.get("camera"), dict):
+        d = d["camera"]
+    from cuespin.physics.scene import SceneError, _parse_camera
+
+    if not isinstance(d, dict) or "intrinsics" not in d:
+        raise InputError(f"{path}: intrinsics: required key is missing")
+    probe = {"fps": 1.0, "intrinsics": d["intrinsics"], "homography": [[1, 0, 0], [0, -1, 0], [0, 0, 1]]}
+    if "distortion" in d:
+        probe["distortion"] = d["distortion"]
+    try:
+        cam = _parse_camera(probe, Table(), 0.028575)
+    except SceneError as exc:
+        raise InputError(f"{path}: {str(exc).replace('camera.', '')}")
+    return cam.K, cam.dist
+
+
+def cmd_calibrate(args) -> int:
+    table = Table(*_floats(args.table, 2, "--table")) if args.table else Table()
+    if min(table.length, table.width) <= 0:
+        raise InputError("--table: length and width must be > 0")
+    corners = None if args.corners is None else np.array(_floats(args.corners, 8, "--corners")).reshape(4, 2)
+    K = dist = None
+    if args.intrinsics:
+        K, dist = read_intrinsics(args.intrinsics)
+    for name in ("focal_px", "camera_height", "R", "mu_s", "mu_r", "corner_error"):
+        v = getattr(args, name)
+        if v is not None and not (math.isfinite(v) and v > 0 or (name == "mu_r" and v == 0)):
+            raise InputError(f"--{name.replace('_', '-')}: must be a positive number")
+    out = Path(args.output)
+    if not out.parent.exists():
+        raise InputError(f"output folder does not exist: {out.parent}")
+    video = Path(args.video)
+    if not video.is_file():
+        raise InputError(f"video not found: {video}")
+    kw = {}
+    if args.corner_error is not None:
+        kw["corner_sigma_px"] = args.corner_error
+    if args.R is not None:
+        kw["R_nominal"] = args.R
+    if args.homography:
+        kw["homography"] = True
+    cal = calibrate_video(video, table, corners, intrinsics=K, distortion=dist, focal_px=args.focal_px,
+                          camera_height_m=args.camera_height, felt_margin_m=args.felt_margin,
+                          felt_height_m=args.felt_height, nose_height_m=args.nose_height, **kw)
+    cam = cal.camera
+    physics = {k: v for k, v in (("R", args.R), ("mu_s", args.mu_s), ("mu_r", args.mu_r)) if v is not None}
+    camd = {"fps": cam.fps, "width": cam.width, "height": cam.height}
+    if cam.homography is not None:
+        camd["homography"] = [list(r) for r in cam.homography]
+    if cam.intrinsics is not None:
+        camd["intrinsics"] = [list(r) for r in cam.intrinsics]
+    if cam.distortion is not None:
+        camd["distortion"] = list(cam.distortion)
+    if cam.is_pinhole:
+        camd["rvec"], camd["tvec"] = list(cam.rvec), list(cam.tvec)
+    camd["exposure_s"] = 0.0
+    scene = {"schema": SCHEMA, "physics": physics,
+             "table": {"length": table.length, "width": table.width}, "camera": camd,
+             "calibration": {"corners_px": cal.corners_px.tolist(), "corner_rms_px": cal.rms_px,
+                             "corner_sigma_px": cal.corner_sigma_px,
+                             "focal_from": cal.focal_source, "edge_rms_px": cal.edge_rms_px,
+                             # The corners' error carried into v0 and w0 by the recovery.
+                             "perturbed": [camera_to_dict(c, geometry_only=True) for c in cal.perturbed]}}
+    tmp = out.with_name(out.name + ".part")
+    tmp.write_text(json.dumps(scene, indent=2) + "\n")
+    tmp.replace(out)
+    for note in cal.notes:
+        print(f"calibrate: {note}", file=sys.stderr)
+    what = {"noses": "the cushions' noses", "felt": "the felt's outline"}.get(cal.edge, "")
+    found = ("given" if corners is not None else
+             f"found in the video ({what}, edges straight to {cal.edge_rms_px:.2f} px RMS)")
+    where = (f"camera {cal.height_m:.2f} m above the cloth, tilted {cal.tilt_deg:.1f} deg, "
+             f"f = {cam.K[0, 0]:.0f} px (from {cal.focal_source})" if cam.is_pinhole else
+             "camera: the corners' homography")
+    print(f"wrote {out}: corners {found}; corner reprojection {cal.rms_px:.2f} px RMS "
+          f"(max {np.linalg.norm(cal.residual_px, axis=1).max():.2f} px); {where}")
+    if not physics.get("R"):
+        print("calibrate: physics.R not given (--R): the scene assumes a pool ball's 0.028575 m",
+              file=sys.stderr)
+    return 0
+
+
+def add_parser(sub) -> None:
+    """Register ``cuespin calibrate`` on the CLI's subparsers."""
+    c = sub.add_parser("calibrate", help="find the camera from the table: write a scene file's camera",
+                       description="Find VIDEO's camera from the playing surface's four corners and write "
+                                   "SCENE.json (physics, table and a pinhole camera in OpenCV's "
+                                   "conventions). Corners: --corners in pixels, or found automatically "
+                                   "from the felt in the video's median frame. The ball's centre is "
+                                   "R above the cloth the corners lie on: the camera written accounts "
+                                   "for it. See docs/calibration.md.")
+    c.add_argument("video", help="the shot's video (or any video from the same fixed camera)")
+    c.add_argument("-o", "--output", required=True, help="scene file to write (JSON)")
+    c.add_argument("--corners", metavar="U1,V1,...,U4,V4",
+                   help="pixels of the corners (0,0), (length,0), (length,width), (0,width): start at "
+                        "any corner, go along a long side, counter-clockwise as seen on the screen")
+    c.add_argument("--intrinsics", metavar="FILE",
+                   help="lens calibration: JSON with intrinsics (3x3) and distortion [k1,k2,p1,p2,k3]")
+    c.add_argument("--focal-px", type=float, default=None, help="focal length (px), without --intrinsics")
+    c.add_argument("--camera-height", type=float, default=None, metavar="M",
+                   help="the lens's height above the cloth (m), to fix the focal length without --intrinsics")
+    c.add_argument("--corner-error", type=float, default=None, metavar="PX",
+                   help="error of each clicked corner coordinate (px; default 1)")
+    c.add_argument("--table", default=None, metavar="LENGTH,WIDTH",
+                   help="playing surface (m; default 2.54,1.27)")
+    c.add_argument("--felt-margin", type=float, default=0.0, metavar="M",
+                   help="automatic, when no cushion nose shows: the felt-coloured outline lies this far "
+                        "beyond the playing surface (m; cloth-covered cushions: their width)")
+    c.add_argument("--felt-height", type=float, default=0.0, metavar="M",
+                   help="automatic, when no cushion nose shows: that outline's height above the cloth (m)")
+    c.add_argument("--nose-height", type=float, default=0.0, metavar="M",
+                   help="automatic: height of the cushions' noses above the cloth (m; 0 for the "
+                        "renderer's flat table, about 0.036 on a real pool table)")
+    c.add_argument("--homography", action="store_true",
+                   help="write the corners' homography, not a pose: for top-down renders (an "
+                        "orthographic view); a real camera D above the cloth reads distances short by R/D")
+    c.add_argument("--R", type=float, default=None, help="ball radius (m), written to physics")
+    c.add_argument("--mu-s", type=float, default=None, help="sliding friction, written to physics")
+    c.add_argument("--mu-r", type=float, default=None, help="rolling friction, written to physics")
+    c.set_defaults(func=cmd_calibrate)

@@ -1,0 +1,160 @@
+"""Both recoveries from one track: segmentation, the decisions, the
+maximum-likelihood fit and the paper's method, in that order.
+
+The measurements (recover.measurements) are built once per pass and shared
+with the bound; every yes/no question is put once to fit.decide.  Pure:
+arrays in, dataclasses out (recover.api turns them into the JSON object).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cuespin.fit.decide import Decision, sliding_ended, sliding_seen, strike_in_view, t1_in_view
+from cuespin.fit.segment import Segments, segment_track
+from cuespin.physics.motion import BallParams, phases
+from cuespin.recover.measurements import (Measurements, as_covariance, build_measurements,
+                                          codec_excess, fill_covariance)
+from cuespin.recover.mle import (MLEResult, ModelFit, fit_model, fit_models, initial_guess, result,
+                                 slip_lr)
+from cuespin.recover.paper import PaperResult, paper_from_segments
+
+# The first fit's strike time is used to place the strike's window only
+# when within this many frames of the segmentation's (the segmentation
+# finds it to a fraction of a frame: README; further off, the first fit
+# is lost and its t0 is not trusted).
+MAX_T0_SHIFT_FRAMES = 3.0
+# Errors a fit may raise on a track it cannot describe: reported as the
+# fit's failure, never raised.
+FIT_ERRORS = (ValueError, np.linalg.LinAlgError, FloatingPointError)
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """Everything the recovery found in one track.
+
+    ``seg`` is the segmentation the decisions chose (rolling from the
+    strike, or sliding that ended in view or not); ``meas`` the
+    measurements the maximum-likelihood fit used (for its bound);
+    ``codec_var`` the codec's per-axis error variance (m^2, signed) measured
+    from the first fit's residuals; ``decisions`` name each Decision taken.
+    """
+
+    seg: Segments
+    paper: PaperResult | None
+    mle: MLEResult | None
+    meas: Measurements | None = None
+    codec_var: float = 0.0
+    decisions: dict = field(default_factory=dict)
+    timing_s: dict = field(default_factory=dict)
+
+
+def _first_fit(meas, params, starts, exposure_s, fit_friction) -> ModelFit | None:
+    """The free-slip fit from the first start that runs and converges."""
+    for start in starts:
+        try:
+            fit = fit_model(meas, params, start, exposure_s, False, fit_friction)
+        except FIT_ERRORS:
+            continue
+        if fit.converged:
+            return fit
+    return None
+
+
+def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: bool = True,
+             fit_friction: bool = False, run_paper: bool = True) -> Estimate:
+    """Segment, decide and fit one track.
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,)
+        Times (s) of the frames where the ball was found.
+    xy : ndarray, shape (n, 2)
+        Centres (m).
+    cov : ndarray, shape (n, 2, 2), (n, 2) or (n,)
+        Per-frame covariance (m^2) or per-axis standard errors (m); NaN
+        where unknown.
+    params : BallParams
+    exposure_s : float
+        Exposure (s).
+    lossless : bool
+        The codec is lossless; otherwise a still ball's frames share one
+        error and the codec's own error is measured from the residuals.
+    fit_friction : bool
+        Estimate mu_s and mu_r in the maximum-likelihood fit.
+    run_paper : bool
+        Run the paper's method as well.
+
+    Returns
+    -------
+    Estimate
+    """
+    t = np.asarray(t, dtype=float)
+    xy = np.asarray(xy, dtype=float)
+    cov = fill_covariance(as_covariance(cov, len(t)), xy) if len(t) else np.zeros((0, 2, 2))
+    sigma = float(np.median(np.sqrt(0.5 * (cov[:, 0, 0] + cov[:, 1, 1])))) if len(t) else float("nan")
+    frame_dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    clock = time.perf_counter()
+    seg = segment_track(t, xy, 5.0 / 7.0 * params.mu_r * params.g, sigma, exposure_s)
+    t_fit = time.perf_counter() - clock
+    clock = time.perf_counter()
+    if not seg:
+        fail = f"the track could not be segmented: {seg.reason}"
+        return Estimate(seg, PaperResult("failed", fail), MLEResult("failed", f"no starting point: {seg.reason}"),
+                        timing_s={"fit": t_fit, "recover": time.perf_counter() - clock})
+    # First pass (free slip, which nests rolling): place the strike and, for
+    # a lossy codec, measure the codec's error from the residuals.  The
+    # segmentation's t0 can miss by most of a frame at 60 fps, and the frame
+    # it then keeps, half still and half moving, passed for slip (measured:
+    # v0 1.6% off at 9 stated errors).
+    def measure(t0):
+        return build_measurements(t, xy, cov, t0=t0, t_rest=seg.t2, exposure_s=exposure_s,
+                                  frame_dt=frame_dt, shared_rest=not lossless)
+
+    starts = [initial_guess(s, params) for s in (seg, seg.unended, seg.rolling) if s is not None]
+    meas1 = measure(seg.t0)
+    first = _first_fit(meas1, params, starts, exposure_s, fit_friction)
+    codec_var, t0 = 0.0, seg.t0
+    if first is not None:
+        if not lossless:
+            codec_var = codec_excess(meas1, first.residuals, len(first.x))
+        if abs(first.shot.t0 - seg.t0) < MAX_T0_SHIFT_FRAMES * frame_dt:
+            t0 = first.shot.t0
+    meas = measure(t0).with_codec(codec_var)
+    decisions: dict[str, Decision] = {}
+    mle = None
+    try:
+        start = (first.shot.x0, first.shot.t0, first.shot.v0, first.shot.w0) if first else starts[0]
+        full, roll = fit_models(meas, params, start, exposure_s, fit_friction,
+                                initial_guess(seg.rolling, params))
+    except FIT_ERRORS as exc:
+        mle = MLEResult("failed", f"the fit did not run: {exc}")
+    if mle is None:
+        lr = slip_lr(full, roll, meas)
+        decisions["sliding_seen"] = sliding_seen(lr)
+        if decisions["sliding_seen"]:
+            decisions["sliding_ended"] = sliding_ended(seg, t, phases(full.shot, full.params).t1,
+                                                       friction_known=not fit_friction)
+            mle = result(full, meas, lr, decisions["sliding_ended"].yes)
+        else:
+            mle = result(roll, meas, lr, True)
+    else:
+        decisions["sliding_ended"] = sliding_ended(seg, t)
+    chosen = seg
+    if "sliding_seen" in decisions and not decisions["sliding_seen"]:
+        chosen = seg.rolling
+    elif seg.unended is not None and not (decisions["sliding_ended"]
+                                          and t1_in_view(seg.t1, t if seg.t2 is None else t[t <= seg.t2])):
+        # Still sliding at the end, or (the ball seen at rest) sliding ran
+        # into the rest (case 2): the segmentation's "unended" fit, which
+        # then puts t1 where the sliding velocity vanishes (eq. 29).
+        chosen = seg.unended
+    paper = None
+    if run_paper:
+        paper = paper_from_segments(chosen, t, xy, params, sigma, frame_dt,
+                                    strike_in_view(t, chosen.t0), lossless)
+    return Estimate(chosen, paper, mle, meas, codec_var, decisions,
+                    {"fit": t_fit, "recover": time.perf_counter() - clock})

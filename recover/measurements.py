@@ -1,0 +1,267 @@
+"""A track turned into the measurements a fit uses: the one place that says
+which frames count, as what, and with what error.
+
+Shared by the maximum-likelihood fit, its Cramer-Rao bound
+(pipeline.measure.mle_bound), the accuracy benchmark and the experiments,
+so all of them weight, leave out and count the same measurements.
+
+- Each frame's error is a 2x2 covariance in table metres (the tracker's
+  pixel covariance through the camera's Jacobian at the ball's position,
+  ``scene.camera.cov_to_table``); per-axis standard errors are accepted too.
+- Frames whose exposure holds the strike are left out by a mask (never by a
+  huge error): their image is a ball still for part of the exposure and
+  streaking for the rest, which no tracker model describes.
+- With a lossy codec, the frames of a resting ball share one compression
+  error (the same image, compressed the same way): their mean is one
+  measurement, with one frame's covariance.  With a lossless codec every
+  frame is its own measurement.
+- Degrees of freedom are counted from the measurements: 2 per measurement.
+
+Pure functions of arrays.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cuespin.fit.segment import noise_from_track
+
+# Frames within this many frame intervals of the strike, beyond half the
+# exposure, are left out as well: the margin for the strike time's own
+# error (the first fit places it to a small fraction of a frame).
+STRIKE_MARGIN_FRAMES = 0.25
+# A codec's measured share may lower the stated errors (see codec_excess)
+# to no less than this fraction of them: MJPG at low noise measured the
+# tracker's stated errors 1.2-1.4 times the real ones (README), so 0.5 is
+# far outside what was seen and only guards against a wild estimate.
+MIN_NOISE_FRACTION = 0.5
+# Frames needed with a finite stated error before the stated errors are
+# used; otherwise the spread of the track itself (the moments refinement
+# states no error).
+MIN_STATED_FRAMES = 8
+
+
+def as_covariance(stderr_or_cov, n: int) -> np.ndarray:
+    """Per-frame covariance (m^2), shape (n, 2, 2), from a covariance
+    (n, 2, 2), per-axis standard errors (n, 2) or one error per frame (n,)."""
+    a = np.asarray(stderr_or_cov, dtype=float)
+    if a.ndim == 3:
+        return a.copy()
+    se = np.broadcast_to(a[:, None] if a.ndim == 1 else a, (n, 2))
+    cov = np.zeros((n, 2, 2))
+    cov[:, 0, 0], cov[:, 1, 1] = se[:, 0] ** 2, se[:, 1] ** 2
+    return cov
+
+
+def table_covariance(camera, xy, stderr_px) -> np.ndarray:
+    """Per-frame covariance in table metres (m^2), shape (n, 2, 2), from the
+    tracker's per-axis pixel errors (n, 2) or pixel covariances (n, 2, 2),
+    through the camera's Jacobian at each frame's position
+    (``camera.cov_to_table``); NaN where the frame has no position."""
+    xy = np.asarray(xy, dtype=float)
+    cov_px = as_covariance(stderr_px, len(xy))
+    out = np.full((len(xy), 2, 2), np.nan)
+    good = np.all(np.isfinite(xy), axis=1)
+    if good.any():
+        out[good] = camera.cov_to_table(xy[good], cov_px[good])
+    return out
+
+
+def fill_covariance(cov, xy) -> np.ndarray:
+    """Per-frame covariances with unknown (non-finite) ones filled: by the
+    median stated one when enough frames state one, else all from the
+    track's own scatter (:func:`noise_from_track`)."""
+    cov = np.array(cov, dtype=float)
+    known = np.all(np.isfinite(cov.reshape(len(cov), -1)), axis=1)
+    known &= (cov[:, 0, 0] > 0) & (cov[:, 1, 1] > 0)
+    if known.sum() >= max(MIN_STATED_FRAMES, 0.5 * len(cov)):
+        cov[~known] = np.median(cov[known], axis=0)
+        return cov
+    s = noise_from_track(xy)
+    return np.broadcast_to(np.eye(2) * s**2, cov.shape).copy()
+
+
+@dataclass(frozen=True)
+class Measurements:
+    """The measurements a fit uses, from one track.
+
+    Attributes
+    ----------
+    t : ndarray, shape (n,)
+        Times (s) of the frames where the ball was found.
+    xy : ndarray, shape (n, 2)
+        Their centres (m).
+    cov : ndarray, shape (n, 2, 2)
+        Each frame's covariance (m^2), the codec's share included.
+    group : ndarray of int, shape (n,)
+        Which measurement each frame belongs to (frames sharing one are
+        averaged into it); -1 for frames left out (the strike's).
+    W : ndarray, shape (m, 2, 2)
+        Inverse Cholesky factor of each measurement's covariance (its
+        whitener); made by :func:`_make`.
+    """
+
+    t: np.ndarray
+    xy: np.ndarray
+    cov: np.ndarray
+    group: np.ndarray
+    W: np.ndarray
+
+    @property
+    def used(self) -> np.ndarray:
+        """Mask of the frames that enter some measurement."""
+        return self.group >= 0
+
+    @property
+    def n(self) -> int:
+        """Number of measurements (each a 2-vector)."""
+        return int(self.group.max()) + 1 if len(self.group) and self.group.max() >= 0 else 0
+
+    def dof(self, n_par: int) -> int:
+        """Degrees of freedom of a fit of ``n_par`` parameters: 2 per measurement."""
+        return max(2 * self.n - n_par, 1)
+
+    @property
+    def t_used(self) -> np.ndarray:
+        return self.t[self.used]
+
+    def _means(self, v):
+        g = self.group[self.used]
+        cnt = np.bincount(g, minlength=self.n)
+        return np.stack([np.bincount(g, weights=v[:, d], minlength=self.n) for d in (0, 1)], 1) / cnt[:, None]
+
+    def whiten(self, model_used) -> np.ndarray:
+        """Whitened residuals, shape (m, 2), in measurement order (time order):
+        ``L^-1 (mean observed - mean model)`` for each measurement, with
+        ``L L^T`` its covariance; ``model_used`` is the model at the used
+        frames (``t_used``), shape (k, 2)."""
+        d = self._means(self.xy[self.used] - np.asarray(model_used, dtype=float))
+        return np.einsum("mij,mj->mi", self.W, d)
+
+    def whiten_delta(self, delta_used) -> np.ndarray:
+        """The whitened measurements' change, shape (m, 2), when the model
+        at the used frames changes by ``delta_used`` (linear; for Jacobians)."""
+        return np.einsum("mij,mj->mi", self.W, self._means(np.asarray(delta_used, dtype=float)))
+
+    @property
+    def single(self) -> np.ndarray:
+        """Mask over measurements: those of one frame (moving-ball frames)."""
+        g = self.group[self.used]
+        return np.bincount(g, minlength=self.n) == 1
+
+    def with_codec(self, codec_var: float) -> "Measurements":
+        """The same measurements with a codec's per-axis error variance
+        ``codec_var`` (m^2, signed: negative takes back an overstatement)
+        added to every frame, floored at ``MIN_NOISE_FRACTION`` of the stated."""
+        cov = self.cov + codec_var * np.eye(2)
+        floor = MIN_NOISE_FRACTION**2 * self.cov
+        low = (cov[:, 0, 0] < floor[:, 0, 0]) | (cov[:, 1, 1] < floor[:, 1, 1])
+        cov[low] = floor[low]
+        return _make(self.t, self.xy, cov, self.group)
+
+
+def _make(t, xy, cov, group) -> Measurements:
+    """Measurements with their whiteners: one frame's covariance for each
+    (the mean of a group's frames': they share one error; a single frame's
+    own), inverted through its Cholesky factor."""
+    used = group >= 0
+    g = group[used]
+    m = int(g.max()) + 1 if len(g) else 0
+    cnt = np.bincount(g, minlength=m)
+    c = np.zeros((m, 2, 2))
+    np.add.at(c, g, cov[used])
+    c /= np.maximum(cnt, 1)[:, None, None]
+    W = np.linalg.inv(np.linalg.cholesky(c)) if m else np.zeros((0, 2, 2))
+    return Measurements(t=t, xy=xy, cov=cov, group=group, W=W)
+
+
+def strike_window(t, t0: float, exposure_s: float, frame_dt: float) -> np.ndarray:
+    """Mask of the frames whose exposure may hold the strike at ``t0`` (the
+    one definition of the strike's window)."""
+    if exposure_s <= 0 or t0 is None or not np.isfinite(t0):
+        return np.zeros(len(t), bool)
+    half = 0.5 * exposure_s + STRIKE_MARGIN_FRAMES * frame_dt
+    return np.abs(np.asarray(t) - t0) < half
+
+
+def build_measurements(t, xy, cov, *, t0: float | None = None, t_rest: float | None = None,
+                       exposure_s: float = 0.0, frame_dt: float | None = None,
+                       shared_rest: bool = False) -> Measurements:
+    """Turn a track into the measurements a fit uses.
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,)
+        Frame times (s) of the frames where the ball was found.
+    xy : ndarray, shape (n, 2)
+        Centres (m).
+    cov : ndarray, shape (n, 2, 2), (n, 2) or (n,)
+        Per-frame covariance (m^2), or per-axis standard errors (m).
+    t0 : float, optional
+        Strike time (s): the frames whose exposure holds it are left out,
+        and the frames before it are the first rest.
+    t_rest : float, optional
+        Time (s) from which the ball rests at the end of the track.
+    exposure_s : float
+        Exposure (s).
+    frame_dt : float, optional
+        Frame interval (s); the median of ``diff(t)`` when absent.
+    shared_rest : bool
+        The codec's error is shared by a still ball's frames (lossy): each
+        rest becomes one measurement, the mean of its frames.
+
+    Returns
+    -------
+    Measurements
+    """
+    t = np.asarray(t, dtype=float)
+    xy = np.asarray(xy, dtype=float)
+    cov = fill_covariance(as_covariance(cov, len(t)), xy)
+    if frame_dt is None:
+        frame_dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    use = ~strike_window(t, t0, exposure_s, frame_dt) if t0 is not None else np.ones(len(t), bool)
+    key = np.arange(len(t), dtype=float)
+    if shared_rest:
+        if t0 is not None and np.isfinite(t0):
+            before = use & (t < t0 - 0.5 * exposure_s - 0.5 * frame_dt)
+            if before.sum() > 1:
+                key[before] = key[before][0]
+        if t_rest is not None and np.isfinite(t_rest):
+            after = use & (t > t_rest + 0.5 * exposure_s + 0.5 * frame_dt)
+            if after.sum() > 1:
+                key[after] = key[after][0]
+    group = np.full(len(t), -1)
+    _, inv = np.unique(key[use], return_inverse=True)
+    group[use] = inv
+    return _make(t, xy, cov, group)
+
+
+def codec_excess(meas: Measurements, whitened_residuals, n_par: int) -> float:
+    """Per-axis error variance (m^2) a lossy codec adds beyond the stated one.
+
+    Measured from a fit's whitened residuals over the single-frame
+    measurements (moving ball): the residual variance in excess of the
+    stated, with the fit's degrees of freedom shared out.  Signed: negative
+    when the residuals are smaller than stated (MJPG at low noise, where
+    the tracker states 1.2-1.4 times its real error).
+
+    Returns
+    -------
+    float
+        0 when too few frames.
+    """
+    r = np.asarray(whitened_residuals, dtype=float)
+    single = meas.single
+    k = int(single.sum())
+    if r.shape[0] != meas.n or 2 * k <= n_par + 2:
+        return 0.0
+    # Back to metres: L r is the raw residual of each measurement.
+    W = meas.W[single]
+    L = np.linalg.inv(W)
+    raw = np.einsum("mij,mj->mi", L, r[single])
+    c = np.linalg.inv(np.einsum("mij,mkj->mik", W, W))  # each measurement's covariance
+    stated = float(np.trace(c, axis1=1, axis2=2).sum())
+    frac = 1.0 - n_par / (2.0 * meas.n)  # the fit absorbs its parameters' share of every residual
+    return float((np.sum(raw**2) - stated * frac) / (2 * k * frac))

@@ -1,0 +1,84 @@
+"""Tracks straight from the forward model with Gaussian noise: the project's
+own generator for calibrating decisions and checking error bars by
+simulation (no video: fast enough for thousands of tracks).
+
+Pure: a seed (or a numpy Generator) in, arrays out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cuespin.data_gen.sampler import sample_shot
+from cuespin.physics.motion import BallParams, Shot, phases
+from cuespin.recover.mle import model_track
+
+# Frame rates and per-axis centre noise (m) the calibration spans: the
+# sampler's frame rates, and the tracker's stated errors at 500 px/m from
+# noise 0.1 to 10 grey levels (about 0.01-0.3 px, measured in
+# benchmarks/track.py).
+FPS_GRID = (60.0, 120.0, 240.0, 480.0)
+SIGMA_GRID_M = (2e-5, 1e-4, 6e-4)
+# Analysed tracks end at rest or after this long from the strike (s): the
+# calibration's tracks, kept short so thousands run in minutes.
+MAX_AFTER_STRIKE_S = 2.0
+
+
+@dataclass(frozen=True)
+class SimTrack:
+    """One simulated track: times (s), centres (m), per-axis error (m), truth."""
+
+    t: np.ndarray
+    xy: np.ndarray
+    sigma: float
+    shot: Shot
+    params: BallParams
+    exposure_s: float
+    fps: float
+
+
+def simulate_track(shot: Shot, params: BallParams, fps: float, sigma: float, rng,
+                   exposure_s: float = 0.0, t_end: float | None = None,
+                   t_start: float = 0.0) -> SimTrack:
+    """The exposure-averaged centre at frame times ``k / fps`` plus N(0, sigma^2) per axis.
+
+    ``t_end`` defaults to 0.3 s after rest, at most :data:`MAX_AFTER_STRIKE_S` after the strike.
+    """
+    rng = np.random.default_rng(rng)
+    ph = phases(shot, params)
+    if t_end is None:
+        t_end = min(ph.t2 + 0.3, shot.t0 + MAX_AFTER_STRIKE_S)
+    t = np.arange(np.ceil(t_start * fps), np.floor(t_end * fps) + 1) / fps
+    xy = model_track(shot, params, t, exposure_s) + sigma * rng.standard_normal((len(t), 2))
+    return SimTrack(t, xy, float(sigma), shot, params, float(exposure_s), float(fps))
+
+
+def null_rolling_tracks(n: int, seed: int, fps_grid=FPS_GRID, sigma_grid=SIGMA_GRID_M,
+                        blur: bool = True):
+    """``n`` tracks rolling from the strike (paper case 4: no slip to see),
+    cycling over frame rates and noise levels, exposures 0.3-1 frame half
+    the time (as the sampler draws them).  Yields :class:`SimTrack`."""
+    rng = np.random.default_rng(seed)
+    for i in range(n):
+        fps = fps_grid[i % len(fps_grid)]
+        sigma = sigma_grid[(i // len(fps_grid)) % len(sigma_grid)]
+        shot, params = sample_shot(rng, "case4")
+        exposure = float(rng.uniform(0.3, 1.0) / fps) if blur and rng.random() < 0.5 else 0.0
+        yield simulate_track(shot, params, fps, sigma, rng, exposure)
+
+
+def sliding_tracks(n: int, seed: int, presets=("random", "case1", "case3", "case5", "masse"),
+                   fps_grid=FPS_GRID, sigma_grid=SIGMA_GRID_M, blur: bool = True):
+    """``n`` tracks of shots that slide (the sampler's presets), cycling over
+    frame rates and noise levels.  Yields :class:`SimTrack`."""
+    rng = np.random.default_rng(seed)
+    for i in range(n):
+        fps = fps_grid[i % len(fps_grid)]
+        sigma = sigma_grid[(i // len(fps_grid)) % len(sigma_grid)]
+        shot, params = sample_shot(rng, presets[i % len(presets)])
+        exposure = float(rng.uniform(0.3, 1.0) / fps) if blur and rng.random() < 0.5 else 0.0
+        ph = phases(shot, params)
+        yield simulate_track(shot, params, fps, sigma, rng, exposure,
+                             t_end=min(ph.t2 + 0.3, max(ph.t1 + 1.0, shot.t0 + MAX_AFTER_STRIKE_S)))

@@ -1,0 +1,106 @@
+"""fit/decide.py: each decision's false-positive rate, measured on tracks
+simulated under its null hypothesis with the project's own generator
+(recover.simulate: the forward model plus Gaussian noise, frame rates
+60-480, noise 2e-5-6e-4 m), held to the nominal rate plus two binomial
+standard errors.  The 400-track runs are slow; the default run keeps a
+smaller version of each."""
+
+import numpy as np
+import pytest
+
+from cuespin.data_gen.sampler import sample_shot
+from cuespin.fit.decide import LEVEL, sliding_ended
+from cuespin.fit.segment import segment_track
+from cuespin.physics import phases
+from cuespin.recover.estimate import estimate
+from cuespin.recover.paper import path_shape
+from cuespin.recover.simulate import (FPS_GRID, SIGMA_GRID_M, null_rolling_tracks, simulate_track,
+                                      sliding_tracks)
+
+
+def allowed(n: int, level: float = LEVEL) -> int:
+    """Most false positives in ``n`` null tracks within nominal + 2 binomial SE."""
+    return int(np.floor(n * (level + 2 * np.sqrt(level * (1 - level) / n))))
+
+
+def false_sliding(n, seed):
+    cells = {}
+    for tr in null_rolling_tracks(n, seed):
+        est = estimate(tr.t, tr.xy, np.full(len(tr.t), tr.sigma), tr.params, tr.exposure_s,
+                       run_paper=False)
+        cells.setdefault((tr.fps, tr.sigma), []).append(bool(est.decisions["sliding_seen"]))
+    return cells
+
+
+def test_false_sliding_rate_small():
+    cells = false_sliding(40, 100)
+    hits = sum(sum(v) for v in cells.values())
+    assert hits <= allowed(40), cells
+
+
+@pytest.mark.slow
+def test_false_sliding_rate_400_every_cell():
+    cells = false_sliding(408, 7)
+    hits = sum(sum(v) for v in cells.values())
+    assert hits <= allowed(408), hits
+    for k, v in cells.items():  # every frame rate and noise level
+        assert sum(v) <= allowed(len(v)), (k, sum(v), len(v))
+
+
+def still_sliding_tracks(n, seed):
+    """Tracks that end while the ball still slides (masse and random shots,
+    cut 40-95% of the way through sliding)."""
+    rng = np.random.default_rng(seed)
+    i = 0
+    while i < n:
+        fps = FPS_GRID[i % len(FPS_GRID)]
+        sigma = SIGMA_GRID_M[(i // len(FPS_GRID)) % len(SIGMA_GRID_M)]
+        shot, p = sample_shot(rng, ("masse", "random")[i % 2])
+        ph = phases(shot, p)
+        if ph.t1 - shot.t0 < 12 / fps:
+            continue
+        cut = shot.t0 + float(rng.uniform(0.4, 0.95)) * (ph.t1 - shot.t0)
+        exposure = float(rng.uniform(0.3, 1.0) / fps) if rng.random() < 0.5 else 0.0
+        i += 1
+        yield simulate_track(shot, p, fps, sigma, rng, exposure, t_end=cut)
+
+
+def false_ended(n, seed):
+    hits = 0
+    for tr in still_sliding_tracks(n, seed):
+        p = tr.params
+        seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, tr.sigma, tr.exposure_s)
+        hits += bool(seg) and sliding_ended(seg, tr.t).yes
+    return hits
+
+
+def test_false_sliding_ended_rate_small():
+    assert false_ended(40, 200) <= allowed(40)
+
+
+@pytest.mark.slow
+def test_false_sliding_ended_rate_400():
+    assert false_ended(400, 8) <= allowed(400)
+
+
+def false_curved(n, seed):
+    hits = total = 0
+    for tr in sliding_tracks(n, seed, presets=("case1", "case3", "case5")):
+        p = tr.params
+        seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, tr.sigma, tr.exposure_s)
+        shape = path_shape(seg, tr.xy, p) if seg else None
+        if shape is not None:
+            total += 1
+            hits += shape.curved
+    return hits, total
+
+
+def test_false_curved_rate_small():
+    hits, total = false_curved(48, 300)
+    assert total >= 30 and hits <= allowed(total)
+
+
+@pytest.mark.slow
+def test_false_curved_rate_400():
+    hits, total = false_curved(440, 9)
+    assert total >= 400 and hits <= allowed(total)

@@ -1,0 +1,147 @@
+"""recover/measurements.py and the error model around it: degrees of freedom,
+masks, rests as one measurement, per-position covariance, autocorrelated
+errors (HAC), and the paper's answers' status and errors."""
+
+import numpy as np
+import pytest
+
+from cuespin.data_gen.sampler import sample_shot
+from cuespin.physics import phases
+from cuespin.recover.api import recover_track
+from cuespin.recover.measurements import build_measurements
+from cuespin.recover.mle import model_track
+from cuespin.recover.simulate import simulate_track
+
+SIGMA = 1e-4
+
+
+def rolling_track(seed=3, fps=120.0, preset="case3"):
+    shot, p = sample_shot(seed, preset)
+    ph = phases(shot, p)
+    return shot, p, simulate_track(shot, p, fps, SIGMA, seed, t_end=min(ph.t2 + 0.5, shot.t0 + 4.0))
+
+
+def test_rests_are_one_measurement_each_and_strike_frames_masked():
+    t = np.arange(100) / 100.0
+    xy = np.zeros((100, 2))
+    m = build_measurements(t, xy, np.full(100, SIGMA), t0=0.2, t_rest=0.8, exposure_s=0.005,
+                           frame_dt=0.01, shared_rest=True)
+    assert not m.used[20] and m.used[18] and m.used[22]       # the strike's frame is masked
+    before = np.unique(m.group[:19])
+    after = np.unique(m.group[82:])
+    assert len(before) == 1 and len(after) == 1               # each rest one measurement
+    in_rest = np.isin(m.group, np.r_[before, after])
+    assert m.n == int(np.sum(m.used & ~in_rest)) + 2 and m.dof(7) == 2 * m.n - 7
+    lossless = build_measurements(t, xy, np.full(100, SIGMA), t0=0.2, exposure_s=0.005, frame_dt=0.01)
+    assert lossless.n == 99 and lossless.dof(7) == 2 * 99 - 7
+
+
+def test_chi2_per_dof_near_one_with_shared_rest_errors():
+    # A lossy codec's rests: every still frame carries the same error (plus
+    # a little of its own); fitted as lossy, chi2/dof must be ~1 (it was
+    # 0.51-0.73 when every frame counted 2 dof).  Measured over these seeds:
+    # median 1.00; held to 0.9-1.1.
+    chis = []
+    for seed in range(6):
+        shot, p = sample_shot(40 + seed, "random")
+        ph = phases(shot, p)
+        rng = np.random.default_rng(seed)
+        t = np.arange(0.0, min(ph.t2 + 0.5, 4.0), 1 / 120)
+        xy = model_track(shot, p, t) + SIGMA * rng.standard_normal((len(t), 2))
+        still0 = t < shot.t0
+        xy[still0] = model_track(shot, p, t[still0]) + SIGMA * rng.standard_normal(2) \
+            + 0.05 * SIGMA * rng.standard_normal((still0.sum(), 2))
+        still2 = t > ph.t2
+        if still2.any():
+            xy[still2] = model_track(shot, p, t[still2]) + SIGMA * rng.standard_normal(2) \
+                + 0.05 * SIGMA * rng.standard_normal((still2.sum(), 2))
+        m = recover_track(t, xy, np.ones(len(t), bool), np.full(len(t), SIGMA), p,
+                          lossless=False)["methods"]["mle"]
+        assert m["status"] in ("ok", "degenerate"), m["reason"]
+        chis.append(m["chi2_per_dof"])
+    assert 0.9 <= np.median(chis) <= 1.1, chis
+
+
+def test_per_position_covariance_is_what_the_fit_weights_by():
+    # Errors whose size varies along the path (a tilted camera: 0.87-1.34x
+    # across the table) and are anisotropic: given as 2x2 covariances, the
+    # fit's chi2/dof is ~1 (measured 0.98-1.03 over seeds 0-3).
+    shot, p = sample_shot(5, "random")
+    ph = phases(shot, p)
+    t = np.arange(0.0, min(ph.t2 + 0.3, 4.0), 1 / 240)
+    clean = model_track(shot, p, t)
+    scale = np.interp(clean[:, 0], [0.0, 2.54], [0.87, 1.34]) * SIGMA
+    cov = np.zeros((len(t), 2, 2))
+    cov[:, 0, 0], cov[:, 1, 1], cov[:, 0, 1] = scale**2, (0.5 * scale) ** 2, 0.3 * scale**2
+    cov[:, 1, 0] = cov[:, 0, 1]
+    rng = np.random.default_rng(0)
+    xy = clean + np.einsum("nij,nj->ni", np.linalg.cholesky(cov), rng.standard_normal((len(t), 2)))
+    m = recover_track(t, xy, np.ones(len(t), bool), cov, p)["methods"]["mle"]
+    assert m["status"] == "ok" and m["chi2_per_dof"] == pytest.approx(1.0, abs=0.08)
+    z = (np.array(m["v0"]) - shot.v0) / np.array(m["stderr"]["v0"])
+    assert np.abs(z).max() < 4
+
+
+def test_autocorrelated_errors_widen_the_errors():
+    # AR(1) errors with lag-1 autocorrelation 0.67 (MJPG at low noise):
+    # the residuals show it, the HAC sandwich is used, and the standard
+    # errors grow (by up to sqrt((1 + rho) / (1 - rho)) = 2.3 for a slowly
+    # varying parameter; measured 1.41 for v0 here).
+    shot, p = sample_shot(7, "random")
+    ph = phases(shot, p)
+    t = np.arange(0.0, min(ph.t2 + 0.3, 4.0), 1 / 240)
+    rng = np.random.default_rng(1)
+    e = np.zeros((len(t), 2))
+    rho = 0.67
+    w = rng.standard_normal((len(t), 2)) * SIGMA * np.sqrt(1 - rho**2)
+    e[0] = SIGMA * rng.standard_normal(2)
+    for k in range(1, len(t)):
+        e[k] = rho * e[k - 1] + w[k]
+    xy = model_track(shot, p, t) + e
+    ok = np.ones(len(t), bool)
+    m = recover_track(t, xy, ok, np.full(len(t), SIGMA), p)["methods"]["mle"]
+    assert m["hac"] and m["rho1"] == pytest.approx(rho, abs=0.1)
+    iid = recover_track(t, model_track(shot, p, t) + SIGMA * rng.standard_normal((len(t), 2)), ok,
+                        np.full(len(t), SIGMA), p)["methods"]["mle"]
+    assert not iid["hac"]
+    assert np.mean(np.array(m["stderr"]["v0"]) / np.array(iid["stderr"]["v0"])) > 1.25
+
+
+def test_paper_degenerate_when_the_strike_is_not_in_view():
+    # The track starts mid-slide: the paper's method has no x0 (it said
+    # "ok" with a wrong v0 before issue 11); the fit may still extrapolate
+    # the strike through the known sliding dynamics.
+    shot, p = sample_shot(12, "masse")
+    ph = phases(shot, p)
+    tr = simulate_track(shot, p, 240.0, SIGMA, 2, t_start=shot.t0 + 0.3 * (ph.t1 - shot.t0),
+                        t_end=min(ph.t2 + 0.3, ph.t1 + 1.0))
+    out = recover_track(tr.t, tr.xy, np.ones(len(tr.t), bool), np.full(len(tr.t), SIGMA), p)
+    paper = out["methods"]["paper"]
+    assert paper["status"] == "degenerate" and "strike is not in view" in paper["reason"]
+    assert out["best"] == ("mle" if out["methods"]["mle"]["status"] == "ok" else None)
+
+
+def test_best_is_null_when_no_method_answers():
+    t = np.arange(200) / 120.0
+    xy = np.full((200, 2), 0.5) + SIGMA * np.random.default_rng(0).standard_normal((200, 2))
+    out = recover_track(t, xy, np.ones(200, bool), np.full(200, SIGMA), sample_shot(1)[1])
+    assert {m["status"] for m in out["methods"].values()} == {"failed"}
+    assert out["best"] is None
+
+
+def test_paper_states_errors_that_cover():
+    # The paper's stated errors on simulated curved shots: measured RMS
+    # z 1.2 over these seeds (stated errors optimistic by ~20%); held to
+    # below 2.5 (issue 11 target: coverage 90-97%, see README).
+    zs = []
+    for seed in range(8):
+        shot, p = sample_shot(60 + seed, "masse")
+        ph = phases(shot, p)
+        tr = simulate_track(shot, p, 240.0, SIGMA, seed, t_end=min(ph.t2 + 0.3, ph.t1 + 1.0))
+        out = recover_track(tr.t, tr.xy, np.ones(len(tr.t), bool), np.full(len(tr.t), SIGMA), p)
+        pp = out["methods"]["paper"]
+        if pp["status"] == "ok":
+            zs.append((np.r_[pp["v0"], pp["w0"]] - np.r_[shot.v0, shot.w0])
+                      / np.r_[pp["stderr"]["v0"], pp["stderr"]["w0"]])
+    assert len(zs) >= 5
+    assert np.sqrt(np.mean(np.square(zs))) < 2.5, np.sqrt(np.mean(np.square(zs)))
