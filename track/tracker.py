@@ -291,7 +291,9 @@ class BallTracker:
     def _learn_look(self, patch, felt, u0, v0, f_shaded, r, G0, blur, fit_blur):
         """One frame's vote on the look: the disc fit's residual sum against
         the shaded one's; decided once ``LOOK_FRAMES`` frames have voted."""
-        from scipy.stats import chi2
+        # scipy.special, not scipy.stats: importing scipy.stats costs ~1.5 s
+        # (measured), more than tracking a short shot; chdtri(df, p) is chi2.isf(p, df).
+        from scipy.special import chdtri
 
         d = fit_disc(patch, felt, u0, v0, f_shaded.c, r, G0, b0=blur, fit_blur=fit_blur)
         if not d:
@@ -302,7 +304,7 @@ class BallTracker:
             rss_d, rss_s, dofs = map(np.array, zip(*self._look_votes))
             s2 = rss_s.sum() / dofs.sum()
             stat = (rss_d - rss_s).sum() / s2
-            self.shade = bool(stat > chi2.isf(LOOK_P, 3 * len(rss_d)))
+            self.shade = bool(stat > chdtri(3 * len(rss_d), LOOK_P))
 
     def _refine(self, frame, loc, blur) -> Observation:
         r = self.r
