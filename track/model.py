@@ -90,7 +90,7 @@ def blur_nodes(blur_px: float) -> np.ndarray:
     return (np.arange(K) + 0.5) / K - 0.5
 
 
-def streak_model(c, b, G, felt, r, u0, v0, taus, shade=None):
+def streak_model(c, b, G, felt, r, u0, v0, taus, shade=None, blur_cols=True):
     """Frame minus felt for a ball of grey ``G`` smeared from ``c - b/2`` to ``c + b/2``.
 
     The ball hides the felt under it, so the model is ``(G - felt) * cov``
@@ -104,6 +104,10 @@ def streak_model(c, b, G, felt, r, u0, v0, taus, shade=None):
     rim darker or lighter than the middle (shading, a highlight's mean),
     taken at each pixel's centre within the exact coverage.  Three more
     Jacobian columns then follow, ``d/dgu, d/dgv, d/dq``.
+
+    ``blur_cols`` False leaves the blur's columns ``d/dbu, d/dbv`` zero (a
+    fit that holds the blur fixed never reads them: two tensor products
+    per evaluation saved).
     """
     h, w = felt.shape
     taus = np.asarray(taus, float)
@@ -116,14 +120,15 @@ def streak_model(c, b, G, felt, r, u0, v0, taus, shade=None):
         cov = covs.sum(axis=0) / n
         du = gus.sum(axis=0)
         dv = gvs.sum(axis=0)
-        bu = np.tensordot(taus, gus, axes=1)
-        bv = np.tensordot(taus, gvs, axes=1)
         contrast = ((G - felt) / n).ravel()
         J = np.empty((h * w, 5))
         J[:, 0] = du.ravel() * contrast
         J[:, 1] = dv.ravel() * contrast
-        J[:, 2] = bu.ravel() * contrast
-        J[:, 3] = bv.ravel() * contrast
+        if blur_cols:
+            J[:, 2] = np.tensordot(taus, gus, axes=1).ravel() * contrast
+            J[:, 3] = np.tensordot(taus, gvs, axes=1).ravel() * contrast
+        else:
+            J[:, 2:4] = 0.0
         J[:, 4] = cov.ravel()
         return (G - felt) * cov, J
     gu, gv, q = shade
@@ -140,8 +145,11 @@ def streak_model(c, b, G, felt, r, u0, v0, taus, shade=None):
     J = np.empty((h * w, 8))
     J[:, 0] = node_du.sum(axis=0).ravel() / n
     J[:, 1] = node_dv.sum(axis=0).ravel() / n
-    J[:, 2] = np.tensordot(taus, node_du, axes=1).ravel() / n
-    J[:, 3] = np.tensordot(taus, node_dv, axes=1).ravel() / n
+    if blur_cols:
+        J[:, 2] = np.tensordot(taus, node_du, axes=1).ravel() / n
+        J[:, 3] = np.tensordot(taus, node_dv, axes=1).ravel() / n
+    else:
+        J[:, 2:4] = 0.0
     J[:, 4] = covs.sum(axis=0).ravel() / n
     J[:, 5] = (covs * X).sum(axis=0).ravel() / n
     J[:, 6] = (covs * Y).sum(axis=0).ravel() / n
@@ -241,10 +249,12 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
     taus = blur_nodes(np.hypot(*b))
     it = 0
     for it in range(1, MAX_ITER + 1):
-        m, J = streak_model(c, b, G, felt, r, u0, v0, taus, look)
+        m, J = streak_model(c, b, G, felt, r, u0, v0, taus, look, blur_cols=fit_blur)
         J = J[:, cols]
-        res = (y - m.ravel()) * use
-        J = J * use[:, None]
+        res = y - m.ravel()
+        if valid is not None:  # all ones otherwise: skip two products per step
+            res *= use
+            J *= use[:, None]
         JtJ = J.T @ J
         try:
             step = np.linalg.solve(JtJ, J.T @ res)
