@@ -153,7 +153,8 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
                            scene_balls(scene.render))
     n = analysed_frames(tr.t, contact, cam.exposure_s)
     out = recover_track(tr.t[:n], tr.xy[:n], tr.ok[:n], cov_m[:n], scene.physics, cam.exposure_s,
-                        method, fit_friction, lossless=tr.lossless)
+                        method, fit_friction, lossless=tr.lossless,
+                        inter_frame=getattr(tr, "inter_frame", False))
     out["contact"] = None if contact is None else {"t": contact.t, "kind": contact.kind}
     noise = tr.centroid_noise_px
     track = {"frames": int(tr.n_frames), "ok_frames": int(tr.ok.sum()),

@@ -337,7 +337,7 @@ def correlated_codec_var(fit: ModelFit, meas: Measurements, frame_dt: float,
     m, p = len(J) // 2, J.shape[1]
     if 2 * m <= p + 2:
         return 0.0
-    A = np.linalg.inv(J.T @ J)
+    A = np.linalg.pinv(J.T @ J)  # the hat matrix's trace needs no inverse (slip undetermined: singular)
     trM = float(np.einsum("mab,mab->", meas.W, meas.W))
     tr_free = trM - float(np.trace(A @ _codec_scores(J, meas, acf, frame_dt)))
     if not tr_free > 0:

@@ -72,6 +72,9 @@ class TrackResult:
         The video's codec is lossless.  A lossy codec's error is a function
         of the image, so frames of a resting ball share it: they are one
         measurement, not many.
+    inter_frame : bool
+        The lossy codec predicts frames from others (H.264...): a moving
+        ball's error is shared between neighbouring frames too.
     cov_px : ndarray, shape (n, 2, 2)
         Covariance of ``uv`` (px^2) by the sandwich over the fit; convert to
         metres with ``scene.camera.cov_to_table(xy, cov_px)``.
@@ -93,6 +96,7 @@ class TrackResult:
     error: str = ""
     seconds: dict = field(default_factory=dict)
     lossless: bool = False
+    inter_frame: bool = False
     cov_px: np.ndarray | None = None
     projection: Projection = GREY
     camera: object = None
@@ -328,7 +332,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     return TrackResult(t=frame_times(path, info, k, cam.fps), uv=uv, xy=xy, ok=ok, status=status,
                        stderr_px=se, radius_px=radius_px, background=bg, error=error,
                        seconds={"background": t_bg, "track": t_track}, lossless=info.lossless,
-                       cov_px=cov, projection=proj, camera=cam)
+                       inter_frame=info.inter_frame, cov_px=cov, projection=proj, camera=cam)
 
 
 def write_track_csv(path, result: TrackResult) -> None:
