@@ -74,6 +74,7 @@ def main(argv=None):
     p.add_argument("--n", type=int, default=12)
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--acf", action="store_true")
+    p.add_argument("--lags-out", default=None, help="also save the lag sums (npz) for pooling runs")
     p.add_argument("--out", default=None, help="folder for the videos (default: a new temporary one)")
     a = p.parse_args(argv)
     out = Path(a.out or tempfile.mkdtemp(prefix="h264_honesty_"))
@@ -111,6 +112,8 @@ def main(argv=None):
         print(f"{codec:6} {'on' if inter else 'off':18} {ok.sum():>2}/{len(r):<2} {100 * cover:>12.1f}% "
               f"{np.sqrt(np.mean(rk[:, :2] ** 2)):>9.2f} {np.sqrt(np.mean(rk[:, 2:] ** 2)):>9.2f}")
     if a.acf and lags[1][0] > 0:
+        if a.lags_out:
+            np.savez(a.lags_out, num=lags[0], cnt=lags[1], stated=lags[2])
         c = lags[0] / lags[1]
         codec_var = c[0] - lags[2] / lags[1][0]
         rho = c[1:] / codec_var

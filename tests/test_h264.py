@@ -71,7 +71,7 @@ def test_correlated_codec_error_is_in_the_standard_errors():
     assert len(z[True]) >= 8
     assert np.sqrt(np.mean(on**2)) < rms_bound(len(on))
     assert np.sqrt(np.mean(on**2)) > 0.5  # not merely wide
-    # Measured: RMS 1.02 with the model (coverage 95.5%), 1.48 without (88.6%).
+    # Measured: RMS 1.05 with the model (coverage 95.5%), 1.39 without (90.9%).
     assert np.sqrt(np.mean(off**2)) > 1.2 * np.sqrt(np.mean(on**2))
 
 
