@@ -74,7 +74,11 @@ class Scene:
     the camera converts in is always the ball's centre plane of this scene.
     ``defaulted`` lists the ``(key, value)`` pairs :func:`parse_scene` filled
     in because the file left them out (the reader says so on stderr); it
-    takes no part in comparisons.
+    takes no part in comparisons.  ``calibration`` holds the cameras of the
+    file's ``calibration.perturbed`` list (``cuespin calibrate`` writes them:
+    the camera re-solved with one corner coordinate moved by its stated
+    error, each in turn), from which the recovery carries the calibration's
+    error into its own (empty: the camera is taken as exact).
     """
 
     physics: BallParams
@@ -83,9 +87,12 @@ class Scene:
     render: dict = field(default_factory=dict)
     truth: Shot | None = None
     defaulted: tuple = field(default=(), compare=False)
+    calibration: tuple = ()
 
     def __post_init__(self):
-        object.__setattr__(self, "camera", self.camera.with_centre_height(float(self.physics.R)))
+        R = float(self.physics.R)
+        object.__setattr__(self, "camera", self.camera.with_centre_height(R))
+        object.__setattr__(self, "calibration", tuple(c.with_centre_height(R) for c in self.calibration))
 
 
 def _number(d: dict, key: str, path: str, default=None, *, positive=False, nonneg=False,
@@ -244,22 +251,42 @@ def parse_scene(d: Any) -> Scene:
                   width=_number(tb, "width", "table", Table.width, positive=True))
     camera = _parse_camera(_block(d, "camera", required=True), table, params.R)
     render = _block(d, "render", required=False) or {}
+    calibration = _perturbed_cameras(d, table, params.R)
     tr = _block(d, "truth", required=False)
     truth = None
     if tr is not None:
         truth = Shot(x0=_vector(tr, "x0", "truth", (2,)), v0=_vector(tr, "v0", "truth", (2,)),
                      w0=_vector(tr, "w0", "truth", (2,)), t0=_number(tr, "t0", "truth", nonneg=True))
     return Scene(physics=params, camera=camera, table=table, render=dict(render), truth=truth,
-                 defaulted=defaulted)
+                 defaulted=defaulted, calibration=calibration)
 
 
-def scene_to_dict(scene: Scene) -> dict:
-    """The JSON object of a :class:`Scene` (inverse of :func:`parse_scene`).
+def _perturbed_cameras(d: dict, table: Table, R: float) -> tuple:
+    """The cameras of ``calibration.perturbed`` (optional), each validated as
+    ``camera`` is, with the main camera's fps and size."""
+    cal = _block(d, "calibration", required=False)
+    if cal is None or "perturbed" not in cal:
+        return ()
+    lst = cal["perturbed"]
+    if not isinstance(lst, list):
+        raise SceneError(f"calibration.perturbed: expected a list of cameras, got {json_repr(lst)}")
+    base = {k: d["camera"][k] for k in ("fps", "width", "height") if k in d["camera"]}
+    out = []
+    for k, cam in enumerate(lst):
+        if not isinstance(cam, dict):
+            raise SceneError(f"calibration.perturbed[{k}]: expected an object, got {json_repr(cam)}")
+        try:
+            out.append(_parse_camera({**base, **cam}, table, R))
+        except SceneError as exc:
+            raise SceneError(str(exc).replace("camera.", f"calibration.perturbed[{k}].", 1))
+    return tuple(out)
 
-    Only the keys the camera has are written: a size left to the video stays
-    out, and a pose camera is written without a homography.
-    """
-    p, c = scene.physics, scene.camera
+
+def camera_to_dict(c: Camera, geometry_only: bool = False) -> dict:
+    """The ``camera`` object of a :class:`Camera`: only the keys it has (a
+    size left to the video stays out; a pose camera has no homography).
+    ``geometry_only`` leaves out fps, size and exposure (a perturbed camera
+    of ``calibration.perturbed`` shares them with the main one)."""
     cam = {"fps": c.fps}
     if c.width is not None:
         cam["width"] = c.width
@@ -272,6 +299,19 @@ def scene_to_dict(scene: Scene) -> dict:
         val = getattr(c, key)
         if val is not None:
             cam[key] = [list(r) for r in val] if key == "intrinsics" else list(val)
+    if geometry_only:
+        cam = {k: v for k, v in cam.items() if k not in ("fps", "width", "height", "exposure_s")}
+    return cam
+
+
+def scene_to_dict(scene: Scene) -> dict:
+    """The JSON object of a :class:`Scene` (inverse of :func:`parse_scene`).
+
+    Only the keys the camera has are written: a size left to the video stays
+    out, and a pose camera is written without a homography.
+    """
+    p = scene.physics
+    cam = camera_to_dict(scene.camera)
     d = {
         "schema": SCHEMA,
         "physics": {"R": p.R, "mu_s": p.mu_s, "mu_r": p.mu_r, "g": p.g},
@@ -280,7 +320,10 @@ def scene_to_dict(scene: Scene) -> dict:
     }
     if scene.render:
         d["render"] = dict(scene.render)
+    if scene.calibration:
+        d["calibration"] = {"perturbed": [camera_to_dict(c, geometry_only=True) for c in scene.calibration]}
     if scene.truth is not None:
         t = scene.truth
         d["truth"] = {"x0": list(t.x0), "v0": list(t.v0), "w0": list(t.w0), "t0": t.t0}
     return d
+

@@ -31,14 +31,14 @@ from __future__ import annotations
 import json
 import math
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from cuespin.physics.camera import Camera, as_tuple, distort, undistort
-from cuespin.physics.scene import SCHEMA, Table
+from cuespin.physics.scene import SCHEMA, Table, camera_to_dict
 from cuespin.pipeline.io import InputError
 
 # A pose whose corners reproject worse than this (px RMS) is not the table's
@@ -88,6 +88,10 @@ class Calibration:
     corner_sigma_px : float or None
         Error of each corner coordinate (px) assumed (clicked: ``--corner-error``,
         default 1; automatic: from the edges' scatter).
+    perturbed : tuple of Camera
+        The camera re-solved with each of the 8 corner coordinates moved by
+        ``corner_sigma_px`` in turn (:func:`perturbed_cameras`), written to the
+        scene file's ``calibration.perturbed`` for the recovery's errors.
     """
 
     camera: Camera
@@ -98,6 +102,7 @@ class Calibration:
     edge_rms_px: float | None = None
     edge: str | None = None
     corner_sigma_px: float | None = None
+    perturbed: tuple = ()
 
     @property
     def rms_px(self) -> float:
@@ -860,7 +865,8 @@ def calibrate_video(path, table: Table = Table(), corners=None, *, intrinsics=No
     K = None if intrinsics is None else np.asarray(intrinsics, dtype=float)
     dist = None if distortion is None else np.asarray(distortion, dtype=float).ravel()
     if corners is not None:
-        return calibrate_corners(corners, size, table, intrinsics=K, distortion=dist, fps=fps, **kw)
+        cal = calibrate_corners(corners, size, table, intrinsics=K, distortion=dist, fps=fps, **kw)
+        return _with_perturbed(cal, size, table, intrinsics=K, distortion=dist, fps=fps, **kw)
     frame = reference_frame(path)
     det = detect_corners(frame, K, dist)
     quad, edge_rms, kappa = det.corners, det.edge_rms, det.kappa
@@ -870,11 +876,24 @@ def calibrate_video(path, table: Table = Table(), corners=None, *, intrinsics=No
     # about the points' scatter times sqrt(4 / points per side).
     per_side = (size[0] + size[1]) / 2.0 / 2.0
     kw.setdefault("corner_sigma_px", max(edge_rms * math.sqrt(4.0 / per_side), 0.02))
-    cal = assign_corners(quad, size, table, intrinsics=K, distortion=dist, fps=fps, kappa=kappa,
-                         margin_m=felt_margin_m, corner_height_m=felt_height_m, **kw)
-    return Calibration(camera=cal.camera, corners_px=cal.corners_px, residual_px=cal.residual_px,
-                       focal_source=cal.focal_source, notes=cal.notes, edge_rms_px=edge_rms,
-                       edge=det.edge, corner_sigma_px=cal.corner_sigma_px)
+    same = dict(intrinsics=K, distortion=dist, fps=fps, kappa=kappa, margin_m=felt_margin_m,
+                corner_height_m=felt_height_m, **kw)
+    cal = assign_corners(quad, size, table, **same)
+    cal = Calibration(camera=cal.camera, corners_px=cal.corners_px, residual_px=cal.residual_px,
+                      focal_source=cal.focal_source, notes=cal.notes, edge_rms_px=edge_rms,
+                      edge=det.edge, corner_sigma_px=cal.corner_sigma_px)
+    return _with_perturbed(cal, size, table, **same)
+
+
+def _with_perturbed(cal: Calibration, size, table: Table, **kw) -> Calibration:
+    """The calibration with its :func:`perturbed_cameras` (solved as ``cal`` was),
+    which the recovery uses to carry the corners' error into v0 and w0."""
+    if not cal.corner_sigma_px:
+        return cal
+    kw.pop("corner_sigma_px", None)
+    cams = perturbed_cameras(cal.corners_px, cal.corner_sigma_px, size, table,
+                             corner_sigma_px=cal.corner_sigma_px, **kw)
+    return replace(cal, perturbed=tuple(cams))
 
 
 # --------------------------------------------------------------------------- synthetic frames
@@ -1034,7 +1053,9 @@ def cmd_calibrate(args) -> int:
              "table": {"length": table.length, "width": table.width}, "camera": camd,
              "calibration": {"corners_px": cal.corners_px.tolist(), "corner_rms_px": cal.rms_px,
                              "corner_sigma_px": cal.corner_sigma_px,
-                             "focal_from": cal.focal_source, "edge_rms_px": cal.edge_rms_px}}
+                             "focal_from": cal.focal_source, "edge_rms_px": cal.edge_rms_px,
+                             # The corners' error carried into v0 and w0 by the recovery.
+                             "perturbed": [camera_to_dict(c, geometry_only=True) for c in cal.perturbed]}}
     tmp = out.with_name(out.name + ".part")
     tmp.write_text(json.dumps(scene, indent=2) + "\n")
     tmp.replace(out)

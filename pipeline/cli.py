@@ -224,9 +224,10 @@ JSON (--json), every field in docs/output.md:
                           t1/x1: sliding ends; t2/x2: the ball stops (s, m);
                           predicted: which of t1, x1, t2, x2 lie after the last frame seen
                           (the fitted model's extrapolation, not seen in the video)
-  methods.paper           trajectory (parabola | line), solutions (every consistent [v0, w0])
+  methods.paper           trajectory (parabola | line), solutions (every consistent [v0, w0]),
+                          stderr (1 standard error of v0, w0, delta method)
   methods.mle             stderr (1 standard error of x0, t0, v0, w0), model (full: slip fitted;
-                          rolling: no slip), slip_lr, chi2_per_dof, codec_noise_m
+                          rolling: no slip), slip_lr, chi2_per_dof, dof, hac, rho1, codec_noise_m
   best                    the method to trust (mle before paper, first that is ok); null if none is
   timing_s                track, fit, recover: wall time (s)
 """

@@ -138,6 +138,7 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
     from cuespin.fit.contact import analysed_frames, find_contact
     from cuespin.physics.contact import scene_balls
     from cuespin.recover.api import recover_track
+    from cuespin.recover.calibration import add_calibration_error
     from cuespin.track.tracker import TrackerConfig
     from cuespin.track.video import track_video
 
@@ -155,6 +156,9 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
     out = recover_track(tr.t[:n], tr.xy[:n], tr.ok[:n], cov_m[:n], scene.physics, cam.exposure_s,
                         method, fit_friction, lossless=tr.lossless,
                         inter_frame=getattr(tr, "inter_frame", False))
+    if scene.calibration:
+        add_calibration_error(out["methods"], lambda c: _refit_through(c, tr, n, scene, method, fit_friction),
+                              scene.calibration)
     out["contact"] = None if contact is None else {"t": contact.t, "kind": contact.kind}
     noise = tr.centroid_noise_px
     track = {"frames": int(tr.n_frames), "ok_frames": int(tr.ok.sum()),
@@ -175,6 +179,22 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
     result = {"video": Path(video).name, "track": track, "methods": out["methods"], "best": out["best"],
               "timing_s": {"track": t_track, **out["timing_s"]}}
     return (result, tr) if return_track else result
+
+
+def _refit_through(camera, tr, n: int, scene, method: str, fit_friction: bool) -> dict:
+    """The methods' answers for the first ``n`` frames of a track seen through
+    another camera (the tracked pixels converted anew)."""
+    from cuespin.recover.api import recover_track
+    from cuespin.recover.measurements import table_covariance
+
+    uv = np.asarray(tr.uv, dtype=float)[:n]
+    xy = np.full_like(uv, np.nan)
+    good = np.all(np.isfinite(uv), axis=1)
+    xy[good] = camera.to_table(uv[good])
+    cov = table_covariance(camera, xy, np.asarray(tr.cov_px)[:n])
+    return recover_track(tr.t[:n], xy, np.asarray(tr.ok)[:n], cov, scene.physics, scene.camera.exposure_s,
+                         method, fit_friction, lossless=tr.lossless,
+                         inter_frame=getattr(tr, "inter_frame", False))["methods"]
 
 
 MODEL_TEXT = {"full": "slip fitted (sliding, then rolling)", "rolling": "rolling from the strike (no slip)"}

@@ -215,8 +215,16 @@ def draw_shot(result: dict, tr, scene, background: np.ndarray, png) -> None:
     first_name = next((n for n in methods if method_shot(methods[n], scene.physics)), None)
     for name, m in methods.items():
         sp = method_shot(m, scene.physics)
-        if sp is None:
-            text.append((f"{name}: {m.get('status')}, nothing to draw", STYLE.get(name, OTHER)["color"]))
+        if sp is None:  # no path without w0; the strike and v0 when the method states them
+            style = STYLE.get(name, OTHER)
+            if m.get("x0") is not None:
+                u = cam.to_pixels(np.atleast_2d(m["x0"]))[0]
+                pts.append(u[None])
+                ax.plot(*u, style["marker"], ms=7, color=style["color"])
+                if m.get("v0") is not None:
+                    _arrow(ax, cam, np.asarray(m["x0"]), np.asarray(m["v0"]) * ARROW_S, style["color"])
+            v0 = f"|v0| {np.hypot(*m['v0']):.4f}{_pm(m.get('stderr') or {}, 'v0')} m/s, " if m.get("v0") else ""
+            text.append((f"{name} ({m.get('status')}): {v0}no path drawn (w0 not determined)", style["color"]))
             continue
         style = STYLE.get(name, OTHER)
         shot, p = sp
@@ -263,7 +271,7 @@ def draw_shot(result: dict, tr, scene, background: np.ndarray, png) -> None:
         ax.set_ylim(min(hi[1], cam.height - 0.5), max(lo[1], -0.5))
     ax.set_xlabel("u (px)")
     ax.set_ylabel("v (px)")
-    ax.legend(fontsize=7, loc="upper right", framealpha=0.8)
+    ax.legend(fontsize=7, loc="best", framealpha=0.8)
     ax.set_title(f"{result.get('video', '')}: solid = sliding, dashed = rolling, faint = after the last frame seen "
                  f"(predicted); markers x0, x1, x2 (hollow: predicted)\narrows from x0: v0 (length {ARROW_S:g} s of "
                  f"travel) and the spin axis w0 (bar head); shaded wedges: direction ± 2 std err; "

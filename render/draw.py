@@ -56,7 +56,10 @@ RENDER_DEFAULTS = {
 def render_settings(scene: Scene) -> dict:
     """The scene's ``render`` block with every default filled in (both looks' keys)."""
     s = dict(RENDER_DEFAULTS)
-    s.update(lk.LOOK_DEFAULTS)
+    # The realistic look's defaults; the keys both looks share (texture,
+    # noise_sigma) keep the plain look's defaults in the plain look.
+    realistic = scene.render.get("look", "plain") == "realistic"
+    s.update({k: v for k, v in lk.LOOK_DEFAULTS.items() if realistic or k not in RENDER_DEFAULTS})
     s.update({k: v for k, v in scene.render.items() if k in s})
     if s["look"] not in ("plain", "realistic"):
         raise ValueError(f"render.look: expected 'plain' or 'realistic', got {s['look']!r}")
@@ -149,13 +152,20 @@ class NoiseSampler:
 
     A 16-bit uniform ``u = 256 hi + lo`` indexes the 16-bit table; in most
     of the 256 blocks of ``hi`` the table is constant, so ``hi`` alone (one
-    ``cv2.LUT``) decides, and only pixels whose block holds a step (5-25% at
+    ``cv2.LUT``) decides, and only pixels whose block holds a step (2-10% at
     sigma 1-8) draw ``lo`` and read the table itself.  The law is exactly
     the table's; the cost is about half the full 16-bit draw.
     """
 
     def __init__(self, sigma: float):
-        self.lut = noise_lut(sigma)
+        # The 16-bit table's values reordered (a uniform index into any
+        # ordering of the same values draws the same law) so that each value
+        # fills whole blocks first and the leftovers share as few blocks as
+        # possible: about half as many mixed blocks as the sorted table.
+        vals, counts = np.unique(noise_lut(sigma), return_counts=True)
+        pure = np.repeat(vals, counts // 256 * 256)
+        rest = np.repeat(vals, counts % 256)
+        self.lut = np.concatenate([pure, rest]).astype(np.int16)
         blocks = self.lut.reshape(256, 256)
         self.base = blocks[:, 0].copy().reshape(256, 1)
         self.mixed = (blocks != blocks[:, :1]).any(axis=1).astype(np.uint8).reshape(256, 1)
@@ -446,6 +456,16 @@ class FrameRenderer:
         self._pad = int(math.ceil(4 * self._psf)) + 1 if self._psf > 0 else 0
         self._border = 2 * self._half + self._pad + 4
         self._rays = self._ray_map() if cam.is_pinhole else None
+        self._struck = {}
+        if self.scene.render.get("contacts") and s["balls"]:
+            # Balls the shot strikes move after the contact: their own paths,
+            # at the tracked ball's exposure nodes.
+            from cuespin.physics.contact import scene_trajectory
+            for other, path in scene_trajectory(self.scene).struck:
+                xy = path.positions(self._t_nodes.ravel()).reshape(self._t_nodes.shape + (2,))
+                uv = cam.to_pixels(xy.reshape(-1, 2)).reshape(xy.shape)
+                albedo = np.asarray(s["balls"][other].get("colour", [228, 232, 235]), float)
+                self._struck[other] = (xy, uv, albedo)
         self._albedo = np.asarray(s["ball_colour"], dtype=np.float64)
         self._mark_colour = np.asarray(s["mark_colour"], dtype=np.float64)
         self._ramp = lk.ramp_image(h, w, float(s["ramp"]), float(s["ramp_angle"]))
@@ -531,21 +551,37 @@ class FrameRenderer:
             else:
                 vv, uu = np.mgrid[0:h, 0:w].astype(np.float64)
                 xy = self._cloth_points(np.stack([uu, vv], -1))
-            # Sub-pixel samples from the local map's derivatives (one
-            # projection of the whole frame, not four).
-            dxy_du = np.gradient(xy, axis=1)
-            dxy_dv = np.gradient(xy, axis=0)
-            ss = 2
-            for dy in range(ss):
-                for dx in range(ss):
-                    off = (np.array([dx, dy]) + 0.5) / ss - 0.5
-                    layers = lk.table_layers(xy + off[0] * dxy_du + off[1] * dxy_dv,
-                                             tb.length, tb.width)
-                    label = np.zeros((h, w), np.uint8)
-                    for i, name in enumerate(names[1:], start=1):
-                        label[layers[name]] = i
-                    felt_share += (label <= 1) / ss**2
-                    img += palette[label] / ss**2
+            tb_lw = (tb.length, tb.width)
+
+            def labels(pts):
+                layers = lk.table_layers(pts, *tb_lw)
+                lab = np.zeros(pts.shape[:-1], np.uint8)
+                for i, name in enumerate(names[1:], start=1):
+                    lab[layers[name]] = i
+                return lab
+
+            # Labels at pixel centres; pixels on an edge between parts (a
+            # neighbour differs) are supersampled 4 x 4 from the local map's
+            # derivatives, the rest take their one label.
+            label = labels(xy)
+            import cv2
+            kernel = np.ones((3, 3), np.uint8)
+            edge = cv2.dilate(label, kernel) != cv2.erode(label, kernel)
+            img[:] = palette[label]
+            felt_share[:] = label <= 1
+            ev, eu = np.nonzero(edge)
+            if len(ev):
+                ss = 4
+                off = (np.arange(ss) + 0.5) / ss - 0.5
+                ou, ov = np.meshgrid(off, off)
+                ou, ov = ou.ravel(), ov.ravel()
+                dxy_du = np.gradient(xy, axis=1)[ev, eu]
+                dxy_dv = np.gradient(xy, axis=0)[ev, eu]
+                pts = (xy[ev, eu][:, None, :] + ou[None, :, None] * dxy_du[:, None, :]
+                       + ov[None, :, None] * dxy_dv[:, None, :])
+                sub = labels(pts)                                   # (n_edge, 16)
+                img[ev, eu] = palette[sub].mean(axis=1)
+                felt_share[ev, eu] = (sub <= 1).mean(axis=1)
         else:
             img[:] = felt
             felt_share[:] = 1.0
@@ -555,8 +591,11 @@ class FrameRenderer:
             tex = lk.felt_texture((h, w), float(s["texture_scale"]), rng)
             img *= (1.0 + tex_amp * tex * felt_share)[..., None]
         img *= self._ramp[..., None]
-        # Other balls at rest, lit like the tracked one, drawn with exact coverage.
-        for b in s["balls"]:
+        # Other balls at rest, lit like the tracked one, drawn with exact
+        # coverage; a ball the shot strikes (render.contacts) is drawn per frame.
+        for i, b in enumerate(s["balls"]):
+            if i in self._struck:
+                continue
             xy = np.array([[float(b["x"]), float(b["y"])]])
             albedo = np.asarray(b.get("colour", [228, 232, 235]), dtype=np.float64)
             self._composite_ball(img, cam.to_pixels(xy), xy, albedo, None, 0)
@@ -654,22 +693,29 @@ class FrameRenderer:
         Returns ``(delta (h, w, 3) float32, u0, v0)`` in frame pixels, or
         ``(None, 0, 0)`` when the ball is out of view.
         """
-        uv = self._uv_nodes[k]
+        orient = self._orient if self._orient is not None else None
+        return self._delta_of(self._uv_nodes[k], self._xy_nodes[k], self._t_nodes[k],
+                              self._albedo, orient)
+
+    def _delta_of(self, uv, xy, t, albedo, orient):
+        """:meth:`_ball_delta` for any ball: nodes imaged at ``uv`` (K, 2) px,
+        centred at ``xy`` (K, 2) m at times ``t`` (K,), its albedo and its
+        :class:`~cuespin.render.look.Orientation` (None: no markings)."""
         B, half, pad = self._border, self._half, self._pad
         h, w = self.cam.height, self.cam.width
+        K = len(uv)
         vis = ((uv[:, 0] + half >= 0) & (uv[:, 0] - half <= w - 1)
                & (uv[:, 1] + half >= 0) & (uv[:, 1] - half <= h - 1))
         if not vis.any():
             return None, 0, 0
         uv = uv[vis]
-        rots = self._orient(self._t_nodes[k][vis]) if self._orient is not None else None
-        cov, colour, iu, iv = self._ball_windows(uv, self._xy_nodes[k][vis], self._albedo, rots)
+        rots = orient(t[vis]) if orient is not None else None
+        cov, colour, iu, iv = self._ball_windows(uv, xy[vis], albedo, rots)
         n = cov.shape[1]
         pu0, pv0 = int(iu.min()) - pad, int(iv.min()) - pad       # frame coords of the patch
         pw, ph = int(iu.max()) + n + pad - pu0, int(iv.max()) + n + pad - pv0
         sharp = self._sharp[pv0 + B:pv0 + B + ph, pu0 + B:pu0 + B + pw]
         delta = np.zeros((ph, pw, 3), np.float32)
-        K = len(self._uv_nodes[k])
         ramp = self._ramp
         for i in range(len(uv)):
             a, b = iu[i] - pu0, iv[i] - pv0
@@ -803,6 +849,10 @@ class FrameRenderer:
         else:
             frame = self.background.copy()
         tiles = dict(self._cue_tiles(k))
+        for xy, uv, albedo in self._struck.values():
+            delta, u0, v0 = self._delta_of(uv[k], xy[k], self._t_nodes[k], albedo, None)
+            if delta is not None:
+                add_to_tiles(tiles, delta, u0, v0)
         delta, u0, v0 = self._ball_delta(k)
         if delta is not None:
             add_to_tiles(tiles, delta, u0, v0)

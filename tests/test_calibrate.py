@@ -210,3 +210,33 @@ def test_perturbed_cameras_move_one_corner_each():
              for cam in cams]
     # half a pixel at one corner moves the table's middle by a fraction of a mm, never zero
     assert all(1e-6 < m < 2e-3 for m in moves), moves
+
+
+@pytest.mark.slow
+def test_automatic_on_the_renderers_realistic_table():
+    """The renderer's realistic look (textured felt, darker cushions, pockets,
+    sights, a lighting ramp, lens blur), top-down with the rails in view: the
+    cushions' noses are found and the corners' homography is the camera's."""
+    from dataclasses import replace
+
+    from cuespin.data_gen.sampler import make_scene, sample_shot
+    from cuespin.physics.camera import Camera
+    from cuespin.physics.motion import Shot
+    from cuespin.pipeline.calibrate import assign_corners
+    from cuespin.render.draw import FrameRenderer
+
+    shot, params = sample_shot(100, "random")
+    scene = make_scene(Shot(shot.x0, shot.v0, shot.w0, t0=0.1), params,
+                       render={"look": "realistic", "noise_sigma": 2.0, "seed": 1})
+    cam = Camera(fps=240.0, width=1400, height=756, homography=((500.0, 0, 60.0), (0, -500.0, 695.0), (0, 0, 1.0)))
+    scene = replace(scene, camera=cam)
+    img = next(iter(FrameRenderer(scene, n_frames=1).frames()))
+    det = detect_corners(img)
+    assert det.edge == "noses"
+    truth = scene.camera.to_pixels(table_corners(TABLE)[:, :2])
+    d = min((np.roll(det.corners, -s, axis=0) - truth for s in range(4)), key=lambda e: np.abs(e).max())
+    assert np.sqrt(np.mean(np.sum(d**2, axis=1))) < AUTO_CORNER_RMS_PX        # measured 0.19
+    cal = assign_corners(det.corners, (1400, 756), TABLE, kappa=det.kappa, homography=True)
+    got = Scene(physics=params, camera=cal.camera).camera
+    xy = ball_grid()
+    assert np.abs(got.to_table(scene.camera.to_pixels(xy)) - xy).max() < 1e-3

@@ -270,7 +270,7 @@ def test_realistic_render_round_trips_through_a_real_file(tmp_path, codec):
     # A few frames around the strike, cue in view (FFV1 encodes colour
     # noise slowly: 0.18 s a frame here).
     scene = realistic(seed=5, preset="leaves_table", fps=60.0, noise=3.0, codec=codec,
-                      duration=0.25, cue=True)
+                      duration=0.1, cue=True)
     video = tmp_path / "shot.avi"
     truth = render_video(scene, video)
     frames = list(FrameRenderer(scene).frames())
@@ -378,3 +378,41 @@ def test_bad_look_settings_refused_in_one_line():
         with pytest.raises(ValueError, match=key.replace(".", r"\.")) as e:
             render_settings(s)
         assert "\n" not in str(e.value)
+
+
+def test_struck_ball_moves_after_the_contact():
+    # A ball_contact shot (render.contacts): the struck ball rests until the
+    # contact, then is drawn along its own path; it is not in the static scene.
+    from cuespin.physics.contact import scene_trajectory
+
+    scene = sample_scene(2, "ball_contact", fps=60.0, look="realistic", noise=0.0, blur=False)
+    r = FrameRenderer(scene)
+    assert list(r._struck) == [0]
+    tc = scene_trajectory(scene).first_contact.t
+    xy, uv, albedo = r._struck[0]
+    before = r.truth.t < tc
+    rest = np.array([scene.render["balls"][0]["x"], scene.render["balls"][0]["y"]])
+    np.testing.assert_allclose(xy[before, 0], np.broadcast_to(rest, xy[before, 0].shape), atol=1e-12)
+    assert np.hypot(*(xy[-1, 0] - rest)) > 2 * scene.physics.R
+    # Drawn where its path says: the frame differs from the background there.
+    k = len(r.truth.t) - 1
+    f = r.render(k, np.random.default_rng(0)).astype(float)
+    u, v = np.rint(uv[k, 0]).astype(int)
+    if 0 <= u < scene.camera.width and 0 <= v < scene.camera.height:
+        assert np.abs(f[v, u] - r.background[v, u]).max() > 20
+    u, v = np.rint(scene.camera.to_pixels(rest)).astype(int)
+    felt = np.asarray(scene.render["felt_colour"], float)
+    assert np.abs(r.background[v, u] - felt).max() < 0.5 * felt.max()
+
+
+def test_plain_look_keeps_its_own_defaults():
+    # Keys both looks know (texture: grey levels in the plain look, a
+    # relative amount in the realistic one) default per look.
+    from cuespin.render.draw import RENDER_DEFAULTS, render_settings
+    from cuespin.render.look import LOOK_DEFAULTS
+
+    shot, params = sample_shot(1, "case3")
+    plain = render_settings(make_scene(shot, params))
+    assert plain["texture"] == RENDER_DEFAULTS["texture"] == 0.0
+    assert render_settings(realistic())["texture"] == realistic().render["texture"]
+    assert LOOK_DEFAULTS["texture"] != 0.0
