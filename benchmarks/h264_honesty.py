@@ -15,8 +15,9 @@ standard errors (1 when honest).
 ``--acf`` also prints the H.264 codec error's correlation between frames
 k apart, pooled over the shots' moving frames (truth sidecar's projected
 centres against the tracker's, the tracker's stated variance taken off),
-and its fit ``a + b exp(-k / tau)``: how recover.mle.INTER_CODEC_ACF was
-measured (``--seed 0 --n 12``).
+and its fit ``a exp(-k / tau_long) + b exp(-k / tau)`` (lags 1-200 weighted by
+their pair counts): how recover.mle.INTER_CODEC_ACF was measured (``--seed
+0 --n 12``).
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ from cuespin.recover.api import recover_track
 from cuespin.render.video import read_truth_csv, render_video, truth_path
 
 PRESETS = ("case3", "random", "masse")
-MAX_LAG = 60
+MAX_LAG = 200
 
 
 def shot_scene(seed: int, i: int, codec: str):
@@ -118,11 +119,12 @@ def main(argv=None):
         codec_var = c[0] - lags[2] / lags[1][0]
         rho = c[1:] / codec_var
         k = np.arange(1, MAX_LAG + 1)
-        par, _ = curve_fit(lambda k, a_, b, tau: a_ + b * np.exp(-k / tau), k, rho, p0=(0.1, 0.2, 10.0))
+        par, _ = curve_fit(lambda k, a_, b, tau, tau_long: a_ * np.exp(-k / tau_long) + b * np.exp(-k / tau),
+                           k, rho, p0=(0.2, 0.1, 7.0, 100.0), sigma=1 / np.sqrt(np.maximum(lags[1][1:], 1)),
+                           maxfev=20000)
         print(f"\nH.264 error variance {c[0]:.3g} px^2, stated {c[0] - codec_var:.3g}; codec's correlation at lags "
-              f"1, 2, 5, 10, 20, 40, 60: {np.round(rho[[0, 1, 4, 9, 19, 39, 59]], 3)}; "
-              f"fit a = {par[0]:.3f}, b = {par[1]:.3f}, tau = {par[2]:.1f} frames")
-
+              f"1, 10, 40, 100, 200: {np.round(rho[[0, 9, 39, 99, 199]], 3)}; "
+              f"fit a = {par[0]:.3f}, b = {par[1]:.3f}, tau = {par[2]:.1f}, tau_long = {par[3]:.0f} frames")
 
 if __name__ == "__main__":
     main()

@@ -47,15 +47,17 @@ LM_TOL = 1e-7
 AUTOCORR_Z = 2.33
 # An inter-frame codec's error (H.264: motion-compensated prediction from
 # earlier frames) is shared by neighbouring frames: the correlation of its
-# per-axis error between frames k apart, rho(k) = a + b exp(-k / tau) for
-# k >= 1.  Measured with benchmarks/h264_honesty.py --acf (the truth
-# sidecar's projected centres against the tracker's, moving frames, the
-# tracker's stated variance taken off), pooled over its 24 shots of seeds
-# 0 and 1 (libx264 CRF 20 veryfast, 120 fps, noise 3, 250 px/m): a = 0.25,
-# b = 0.12, tau = 13 frames, fit to lags 1-60 (RMS misfit 0.014; seed 0
-# alone 0.16, 0.19, 19; seed 1 alone 0.31, 0.09, 6.7).  The constant part
-# (mostly a per-shot offset) is largely absorbed by x0.
-INTER_CODEC_ACF = (0.25, 0.12, 13.0)
+# per-axis error between frames k apart, rho(k) = a exp(-k / tau_long) +
+# b exp(-k / tau) for k >= 1.  Measured with the shots of
+# benchmarks/h264_honesty.py --seed 0 (12 shots, libx264 CRF 20 veryfast,
+# 120 fps, noise 3, 250 px/m; the truth sidecar's projected centres
+# against the tracker's, moving frames, the tracker's stated variance
+# taken off), fit to lags 1-200 weighted by their pair counts: a = 0.27,
+# tau_long = 118 frames, b = 0.10, tau = 7 frames (lags 1, 10, 40, 100,
+# 200: 0.31, 0.27, 0.17, 0.10, 0.02).  A fit with a constant instead of
+# the slow part (lags 1-60 only) gave too narrow intervals: a constant is
+# absorbed by x0, a drift over a second is not.
+INTER_CODEC_ACF = (0.27, 0.10, 7.0, 118.0)
 # Gauss-Legendre nodes for averaging the model over the exposure: exact for
 # the (quadratic) motion within a phase.
 _GL_T, _GL_W = np.polynomial.legendre.leggauss(3)
@@ -297,7 +299,7 @@ class CodecCorrelation:
     """An inter-frame codec's error shared between frames: its per-axis
     variance ``var`` (m^2, measured from the first fit's residuals,
     recover.measurements.codec_excess), the frame interval ``frame_dt``
-    (s) and its correlation ``acf = (a, b, tau_frames)``
+    (s) and its correlation ``acf = (a, b, tau, tau_long)`` (frames)
     (:data:`INTER_CODEC_ACF`)."""
 
     var: float
@@ -317,9 +319,9 @@ def _codec_scores(J, meas: Measurements, acf, frame_dt: float) -> np.ndarray:
     out = np.einsum("map,maq->pq", G, G)
     single = meas.single
     if single.sum() > 1 and frame_dt > 0:
-        a, b, tau = acf
-        ts = t_m[single]
-        rho = a + b * np.exp(-np.abs(ts[:, None] - ts[None, :]) / (frame_dt * tau))
+        a, b, tau, tau_long = acf
+        k = np.abs(t_m[single][:, None] - t_m[single][None, :]) / frame_dt
+        rho = a * np.exp(-k / tau_long) + b * np.exp(-k / tau)
         np.fill_diagonal(rho, 0.0)
         Gs = G[single]
         out = out + sum(Gs[:, d, :].T @ rho @ Gs[:, d, :] for d in (0, 1))
