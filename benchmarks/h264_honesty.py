@@ -63,7 +63,7 @@ def codec_lags(tr, video):
     mov = np.zeros(len(e), bool)
     mov[idx[1:]] = np.hypot(*np.diff(uvt[idx], axis=0).T) > 1e-6
     num, cnt = np.zeros(MAX_LAG + 1), np.zeros(MAX_LAG + 1)
-    for k in range(MAX_LAG + 1):
+    for k in range(min(MAX_LAG + 1, len(e))):
         both = mov[k:] & mov[:len(mov) - k]
         num[k] = np.sum(e[k:][both] * e[:len(e) - k][both])
         cnt[k] = 2 * both.sum()
