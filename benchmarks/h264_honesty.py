@@ -121,7 +121,7 @@ def main(argv=None):
         k = np.arange(1, MAX_LAG + 1)
         par, _ = curve_fit(lambda k, a_, b, tau, tau_long: a_ * np.exp(-k / tau_long) + b * np.exp(-k / tau),
                            k, rho, p0=(0.2, 0.1, 7.0, 100.0), sigma=1 / np.sqrt(np.maximum(lags[1][1:], 1)),
-                           maxfev=20000)
+                           bounds=([0, 0, 1, 1], [1, 1, 1e3, 1e4]), max_nfev=20000)
         print(f"\nH.264 error variance {c[0]:.3g} px^2, stated {c[0] - codec_var:.3g}; codec's correlation at lags "
               f"1, 10, 40, 100, 200: {np.round(rho[[0, 9, 39, 99, 199]], 3)}; "
               f"fit a = {par[0]:.3f}, b = {par[1]:.3f}, tau = {par[2]:.1f}, tau_long = {par[3]:.0f} frames")
