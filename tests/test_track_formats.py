@@ -38,12 +38,10 @@ def check_track(res, scene, truth_uv, tol=CENTRE_TOL_PX):
 
 @pytest.mark.parametrize("codec,pix_fmt,ext", [
     ("ffv1", "bgr0", "avi"),        # the 4-channel format OpenCV once read as one channel
-    ("ffv1", "yuv444p", "mkv"),
-    pytest.param("ffv1", "yuv420p", "avi", marks=pytest.mark.xfail(
-        reason="chroma at half resolution blurs the colour channel's ball: the sharp disc model "
-               "converges slowly, 2 of 45 frames fail (needs the learnt look's blur)", strict=False)),
-    ("libx264", "yuv420p", "mp4"),
-    ("rawvideo", "bgr24", "nut"),
+    pytest.param("ffv1", "yuv444p", "mkv", marks=pytest.mark.slow),
+    ("ffv1", "yuv420p", "avi"),     # chroma at half resolution: the fit converges slowly (damped)
+    pytest.param("libx264", "yuv420p", "mp4", marks=pytest.mark.slow),
+    pytest.param("rawvideo", "bgr24", "nut", marks=pytest.mark.slow),
 ])
 def test_colour_pixel_formats(tmp_path, codec, pix_fmt, ext):
     scene = small_scene()
@@ -69,6 +67,7 @@ def test_grey_pixel_format(tmp_path):
     check_track(res, scene, truth.uv)
 
 
+@pytest.mark.slow
 def test_colour_beats_grey_on_a_low_luma_contrast_pair(tmp_path):
     # Luma alone (17 levels at noise 4) leaves the stated errors ~3x those
     # of the learnt colour channel (Fisher: blue carries most of it).
@@ -140,3 +139,26 @@ def test_csv_has_lf_endings_and_size_from_the_video(tmp_path):
     # The covariance's diagonal is the stated errors squared.
     ok = res.ok
     np.testing.assert_allclose(np.sqrt(res.cov_px[ok][:, [0, 1], [0, 1]]), res.stderr_px[ok])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 3])
+def test_realistic_look_found_without_false_positives(tmp_path, seed):
+    # The renderer's realistic look (colour, shading, highlight, markings,
+    # textured felt under a ramp, rails, pockets, sights, resting balls, a
+    # cue): the ball found in the frames where it rests or rolls in view,
+    # and never more than R/4 from the projected true centre.
+    from cuespin.data_gen.sampler import sample_scene
+    from cuespin.render import render_video
+
+    scene = sample_scene(seed, look="realistic", codec="FFV1")
+    scene.render["max_duration"] = 1.0
+    truth = render_video(scene, tmp_path / "r.avi")
+    res = track_video(tmp_path / "r.avi", scene)
+    assert res.ok.any(), res.error
+    err = np.hypot(*(res.uv - truth.uvc).T)
+    assert (err[res.ok] < res.radius_px / 4).all(), err[res.ok].max()
+    # Found in 95% of the frames after the strike (measured 97-100%; the
+    # frames a slid-off look-ahead gave up before the strike not counted).
+    after = truth.t > scene.truth.t0 + 0.02
+    assert res.ok[after].mean() > 0.95, res.status_counts()

@@ -18,15 +18,17 @@ import numpy as np
 
 from cuespin.render.draw import quadrant_area
 
-MAX_ITER = 16
+MAX_ITER = 24
 # After this many full Gauss-Newton steps the steps are halved: where the
 # look departs from the model (chroma subsampled at half resolution, a
 # shaded ball) the undamped iteration can cycle between two centres
 # 0.002-0.01 px apart (measured on yuv420p FFV1 video) instead of converging.
 DAMP_AFTER = 6
+# Block size (px) of the cluster-robust sandwich used with the shaded look.
+CLUSTER_PX = 3
 # A fit still stepping after MAX_ITER is kept if its last step is below this
-# fraction of the centre's standard error (it adds < 0.5% to its variance).
-NO_CONVERGENCE_SE = 0.07
+# fraction of the centre's standard error (it adds at most 4% to its variance).
+NO_CONVERGENCE_SE = 0.2
 # Gauss-Newton stops when the centre moves less than this (px).  It
 # converges quadratically from the moments start (~0.02 px off), so the
 # error left after a step this small is ~1e-6 px, far below any bound.
@@ -190,7 +192,7 @@ class DiscFit:
 
 
 def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float, G0: float,
-             b0=(0.0, 0.0), fit_blur: bool = False, shade: bool = False) -> DiscFit:
+             b0=(0.0, 0.0), fit_blur: bool = False, shade: bool = False, valid=None) -> DiscFit:
     """Least-squares fit of the exact disc (or streak) model to a patch.
 
     Parameters
@@ -216,6 +218,8 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
         Fit the ball's look too (:func:`streak_model`'s ``shade``: lit
         side and rim, three linear nuisances), for a shaded ball whose
         uniform-disc fit is pulled towards its lit side.
+    valid : ndarray of bool, shape (h, w), optional
+        Pixels the fit may use (others, e.g. the cue's, are left out).
 
     Returns
     -------
@@ -225,6 +229,7 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
     felt = np.asarray(felt, dtype=np.float64)
     h, w = felt.shape
     y = (np.asarray(frame, dtype=np.float64) - felt).ravel()
+    use = np.ones(h * w) if valid is None else np.asarray(valid, float).ravel()
     c = np.array(c0, dtype=float)
     b = np.array(b0, dtype=float)
     G = float(G0)
@@ -238,7 +243,8 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
     for it in range(1, MAX_ITER + 1):
         m, J = streak_model(c, b, G, felt, r, u0, v0, taus, look)
         J = J[:, cols]
-        res = y - m.ravel()
+        res = (y - m.ravel()) * use
+        J = J * use[:, None]
         JtJ = J.T @ J
         try:
             step = np.linalg.solve(JtJ, J.T @ res)
@@ -266,7 +272,7 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
             return _failed(f"no convergence in {MAX_ITER} iterations", c, b, G, it)
     # Residual and covariance from the last evaluation: the final step moved
     # the centre by under STEP_TOL_PX, which changes neither measurably.
-    dof = max(len(y) - len(cols), 1)
+    dof = max(int(use.sum()) - len(cols), 1)
     rms = float(np.sqrt(max(res @ res - (J.T @ res) @ step, 0.0) / dof))
     inside = (u0 - 0.5 <= c[0] <= u0 + w - 0.5) and (v0 - 0.5 <= c[1] <= v0 + h - 0.5)
     if not inside:
@@ -278,9 +284,22 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
     # every frame show almost none: one pooled RMS stated errors 3.6x too
     # small at noise 0.08 (benchmarks/track.py accuracy, column err/se).  It
     # equals the sandwich when the noise is the same everywhere.
+    # With the look fitted (shaded), what the model leaves (the lens's blur
+    # on the edge, markings turning with the spin) is correlated between
+    # neighbouring pixels, which HC1 counts as independent: the residuals
+    # are then summed over blocks of CLUSTER_PX x CLUSTER_PX pixels first
+    # (the cluster-robust sandwich, CR1).
     try:
         A = np.linalg.inv(JtJ)
-        meat = J.T @ (J * (res * res)[:, None]) * (len(y) / dof)
+        if shade:
+            B = CLUSTER_PX
+            S = (J * res[:, None]).reshape(h, w, -1)
+            S = np.pad(S, ((0, -h % B), (0, -w % B), (0, 0)))
+            S = S.reshape(S.shape[0] // B, B, S.shape[1] // B, B, -1).sum(axis=(1, 3)).reshape(-1, J.shape[1])
+            nb = len(S)
+            meat = S.T @ S * (use.sum() / dof) * nb / max(nb - 1, 1)
+        else:
+            meat = J.T @ (J * (res * res)[:, None]) * (use.sum() / dof)
         cov = (A @ meat @ A)[:2, :2]
         cov = 0.5 * (cov + cov.T)
         se = np.sqrt(np.clip(np.diag(cov), 0.0, None))

@@ -14,7 +14,7 @@ import numpy as np
 
 from cuespin.track.background import DETECT_SIGMAS, Background, box_size
 from cuespin.track.colour import GREY, Projection
-from cuespin.track.model import fit_disc, moments, streak_from_moments
+from cuespin.track.model import blur_nodes, fit_disc, moments, streak_from_moments, streak_model
 
 OK, NO_BALL, PARTIAL, TWO_BLOBS, GONE, FIT_FAILED = 0, 1, 2, 3, 4, 5
 STATUS_TEXT = {OK: "ok", NO_BALL: "no ball", PARTIAL: "ball partly out of the frame",
@@ -25,6 +25,13 @@ REFINERS = ("fit", "moments")
 # length, not fitted: a symmetric smear moves no centroid, and its image
 # changes only to second order in the length, so fitting it is ill-posed.
 FIT_BLUR_PX = 3.0
+# A blob within this distance (px) of one the previous frame's full search
+# found has not moved (the score's peak moves by a pixel or so with noise).
+STILL_PX = 1.5
+# A pixel whose residual exceeds this many noise sigmas is something the
+# ball's model does not hold (the cue, a highlight): left out of a refit.
+# Gaussian noise passes it once in 1.7 million pixels.
+OUTLIER_SIGMAS = 5.0
 # Frames whose two fits (disc and shaded) decide the look (config.look "auto").
 LOOK_FRAMES = 12
 # The shaded look is kept when its pooled residual reduction exceeds the
@@ -103,11 +110,14 @@ class BallTracker:
     search_mask : ndarray of bool, shape (h, w), optional
         Where the ball's centre may be (the playing surface, with a margin);
         a search finds nothing outside it (rails, pockets, sights).
+    max_step_px : float
+        Farthest the ball can move in one frame (px): a blob found further
+        from the last centre, a few frames on, is not the ball.
     """
 
     def __init__(self, background: Background, radius_px: float, exposure_frames: float,
                  config: TrackerConfig = TrackerConfig(), projection: Projection = GREY,
-                 search_mask: np.ndarray | None = None):
+                 search_mask: np.ndarray | None = None, max_step_px: float = np.inf):
         if config.refine not in REFINERS:
             raise ValueError(f"refine must be one of {REFINERS}, got {config.refine!r}")
         self.bg = background
@@ -123,6 +133,7 @@ class BallTracker:
                           0.25 * background.contrast)
         self.H, self.W = background.image.shape
         self.mask = search_mask
+        self.max_step_px = float(max_step_px)
         # The projected window of the last converged fit, for the felt average.
         self.last_patch: tuple | None = None
         self.history: list[tuple[int, np.ndarray]] = []
@@ -132,6 +143,7 @@ class BallTracker:
         self.was_partial_edge = False
         self.shade = {"disc": False, "shaded": True}.get(config.look)  # None: learning
         self._look_votes: list[tuple[float, float, int]] = []
+        self._candidates: tuple = ()  # the last full search's blobs
 
     # -- search ---------------------------------------------------------
     def _velocity(self, k: int):
@@ -146,27 +158,35 @@ class BallTracker:
             vel = np.zeros(2)
         return c1 + vel * (k - k1), vel
 
+    def _score(self, D: np.ndarray) -> np.ndarray:
+        """Ball-likeness at every pixel of a ball-positive image: the mean
+        over a box the ball fills less the mean over the ring of felt
+        around it.  A stick (the cue) or an edge fills the ring as much as
+        the box and scores near 0; the ball scores ~0.8 of its contrast."""
+        k, K = self.k, self.k_out
+        inner = cv2.blur(D, (k, k))
+        outer = cv2.boxFilter(D, -1, (K, K), normalize=False)
+        return inner - (outer - inner * (k * k)) / (K * K - k * k)
+
     def _peak(self, frame: np.ndarray, u0: int, v0: int, u1: int, v1: int):
-        """Box-filtered peak of the ball signal in a window; value and place."""
-        roi = self.proj(frame, v0, v1, u0, u1)
-        D = self.pol * (roi - self.bg.image[v0:v1, u0:u1])
-        sm = cv2.blur(D, (self.k, self.k))
+        """Peak of :meth:`_score` in a window; value and place.  The filters
+        see half the ring's width beyond the window, so the score near its
+        edges is not the image border's."""
+        m = self.k_out // 2
+        U0, V0 = max(u0 - m, 0), max(v0 - m, 0)
+        U1, V1 = min(u1 + m, self.W), min(v1 + m, self.H)
+        roi = self.proj(frame, V0, V1, U0, U1)
+        D = self.pol * (roi - self.bg.image[V0:V1, U0:U1])
+        sm = self._score(D)[v0 - V0:v1 - V0, u0 - U0:u1 - U0]
         if self.mask is not None:
             sm = np.where(self.mask[v0:v1, u0:u1], sm, -np.inf).astype(np.float32)
         _, val, _, loc = cv2.minMaxLoc(sm)
         return D, sm, val, np.array([loc[0] + u0, loc[1] + v0], float)
 
     def _full_search(self, frame):
-        """The most ball-like blob on the playing surface: a box the ball fills
-        (as in :meth:`_peak`) less the ring of felt around it.  A stick (the
-        cue) or an edge fills the ring as much as the box and scores near 0;
-        the ball scores ~0.8 of its contrast."""
-        roi = self.proj(frame)
-        D = self.pol * (roi - self.bg.image)
-        k, K = self.k, self.k_out
-        inner = cv2.blur(D, (k, k))
-        outer = cv2.boxFilter(D, -1, (K, K), normalize=False)
-        sm = inner - (outer - inner * (k * k)) / (K * K - k * k)
+        """The most ball-like blob (:meth:`_score`) on the playing surface."""
+        D = self.pol * (self.proj(frame) - self.bg.image)
+        sm = self._score(D)
         if self.mask is not None:
             sm[~self.mask] = -np.inf
         _, val, _, at = cv2.minMaxLoc(sm)
@@ -177,8 +197,17 @@ class BallTracker:
         mask = np.zeros_like(sm, dtype=np.uint8)
         cv2.circle(mask, (int(loc[0]), int(loc[1])), int(2.5 * self.r + 4), 1, -1)
         sm[mask.astype(bool)] = -np.inf
-        if sm.max() >= max(self.thresh, 0.5 * val):
+        _, val2, _, at2 = cv2.minMaxLoc(sm)
+        if val2 >= max(self.thresh, 0.5 * val):
+            # Two blobs.  Before the strike the ball rests while the cue
+            # moves: the one that stayed put since the last frame is the ball.
+            loc2 = np.array(at2, float)
+            prev, self._candidates = self._candidates, (loc, loc2)
+            still = [c for c in (loc, loc2) if any(np.hypot(*(c - p)) <= STILL_PX for p in prev)]
+            if len(still) == 1:
+                return still[0], OK
             return loc, TWO_BLOBS
+        self._candidates = (loc,)
         return loc, OK
 
     # -- per frame ------------------------------------------------------
@@ -210,6 +239,12 @@ class BallTracker:
                 return _lost(status)
             if status != OK:
                 return _lost(status)
+            if self.history and k - self.history[-1][0] <= 3:
+                # The ball cannot have gone further than its top speed allows:
+                # a blob beyond that is something else (the cue's tip).
+                k1, c1 = self.history[-1]
+                if np.hypot(*(loc - c1)) > self.max_step_px * (k - k1) + self.r:
+                    return _lost(NO_BALL)
             # No velocity to predict the blur.  Before the ball is first found
             # it rests (a shot is struck from rest), and a streak measured from
             # the image there would take the cue, or the ball's shading, for
@@ -237,6 +272,21 @@ class BallTracker:
             return 0.0
         ys, xs = np.nonzero(on)
         return float(max(xs.max() - xs.min(), ys.max() - ys.min()) - 2 * self.r + 2) if len(xs) else 0.0
+
+    def _without_outliers(self, patch, felt, u0, v0, f, r, G0, blur, fit_blur, shade):
+        """Refit without the pixels the model cannot explain (beyond
+        ``OUTLIER_SIGMAS`` of the noise, and their neighbours): the cue in the
+        ball's window, a specular highlight.  The fit unchanged when there
+        are none."""
+        m, _ = streak_model(f.c, f.b, f.G, felt, r, u0, v0, blur_nodes(np.hypot(*f.b)),
+                            f.shade if shade else None)
+        res = (patch - felt) - m
+        bad = np.abs(res) > OUTLIER_SIGMAS * max(self.bg.sigma, 0.5)
+        if bad.sum() < 3:
+            return f
+        bad = cv2.dilate(bad.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+        g = fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=shade, valid=~bad)
+        return g if g else f
 
     def _learn_look(self, patch, felt, u0, v0, f_shaded, r, G0, blur, fit_blur):
         """One frame's vote on the look: the disc fit's residual sum against

@@ -29,14 +29,17 @@ from cuespin.track.model import refit_shift
 from cuespin.track.reader import FrameSource, ThreadedFrames, TrackError, frame_times, probe
 from cuespin.track.tracker import OK, STATUS_TEXT, BallTracker, TrackerConfig
 
-# Bytes of decoded frames held before the background is learnt: 480 grey or
-# 80 BGR frames at 1280 x 720 (at 240 fps, 2 s or 0.33 s of video).  A fixed
-# cap: memory does not grow with the video's length.
-LOOKAHEAD_BYTES = 224 * 2**20
+# Bytes of decoded frames held before the background is learnt: 437 grey or
+# 145 BGR frames at 1280 x 720 (at 240 fps, 1.8 s or 0.6 s of video; the
+# realistic look's strike comes 0.1-0.5 s in).  A fixed cap: memory does not
+# grow with the video's length.
+LOOKAHEAD_BYTES = 384 * 2**20
 LOOKAHEAD_MIN_FRAMES = 24
 # Bytes the decoder may run ahead while the background is learnt and the
 # look-ahead tracked, so that it does not stall meanwhile.
 QUEUE_BYTES = 96 * 2**20
+# The fastest a struck ball moves (m/s): a hard break is 8-11 m/s.
+MAX_SPEED_M_S = 12.0
 # Every this many frames the whole decoded frame joins the felt average
 # (cv2.accumulate: ~1 ms for a 1280 x 720 BGR frame, a quarter of it per frame).
 FULL_FELT_EVERY = 4
@@ -273,7 +276,8 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
                 buf.append(img)
         t_bg = time.perf_counter() - t_start
         tracker = BallTracker(bg, radius_px, cam.exposure_s * cam.fps, config, projection=proj,
-                              search_mask=mask)
+                              search_mask=mask,
+                              max_step_px=MAX_SPEED_M_S / cam.fps * cam.px_per_m(center))
         felt = FeltAccumulator(first.shape)
         fits = []  # (frame index, the fit's state) for the final background correction
         t_start = time.perf_counter()
