@@ -25,6 +25,7 @@ from cuespin.physics.scene import Scene
 from cuespin.videoio import quiet_native_stderr
 from cuespin.track.background import Background, FeltAccumulator, learn_background
 from cuespin.track.colour import GREY, Projection, learn_projection
+from cuespin.track.projection import projected_centres
 from cuespin.track.model import refit_shift
 from cuespin.track.reader import FrameSource, ThreadedFrames, TrackError, frame_times, probe
 from cuespin.track.tracker import OK, STATUS_TEXT, BallTracker, TrackerConfig
@@ -330,6 +331,8 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         why = (" (the ball never moved, or is not in view; do physics.R and the camera "
                "match the video?)")
         error = f"no ball found in any of {k} frames" + (f"; {error}" if error else why)
+    if ok.any():
+        uv[ok] = projected_centres(cam, uv[ok], R)  # the centre's image, not the silhouette's
     xy = np.full_like(uv, np.nan)
     xy[ok] = cam.to_table(uv[ok])
     se = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0, None))
