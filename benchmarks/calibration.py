@@ -32,7 +32,7 @@ from cuespin.data_gen.sampler import sample_shot
 from cuespin.physics.camera import pinhole_camera
 from cuespin.physics.motion import phases, positions
 from cuespin.physics.scene import Scene, Table
-from cuespin.pipeline.calibrate import CalibrationError, calibrate_corners, table_corners
+from cuespin.pipeline.calibrate import CalibrationError, calibrate_corners, perturbed_cameras, table_corners
 from cuespin.recover.api import recover_track
 
 SIZE = (1280, 720)
@@ -42,21 +42,35 @@ FPS = 240.0
 ROLL_DEG = 1.0
 
 
-def one(shot, params, true, corners_px, mode, rng, track_px):
+def one(shot, params, true, corners_px, mode, rng, track_px, sigma=0.0, propagate=False):
     """Recover one shot through a camera calibrated from ``corners_px``; return
-    (v0 error, R w0 error, v0 stderr, R w0 stderr) as 2-vectors, or None."""
+    (v0 error, R w0 error, v0 stderr, R w0 stderr) as 2-vectors, or None.
+    With ``propagate``, the stated errors include the calibration's, from the
+    8 cameras of :func:`perturbed_cameras` (the same track refitted through each)."""
     kw = {"intrinsics": true.K, "distortion": true.dist} if mode == "intrinsics" else {}
     try:
         cal = calibrate_corners(corners_px, SIZE, Table(), fps=FPS, **kw)
     except CalibrationError:
         return None
-    return through(shot, params, true, cal.camera, rng, track_px)
+    uv = track_pixels(shot, params, true, rng, track_px)
+    r = through(shot, params, cal.camera, *uv)
+    if r is None or not propagate or sigma == 0:
+        return r
+    dv, dw, sv, sw = r
+    extra_v, extra_w = np.zeros(2), np.zeros(2)
+    for cam in perturbed_cameras(corners_px, sigma, SIZE, Table(), fps=FPS, **kw):
+        rk = through(shot, params, cam, *uv)
+        if rk is not None:
+            extra_v += (rk[0] - dv) ** 2
+            extra_w += (rk[1] - dw) ** 2
+    return dv, dw, np.sqrt(sv**2 + extra_v), np.sqrt(sw**2 + extra_w)
 
 
-def through(shot, params, true, camera, rng, track_px):
-    """The shot imaged by ``true``, read back through ``camera``, fitted."""
+def track_pixels(shot, params, true, rng, track_px):
+    """The tracked pixels of a shot seen by ``true``: (t, uv), until it stops
+    or its centre comes within R of a cushion."""
     table = Table()
-    cam = Scene(physics=params, camera=camera).camera
+    true = Scene(physics=params, camera=true).camera
     ph = phases(shot, params)
     t_end = min(ph.t2 + 0.3, shot.t0 + 3.0)
     t = np.arange(0.0, t_end, 1.0 / FPS)
@@ -64,7 +78,12 @@ def through(shot, params, true, camera, rng, track_px):
     inside = table.contains(xy, params.R)
     stop = np.argmin(inside) if not inside.all() else len(t)
     t, xy = t[:stop], xy[:stop]
-    uv = true.to_pixels(xy) + rng.normal(0.0, track_px, (len(t), 2))
+    return t, true.to_pixels(xy) + rng.normal(0.0, track_px, (len(t), 2)), track_px
+
+
+def through(shot, params, camera, t, uv, track_px):
+    """Pixels read back through ``camera`` and fitted: errors and stated errors."""
+    cam = Scene(physics=params, camera=camera).camera
     xy_m = cam.to_table(uv)
     cov = cam.cov_to_table(xy_m, np.broadcast_to(np.eye(2) * track_px**2, (len(t), 2, 2)))
     se = np.sqrt(np.stack([cov[:, 0, 0], cov[:, 1, 1]], axis=1))
@@ -83,6 +102,7 @@ def auto(args):
     """Automatic calibration on drawn frames: corners, metres, v0 against the exact camera."""
     from cuespin.pipeline.calibrate import assign_corners, detect_corners, synthetic_table_frame
 
+    print(f"cushions {args.cushion} m; {args.n} shots per camera; tracker error {args.track_px} px")
     print("height tilt    k1 | corner_rms_px edge_rms_px k1_est focal_from | max_m_err | "
           "v0_rms exact / auto (m/s), Rw0_rms exact / auto")
     xs, ys = np.meshgrid(np.linspace(0.1, 2.44, 9), np.linspace(0.1, 1.17, 5))
@@ -91,7 +111,8 @@ def auto(args):
                              (2.0, 10.0, -0.25), (1.5, 15.0, -0.25), (2.0, 12.0, 0.25), (2.0, 0.0, -0.25)]:
         true = Scene(physics=sample_shot(0)[1], camera=pinhole_camera(
             height_m=height, tilt_deg=tilt, k1=k1, size=SIZE, fps=FPS, roll_deg=ROLL_DEG)).camera
-        img = synthetic_table_frame(true, seed=int(10 * tilt + 100 * k1))
+        img = synthetic_table_frame(true, seed=int(10 * tilt + 100 * abs(k1)), cushion_m=args.cushion,
+                                    pockets=args.cushion > 0)
         det = detect_corners(img)
         quad, edge_rms, kappa = det.corners, det.edge_rms, det.kappa
         cal = assign_corners(quad, SIZE, Table(), kappa=kappa, fps=FPS,
@@ -104,14 +125,15 @@ def auto(args):
         for i in range(args.n):
             shot, params = sample_shot(args.seed * 1000 + i, "random")
             tr = Scene(physics=params, camera=true).camera
+            uv = track_pixels(shot, params, tr, np.random.default_rng(i), args.track_px)
             for name, c in (("exact", true), ("auto", cal.camera)):
-                r = through(shot, params, tr, c, np.random.default_rng(i), args.track_px)
+                r = through(shot, params, c, *uv)
                 if r is not None:
                     res[name].append(r)
         rv = {k: np.sqrt(np.mean([np.sum(r[0] ** 2) / 2 for r in v])) for k, v in res.items()}
         rw = {k: np.sqrt(np.mean([np.sum(r[1] ** 2) / 2 for r in v])) for k, v in res.items()}
         print(f"{height:6.1f} {tilt:4.0f} {k1:+.2f} | {c_rms:13.3f} {edge_rms:11.3f} "
-              f"{kappa * cal.camera.K[0, 0] ** 2:+.3f} {cal.focal_source:10s} | {m_err:9.1e} | "
+              f"{kappa * cal.camera.K[0, 0] ** 2:+.3f} {cal.focal_source:10s} {det.edge:6s} | {m_err:9.1e} | "
               f"{rv['exact']:.2e} / {rv['auto']:.2e}, {rw['exact']:.2e} / {rw['auto']:.2e}")
 
 
@@ -123,6 +145,10 @@ def main():
     ap.add_argument("--tilt", type=float, default=10.0)
     ap.add_argument("--height", type=float, default=2.0)
     ap.add_argument("--auto", action="store_true", help="automatic calibration on drawn frames instead")
+    ap.add_argument("--cushion", type=float, default=0.05,
+                    help="--auto: cushions this wide (m) in a darker felt, and pockets (0: bare felt)")
+    ap.add_argument("--propagate", action="store_true",
+                    help="add the calibration's error (8 perturbed cameras) to the stated errors")
     args = ap.parse_args()
     if args.auto:
         return auto(args)
@@ -132,14 +158,15 @@ def main():
           f"tracker error {args.track_px} px; {args.n} shots")
     print("corner_px  focal       n | v0: rms(m/s) real/stated (rms, robust) cover95 | "
           "R w0: rms(m/s) real/stated (rms, robust) cover95")
-    for sigma in (0.0, 0.1, 0.5, 1.0, 2.0):
+    sigmas = (0.5, 1.0) if args.propagate else (0.0, 0.1, 0.5, 1.0, 2.0)
+    for sigma in sigmas:
         for mode in ("intrinsics", "corners"):
             rng = np.random.default_rng(args.seed)
             rows = []
             for i in range(args.n):
                 shot, params = sample_shot(args.seed * 1000 + i, "random")
                 c = exact + rng.normal(0.0, sigma, exact.shape)
-                r = one(shot, params, Scene(physics=params, camera=true).camera, c, mode, rng, args.track_px)
+                r = one(shot, params, true, c, mode, rng, args.track_px, sigma, args.propagate)
                 if r is not None:
                     rows.append(r)
             if not rows:

@@ -11,7 +11,7 @@ balls, a highlight, dot markings and the cue.
 ``--offsets`` instead measures how far the intensity-weighted centroid of a
 shaded ball's image lies from its centre, for a few looks (noise-free).
 
-Usage: python benchmarks/render.py [--look realistic] [--codec MJPG] [--codec FFV1] [--noise 5]
+Usage: python benchmarks/render.py [--look realistic] [--codec MJPG] [--codec FFV1] [--codec H264] [--noise 5]
        python benchmarks/render.py --offsets
 """
 
@@ -24,23 +24,29 @@ from pathlib import Path
 import numpy as np
 
 from cuespin.data_gen.sampler import framed_camera, make_scene, realistic_look, sample_shot
-from cuespin.physics.scene import Scene, Table
+from cuespin.physics.scene import Scene, Table, pinhole_camera
 from cuespin.render import FrameRenderer, render_video
-from cuespin.render.video import encode_frames
+from cuespin.render.video import encode_frames, video_suffix
 
 
 def realistic_scene(shot, params, fps: float, render: dict, size=(1280, 720), exposure_s=0.0,
-                    seed: int = 4) -> Scene:
-    """A realistic-look scene for ``shot`` with ``render`` overriding the sampled look."""
+                    seed: int = 4, camera: str = "topdown") -> Scene:
+    """A realistic-look scene for ``shot`` with ``render`` overriding the sampled look;
+    ``camera="tilted"``: 2 m up, 10 deg tilt, k1 -0.2."""
     rng = np.random.default_rng(seed)
     table = Table()
-    cam = framed_camera(rng, fps, table, exposure_s, size=size)
+    if camera == "tilted":
+        cam = pinhole_camera(table, height_m=2.0, tilt_deg=10.0, size=size, k1=-0.2, fps=fps,
+                             exposure_s=exposure_s)
+    else:
+        cam = framed_camera(rng, fps, table, exposure_s, size=size)
     look = realistic_look(rng, shot, params, table, fps)
     look.update(render)
     return Scene(physics=params, camera=cam, table=table, render=look, truth=shot)
 
 
-def bench(codec: str, look: str, noise: float, seconds: float, repeat: int) -> dict:
+def bench(codec: str, look: str, noise: float, seconds: float, repeat: int,
+          camera: str = "topdown") -> dict:
     shot, params = sample_shot(1, "case3")
     render = {"noise_sigma": noise, "codec": codec, "duration": seconds}
     if look == "plain":
@@ -50,18 +56,19 @@ def bench(codec: str, look: str, noise: float, seconds: float, repeat: int) -> d
         render.update(specular=0.5, markings="dots", cue=True,
                       balls=[{"x": 0.4, "y": 0.3, "colour": [45, 40, 200]},
                              {"x": 2.2, "y": 1.0, "colour": [30, 205, 240]}])
-        scene = realistic_scene(shot, params, 240.0, render)
+        scene = realistic_scene(shot, params, 240.0, render, camera=camera)
     frames = list(FrameRenderer(scene).frames())
     n = len(frames)
     size = (scene.camera.width, scene.camera.height)
     enc, ren = [], []
+    ext = video_suffix(codec)                       # .mp4 for H264 (PyAV), else .avi
     with tempfile.TemporaryDirectory() as tmp:
         for _ in range(repeat):  # alternating, median of N: the machine is shared
             t = time.perf_counter()
-            encode_frames(iter(frames), Path(tmp) / "enc.avi", codec, 240.0, size)
+            encode_frames(iter(frames), Path(tmp) / f"enc{ext}", codec, 240.0, size)
             enc.append(time.perf_counter() - t)
             t = time.perf_counter()
-            render_video(scene, Path(tmp) / "ren.avi")
+            render_video(scene, Path(tmp) / f"ren{ext}")
             ren.append(time.perf_counter() - t)
     ratios = [e / r for e, r in zip(enc, ren)]
     return {"codec": codec, "look": look, "frames": n, "encode_fps": n / statistics.median(enc),
@@ -103,21 +110,24 @@ def offsets() -> None:
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--codec", action="append", help="FourCC (repeatable); default MJPG and FFV1")
+    ap.add_argument("--codec", action="append", help="FourCC or H264 (repeatable); default MJPG, FFV1, H264")
     ap.add_argument("--look", choices=("plain", "realistic"), action="append",
                     help="look (repeatable); default both")
     ap.add_argument("--noise", type=float, default=5.0, help="noise sigma, grey levels")
     ap.add_argument("--seconds", type=float, default=4.0, help="video length, s")
     ap.add_argument("--repeat", type=int, default=3, help="alternating runs of each, median taken")
+    ap.add_argument("--camera", choices=("topdown", "tilted"), default="topdown",
+                    help="realistic look's camera (tilted: 2 m, 10 deg, k1 -0.2)")
     ap.add_argument("--offsets", action="store_true", help="measure shaded-ball centroid offsets")
     args = ap.parse_args()
     if args.offsets:
         offsets()
         return
+    print(f"camera {args.camera}")
     print(f"{'look':9} {'codec':6} {'frames':>6} {'encode fps':>11} {'render fps':>11} {'ratio':>6}  runs")
     for look in args.look or ["plain", "realistic"]:
-        for codec in args.codec or ["MJPG", "FFV1"]:
-            r = bench(codec, look, args.noise, args.seconds, args.repeat)
+        for codec in args.codec or ["MJPG", "FFV1", "H264"]:
+            r = bench(codec, look, args.noise, args.seconds, args.repeat, args.camera)
             runs = " ".join(f"{x:.2f}" for x in r["ratios"])
             print(f"{r['look']:9} {r['codec']:6} {r['frames']:6d} {r['encode_fps']:11.1f} "
                   f"{r['render_fps']:11.1f} {r['ratio']:6.2f}  {runs}", flush=True)

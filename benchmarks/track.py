@@ -41,10 +41,10 @@ from cuespin.track.video import track_video
 # PyAV encoder, pixel format, options and file type per codec: what cameras
 # and common tools write.
 CODECS = {
-    "MJPG": ("mjpeg", "yuvj420p", {"q:v": "3"}, "avi"),
-    "FFV1": ("ffv1", "bgr0", None, "avi"),
-    "mp4v": ("mpeg4", "yuv420p", {"q:v": "4"}, "avi"),
-    "H264": ("libx264", "yuv420p", {"crf": "18"}, "mp4"),  # x264's default keyframe interval, 250
+    "MJPG": ("mjpeg", "yuvj420p", None, "avi", 8e5),  # bits per frame: 0.1 MB, as OpenCV writes
+    "FFV1": ("ffv1", "bgr0", None, "avi", None),
+    "mp4v": ("mpeg4", "yuv420p", None, "avi", 2e5),
+    "H264": ("libx264", "yuv420p", {"crf": "18"}, "mp4", None),  # x264's default keyframe interval, 250
 }
 
 
@@ -62,11 +62,11 @@ def scene_for(codec, seconds, fps=240.0, noise=5.0, px_per_m=500.0, blur=False, 
 def colour_video(tmp, codec, n_frames, fps=240.0):
     """A colour shot of ``n_frames`` written with PyAV; (path, scene)."""
     scene = scene_for(codec, n_frames / fps, fps=fps)
-    enc, pix, opts, ext = CODECS[codec]
+    enc, pix, opts, ext, rate = CODECS[codec]
     path = Path(tmp) / f"speed_{codec}_{n_frames}.{ext}"
     if not path.exists():
         write_av(colour_frames(scene, (40, 200, 220), (40, 110, 30), noise=3.0, seed=1, noise_bank=16),
-                 path, enc, pix, fps, options=opts)
+                 path, enc, pix, fps, options=opts, bit_rate=rate and rate * fps)
     return path, scene
 
 
@@ -177,14 +177,14 @@ def colour_accuracy(tmp, pair, noise, codec="FFV1", fps=240.0, seed=1, grey=Fals
 
     ball, felt = PAIRS[pair]
     scene = scene_for(codec, 0.6, fps=fps, seed=seed)
-    enc, pix, opts, ext = CODECS[codec]
+    enc, pix, opts, ext, rate = CODECS[codec]
     path = Path(tmp) / f"acc.{ext}"
     frames = colour_frames(scene, ball, felt, noise=noise, seed=seed, ramp=ramp)
     if grey:
         w = np.array([0.114, 0.587, 0.299])
         frames = (np.clip(np.rint(f @ w), 0, 255).astype(np.uint8) for f in frames)
         pix = "gray" if codec == "FFV1" else pix
-    write_av(frames, path, enc, pix, fps, options=opts)
+    write_av(frames, path, enc, pix, fps, options=opts, bit_rate=rate and rate * fps)
     res = track_video(path, scene)
     r = FrameRenderer(scene)
     truth = r.truth

@@ -158,7 +158,8 @@ def track_dataframe(track, scene=None):
         What :func:`track_video` returns.
     scene : Scene or path, optional
         Its scene: the camera carries each frame's pixel error to the table.
-        Without it ``stderr_m`` is NaN (unless the track states it in metres).
+        Without it the track's own camera is used; ``stderr_m`` is NaN when
+        neither is at hand.
 
     Returns
     -------
@@ -177,8 +178,9 @@ def track_dataframe(track, scene=None):
     from cuespin.track.tracker import STATUS_TEXT
 
     n = len(track.t)
-    if scene is not None or getattr(track, "stderr_m", None) is not None:
-        se = track_stderr_m(track, _scene(scene).camera if scene is not None else None)
+    camera = _scene(scene).camera if scene is not None else getattr(track, "camera", None)
+    if camera is not None:
+        se = track_stderr_m(track, camera)
         stderr_m = np.sqrt(np.mean(se**2, axis=1))
     else:
         stderr_m = np.full(n, np.nan)

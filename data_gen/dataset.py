@@ -23,7 +23,7 @@ def shot_stem(i: int) -> str:
 
 def generate_dataset(out: Path, n: int, seed: int, preset: str | None = None,
                      codec: str | None = None, fps: float | None = None,
-                     progress=None, look: str = "plain") -> dict:
+                     progress=None, look: str = "plain", camera: str = "topdown") -> dict:
     """Sample ``n`` scenes from ``seed`` and render each into ``out``.
 
     Parameters
@@ -45,6 +45,8 @@ def generate_dataset(out: Path, n: int, seed: int, preset: str | None = None,
         ``progress(total, desc, unit)`` returning a context-manager bar.
     look : str
         ``plain`` or ``realistic`` (see :func:`cuespin.data_gen.sampler.sample_scene`).
+    camera : str
+        ``topdown`` or ``tilted`` (same).
 
     Returns
     -------
@@ -57,7 +59,8 @@ def generate_dataset(out: Path, n: int, seed: int, preset: str | None = None,
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    scenes = sample_scenes(n, seed, preset=preset, fps=fps, codec=codec, look=look)
+    scenes = sample_scenes(n, seed, preset=preset, fps=fps, codec=codec, look=look,
+                           camera=camera)
     written = skipped = 0
     paths = []
     bar = progress(n, "generate", "shot") if progress else None

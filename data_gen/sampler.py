@@ -11,13 +11,16 @@ import math
 
 import numpy as np
 
+from cuespin.data_gen.contacts import CONTACT_PRESETS, contact_render, sample_contact
 from cuespin.physics.motion import BallParams, Shot, positions
-from cuespin.physics.scene import Camera, Scene, Table, default_camera, motion_end
+from cuespin.physics.scene import Camera, Scene, Table, default_camera, motion_end, pinhole_camera
 from cuespin.physics.straight import straight_frame
 from cuespin.render import look as lk
 
-PRESETS = ("random", "case1", "case2", "case3", "case4", "case5", "masse", "leaves_table")
+PRESETS = ("random", "case1", "case2", "case3", "case4", "case5", "masse", "leaves_table",
+           *CONTACT_PRESETS)
 LOOKS = ("plain", "realistic")
+CAMERAS = ("topdown", "tilted")
 # Frame sizes of the realistic look's cameras (px): HD, qHD and 4:3.
 FRAME_SIZES = ((1280, 720), (960, 540), (800, 600))
 
@@ -80,7 +83,9 @@ def sample_shot(seed, preset: str = "random", params: BallParams | None = None,
         up to 2.5 v0/R in any planar direction), ``case1``..``case5`` (straight
         shots in each case of Figure 4), ``masse`` (strong spin along v0: a
         visibly curved path sliding for half a second or more) or ``leaves_table``
-        (fast, aimed at a near cushion).
+        (fast, aimed at a near cushion); ``cushion`` and ``ball_contact``
+        (the first contact, 0.25-2.5 s after the strike, is a cushion or a
+        resting ball: see ``data_gen/contacts.py``).
     params : BallParams, optional
         Fixed friction; sampled (mu_s 0.1-0.3, mu_r 0.005-0.02) when absent.
     table : Table
@@ -94,6 +99,9 @@ def sample_shot(seed, preset: str = "random", params: BallParams | None = None,
     if preset not in PRESETS:
         raise ValueError(f"unknown preset {preset!r}; choose from {', '.join(PRESETS)}")
     rng = _rng(seed)
+    if preset in CONTACT_PRESETS:  # data_gen/contacts.py; the other balls are dropped here
+        shot, params, _ = sample_contact(rng, preset, params, table)
+        return shot, params
     if params is None:
         params = BallParams(mu_s=float(rng.uniform(0.1, 0.3)), mu_r=float(rng.uniform(0.005, 0.02)))
     R = params.R
@@ -160,6 +168,21 @@ def framed_camera(rng: np.random.Generator, fps: float, table: Table,
     v_off = 0.5 * (h - table.width * s) + table.width * s
     H = ((s, 0.0, u_off), (0.0, -s, v_off), (0.0, 0.0, 1.0))
     return Camera(fps=float(fps), width=w, height=h, homography=H, exposure_s=float(exposure_s))
+
+
+def tilted_camera(rng: np.random.Generator, fps: float, table: Table, exposure_s: float = 0.0,
+                  size: tuple[int, int] | None = None) -> Camera:
+    """A real camera as a phone on a stand would be: 1.5-3 m above the cloth,
+    tilted 0-15 degrees from straight down, rolled up to 2 degrees, a wide
+    lens with barrel distortion (k1 -0.25 to 0, k2 up to a fifth of it the
+    other way), framed to show the rails with 2-10 cm to spare."""
+    w, h = FRAME_SIZES[int(rng.integers(len(FRAME_SIZES)))] if size is None else size
+    k1 = float(rng.uniform(-0.25, 0.0))
+    return pinhole_camera(table, height_m=float(rng.uniform(1.5, 3.0)),
+                          tilt_deg=float(rng.uniform(0.0, 15.0)), size=(w, h), k1=k1,
+                          k2=float(-0.2 * k1 * rng.uniform(0, 1)), fps=fps, exposure_s=exposure_s,
+                          roll_deg=float(rng.uniform(-2.0, 2.0)),
+                          margin_m=lk.CUSHION_WIDTH_M + lk.RAIL_WIDTH_M + float(rng.uniform(0.02, 0.10)))
 
 
 def _resting_balls(rng: np.random.Generator, shot: Shot, params: BallParams, table: Table,
@@ -237,7 +260,8 @@ def realistic_look(rng: np.random.Generator, shot: Shot, params: BallParams, tab
 
 def sample_scene(seed, preset: str = "random", fps: float | None = None,
                  noise: float | None = None, blur: bool | None = None,
-                 px_per_m: float = 500.0, codec: str | None = None, look: str = "plain") -> Scene:
+                 px_per_m: float = 500.0, codec: str | None = None, look: str = "plain",
+                 camera: str = "topdown") -> Scene:
     """Sample a complete scene: shot, friction, camera and renderer settings.
 
     Parameters
@@ -261,6 +285,10 @@ def sample_scene(seed, preset: str = "random", fps: float | None = None,
         ``realistic`` (colour, shading, rails and the rest of
         :func:`realistic_look`, on a camera that shows the rails: ``px_per_m``
         is then set by the frame size; noise 1-8 per channel when not given).
+    camera : str
+        ``topdown`` (a similarity: the conventions' camera for the plain
+        look, one framing the rails for the realistic look) or ``tilted``
+        (a real camera with a pose and lens distortion, :func:`tilted_camera`).
 
     Returns
     -------
@@ -269,26 +297,42 @@ def sample_scene(seed, preset: str = "random", fps: float | None = None,
     """
     if look not in LOOKS:
         raise ValueError(f"unknown look {look!r}; choose from {', '.join(LOOKS)}")
+    if camera not in CAMERAS:
+        raise ValueError(f"unknown camera {camera!r}; choose from {', '.join(CAMERAS)}")
     rng = _rng(seed)
-    shot, params = sample_shot(rng, preset)
+    balls = None
+    if preset in CONTACT_PRESETS:
+        shot, params, balls = sample_contact(rng, preset)
+    else:
+        shot, params = sample_shot(rng, preset)
     if fps is None:
         fps = float(rng.choice(FPS_CHOICES))
     render, exposure = _render_settings(rng, fps, noise, blur)
     if codec is not None:
         render["codec"] = codec
     render["preset"] = preset
-    if look == "plain":
-        return make_scene(shot, params, fps=fps, px_per_m=px_per_m, exposure_s=exposure,
-                          render=render)
-    # Drawn after the plain look's draws, so plain datasets stay as they were.
+    if balls is not None:
+        render.update(contact_render(balls))  # render.contacts on, render.balls listed
     table = Table()
-    camera = framed_camera(rng, fps, table, exposure)
+    if look == "plain":
+        scene = make_scene(shot, params, fps=fps, px_per_m=px_per_m, exposure_s=exposure,
+                           render=render)
+        if camera == "topdown":
+            return scene
+        # Drawn after the plain look's draws, so plain top-down datasets stay as they were.
+        return Scene(physics=params, camera=tilted_camera(rng, fps, table, exposure), table=table,
+                     render=render, truth=shot)
+    cam = (framed_camera if camera == "topdown" else tilted_camera)(rng, fps, table, exposure)
     render.update(realistic_look(rng, shot, params, table, fps))
+    if balls is not None:  # the struck ball first, in a colour of the look's
+        name = list(lk.BALL_COLOURS)[int(rng.integers(len(lk.BALL_COLOURS)))]
+        struck = [{**b, "colour": _jitter(rng, lk.BALL_COLOURS[name])} for b in contact_render(balls)["balls"]]
+        render["balls"] = struck + render["balls"]
     for k in ("felt_grey", "ball_grey", "gradient", "gradient_angle"):
         render.pop(k, None)
     if noise is None:
         render["noise_sigma"] = round(float(rng.uniform(1.0, 8.0)), 3)
-    return Scene(physics=params, camera=camera, table=table, render=render, truth=shot)
+    return Scene(physics=params, camera=cam, table=table, render=render, truth=shot)
 
 
 def sample_scenes(n: int, seed: int, preset: str | None = None, **kwargs) -> list[Scene]:
@@ -298,7 +342,8 @@ def sample_scenes(n: int, seed: int, preset: str | None = None, **kwargs) -> lis
     of shot: mostly ``random`` with each named preset mixed in.
     """
     children = np.random.SeedSequence(seed).spawn(n)
-    mix = ["random"] * 4 + [p for p in PRESETS if p != "random"]
+    # Contact shots only when asked for: the default mix is of shots on open cloth.
+    mix = ["random"] * 4 + [p for p in PRESETS if p != "random" and p not in CONTACT_PRESETS]
     scenes = []
     for i, child in enumerate(children):
         p = preset if preset is not None else mix[i % len(mix)]

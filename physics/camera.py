@@ -360,6 +360,33 @@ class Camera:
         xy = apply_homography(self._Ginv, self._from_px(pts))
         return xy[0] if uv.ndim == 1 else xy
 
+    def to_plane(self, uv, z: float = 0.0):
+        """Pixels ``(u, v)`` to the points ``(x, y)`` (m) of the horizontal plane ``z``
+        (m above the cloth) they see: the cloth at 0, a cushion's nose at its height.
+
+        For a pose camera, the ray through each pixel (lens undone) cut with
+        that plane.  A camera without a pose knows only the ball-centre plane,
+        so ``z`` is ignored (as in :meth:`project`): the result is
+        :meth:`to_table`'s.
+
+        Parameters
+        ----------
+        uv : array_like, shape (n, 2) or (2,)
+        z : float
+
+        Returns
+        -------
+        ndarray, shape (n, 2) or (2,)
+        """
+        if not self.is_pinhole:
+            return self.to_table(uv)
+        uv = np.asarray(uv, dtype=float)
+        pts = np.atleast_2d(uv)
+        Rm, t = self.rotation, np.asarray(self.tvec, dtype=float)
+        G = np.column_stack([Rm[:, 0], Rm[:, 1], Rm[:, 2] * float(z) + t])
+        xy = apply_homography(np.linalg.inv(G), self._from_px(pts))
+        return xy[0] if uv.ndim == 1 else xy
+
     def jacobian(self, xy) -> np.ndarray:
         """d(pixels)/d(metres) of :meth:`to_pixels` at ball-centre positions (analytic).
 

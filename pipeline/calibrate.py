@@ -85,6 +85,9 @@ class Calibration:
         the four fitted lines (px).
     edge : str or None
         Automatic detection only: ``noses`` or ``felt`` (:class:`Detection`).
+    corner_sigma_px : float or None
+        Error of each corner coordinate (px) assumed (clicked: ``--corner-error``,
+        default 1; automatic: from the edges' scatter).
     """
 
     camera: Camera
@@ -94,6 +97,7 @@ class Calibration:
     notes: list = field(default_factory=list)
     edge_rms_px: float | None = None
     edge: str | None = None
+    corner_sigma_px: float | None = None
 
     @property
     def rms_px(self) -> float:
@@ -232,7 +236,8 @@ def calibrate_corners(corners_px, size, table: Table = Table(), *, intrinsics=No
                       focal_px: float | None = None, camera_height_m: float | None = None,
                       corner_sigma_px: float = 1.0, margin_m: float = 0.0,
                       corner_height_m: float = 0.0, fps: float = 30.0,
-                      R_nominal: float = 0.028575, kappa: float = 0.0) -> Calibration:
+                      R_nominal: float = 0.028575, kappa: float = 0.0,
+                      homography: bool = False) -> Calibration:
     """The camera from the playing surface's four corners in pixels.
 
     Parameters
@@ -262,6 +267,11 @@ def calibrate_corners(corners_px, size, table: Table = Table(), *, intrinsics=No
         Without intrinsics: radial distortion about the frame's centre in
         pixels (``k1 / f^2``, e.g. from the felt's bowed edges); the camera
         written has ``k1 = kappa f^2``.
+    homography : bool
+        Write the corners' plane homography instead of a pose: the ball's
+        centre plane taken as the corners' plane.  Exact for an orthographic
+        view (the renderer's top-down camera, a camera far above); for a real
+        camera D above the cloth every distance comes out short by R / D.
 
     Returns
     -------
@@ -278,6 +288,9 @@ def calibrate_corners(corners_px, size, table: Table = Table(), *, intrinsics=No
     size = (int(size[0]), int(size[1]))
     _check_quad(img, size)
     obj = table_corners(table, margin_m, corner_height_m)
+    if homography:
+        return _homography_calibration(obj, img, size, intrinsics, distortion, kappa, fps,
+                                       corner_sigma_px)
     notes = []
     dist = None
     if intrinsics is not None:
@@ -348,14 +361,65 @@ def calibrate_corners(corners_px, size, table: Table = Table(), *, intrinsics=No
                  intrinsics=as_tuple(K),
                  distortion=None if dist is None or not np.any(dist) else as_tuple(np.resize(dist, 5)),
                  rvec=as_tuple(rvec), tvec=as_tuple(tvec))
-    return Calibration(camera=cam, corners_px=img, residual_px=res, focal_source=source, notes=notes)
+    return Calibration(camera=cam, corners_px=img, residual_px=res, focal_source=source, notes=notes,
+                       corner_sigma_px=float(corner_sigma_px))
+
+
+def _homography_calibration(obj, img, size, intrinsics, distortion, kappa, fps, sigma):
+    """The corners' plane homography as the camera (see ``homography`` above),
+    through the lens when one is known or estimated (a homography in
+    undistorted pixels, with intrinsics and distortion)."""
+    K = dist = None
+    und = img
+    if intrinsics is not None:
+        K = np.asarray(intrinsics, dtype=float)
+        dist = None if distortion is None else np.asarray(distortion, dtype=float).ravel()
+        und = img if dist is None else _undistort_px(img, K, dist)
+    elif kappa:
+        f = NOMINAL_FOCAL * max(size)
+        K = _K(f, size)
+        dist = np.array([kappa * f * f, 0.0, 0.0, 0.0, 0.0])
+        und = _undistort_radial(img, K[:2, 2], kappa)
+    H = _homography_dlt(obj[:, :2], und)
+    H = H / H[2, 2]
+    cam = Camera(fps=float(fps), width=int(size[0]), height=int(size[1]), homography=as_tuple(H),
+                 intrinsics=None if K is None else as_tuple(K),
+                 distortion=None if dist is None or not np.any(dist) else as_tuple(_lens(dist)))
+    proj = cam.with_centre_height(0.0).to_pixels(obj[:, :2])
+    notes = ["homography: the ball's centre plane is taken as the corners' plane (exact for a "
+             "top-down render or a far camera; a real camera D m above the cloth reads every "
+             "distance short by R / D)"]
+    return Calibration(camera=cam, corners_px=img, residual_px=img - proj, focal_source="homography",
+                       notes=notes, corner_sigma_px=float(sigma))
+
+
+def perturbed_cameras(corners_px, sigma_px: float, size, table: Table = Table(), **kw) -> list:
+    """The cameras of the 8 corner coordinates each moved by ``sigma_px``, one at a time.
+
+    For propagating a calibration's error to anything computed through the
+    camera (v0, w0): with ``q`` the quantity through the calibrated camera and
+    ``q_k`` through camera k, its calibration variance is ``sum_k (q_k - q)^2``
+    (first order; the corners' errors independent, ``sigma_px`` per
+    coordinate).  ``kw`` as for :func:`calibrate_corners` (the same lens or
+    focal length source); a corner moved into an implausible camera is skipped.
+    """
+    base = np.asarray(corners_px, dtype=float).reshape(4, 2)
+    cams = []
+    for k in range(8):
+        c = base.copy()
+        c.flat[k] += sigma_px
+        try:
+            cams.append(calibrate_corners(c, size, table, **kw).camera)
+        except CalibrationError:
+            continue
+    return cams
 
 
 # --------------------------------------------------------------------------- automatic
 def reference_frame(path, n: int = 9) -> np.ndarray:
     """The median of ``n`` frames spread over the video: the table without the
     moving ball (and without a cue that crosses the view for a moment)."""
-    from cuespin.render.video import quiet_native_stderr
+    from cuespin.videoio import quiet_native_stderr
 
     with quiet_native_stderr():
         cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
@@ -525,20 +589,24 @@ def cushion_noses(img: np.ndarray, sides: list, search_frac: float = 0.08, reach
         P = base[:, None, :] + offs[None, :, None] * nrm
         prof = cv2.remap(grey.astype(np.float32), P[..., 0].astype(np.float32),
                          P[..., 1].astype(np.float32), cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        g = np.abs(np.diff(prof, axis=1))                    # step strength per 0.5 px
-        g[:, -8:] = 0.0                                      # the outline's own edge (last 4 px)
-        k = np.argmax(g, axis=1)
-        strength = g[np.arange(len(base)), k]
-        noise = 1.4826 * np.median(np.abs(np.diff(prof[:, : len(offs) // 3], axis=1))) + 1e-6
-        where = offs[k]
-        ok = strength > 6.0 * noise
-        if ok.mean() < 0.6:
+        # The side's median profile (felt texture and noise averaged away along
+        # the side); the step: the largest difference of the means over 3 px
+        # either side, away from the outline's own edge (its last 5 px).
+        med_prof = np.median(prof, axis=0)
+        w = 6
+        cs = np.concatenate([[0.0], np.cumsum(med_prof)])
+        g = np.zeros_like(med_prof)
+        g[w:-w] = np.abs((cs[2 * w + 1:] - cs[w + 1:-w]) - (cs[w:-w - 1] - cs[:-2 * w - 1])) / w
+        g[-10:] = 0.0
+        k = int(np.argmax(g))
+        inner = g[w: max(len(offs) // 3, w + 4)]
+        noise = np.median(inner) + 1.4826 * np.median(np.abs(inner - np.median(inner))) + 1e-3
+        # a cushion's face or top: a step of at least 3 grey levels, 8x the flat felt's
+        if not (g[k] > max(3.0, 8.0 * noise)):
             return None
-        med = float(np.median(where[ok]))
-        if np.median(np.abs(where[ok] - med)) > 1.5:
-            return None
-        nose = _subpixel_edge(Ds, base[ok] + med * nrm, nrm, np.arange(-reach_px - 3.0, reach_px + 3.0 + 1e-9, 0.25))
-        if len(nose) < 10:
+        med = float(offs[k])
+        nose = _subpixel_edge(Ds, base + med * nrm, nrm, np.arange(-reach_px - 3.0, reach_px + 3.0 + 1e-9, 0.25))
+        if len(nose) < max(10, 0.3 * len(base)):
             return None
         out.append(nose)
     return out
@@ -754,7 +822,14 @@ def assign_corners(quad: np.ndarray, size, table: Table, **kw) -> Calibration:
         except CalibrationError:
             continue
         u, v = order[0]
-        tries.append((round(cal.rms_px, 1), u - v, cal))
+        if kw.get("homography"):
+            # every order fits 4 points exactly: the one whose view is closest to
+            # square pixels (the long side along x) wins
+            sv = np.linalg.svd(cal.camera.with_centre_height(0.0).jacobian(
+                [table.length / 2, table.width / 2]), compute_uv=False)
+            tries.append((round(float(sv[0] / sv[1]), 3), u - v, cal))
+        else:
+            tries.append((round(cal.rms_px, 1), u - v, cal))
     if not tries:
         raise CalibrationError("no camera fits the felt's outline as a "
                                f"{table.length:g} x {table.width:g} m table; give --corners")
@@ -771,7 +846,7 @@ def calibrate_video(path, table: Table = Table(), corners=None, *, intrinsics=No
     at ``nose_height_m`` above the cloth), else the felt-coloured outline (the
     surface grown by ``felt_margin_m`` at ``felt_height_m``).
     """
-    from cuespin.render.video import quiet_native_stderr
+    from cuespin.videoio import quiet_native_stderr
 
     with quiet_native_stderr():
         cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
@@ -799,7 +874,7 @@ def calibrate_video(path, table: Table = Table(), corners=None, *, intrinsics=No
                          margin_m=felt_margin_m, corner_height_m=felt_height_m, **kw)
     return Calibration(camera=cal.camera, corners_px=cal.corners_px, residual_px=cal.residual_px,
                        focal_source=cal.focal_source, notes=cal.notes, edge_rms_px=edge_rms,
-                       edge=det.edge)
+                       edge=det.edge, corner_sigma_px=cal.corner_sigma_px)
 
 
 # --------------------------------------------------------------------------- synthetic frames
@@ -938,19 +1013,27 @@ def cmd_calibrate(args) -> int:
         kw["corner_sigma_px"] = args.corner_error
     if args.R is not None:
         kw["R_nominal"] = args.R
+    if args.homography:
+        kw["homography"] = True
     cal = calibrate_video(video, table, corners, intrinsics=K, distortion=dist, focal_px=args.focal_px,
                           camera_height_m=args.camera_height, felt_margin_m=args.felt_margin,
                           felt_height_m=args.felt_height, nose_height_m=args.nose_height, **kw)
     cam = cal.camera
     physics = {k: v for k, v in (("R", args.R), ("mu_s", args.mu_s), ("mu_r", args.mu_r)) if v is not None}
-    camd = {"fps": cam.fps, "width": cam.width, "height": cam.height,
-            "intrinsics": [list(r) for r in cam.intrinsics], "rvec": list(cam.rvec),
-            "tvec": list(cam.tvec), "exposure_s": 0.0}
+    camd = {"fps": cam.fps, "width": cam.width, "height": cam.height}
+    if cam.homography is not None:
+        camd["homography"] = [list(r) for r in cam.homography]
+    if cam.intrinsics is not None:
+        camd["intrinsics"] = [list(r) for r in cam.intrinsics]
     if cam.distortion is not None:
         camd["distortion"] = list(cam.distortion)
+    if cam.is_pinhole:
+        camd["rvec"], camd["tvec"] = list(cam.rvec), list(cam.tvec)
+    camd["exposure_s"] = 0.0
     scene = {"schema": SCHEMA, "physics": physics,
              "table": {"length": table.length, "width": table.width}, "camera": camd,
              "calibration": {"corners_px": cal.corners_px.tolist(), "corner_rms_px": cal.rms_px,
+                             "corner_sigma_px": cal.corner_sigma_px,
                              "focal_from": cal.focal_source, "edge_rms_px": cal.edge_rms_px}}
     tmp = out.with_name(out.name + ".part")
     tmp.write_text(json.dumps(scene, indent=2) + "\n")
@@ -960,9 +1043,11 @@ def cmd_calibrate(args) -> int:
     what = {"noses": "the cushions' noses", "felt": "the felt's outline"}.get(cal.edge, "")
     found = ("given" if corners is not None else
              f"found in the video ({what}, edges straight to {cal.edge_rms_px:.2f} px RMS)")
+    where = (f"camera {cal.height_m:.2f} m above the cloth, tilted {cal.tilt_deg:.1f} deg, "
+             f"f = {cam.K[0, 0]:.0f} px (from {cal.focal_source})" if cam.is_pinhole else
+             "camera: the corners' homography")
     print(f"wrote {out}: corners {found}; corner reprojection {cal.rms_px:.2f} px RMS "
-          f"(max {np.linalg.norm(cal.residual_px, axis=1).max():.2f} px); camera {cal.height_m:.2f} m above "
-          f"the cloth, tilted {cal.tilt_deg:.1f} deg, f = {cam.K[0, 0]:.0f} px (from {cal.focal_source})")
+          f"(max {np.linalg.norm(cal.residual_px, axis=1).max():.2f} px); {where}")
     if not physics.get("R"):
         print("calibrate: physics.R not given (--R): the scene assumes a pool ball's 0.028575 m",
               file=sys.stderr)
@@ -1000,6 +1085,9 @@ def add_parser(sub) -> None:
     c.add_argument("--nose-height", type=float, default=0.0, metavar="M",
                    help="automatic: height of the cushions' noses above the cloth (m; 0 for the "
                         "renderer's flat table, about 0.036 on a real pool table)")
+    c.add_argument("--homography", action="store_true",
+                   help="write the corners' homography, not a pose: for top-down renders (an "
+                        "orthographic view); a real camera D above the cloth reads distances short by R/D")
     c.add_argument("--R", type=float, default=None, help="ball radius (m), written to physics")
     c.add_argument("--mu-s", type=float, default=None, help="sliding friction, written to physics")
     c.add_argument("--mu-r", type=float, default=None, help="rolling friction, written to physics")

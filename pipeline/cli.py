@@ -67,7 +67,8 @@ def cmd_generate(args) -> int:
     if args.n < 1:
         raise InputError("--n must be at least 1")
     summary = generate_dataset(Path(args.out), n=args.n, seed=args.seed, preset=args.preset,
-                               codec=args.codec, fps=args.fps, progress=_progress, look=args.look)
+                               codec=args.codec, fps=args.fps, progress=_progress, look=args.look,
+                               camera=args.camera)
     print(f"{summary['written']} written, {summary['skipped']} already there, in {args.out}")
     return 0
 
@@ -223,9 +224,10 @@ JSON (--json), every field in docs/output.md:
                           t1/x1: sliding ends; t2/x2: the ball stops (s, m);
                           predicted: which of t1, x1, t2, x2 lie after the last frame seen
                           (the fitted model's extrapolation, not seen in the video)
-  methods.paper           trajectory (parabola | line), solutions (every consistent [v0, w0])
+  methods.paper           trajectory (parabola | line), solutions (every consistent [v0, w0]),
+                          stderr (1 standard error of v0, w0, delta method)
   methods.mle             stderr (1 standard error of x0, t0, v0, w0), model (full: slip fitted;
-                          rolling: no slip), slip_lr, chi2_per_dof, codec_noise_m
+                          rolling: no slip), slip_lr, chi2_per_dof, dof, hac, rho1, codec_noise_m
   best                    the method to trust (mle before paper, first that is ok); null if none is
   timing_s                track, fit, recover: wall time (s)
 """
@@ -362,6 +364,7 @@ def add_generate(sub):
                    help="MJPG (default, lossy), FFV1 (lossless) or H264 (lossy, .mp4 files, CRF 20)")
     g.add_argument("--fps", type=float, default=None, help="frame rate; default: sampled from 60-480")
     g.add_argument("--look", choices=("plain", "realistic"), default="plain", help="plain grey or realistic colour scenes")
+    g.add_argument("--camera", choices=("topdown", "tilted"), default="topdown", help="top-down or tilted, lens distorted")
     g.set_defaults(func=cmd_generate)
 
 

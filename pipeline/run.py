@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -81,8 +82,11 @@ def mark_predictions(methods: dict, t_seen: float | None, frame_dt: float, param
             continue
         if all(m.get(k) is not None for k in ("x0", "v0", "w0", "t0")) and \
                 any(m.get(x) is None and m.get(t) is not None for t, x in EVENTS):
+            p = params  # the method's own friction when it fitted one (--fit-friction)
+            if m.get("mu_s") is not None and m.get("mu_r") is not None:
+                p = replace(params, mu_s=float(m["mu_s"]), mu_r=float(m["mu_r"]))
             try:
-                ph = phases(Shot(tuple(m["x0"]), tuple(m["v0"]), tuple(m["w0"]), float(m["t0"])), params)
+                ph = phases(Shot(tuple(m["x0"]), tuple(m["v0"]), tuple(m["w0"]), float(m["t0"])), p)
                 for (t, x), pos in zip(EVENTS, (ph.x1, ph.x2)):
                     if m.get(x) is None and m.get(t) is not None and np.all(np.isfinite(pos)):
                         m[x] = [float(v) for v in pos]
@@ -131,6 +135,8 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
     TrackError
         The video cannot be read at all (see ``cuespin.track.video.track_video``).
     """
+    from cuespin.fit.contact import analysed_frames, find_contact
+    from cuespin.physics.contact import scene_balls
     from cuespin.recover.api import recover_track
     from cuespin.track.tracker import TrackerConfig
     from cuespin.track.video import track_video
@@ -140,16 +146,24 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
         config = TrackerConfig(refine=refine)
     tr = track_video(video, scene, config, progress=progress)
     t_track = time.perf_counter() - clock
-    cam = scene.camera
+    cam = getattr(tr, "camera", None) or scene.camera  # its size filled from the video where the scene leaves it
     cov_m = track_covariance_m(tr, cam)
-    out = recover_track(tr.t, tr.xy, tr.ok, cov_m, scene.physics, cam.exposure_s, method,
-                        fit_friction, lossless=tr.lossless)
+    # The analysed motion ends at the first contact (CONVENTIONS.md): fit only the frames before it.
+    contact = find_contact(tr.t, tr.xy, tr.ok, track_stderr_m(tr, cam), scene.table, scene.physics.R,
+                           scene_balls(scene.render))
+    n = analysed_frames(tr.t, contact, cam.exposure_s)
+    out = recover_track(tr.t[:n], tr.xy[:n], tr.ok[:n], cov_m[:n], scene.physics, cam.exposure_s,
+                        method, fit_friction, lossless=tr.lossless)
+    out["contact"] = None if contact is None else {"t": contact.t, "kind": contact.kind}
     noise = tr.centroid_noise_px
     track = {"frames": int(tr.n_frames), "ok_frames": int(tr.ok.sum()),
              "centroid_noise_px": _num(noise), "last_tracked_t": last_tracked_t(tr)}
-    for key in ("contact",):  # fields the recovery adds to the track block
+    # Fields the recovery adds to the track block (top level or in its own "track").
+    for key in ("contact",):
         if key in out:
             track[key] = out[key]
+        elif isinstance(out.get("track"), dict) and key in out["track"]:
+            track[key] = out["track"][key]
     if tr.error:
         track["error"] = tr.error
     t_seen = track["last_tracked_t"]

@@ -92,6 +92,11 @@ def background_frame(video, n_frames: int, k: int = BACKGROUND_FRAMES) -> np.nda
     return np.median(np.stack(frames), axis=0).astype(np.uint8)
 
 
+def _camera(tr, scene):
+    """The track's camera (its size filled from the video), else the scene's."""
+    return getattr(tr, "camera", None) or scene.camera
+
+
 def seen_until(result: dict, tr) -> float:
     """Time (s) of the last frame the analysis used: the last tracked one, or the contact."""
     ok = np.asarray(tr.ok, bool)
@@ -116,7 +121,7 @@ def residuals(result: dict, tr, scene) -> dict:
     """
     from cuespin.pipeline.run import track_stderr_m
 
-    se = track_stderr_m(tr, scene.camera)
+    se = track_stderr_m(tr, _camera(tr, scene))
     t = np.asarray(tr.t, float)
     xy = np.asarray(tr.xy, float)
     use = np.asarray(tr.ok, bool) & np.all(np.isfinite(xy), axis=1) & (t <= seen_until(result, tr) + 1e-9)
@@ -127,7 +132,7 @@ def residuals(result: dict, tr, scene) -> dict:
         sp = method_shot(m, scene.physics)
         if sp is None or not use.any():
             continue
-        pred = predicted_xy(sp[0], sp[1], t[use], scene.camera.exposure_s)
+        pred = predicted_xy(sp[0], sp[1], t[use], _camera(tr, scene).exposure_s)
         out[name] = (t[use], (xy[use] - pred) / se[use])
     return out
 
@@ -192,7 +197,7 @@ def draw_shot(result: dict, tr, scene, background: np.ndarray, png) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    cam = scene.camera
+    cam = _camera(tr, scene)
     R = scene.physics.R
     methods = {k: v for k, v in (result.get("methods") or {}).items() if isinstance(v, dict)}
     res = residuals(result, tr, scene)
@@ -210,8 +215,16 @@ def draw_shot(result: dict, tr, scene, background: np.ndarray, png) -> None:
     first_name = next((n for n in methods if method_shot(methods[n], scene.physics)), None)
     for name, m in methods.items():
         sp = method_shot(m, scene.physics)
-        if sp is None:
-            text.append((f"{name}: {m.get('status')}, nothing to draw", STYLE.get(name, OTHER)["color"]))
+        if sp is None:  # no path without w0; the strike and v0 when the method states them
+            style = STYLE.get(name, OTHER)
+            if m.get("x0") is not None:
+                u = cam.to_pixels(np.atleast_2d(m["x0"]))[0]
+                pts.append(u[None])
+                ax.plot(*u, style["marker"], ms=7, color=style["color"])
+                if m.get("v0") is not None:
+                    _arrow(ax, cam, np.asarray(m["x0"]), np.asarray(m["v0"]) * ARROW_S, style["color"])
+            v0 = f"|v0| {np.hypot(*m['v0']):.4f}{_pm(m.get('stderr') or {}, 'v0')} m/s, " if m.get("v0") else ""
+            text.append((f"{name} ({m.get('status')}): {v0}no path drawn (w0 not determined)", style["color"]))
             continue
         style = STYLE.get(name, OTHER)
         shot, p = sp
@@ -258,7 +271,7 @@ def draw_shot(result: dict, tr, scene, background: np.ndarray, png) -> None:
         ax.set_ylim(min(hi[1], cam.height - 0.5), max(lo[1], -0.5))
     ax.set_xlabel("u (px)")
     ax.set_ylabel("v (px)")
-    ax.legend(fontsize=7, loc="upper right", framealpha=0.8)
+    ax.legend(fontsize=7, loc="best", framealpha=0.8)
     ax.set_title(f"{result.get('video', '')}: solid = sliding, dashed = rolling, faint = after the last frame seen "
                  f"(predicted); markers x0, x1, x2 (hollow: predicted)\narrows from x0: v0 (length {ARROW_S:g} s of "
                  f"travel) and the spin axis w0 (bar head); shaded wedges: direction ± 2 std err; "
@@ -306,7 +319,7 @@ def write_overlay_video(video, out, result: dict, tr, scene) -> int:
     from cuespin.physics.motion import phases
     from cuespin.videoio import quiet_native_stderr
 
-    cam = scene.camera
+    cam = _camera(tr, scene)
     paths = {}
     for name, m in (result.get("methods") or {}).items():
         sp = method_shot(m, scene.physics)

@@ -19,8 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtr
 
-from cuespin.physics.motion import evaluate, phases
-from cuespin.physics.scene import Scene, homography_jacobian, motion_end
+from cuespin.physics.contact import scene_trajectory
+from cuespin.physics.scene import Scene, motion_end
 from cuespin.render import look as lk
 from cuespin.render.timing import frame_times
 
@@ -31,6 +31,12 @@ MAX_BLUR_NODES = 256
 # A homography whose local Jacobian departs from a similarity by more than
 # this (relative) would image the ball as an ellipse, which is not modelled.
 SIMILARITY_RTOL = 1e-6
+# Vertices of the ball's silhouette polygon under a non-similarity camera:
+# its centroid is within 1.2e-5 px of the 720-vertex one (measured on a
+# 14-px ball, 15 deg tilt, k1 -0.25; tests/test_render.py), its area within 0.05%.
+OUTLINE_VERTICES = 128
+# Spacing (px) of the grid on which the lens is inverted for the ray map.
+RAY_GRID_PX = 8
 
 RENDER_DEFAULTS = {
     "felt_grey": 90.0,        # grey level of the felt
@@ -54,6 +60,8 @@ def render_settings(scene: Scene) -> dict:
     s.update({k: v for k, v in scene.render.items() if k in s})
     if s["look"] not in ("plain", "realistic"):
         raise ValueError(f"render.look: expected 'plain' or 'realistic', got {s['look']!r}")
+    if s["look"] == "realistic":
+        lk.check_look(s)
     return s
 
 
@@ -63,8 +71,7 @@ def ball_motion(scene: Scene):
     Every position and spin the renderer draws comes from here, so a motion
     with cushion or ball contacts is swapped in on this one line.
     """
-    ph = phases(scene.truth, scene.physics)
-    return lambda t: evaluate(scene.truth, scene.physics, np.atleast_1d(np.asarray(t, float)), ph)
+    return scene_trajectory(scene).state  # continued past contacts when render.contacts is on
 
 
 def quadrant_area(x, y, r):
@@ -136,6 +143,38 @@ def noise_lut(sigma: float, bits: int = 16) -> np.ndarray:
     return k[np.searchsorted(cdf, p)].astype(np.int16)
 
 
+class NoiseSampler:
+    """Rounded Gaussian noise images, drawn from the law of :func:`noise_lut`
+    with one random byte per pixel plus a second only where it matters.
+
+    A 16-bit uniform ``u = 256 hi + lo`` indexes the 16-bit table; in most
+    of the 256 blocks of ``hi`` the table is constant, so ``hi`` alone (one
+    ``cv2.LUT``) decides, and only pixels whose block holds a step (5-25% at
+    sigma 1-8) draw ``lo`` and read the table itself.  The law is exactly
+    the table's; the cost is about half the full 16-bit draw.
+    """
+
+    def __init__(self, sigma: float):
+        self.lut = noise_lut(sigma)
+        blocks = self.lut.reshape(256, 256)
+        self.base = blocks[:, 0].copy().reshape(256, 1)
+        self.mixed = (blocks != blocks[:, :1]).any(axis=1).astype(np.uint8).reshape(256, 1)
+
+    def draw(self, rng: np.random.Generator, shape: tuple) -> np.ndarray:
+        """Integer noise (int16) of the given shape."""
+        import cv2
+
+        n = int(np.prod(shape))
+        hi = np.frombuffer(rng.bytes(n), dtype=np.uint8).reshape(shape)
+        out = cv2.LUT(hi, self.base) if len(shape) < 3 or shape[2] <= 4 else self.base[hi, 0]
+        # nonzero on a bool view: several times faster than on uint8.
+        idx = np.nonzero(cv2.LUT(hi, self.mixed).reshape(-1).view(bool))[0]
+        if idx.size:
+            lo = np.frombuffer(rng.bytes(idx.size), dtype=np.uint8)
+            out.reshape(-1)[idx] = self.lut[hi.reshape(-1)[idx].astype(np.int32) * 256 + lo]
+        return out
+
+
 def make_background(scene: Scene, settings: dict) -> np.ndarray:
     """The static 8-bit felt image: flat grey, lighting gradient, texture."""
     cam = scene.camera
@@ -192,13 +231,92 @@ def disc_coverage_batch(cu, cv, r: float, u0, v0, n: int) -> np.ndarray:
     return G[:, 1:, 1:] - G[:, 1:, :-1] - G[:, :-1, 1:] + G[:, :-1, :-1]
 
 
+def polygon_coverage_batch(polys, u0, v0, w: int, h: int) -> np.ndarray:
+    """Exact fraction of each pixel covered by simple polygons, one per window.
+
+    The area of the polygon below-left of a grid corner ``(X, Y)`` is
+    ``F(X, Y) = sum over edges of  sign * int_{y <= Y} min(x(y) - X, 0) dy``
+    (per horizontal line, signed crossings add up to the length of the
+    polygon left of X; the X terms cancel), a closed form for straight
+    edges.  A pixel's area is ``F``'s second difference over its corners, as
+    in :func:`disc_coverage`; along y only the edges inside a pixel row
+    differ between its two sides, so the edges are cut where they cross row
+    boundaries and each piece adds to its own row.  Exact up to float
+    rounding, any orientation, convex or not.
+
+    Parameters
+    ----------
+    polys : ndarray, shape (K, n, 2)
+        Vertices (px) of K polygons, in order around each.
+    u0, v0 : ndarray of int, shape (K,)
+        Top-left pixel of each window.
+    w, h : int
+        Window size (px).
+
+    Returns
+    -------
+    ndarray, shape (K, h, w)
+    """
+    p = np.asarray(polys, dtype=float)
+    K, n = p.shape[:2]
+    q = np.roll(p, -1, axis=1)
+    area = 0.5 * (p[..., 0] * q[..., 1] - q[..., 0] * p[..., 1]).sum(axis=1)
+    p, q = p.reshape(-1, 2), q.reshape(-1, 2)
+    node = np.repeat(np.arange(K), n)
+    E = len(p)
+    y0, y1 = p[:, 1], q[:, 1]
+    # Row boundaries y = k - 1/2 strictly inside each edge's span.
+    k_lo = np.floor(np.minimum(y0, y1) + 0.5).astype(int) + 1
+    k_hi = np.ceil(np.maximum(y0, y1) + 0.5).astype(int) - 1
+    cnt = np.maximum(k_hi - k_lo + 1, 0)
+    idx = np.repeat(np.arange(E), cnt)
+    first = np.cumsum(cnt) - cnt
+    kb = k_lo[idx] + np.arange(len(idx)) - first[idx]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tb = (kb - 0.5 - y0[idx]) / (y1[idx] - y0[idx])
+    T = np.r_[np.zeros(E), tb]
+    eid = np.r_[np.arange(E), idx]
+    order = np.lexsort((T, eid))
+    T, eid = T[order], eid[order]
+    T1 = np.r_[T[1:], 1.0]
+    last = np.r_[eid[1:] != eid[:-1], True]
+    T1[last] = 1.0
+    d = q[eid] - p[eid]
+    a_pt = p[eid] + T[:, None] * d
+    b_pt = p[eid] + T1[:, None] * d
+    dy = b_pt[:, 1] - a_pt[:, 1]
+    keep = dy != 0
+    a_pt, b_pt, dy, nid = a_pt[keep], b_pt[keep], dy[keep], node[eid[keep]]
+    row = np.floor(0.5 * (a_pt[:, 1] + b_pt[:, 1]) + 0.5).astype(int) - np.asarray(v0)[nid]
+    inside = (row >= 0) & (row < h)
+    a_pt, b_pt, dy, nid, row = a_pt[inside], b_pt[inside], dy[inside], nid[inside], row[inside]
+    X = np.asarray(u0)[nid][:, None] + np.arange(w + 1) - 0.5                # (M, w+1)
+    a, b = a_pt[:, 0:1] - X, b_pt[:, 0:1] - X
+    lo_ab = np.minimum(a, b)
+    m = np.where(a * b >= 0, 0.5 * (np.minimum(a, 0.0) + np.minimum(b, 0.0)),
+                 -(lo_ab * lo_ab) / (2.0 * np.maximum(np.abs(a - b), 1e-300)))
+    rowF = np.zeros((K * h, w + 1))
+    np.add.at(rowF, nid * h + row, dy[:, None] * m)
+    cov = np.diff(rowF.reshape(K, h, w + 1), axis=2)
+    # Orientation: the area comes out negative for one sense of traversal.
+    return cov * np.sign(area)[:, None, None]
+
+
 class FrameRenderer:
     """Renders the frames of one scene with its truth.
+
+    Any camera of CONVENTIONS.md: on a top-down (similarity) homography the
+    ball is a disc drawn with :func:`disc_coverage`; through any other camera
+    (a tilted pose, a lens with distortion) it is the sphere's silhouette,
+    the polygon of ``camera.ball_outline`` with ``OUTLINE_VERTICES``
+    vertices, drawn with :func:`polygon_coverage_batch`.  Either way the
+    coverage is exact, so the truth (the silhouette's centroid, averaged over
+    the exposure, area-weighted) is the drawn image's.
 
     Parameters
     ----------
     scene : Scene
-        Must carry ``truth``; the camera must be top-down (a similarity).
+        Must carry ``truth``.
     n_frames : int, optional
         Number of frames; from the scene's motion when absent (see
         :func:`video_length`).
@@ -213,11 +331,11 @@ class FrameRenderer:
         self.cam = scene.camera
         self.H = self.cam.H
         self.motion = ball_motion(scene)
-        J = homography_jacobian(self.H, scene.truth.x0)
+        J = self.cam.jacobian(np.asarray(scene.truth.x0))
         scale = math.sqrt(abs(np.linalg.det(J)))
-        if np.abs(np.abs(J.T @ J) - scale**2 * np.eye(2)).max() > SIMILARITY_RTOL * scale**2:
-            raise ValueError("camera.homography: the renderer draws only top-down "
-                             "(similarity) views; the ball would image as an ellipse")
+        self.similar = (not self.cam.has_lens and not self.cam.is_pinhole
+                        and np.abs(np.abs(J.T @ J) - scale**2 * np.eye(2)).max()
+                        <= SIMILARITY_RTOL * scale**2)
         self._Jinv = np.linalg.inv(J)          # px -> m, constant on a similarity
         self.radius_px = scene.physics.R * scale
         self.n_frames = n_frames if n_frames is not None else video_length(scene)
@@ -231,6 +349,10 @@ class FrameRenderer:
             self.felt = float(self.settings["felt_grey"])
             self.ball = float(self.settings["ball_grey"])
 
+    def _scale(self, xy: np.ndarray) -> float:
+        """Largest local scale (px per m) over table points ``xy`` (n, 2)."""
+        return float(np.sqrt(np.abs(np.linalg.det(self.cam.jacobian(np.atleast_2d(xy))))).max())
+
     def _nodes(self, t: np.ndarray) -> np.ndarray:
         """Exposure nodes (s) for frames at times ``t``: shape (n, K)."""
         exp = self.cam.exposure_s
@@ -239,12 +361,17 @@ class FrameRenderer:
         # Longest blur (px) over these frames decides the node count: the
         # fastest of the exposure's ends and the strike (|v| jumps there).
         probe = np.r_[t - exp / 2, t + exp / 2, self.scene.truth.t0]
-        speed = float(np.hypot(*self.motion(probe).v.T).max())
-        scale = self.radius_px / self.scene.physics.R
+        st = self.motion(probe)
+        speed = float(np.hypot(*st.v.T).max())
+        scale = self.radius_px / self.scene.physics.R if self.similar else self._scale(st.x)
         blur_px = (speed + 1e-9) * exp * scale
         K = int(min(MAX_BLUR_NODES, max(2, math.ceil(blur_px / BLUR_NODE_SPACING_PX))))
         offs = ((np.arange(K) + 0.5) / K - 0.5) * exp
         return t[:, None] + offs[None, :]
+
+    def outlines(self, xy: np.ndarray) -> np.ndarray:
+        """The ball's silhouette polygons (px), shape (n, OUTLINE_VERTICES, 2), at centres ``xy``."""
+        return self.cam.ball_outline(np.atleast_2d(xy), self.scene.physics.R, OUTLINE_VERTICES)
 
     def _truth(self) -> FrameTruth:
         t = frame_times(self.scene, self.n_frames).t  # the writer stamps the same times
@@ -253,10 +380,34 @@ class FrameRenderer:
         xy_nodes = self.motion(nodes.ravel()).x
         uv_nodes = self.cam.to_pixels(xy_nodes).reshape(nodes.shape + (2,))
         self._uv_nodes = uv_nodes
+        self._xy_nodes = xy_nodes.reshape(nodes.shape + (2,))
         xy = self.motion(t).x
-        # Top-down: the silhouette is a disc about the projected centre.
-        uv = uv_nodes.mean(axis=1)
-        return FrameTruth(t=t, uv=uv, xy=xy, uvc=uv.copy())
+        uvc = uv_nodes.mean(axis=1)
+        if self.similar:
+            # Top-down: the silhouette is a disc about the projected centre.
+            self._half = int(math.ceil(self.radius_px)) + 2
+            return FrameTruth(t=t, uv=uvc.copy(), xy=xy, uvc=uvc)
+        # The silhouette's area centroid, area-weighted over the exposure's
+        # nodes (the blurred image is their coverages' mean), in chunks.
+        flat = xy_nodes
+        cen = np.empty((len(flat), 2))
+        area = np.empty(len(flat))
+        ext = 0.0
+        for a in range(0, len(flat), 4096):
+            poly = self.outlines(flat[a:a + 4096])
+            q = np.roll(poly, -1, axis=1)
+            cr = poly[..., 0] * q[..., 1] - q[..., 0] * poly[..., 1]
+            A = cr.sum(axis=1) / 2.0
+            cen[a:a + 4096, 0] = ((poly[..., 0] + q[..., 0]) * cr).sum(axis=1) / (6.0 * A)
+            cen[a:a + 4096, 1] = ((poly[..., 1] + q[..., 1]) * cr).sum(axis=1) / (6.0 * A)
+            area[a:a + 4096] = np.abs(A)
+            ok = np.isfinite(poly).all(axis=(1, 2))
+            if ok.any():
+                ext = max(ext, float(np.ptp(poly[ok], axis=1).max()))
+        self._half = int(math.ceil(ext / 2)) + 2
+        A = area.reshape(nodes.shape)
+        uv = (cen.reshape(nodes.shape + (2,)) * A[..., None]).sum(axis=1) / A.sum(axis=1)[:, None]
+        return FrameTruth(t=t, uv=uv, xy=xy, uvc=uvc)
 
     def ball_patch(self, k: int):
         """Exact blurred coverage of frame ``k`` near the ball.
@@ -266,7 +417,7 @@ class FrameRenderer:
         is None when the ball is wholly outside the frame.
         """
         uv = self._uv_nodes[k]
-        r = self.radius_px
+        r = self._half - 1
         umin = max(int(math.floor(uv[:, 0].min() - r - 1)), 0)
         vmin = max(int(math.floor(uv[:, 1].min() - r - 1)), 0)
         umax = min(int(math.ceil(uv[:, 0].max() + r + 1)), self.cam.width - 1)
@@ -275,8 +426,13 @@ class FrameRenderer:
             return None, 0, 0
         w, h = umax - umin + 1, vmax - vmin + 1
         cov = np.zeros((h, w))
-        for cu, cv in uv:
-            cov += disc_coverage(cu, cv, r, umin, vmin, w, h)
+        if self.similar:
+            for cu, cv in uv:
+                cov += disc_coverage(cu, cv, self.radius_px, umin, vmin, w, h)
+        else:
+            for xy in self._xy_nodes[k]:
+                cov += polygon_coverage_batch(self.outlines(xy), np.array([umin]),
+                                              np.array([vmin]), w, h)[0]
         cov /= len(uv)
         return cov, umin, vmin
 
@@ -288,8 +444,8 @@ class FrameRenderer:
         h, w = cam.height, cam.width
         self._psf = float(s["psf_sigma"])
         self._pad = int(math.ceil(4 * self._psf)) + 1 if self._psf > 0 else 0
-        self._half = int(math.ceil(self.radius_px)) + 2
         self._border = 2 * self._half + self._pad + 4
+        self._rays = self._ray_map() if cam.is_pinhole else None
         self._albedo = np.asarray(s["ball_colour"], dtype=np.float64)
         self._mark_colour = np.asarray(s["mark_colour"], dtype=np.float64)
         self._ramp = lk.ramp_image(h, w, float(s["ramp"]), float(s["ramp_angle"]))
@@ -302,13 +458,54 @@ class FrameRenderer:
         self.background = np.clip(np.rint(blur), 0, 255).astype(np.uint8)
         self._bg16 = self.background.astype(np.int16)
         self._frac = (blur - self.background).astype(np.float32)   # what 8 bits rounded off
+        self._noise = NoiseSampler(self.sigma)
         self._orient = None
         if s["markings"] != "none":
             t0 = min(0.0, float(self._t_nodes.min()))
             self._orient = lk.Orientation(lambda t: self.motion(t).w, t0, float(self._t_nodes.max()))
 
+    def _ray_map(self) -> np.ndarray:
+        """Unit directions (table frame) of the rays through every pixel of the
+        frame padded by ``_border``, float32 (h + 2B, w + 2B, 3); NaN past the
+        lens's fold.  Pixel (row i, column j) of the frame is ``[i + B, j + B]``.
+
+        The lens is inverted exactly on a grid every ``RAY_GRID_PX`` pixels and
+        interpolated bilinearly between (the rays are smooth: under 0.01 px of
+        error at |k1| = 0.25); they serve shading and the cloth, not the
+        ball's coverage.
+        """
+        import cv2
+
+        cam, B, g = self.cam, self._border, RAY_GRID_PX
+        H, W = cam.height + 2 * B, cam.width + 2 * B
+        gv = np.arange(0, H + g, g, dtype=np.float64)
+        gu = np.arange(0, W + g, g, dtype=np.float64)
+        uu, vv = np.meshgrid(gu - B, gv - B)
+        n = cam._from_px(np.column_stack([uu.ravel(), vv.ravel()]))   # undistorted, normalised
+        d = np.column_stack([n, np.ones(len(n))]) @ cam.rotation        # R^T (x, y, 1)
+        d = d.reshape(uu.shape + (3,)).astype(np.float32)
+        mu, mv = np.meshgrid(np.arange(W, dtype=np.float32) / g, np.arange(H, dtype=np.float32) / g)
+        full = cv2.remap(d, mu, mv, cv2.INTER_LINEAR)
+        full /= np.linalg.norm(full, axis=-1, keepdims=True)
+        return full
+
+    def _plane_points(self, v0: int, v1: int, u0: int, u1: int, z: float) -> np.ndarray:
+        """Table points (m) at height ``z`` seen at frame pixels ``[v0:v1, u0:u1]``
+        (pose cameras); far away where the ray never meets the plane."""
+        B = self._border
+        d = self._rays[v0 + B:v1 + B, u0 + B:u1 + B].astype(np.float64)
+        C = self.cam.centre
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = (z - C[2]) / d[..., 2]
+            xy = C[:2] + s[..., None] * d[..., :2]
+        bad = ~(s > 0) | ~np.isfinite(xy).all(-1)
+        xy[bad] = 1e3
+        return xy
+
     def _cloth_points(self, uv: np.ndarray) -> np.ndarray:
         """Table points (m) on the cloth seen at pixels ``uv`` (..., 2)."""
+        if self.cam.has_lens:
+            return self.cam.to_table(uv.reshape(-1, 2)).reshape(uv.shape)
         # Elementwise (a matmul with an inner size of 2 is slow on large arrays).
         Hi = np.linalg.inv(self.H)
         u, v = uv[..., 0], uv[..., 1]
@@ -329,8 +526,11 @@ class FrameRenderer:
         img = np.zeros((h, w, 3), np.float32)
         felt_share = np.zeros((h, w), np.float32)
         if s["rails"]:
-            vv, uu = np.mgrid[0:h, 0:w].astype(np.float64)
-            xy = self._cloth_points(np.stack([uu, vv], -1))
+            if cam.is_pinhole:
+                xy = self._plane_points(0, h, 0, w, 0.0)        # the cloth, z = 0
+            else:
+                vv, uu = np.mgrid[0:h, 0:w].astype(np.float64)
+                xy = self._cloth_points(np.stack([uu, vv], -1))
             # Sub-pixel samples from the local map's derivatives (one
             # projection of the whole frame, not four).
             dxy_du = np.gradient(xy, axis=1)
@@ -357,47 +557,80 @@ class FrameRenderer:
         img *= self._ramp[..., None]
         # Other balls at rest, lit like the tracked one, drawn with exact coverage.
         for b in s["balls"]:
-            uv = cam.to_pixels(np.array([[float(b["x"]), float(b["y"])]]))
+            xy = np.array([[float(b["x"]), float(b["y"])]])
             albedo = np.asarray(b.get("colour", [228, 232, 235]), dtype=np.float64)
-            self._composite_ball(img, uv, albedo, None, 0)
+            self._composite_ball(img, cam.to_pixels(xy), xy, albedo, None, 0)
         return img
 
-    def _ball_windows(self, uv: np.ndarray, albedo: np.ndarray, rots):
-        """Colour and coverage of the ball at node centres ``uv`` (K, 2) (px).
+    def _ball_windows(self, uv: np.ndarray, xy: np.ndarray, albedo: np.ndarray, rots):
+        """Colour and coverage of the ball at nodes with centres ``xy`` (K, 2) (m),
+        imaged at ``uv`` (K, 2) (px).
 
         Returns ``(cov (K, n, n), colour (K, n, n, 3), iu (K,), iv (K,))``:
         each node's exact coverage and shaded colour on its own window whose
         top-left pixel is ``(iu, iv)``.  The colour is evaluated at pixel
         centres (normals clamped to the rim), the coverage is exact, so the
-        silhouette's centroid stays exact.
+        silhouette's centroid stays exact.  Through a pose camera the normal
+        is where each pixel's ray meets the sphere (or, past the rim, the
+        sphere's point nearest the ray) and the highlight follows the ray.
         """
-        half, r = self._half, self.radius_px
+        half, r, R = self._half, self.radius_px, self.scene.physics.R
         n = 2 * half + 1
-        iu = np.floor(uv[:, 0]).astype(int) - half
-        iv = np.floor(uv[:, 1]).astype(int) - half
-        cov = disc_coverage_batch(uv[:, 0], uv[:, 1], r, iu, iv, n)
         a = np.arange(n)
-        du = (iu[:, None] + a - uv[:, 0:1])[:, None, :] * np.ones((1, n, 1))
-        dv = (iv[:, None] + a - uv[:, 1:2])[:, :, None] * np.ones((1, 1, n))
-        Ji = self._Jinv / self.scene.physics.R      # px -> ball radii
-        nx = Ji[0, 0] * du + Ji[0, 1] * dv
-        ny = Ji[1, 0] * du + Ji[1, 1] * dv
-        rho2 = nx * nx + ny * ny
-        shrink = np.where(rho2 > 1.0, 1.0 / np.sqrt(np.maximum(rho2, 1e-300)), 1.0)
-        nx, ny = nx * shrink, ny * shrink
-        nz = np.sqrt(np.maximum(1.0 - nx * nx - ny * ny, 0.0))
-        normals = np.stack([nx, ny, nz], -1)
+        view = None
+        if self.similar:
+            iu = np.floor(uv[:, 0]).astype(int) - half
+            iv = np.floor(uv[:, 1]).astype(int) - half
+            cov = disc_coverage_batch(uv[:, 0], uv[:, 1], r, iu, iv, n)
+        else:
+            poly = self.outlines(xy)
+            mid = 0.5 * (poly.min(axis=1) + poly.max(axis=1))
+            iu = np.floor(mid[:, 0]).astype(int) - half
+            iv = np.floor(mid[:, 1]).astype(int) - half
+            cov = polygon_coverage_batch(poly, iu, iv, n, n)
+        if self.cam.is_pinhole:
+            B = self._border
+            rows = (iv[:, None] + a + B)[:, :, None]
+            cols = (iu[:, None] + a + B)[:, None, :]
+            d = self._rays[np.clip(rows, 0, self._rays.shape[0] - 1),
+                           np.clip(cols, 0, self._rays.shape[1] - 1)].astype(np.float64)
+            C = self.cam.centre
+            P = np.c_[xy, np.full(len(xy), R)][:, None, None, :]
+            ts = np.einsum("kabi,kabi->kab", P - C, d)
+            D = C + ts[..., None] * d - P                     # centre to the ray's nearest point
+            dist2 = np.einsum("kabi,kabi->kab", D, D)
+            hit = dist2 <= R * R
+            back = np.sqrt(np.maximum(R * R - dist2, 0.0))
+            normals = np.where(hit[..., None], (D - back[..., None] * d) / R,
+                               D / np.sqrt(np.maximum(dist2, 1e-300))[..., None])
+            normals = np.nan_to_num(normals)
+            view = -d
+        else:
+            du = (iu[:, None] + a - uv[:, 0:1])[:, None, :] * np.ones((1, n, 1))
+            dv = (iv[:, None] + a - uv[:, 1:2])[:, :, None] * np.ones((1, 1, n))
+            # px -> ball radii: the local inverse Jacobian (a similarity's, or
+            # any other homography's at each node: an orthographic view).
+            Ji = (self._Jinv if self.similar else np.linalg.inv(self.cam.jacobian(xy))) / R
+            Ji = np.broadcast_to(Ji, (len(uv), 2, 2))[:, :, :, None, None]
+            nx = Ji[:, 0, 0] * du + Ji[:, 0, 1] * dv
+            ny = Ji[:, 1, 0] * du + Ji[:, 1, 1] * dv
+            rho2 = nx * nx + ny * ny
+            shrink = np.where(rho2 > 1.0, 1.0 / np.sqrt(np.maximum(rho2, 1e-300)), 1.0)
+            nx, ny = nx * shrink, ny * shrink
+            nz = np.sqrt(np.maximum(1.0 - nx * nx - ny * ny, 0.0))
+            normals = np.stack([nx, ny, nz], -1)
         alb = np.broadcast_to(albedo, normals.shape)
         if rots is not None and self.settings["markings"] != "none":
             body = np.einsum("kji,kabj->kabi", rots, normals)     # R^T n: table -> body
             m = lk.mark_mask(body, self.settings["markings"], r)[..., None]
             alb = alb * (1.0 - m) + self._mark_colour * m
-        colour = lk.shade(normals, alb, self.settings)
+        colour = lk.shade(normals, alb, self.settings, view)
         return cov, colour, iu, iv
 
-    def _composite_ball(self, img, uv, albedo, rots, pad):
-        """Draw a ball averaged over nodes ``uv`` (K, 2) into the sharp image ``img``."""
-        cov, colour, iu, iv = self._ball_windows(uv, albedo, rots)
+    def _composite_ball(self, img, uv, xy, albedo, rots, pad):
+        """Draw a ball averaged over nodes at ``xy`` (K, 2) (m), imaged at ``uv``
+        (K, 2) (px), into the sharp image ``img``."""
+        cov, colour, iu, iv = self._ball_windows(uv, xy, albedo, rots)
         h, w = img.shape[:2]
         n = cov.shape[1]
         K = len(uv)
@@ -430,7 +663,7 @@ class FrameRenderer:
             return None, 0, 0
         uv = uv[vis]
         rots = self._orient(self._t_nodes[k][vis]) if self._orient is not None else None
-        cov, colour, iu, iv = self._ball_windows(uv, self._albedo, rots)
+        cov, colour, iu, iv = self._ball_windows(uv, self._xy_nodes[k][vis], self._albedo, rots)
         n = cov.shape[1]
         pu0, pv0 = int(iu.min()) - pad, int(iv.min()) - pad       # frame coords of the patch
         pw, ph = int(iu.max()) + n + pad - pu0, int(iv.max()) + n + pad - pv0
@@ -458,8 +691,8 @@ class FrameRenderer:
         At address ``cue_gap`` behind the ball; it approaches at the cue's
         speed (half the ball's, at least 0.3 m/s) to touch the ball at
         ``t0``, follows through ``cue_follow`` past the contact point (never
-        into the departing ball), then withdraws at 0.6 m/s.  Negative is
-        past the contact point.
+        into the departing ball), then withdraws at 1 m/s to 0.15 m behind
+        the contact point and is held there.  Negative is past the contact point.
         """
         s, tr = self.settings, self.scene.truth
         t = np.asarray(t, dtype=float)
@@ -471,84 +704,115 @@ class FrameRenderer:
         gap = np.where(t < tr.t0, np.minimum(g0, vc * (tr.t0 - t)),
                        -f * (1.0 - np.exp(-(t - tr.t0) * vc / f)))
         back = t > tr.t0 + tf
-        gap = np.where(back, -f * (1 - math.exp(-3.0)) + 0.6 * (t - tr.t0 - tf), gap)
+        gap = np.where(back, np.minimum(-f * (1 - math.exp(-3.0)) + 1.0 * (t - tr.t0 - tf), 0.15),
+                       gap)
         # The tip stays behind the ball's rear point.
         d_hat = v0 / max(speed, 1e-12)
         moved = (self.motion(t).x - np.asarray(tr.x0)) @ d_hat
         return np.maximum(gap, -moved)
 
-    def _cue_pieces(self, k: int) -> list:
-        """The cue's change to the blurred background in frame ``k``: a list
-        of ``(delta, u0, v0)`` patches, one per stretch of the cue (each
-        pixel belongs to one stretch, so overlapping patches add exactly)."""
+    def _cue_tiles(self, k: int) -> dict:
+        """The cue's change to the blurred background in frame ``k``, as tiles
+        (:func:`add_to_tiles`): one patch per stretch of the cue (each pixel
+        belongs to one stretch, so overlapping patches add exactly)."""
         if not self.settings["cue"]:
-            return []
+            return {}
         tr = self.scene.truth
         v0 = np.asarray(tr.v0)
         speed = float(np.hypot(*v0))
         if speed <= 0:
-            return []
+            return {}
         d = v0 / speed
         nrm = np.array([-d[1], d[0]])
         R = self.scene.physics.R
-        # The cue's state at the frame's middle (its own blur is not drawn).
-        tip = np.asarray(tr.x0) - d * (R + float(self.cue_tip(np.array([self.truth.t[k]]))[0]))
+        # The cue's state at the frame's middle (its own blur is not drawn);
+        # a cue held still is drawn once.
+        gap = float(self.cue_tip(np.array([self.truth.t[k]]))[0])
+        cached = getattr(self, "_cue_cache", None)
+        if cached is not None and cached[0] == gap:
+            return cached[1]
+        tip = np.asarray(tr.x0) - d * (R + gap)
         px_m = self.radius_px / R
         h, w = self.cam.height, self.cam.width
-        pieces = []
+        tiles: dict = {}
         step = 48.0 / px_m                      # a stretch of about 48 px
         edges = np.arange(0.0, CUE_LENGTH_M + step, step)
         edges[-1] = CUE_LENGTH_M
         pad = self._pad + 2
-        for a0, a1 in zip(edges[:-1], edges[1:]):
-            r1 = cue_radius(a1)
-            corners = np.array([tip - d * a + nrm * c for a in (a0, a1) for c in (-r1, r1)])
-            uv = self.cam.to_pixels(corners)
+        # Every stretch's four corners in one projection (the cue's axis at
+        # the ball's centre height).
+        a_c = np.repeat(np.c_[edges[:-1], edges[1:]], 2, axis=1)              # (m, 4)
+        c_c = np.array([-1.0, 1.0, -1.0, 1.0]) * cue_radius(edges[1:])[:, None]
+        xy_c = tip - a_c[..., None] * d + c_c[..., None] * nrm                 # (m, 4, 2)
+        uv_all = self.cam.project(np.c_[xy_c.reshape(-1, 2), np.full(xy_c.size // 2, R)])
+        uv_all = uv_all.reshape(-1, 4, 2)
+        for a0, a1, uv in zip(edges[:-1], edges[1:], uv_all):
+            if not np.isfinite(uv).all():
+                continue
             u_lo = max(int(math.floor(uv[:, 0].min())) - pad, 0)
             v_lo = max(int(math.floor(uv[:, 1].min())) - pad, 0)
             u_hi = min(int(math.ceil(uv[:, 0].max())) + pad, w - 1)
             v_hi = min(int(math.ceil(uv[:, 1].max())) + pad, h - 1)
             if u_hi < u_lo or v_hi < v_lo:
                 continue
-            vv, uu = np.mgrid[v_lo:v_hi + 1, u_lo:u_hi + 1]
-            xy = self._cloth_points(np.stack([uu, vv], -1).reshape(-1, 2).astype(float))
-            rel = xy - tip
-            a = -(rel @ d)                       # along the cue from its tip (m)
-            c = rel @ nrm                        # across (m)
+            shape = (v_hi + 1 - v_lo, u_hi + 1 - u_lo)
+            if self.similar:
+                # Affine in the pixel's position: two 1-D ramps, no per-pixel mapping.
+                rel0 = self.cam.to_table(np.array([[u_lo, v_lo]], float))[0] - tip
+                ju, jv = self._Jinv[:, 0], self._Jinv[:, 1]
+                du = np.arange(shape[1], dtype=np.float64)[None, :]
+                dv = np.arange(shape[0], dtype=np.float64)[:, None]
+                a = -(rel0 @ d) - (ju @ d) * du - (jv @ d) * dv     # along the cue from its tip (m)
+                c = (rel0 @ nrm) + (ju @ nrm) * du + (jv @ nrm) * dv  # across (m)
+            else:
+                if self.cam.is_pinhole:
+                    xy = self._plane_points(v_lo, v_hi + 1, u_lo, u_hi + 1, R)
+                else:
+                    vv, uu = np.mgrid[v_lo:v_hi + 1, u_lo:u_hi + 1]
+                    xy = self._cloth_points(np.stack([uu, vv], -1).astype(float))
+                rel = xy - tip
+                a = -(rel @ d)
+                c = rel @ nrm
             own = (a >= a0) & (a < a1) if a0 > 0 else (a < a1)
             ra = cue_radius(np.clip(a, 0, CUE_LENGTH_M))
             cov = np.clip((ra - np.abs(c)) * px_m + 0.5, 0, 1) * np.clip(a * px_m + 0.5, 0, 1) * own
-            if not cov.any():
+            on = cov > 0
+            if not on.any():
                 continue
-            colour = cue_colour(a)
-            across = np.clip(np.abs(c) / ra, 0, 1)
-            colour = colour * (0.55 + 0.45 * np.sqrt(1 - across**2))[:, None]
-            shape = vv.shape
+            # Colour only where the cue is (it is thin): its part, cylinder shading.
+            a_on, c_on, ra_on = a[on], c[on], ra[on]
+            across = np.clip(np.abs(c_on) / ra_on, 0, 1)
+            colour = cue_colour(a_on) * (0.55 + 0.45 * np.sqrt(1 - across**2))[:, None]
             sharp = self._sharp[v_lo + self._border:v_hi + 1 + self._border,
                                 u_lo + self._border:u_hi + 1 + self._border]
-            ramp = self._ramp[v_lo:v_hi + 1, u_lo:u_hi + 1, None]
-            delta = cov.reshape(shape)[..., None] * (colour.reshape(shape + (3,)) * ramp - sharp)
-            pieces.append((gaussian(delta, self._psf, constant=True), u_lo, v_lo))
-        return pieces
+            ramp = self._ramp[v_lo:v_hi + 1, u_lo:u_hi + 1]
+            delta = np.zeros(shape + (3,), np.float32)
+            delta[on] = cov[on][:, None] * (colour * ramp[on][:, None] - sharp[on])
+            add_to_tiles(tiles, gaussian(delta, self._psf, constant=True), u_lo, v_lo)
+        self._cue_cache = (gap, tiles)
+        return tiles
 
     def _render_realistic(self, k: int, rng: np.random.Generator) -> np.ndarray:
         import cv2
 
         if self.sigma > 0:
-            u = np.frombuffer(rng.bytes(2 * self._bg16.size), dtype=np.uint16).reshape(self._bg16.shape)
-            frame = cv2.add(np.take(self.lut, u), self._bg16, dtype=cv2.CV_8U)
+            # SFC64 writes random bytes about a third faster than PCG64; seeded
+            # from the caller's generator, so frames stay reproducible.
+            fast = np.random.Generator(np.random.SFC64(int(rng.integers(0, 2**63))))
+            frame = cv2.add(self._noise.draw(fast, self._bg16.shape), self._bg16, dtype=cv2.CV_8U)
         else:
             frame = self.background.copy()
-        pieces = self._cue_pieces(k)
+        tiles = dict(self._cue_tiles(k))
         delta, u0, v0 = self._ball_delta(k)
         if delta is not None:
-            pieces.append((delta, u0, v0))
-        # The frame is round(blur + n) with integer noise n: adding each
-        # patch's change to the unrounded value keeps it round(blur + delta + n).
-        for delta, u0, v0 in merge_patches(pieces):
-            h, w = delta.shape[:2]
-            sl = (slice(v0, v0 + h), slice(u0, u0 + w))
-            clean = frame[sl] + self._frac[sl] + delta
+            add_to_tiles(tiles, delta, u0, v0)
+        # The frame is round(blur + n) with integer noise n: adding the
+        # change to the unrounded value keeps it round(blur + delta + n).
+        T = TILE_PX
+        for (ty, tx), acc in tiles.items():
+            sl = (slice(ty * T, ty * T + T), slice(tx * T, tx * T + T))
+            f = frame[sl]
+            clean = f + self._frac[sl] + acc[:f.shape[0], :f.shape[1]]
             frame[sl] = np.clip(np.rint(clean), 0, 255).astype(np.uint8)
         return frame
 
@@ -615,30 +879,25 @@ def cue_colour(a: np.ndarray) -> np.ndarray:
     return cols[np.minimum(np.searchsorted(ends, a), len(ends) - 1)]
 
 
-def merge_patches(pieces: list) -> list:
-    """Patches ``(delta, u0, v0)`` merged until none overlap (overlaps added)."""
-    out = list(pieces)
-    merged = True
-    while merged and len(out) > 1:
-        merged = False
-        for i in range(len(out)):
-            for j in range(i + 1, len(out)):
-                (a, au, av), (b, bu, bv) = out[i], out[j]
-                if (au < bu + b.shape[1] and bu < au + a.shape[1]
-                        and av < bv + b.shape[0] and bv < av + a.shape[0]):
-                    u0, v0 = min(au, bu), min(av, bv)
-                    u1 = max(au + a.shape[1], bu + b.shape[1])
-                    v1 = max(av + a.shape[0], bv + b.shape[0])
-                    m = np.zeros((v1 - v0, u1 - u0, 3), np.float32)
-                    m[av - v0:av - v0 + a.shape[0], au - u0:au - u0 + a.shape[1]] += a
-                    m[bv - v0:bv - v0 + b.shape[0], bu - u0:bu - u0 + b.shape[1]] += b
-                    out[i] = (m, u0, v0)
-                    del out[j]
-                    merged = True
-                    break
-            if merged:
-                break
-    return out
+TILE_PX = 32
+
+
+def add_to_tiles(tiles: dict, delta: np.ndarray, u0: int, v0: int) -> dict:
+    """Add a patch ``delta`` (h, w, 3) at frame pixel ``(u0, v0)`` into a dict of
+    ``TILE_PX`` square tiles keyed by ``(row, column)``; tiles it touches are
+    copied first, so a dict shared with a cache is never changed."""
+    T = TILE_PX
+    h, w = delta.shape[:2]
+    for ty in range(v0 // T, (v0 + h - 1) // T + 1):
+        for tx in range(u0 // T, (u0 + w - 1) // T + 1):
+            a0, a1 = max(tx * T, u0), min(tx * T + T, u0 + w)
+            b0, b1 = max(ty * T, v0), min(ty * T + T, v0 + h)
+            tile = tiles.get((ty, tx))
+            tile = np.zeros((T, T, 3), np.float32) if tile is None else tile.copy()
+            tile[b0 - ty * T:b1 - ty * T, a0 - tx * T:a1 - tx * T] += delta[b0 - v0:b1 - v0,
+                                                                          a0 - u0:a1 - u0]
+            tiles[(ty, tx)] = tile
+    return tiles
 
 
 def gaussian(img: np.ndarray, sigma: float, constant: bool = False) -> np.ndarray:
@@ -667,6 +926,8 @@ def video_length(scene: Scene) -> int:
     if s["duration"] is not None:
         return max(1, int(round(float(s["duration"]) * fps)))
     end, left = motion_end(scene.truth, scene.physics, scene.table, fps, float(s["max_duration"]))
+    if scene.render.get("contacts"):  # bounced back, not gone: until it stops
+        end, left = min(scene_trajectory(scene).t_rest, float(s["max_duration"])), False
     if not left:
         end = min(end + float(s["tail"]), float(s["max_duration"]))
     return int(math.floor(end * fps)) + 1

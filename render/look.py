@@ -15,18 +15,30 @@ symmetric Gaussian PSF and leaves every centroid where it was.
 
 The image's *intensity-weighted* centroid is not the centre: the light comes
 from one side (``light_azimuth``, ``light_elevation``), so the lit half is
-brighter and its highlight sits towards the light.  Measured with
-``benchmarks/render.py --offsets`` (centroid of ``|frame - felt|`` summed
-over the channels, noise-free, top-down camera at 450 px/m, radius 12.9 px,
-ball pointing 45 degrees from the light):
+brighter and the terminator darkens the far half.  Measured with
+``python benchmarks/render.py --offsets`` (centroid of ``|frame - felt|``
+summed over the channels, noise-free, top-down 1280 x 720 view, ball radius
+12.0 px, PSF 0.7 px, light from +u): the offset points towards the light, is
+about 0.1-0.2 R, and depends on the ball/felt pair (on red on green, whose
+grey contrast is tiny, the channels' differences partly cancel)::
 
-=====================================  ==========================
-look                                   centroid - centre (px)
-=====================================  ==========================
-matte (ambient 0.35, no highlight)     see OFFSETS_MEASURED below
-=====================================  ==========================
+    look                                 white/green  red/green  yellow/blue   (du px; dv < 0.002)
+    matte, light overhead (86 deg)           0.27        0.07        0.16
+    matte, light at 60 deg                   1.77        0.43        1.00
+    matte, light at 50 deg, ambient 0.2      2.52        0.69        1.29
+    highlight 0.5, light at 60 deg           1.81        0.44        1.02
+    highlight 0.7, light at 50 deg           2.46        0.61        1.30
 
-(The table is filled in from the measurement; see ``OFFSETS_MEASURED``.)
+So a tracker that takes the intensity centroid (or fits a uniform disc) of a
+realistic ball is off by up to 2.5 px, 200 times the truth's 0.01 px; the
+centre has to come from a model of the ball's look, not its brightness.
+
+Through a real camera (``FrameRenderer`` with a pose camera) the
+silhouette's own centroid (sidecar ``u_px, v_px``) is off the projected
+centre (``uc_px, vc_px``) too, measured over a 25 x 13 grid of the table
+(``camera.silhouette_centroid_offset``): 1.5 m high, 15 deg tilt, k1 -0.25:
+max 0.30 px, median 0.011; 2 m, 8 deg, k1 -0.1: max 0.063, median 0.044;
+3 m straight down, no distortion: max 0.058, median 0.031 (perspective alone).
 """
 
 from __future__ import annotations
@@ -88,6 +100,35 @@ LOOK_DEFAULTS = {
 }
 
 
+def check_look(settings: dict) -> None:
+    """Refuse a realistic look's settings that cannot be drawn, one line naming the key.
+
+    Raises
+    ------
+    ValueError
+        ``render.<key>: ...`` for a colour that is not three numbers in
+        0-255, an unknown ``markings``, a negative amount, or a resting ball
+        without ``x`` and ``y``.
+    """
+    for key in ("ball_colour", "felt_colour", "rail_colour", "mark_colour"):
+        c = np.asarray(settings[key], dtype=object)
+        ok = c.shape == (3,) and all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                     and 0 <= v <= 255 for v in c)
+        if not ok:
+            raise ValueError(f"render.{key}: expected three numbers 0-255 (B, G, R), got {settings[key]!r}")
+    if settings["markings"] not in ("none", "dots", "logo"):
+        raise ValueError(f"render.markings: expected 'none', 'dots' or 'logo', got {settings['markings']!r}")
+    for key in ("ambient", "specular", "psf_sigma", "texture", "texture_scale", "ramp", "shininess",
+                "cue_gap", "cue_follow"):
+        v = settings[key]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+            raise ValueError(f"render.{key}: expected a number >= 0, got {v!r}")
+    balls = settings["balls"]
+    if not isinstance(balls, list) or not all(isinstance(b, dict) and "x" in b and "y" in b
+                                              for b in balls):
+        raise ValueError("render.balls: expected a list of {\"x\": m, \"y\": m, \"colour\": [b, g, r]}")
+
+
 def grey_level(bgr) -> float:
     """OpenCV's BGR-to-grey weighting of a colour (levels)."""
     b, g, r = (float(c) for c in bgr)
@@ -102,20 +143,25 @@ def light_vectors(settings: dict):
     return L, H / np.linalg.norm(H)
 
 
-def shade(normals: np.ndarray, albedo: np.ndarray, settings: dict) -> np.ndarray:
+def shade(normals: np.ndarray, albedo: np.ndarray, settings: dict, view=None) -> np.ndarray:
     """Colour (BGR, float) of the ball's surface with outward ``normals`` (..., 3).
 
     Lambertian diffuse ``albedo (ka + (1 - ka) max(n.L, 0))`` (darker towards
     the rim, the terminator on the side away from the light) plus a Blinn
-    highlight ``255 ks max(n.H, 0)^p`` of the light's own colour.
+    highlight ``255 ks max(n.H, 0)^p`` of the light's own colour; ``view``
+    (..., 3), unit vectors towards the camera, default straight up.
     """
     L, H = light_vectors(settings)
+    if view is not None:
+        H = L + view
+        H = H / np.linalg.norm(H, axis=-1, keepdims=True)
     ka = float(settings["ambient"])
     ndl = np.maximum(normals @ L, 0.0)
     out = albedo * (ka + (1.0 - ka) * ndl)[..., None]
     ks = float(settings["specular"])
     if ks > 0:
-        spec = 255.0 * ks * np.maximum(normals @ H, 0.0) ** float(settings["shininess"])
+        ndh = (normals * H).sum(-1) if H.ndim > 1 else normals @ H
+        spec = 255.0 * ks * np.maximum(ndh, 0.0) ** float(settings["shininess"])
         out = out + spec[..., None]
     return out
 

@@ -105,3 +105,22 @@ def test_api_names_survive_importing_every_stage():
             "print(bad)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_readable_table_marks_predictions_and_says_when_nothing_answered():
+    from cuespin.pipeline.run import format_recover
+
+    result = {"video": "v.avi", "track": {"frames": 100, "ok_frames": 90, "centroid_noise_px": None,
+                                          "last_tracked_t": 1.4},
+              "methods": {"paper": {"status": "degenerate", "reason": "no rest point in view", "v0": None,
+                                    "w0": None, "t0": 0.2, "t1": 0.5, "t2": None, "predicted": []},
+                          "mle": {"status": "ok", "reason": "", "model": "full", "v0": [1.0, 0.2],
+                                  "w0": [20.0, -30.0], "t0": 0.2, "t1": 0.5, "t2": 14.8,
+                                  "stderr": {"v0": [1e-5, 1e-5], "w0": [0.01, 0.01], "t0": 1e-5},
+                                  "predicted": ["t2", "x2"]}},
+              "best": None, "timing_s": {"track": 1.0, "fit": 0.1, "recover": 0.1}}
+    text = format_recover(result)
+    assert " 14.800*" in text and "predicted by the fitted model" in text
+    assert "best: none (no method answered ok)" in text
+    assert "1 std err" in text and "+/-" not in text and "stated error of a centre" in text
+    assert "slip fitted" in text and "reason: no rest point in view" in text

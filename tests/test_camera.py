@@ -291,3 +291,12 @@ def test_vectorised_speed():
     cam.to_table(uv)
     cam.jacobian(xy)
     assert time.perf_counter() - t < 0.5
+
+
+@pytest.mark.parametrize("name", ["barrel", "pincushion", "top-down"])
+def test_to_plane_inverts_project_at_any_height(name):
+    cam = cameras()[name]
+    xy = table_points(200, 9, margin=-0.1)          # the rails too
+    for z in (0.0, 0.037):
+        X = np.column_stack([xy, np.full(len(xy), z)])
+        np.testing.assert_allclose(cam.to_plane(cam.project(X), z), xy, atol=1e-9)

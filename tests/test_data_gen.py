@@ -142,3 +142,29 @@ def test_generate_realistic_dataset(tmp_path):
     assert ok and im.ndim == 3
     # Colour: the channels differ (the grey look's are equal).
     assert np.abs(im[..., 0].astype(int) - im[..., 2]).mean() > 5
+
+
+def test_tilted_cameras_sampled_in_range_and_round_trip():
+    import json
+
+    from cuespin.physics.scene import parse_scene, scene_to_dict
+
+    scenes = sample_scenes(12, seed=4, look="realistic", camera="tilted")
+    assert scenes == sample_scenes(12, seed=4, look="realistic", camera="tilted")
+    tilts = []
+    for s in scenes:
+        cam = s.camera
+        assert cam.is_pinhole
+        assert 1.5 <= cam.centre[2] <= 3.0
+        assert -0.25 <= cam.dist[0] <= 0.0
+        axis = cam.rotation.T @ np.array([0.0, 0.0, 1.0])         # optical axis, table frame
+        tilts.append(np.degrees(np.arccos(-axis[2])))
+        # The table with its rails is in view.
+        corners = np.array([[-0.16, -0.16, 0], [s.table.length + 0.16, -0.16, 0],
+                            [-0.16, s.table.width + 0.16, 0], [s.table.length + 0.16, s.table.width + 0.16, 0]])
+        uv = cam.project(corners)
+        assert (uv >= 0).all() and (uv[:, 0] < cam.width).all() and (uv[:, 1] < cam.height).all()
+        assert parse_scene(json.loads(json.dumps(scene_to_dict(s)))) == s
+    assert max(tilts) <= 15.0 + 1e-9 and max(tilts) > 8.0
+    with pytest.raises(ValueError):
+        sample_scene(0, camera="fisheye")

@@ -48,3 +48,24 @@ def test_trial_leaves_no_files(tmp_path, monkeypatch):
     row = trial(specs_noise(1, seed=1, quick=True)[0])
     assert row["status_mle"] in ("ok", "degenerate", "ambiguous", "failed")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_charts_from_rows_with_gaps(tmp_path):
+    """Charts drawn from rows with cells no method answered ok, a categorical codec
+    axis and a setting with no ok answer at all: every chart is written."""
+    from cuespin.pipeline.experiments import CHARTS
+
+    rng = np.random.default_rng(5)
+    rows = []
+    for f, levels in {"noise": ["2.0", "10.0"], "codec": ["MJPG", "FFV1"]}.items():
+        for lv in levels:
+            for i in range(4):
+                r = {"factor": f, "level": lv, "shot": i, "status_paper": "degenerate", "status_mle": "ok",
+                     "err_v0_mle": 10 ** rng.normal(-4, 0.2), "err_rw0_mle": 10 ** rng.normal(-3, 0.2),
+                     "crb_v0": 1e-4, "crb_rw0": 1e-3, "config": f"{f} {lv}", "t_total": 1.0 + i,
+                     "angle": 90.0 * (i % 2), "mag": 1.5, "t1": 0.2}
+                rows.append(r)
+    for name, chart in CHARTS.items():
+        chart(rows, tmp_path)
+    pngs = sorted(p.name for p in tmp_path.glob("*.png"))
+    assert pngs == ["noise.png", "speed_accuracy.png", "stability.png"]

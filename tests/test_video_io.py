@@ -154,3 +154,15 @@ def test_generate_h264_dataset(tmp_path):
     assert json.loads((tmp_path / "ds" / "shot_0000.json").read_text())["render"]["codec"] == "H264"
     frames, t, _ = decode(tmp_path / "ds" / "shot_0000.mp4")
     assert len(frames) == len(read_truth_csv(tmp_path / "ds" / "shot_0000.truth.csv")["t"])
+
+
+def test_tracker_reads_the_vfr_times_the_renderer_wrote(tmp_path):
+    from cuespin.track.video import track_video
+
+    scene = small_scene(fps=120.0, duration=0.5, vfr_jitter=0.03)
+    video = tmp_path / "vfr.mp4"
+    truth = render_video(scene, video)
+    tr = track_video(video, scene)
+    # Equal to far below the file's 1/90000 s resolution (float rounding only).
+    assert len(tr.t) == len(truth.t)
+    assert np.abs(tr.t - truth.t).max() < 1e-12

@@ -73,6 +73,21 @@ class Background:
     weak_samples: np.ndarray
 
 
+# Where the ball moved, the samples disagree over a region a disc of this
+# fraction of the ball's radius fits in; a cue (about a quarter of the
+# ball's diameter wide) or its shadow does not, so its motion is not taken
+# for the ball's (polarity, contrast, colour, the felt's far side).
+BALL_WIDE_FRACTION = 0.6
+
+
+def ball_wide(mask: np.ndarray, radius_px: float) -> np.ndarray:
+    """The parts of ``mask`` (bool, h x w) that a disc of
+    ``BALL_WIDE_FRACTION`` of the ball's radius fits in (a morphological opening)."""
+    d = max(3, int(round(2 * BALL_WIDE_FRACTION * radius_px)) | 1)
+    k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (d, d))
+    return cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_OPEN, k).astype(bool)
+
+
 def noise_sigma(a: np.ndarray, b: np.ndarray) -> float:
     """Robust per-frame noise sigma from two frames: MAD of their difference / sqrt 2."""
     d = (a.astype(np.float32) - b.astype(np.float32)).ravel()
@@ -122,14 +137,15 @@ def learn_background(samples: np.ndarray, radius_px: float) -> Background:
     spread = (hi.astype(np.float32) - lo.astype(np.float32)) > 7.5 * max(sigma, 0.5) + 2
     spread = cv2.dilate(spread.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
     ys, xs = np.nonzero(spread)
-    if len(ys) < MIN_AREA_FRACTION * np.pi * radius_px**2:
+    wide = ball_wide(spread, radius_px)
+    if wide.sum() < MIN_AREA_FRACTION * np.pi * radius_px**2:  # no ball-like thing moved
         return Background(image=image, sigma=sigma, polarity=0, contrast=0.0, n_samples=n,
                           path_pixels=int(len(ys)), weak_samples=np.zeros(n, bool))
     S = samples[:, ys, xs].astype(np.float32)  # (n, m) samples on the path
     med = np.median(S, axis=0)
     up = S.max(axis=0) - med
     down = med - S.min(axis=0)
-    strong = np.abs(up - down) > 4 * max(sigma, 0.5)
+    strong = (np.abs(up - down) > 4 * max(sigma, 0.5)) & wide[ys, xs]
     votes = np.sign(up - down)[strong]
     polarity = int(np.sign(votes.sum()) or 1)
     P = polarity * S  # ball is high in P
@@ -143,6 +159,16 @@ def learn_background(samples: np.ndarray, radius_px: float) -> Background:
         keep = P < felt + band + slack
         felt = np.where(keep.any(axis=0),
                         (P * keep).sum(axis=0) / np.maximum(keep.sum(axis=0), 1), felt0)
+    # Away from where the ball went, what moved (a cue, its shadow) may lie on
+    # either side of the felt: there the felt is the samples near the median
+    # (the felt shows in most of them), not the far side from the ball.
+    near = cv2.dilate(wide.astype(np.uint8), np.ones((7, 7), np.uint8)).astype(bool)[ys, xs]
+    if not near.all():
+        Pm = P[:, ~near]
+        keep_m = np.abs(Pm - np.median(Pm, axis=0)) < band
+        felt_m = (Pm * keep_m).sum(axis=0) / np.maximum(keep_m.sum(axis=0), 1)
+        felt[~near] = felt_m
+        keep[:, ~near] = keep_m
     image[ys, xs] = polarity * felt
     image = fill_unseen(image, hidden_ball(image, spread, polarity, contrast, sigma, radius_px))
     count = keep.sum(axis=0)

@@ -17,8 +17,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cuespin.track.background import ball_wide
+
 # 8-bit rounding adds variance 1/12 per channel, whatever the sensor does.
 ROUNDING_VAR = 1.0 / 12.0
+# Smallest noise variance along any colour direction, as a fraction of the
+# channels' mean: bounds the projection's gain on noise the frame
+# differences cannot see (a lossy codec's own error).
+CONDITION_FLOOR = 0.05
 # A sample differs from its pixel's median by more than this many whitened
 # noise sigmas: the ball (or something else moving) covers it.
 BALL_SIGMAS = 6.0
@@ -66,8 +72,9 @@ def noise_covariance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
     Robust to what moved between them: pixels whose difference is beyond 5
     MADs in any channel are left out (99.99994% of the noise stays in).
-    The rounding's 1/12 per channel is a floor, so a noise-free video still
-    gets an invertible covariance.
+    Each channel's rounding (1/12) and ``CONDITION_FLOOR`` of the mean
+    variance are added, so a noise-free or codec-flattened video still gets
+    a well-conditioned covariance.
     """
     d = (a.astype(np.float32) - b.astype(np.float32)).reshape(-1, 3)
     med = np.median(d, axis=0)
@@ -75,17 +82,26 @@ def noise_covariance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     keep = np.all(np.abs(d - med) <= np.maximum(5 * mad, 1.5), axis=1)
     d = d[keep].astype(np.float64)
     cov = (d.T @ d) / max(len(d), 1) / 2.0
-    cov[np.diag_indices(3)] = np.maximum(np.diag(cov), ROUNDING_VAR)
-    return cov
+    # A lossy codec can flatten the felt's noise and share it between the
+    # channels (MJPG at a low bit rate: differences 0 in flat felt, the rest
+    # one chroma-free pattern), so the estimate may be near singular and a
+    # projection along its null direction would amplify the codec's error
+    # unseen.  Each channel's own rounding, and a floor of CONDITION_FLOOR
+    # of the mean variance, keep every direction's noise honest.
+    floor = ROUNDING_VAR + CONDITION_FLOOR * np.trace(cov) / 3.0
+    return cov + floor * np.eye(3)
 
 
-def learn_projection(samples: np.ndarray) -> Projection:
+def learn_projection(samples: np.ndarray, radius_px: float) -> Projection:
     """The channel combination that best separates the moving ball from the felt.
 
     Parameters
     ----------
     samples : ndarray, shape (n, h, w, 3), uint8
         BGR frames spread over the video (the background's samples).
+    radius_px : float
+        The ball's radius (px): only regions of motion a ball fits in count
+        (a cue's or a shadow's colour is not the ball's).
 
     Returns
     -------
@@ -104,7 +120,7 @@ def learn_projection(samples: np.ndarray) -> Projection:
     lo = samples.min(axis=0).astype(np.int16)
     hi = samples.max(axis=0).astype(np.int16)
     spread = np.any((hi - lo) > 7.5 * np.maximum(sd, 0.5) + 2, axis=-1)
-    ys, xs = np.nonzero(spread)
+    ys, xs = np.nonzero(ball_wide(spread, radius_px))
     luma = np.array([0.114, 0.587, 0.299])
     w = None
     if len(ys):

@@ -88,37 +88,63 @@ def blur_nodes(blur_px: float) -> np.ndarray:
     return (np.arange(K) + 0.5) / K - 0.5
 
 
-def streak_model(c, b, G, felt, r, u0, v0, taus):
+def streak_model(c, b, G, felt, r, u0, v0, taus, shade=None):
     """Frame minus felt for a ball of grey ``G`` smeared from ``c - b/2`` to ``c + b/2``.
 
     The ball hides the felt under it, so the model is ``(G - felt) * cov``
     with ``cov`` the exposure-averaged coverage.  Returns the model patch
     and its Jacobian, shape (h*w, 5), with columns
     ``d/dcu, d/dcv, d/dbu, d/dbv, d/dG``.
+
+    ``shade = (gu, gv, q)``, when given, is the ball's look: its level at a
+    point ``X`` (px, from the ball's centre) is
+    ``G + (gu X_u + gv X_v) / r + q (|X|^2 / r^2 - 1/2)``, a lit side and a
+    rim darker or lighter than the middle (shading, a highlight's mean),
+    taken at each pixel's centre within the exact coverage.  Three more
+    Jacobian columns then follow, ``d/dgu, d/dgv, d/dq``.
     """
     h, w = felt.shape
     taus = np.asarray(taus, float)
-    # Every exposure node in one vectorised call.
     n = len(taus)
-    if n == 1:  # a sharp ball (no blur fitted): one disc, no blur derivatives
-        cov, du, dv = disc_with_gradient(c[0] + b[0] * taus[0], c[1] + b[1] * taus[0], r, u0, v0, w, h)
-        bu = taus[0] * du
-        bv = taus[0] * dv
-    else:
-        covs, gus, gvs = disc_with_gradient(c[0] + b[0] * taus, c[1] + b[1] * taus, r, u0, v0, w, h)
+    cu = c[0] + b[0] * taus
+    cv = c[1] + b[1] * taus
+    covs, gus, gvs = disc_with_gradient(cu, cv, r, u0, v0, w, h)      # (n, h, w)
+    felt = np.asarray(felt, float)
+    if shade is None:
         cov = covs.sum(axis=0) / n
         du = gus.sum(axis=0)
         dv = gvs.sum(axis=0)
         bu = np.tensordot(taus, gus, axes=1)
         bv = np.tensordot(taus, gvs, axes=1)
-    contrast = ((G - felt) / n).ravel()
-    J = np.empty((h * w, 5))
-    J[:, 0] = du.ravel() * contrast
-    J[:, 1] = dv.ravel() * contrast
-    J[:, 2] = bu.ravel() * contrast
-    J[:, 3] = bv.ravel() * contrast
-    J[:, 4] = cov.ravel()
-    return (G - felt) * cov, J
+        contrast = ((G - felt) / n).ravel()
+        J = np.empty((h * w, 5))
+        J[:, 0] = du.ravel() * contrast
+        J[:, 1] = dv.ravel() * contrast
+        J[:, 2] = bu.ravel() * contrast
+        J[:, 3] = bv.ravel() * contrast
+        J[:, 4] = cov.ravel()
+        return (G - felt) * cov, J
+    gu, gv, q = shade
+    X = (np.arange(u0, u0 + w)[None, None, :] - cu[:, None, None]) / r   # (n, 1, w)
+    Y = (np.arange(v0, v0 + h)[None, :, None] - cv[:, None, None]) / r   # (n, h, 1)
+    Q = X * X + Y * Y - 0.5
+    level = G + gu * X + gv * Y + q * Q                                  # (n, h, w)
+    ball = level - felt
+    # d/d(node centre): the edge moves (coverage) and the look moves with it.
+    dlu = (-gu - 2 * q * X) / r
+    dlv = (-gv - 2 * q * Y) / r
+    node_du = gus * ball + covs * dlu
+    node_dv = gvs * ball + covs * dlv
+    J = np.empty((h * w, 8))
+    J[:, 0] = node_du.sum(axis=0).ravel() / n
+    J[:, 1] = node_dv.sum(axis=0).ravel() / n
+    J[:, 2] = np.tensordot(taus, node_du, axes=1).ravel() / n
+    J[:, 3] = np.tensordot(taus, node_dv, axes=1).ravel() / n
+    J[:, 4] = covs.sum(axis=0).ravel() / n
+    J[:, 5] = (covs * X).sum(axis=0).ravel() / n
+    J[:, 6] = (covs * Y).sum(axis=0).ravel() / n
+    J[:, 7] = (covs * Q).sum(axis=0).ravel() / n
+    return (covs * ball).sum(axis=0) / n, J
 
 
 @dataclass(frozen=True)
@@ -157,13 +183,14 @@ class DiscFit:
     rms: float
     n_iter: int
     cov: np.ndarray = None
+    shade: np.ndarray | None = None
 
     def __bool__(self):
         return self.ok
 
 
 def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float, G0: float,
-             b0=(0.0, 0.0), fit_blur: bool = False) -> DiscFit:
+             b0=(0.0, 0.0), fit_blur: bool = False, shade: bool = False) -> DiscFit:
     """Least-squares fit of the exact disc (or streak) model to a patch.
 
     Parameters
@@ -185,6 +212,10 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
         value when ``fit_blur`` is False.
     fit_blur : bool
         Estimate the blur vector too.
+    shade : bool
+        Fit the ball's look too (:func:`streak_model`'s ``shade``: lit
+        side and rim, three linear nuisances), for a shaded ball whose
+        uniform-disc fit is pulled towards its lit side.
 
     Returns
     -------
@@ -198,10 +229,14 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
     b = np.array(b0, dtype=float)
     G = float(G0)
     cols = [0, 1, 2, 3, 4] if fit_blur else [0, 1, 4]
+    look = np.zeros(3) if shade else None
+    if shade:
+        cols = cols + [5, 6, 7]
+    n_look = 3 if shade else 0
     taus = blur_nodes(np.hypot(*b))
     it = 0
     for it in range(1, MAX_ITER + 1):
-        m, J = streak_model(c, b, G, felt, r, u0, v0, taus)
+        m, J = streak_model(c, b, G, felt, r, u0, v0, taus, look)
         J = J[:, cols]
         res = y - m.ravel()
         JtJ = J.T @ J
@@ -214,7 +249,9 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
         if it > DAMP_AFTER:
             step = 0.5 * step
         c += step[:2]
-        G += step[-1]
+        G += step[len(cols) - 1 - n_look]
+        if shade:
+            look += step[-3:]
         if fit_blur:
             b += step[2:4]
             taus = blur_nodes(np.hypot(*b))
@@ -249,7 +286,7 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
         se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     except np.linalg.LinAlgError:
         se, cov = np.full(2, np.nan), np.full((2, 2), np.nan)
-    return DiscFit(True, "", c, b, G, se, rms, it, cov)
+    return DiscFit(True, "", c, b, G, se, rms, it, cov, look)
 
 
 def _failed(reason, c, b, G, it):
@@ -293,7 +330,7 @@ def moments(D: np.ndarray, u0: int, v0: int, c0, radius: float, n_iter: int = 3)
 
 
 def refit_shift(felt_old: np.ndarray, felt_new: np.ndarray, u0: int, v0: int, c, b, G: float,
-                r: float, fit_blur: bool) -> np.ndarray:
+                r: float, fit_blur: bool, shade=None) -> np.ndarray:
     """Change of a converged disc fit's centre (px) when its felt is replaced.
 
     At the old optimum the old Jacobian ``J_o`` is orthogonal to the
@@ -305,24 +342,25 @@ def refit_shift(felt_old: np.ndarray, felt_new: np.ndarray, u0: int, v0: int, c,
     the old felt was badly wrong (a felt that shows ball, where a shot
     stopped near its strike: ``J_o`` is zero there, as those pixels told the
     old fit nothing; with ``J_n`` the shift came out of the wrong sign).
+    ``shade``: the fit's look parameters, when it fitted them.
     """
     taus = blur_nodes(np.hypot(*b))
-    # Unit contrast: the coverage's geometric derivatives, scaled per felt below.
-    _, J = streak_model(np.asarray(c, float), np.asarray(b, float), 1.0, np.zeros_like(felt_new, float),
-                        r, u0, v0, taus)
+    c, b = np.asarray(c, float), np.asarray(b, float)
+    felt_old = np.asarray(felt_old, np.float64)
+    felt_new = np.asarray(felt_new, np.float64)
+    _, Jo = streak_model(c, b, G, felt_old, r, u0, v0, taus, shade)
+    _, Jn = streak_model(c, b, G, felt_new, r, u0, v0, taus, shade)
+    cov = Jo[:, 4]
     cols = [0, 1, 2, 3, 4] if fit_blur else [0, 1, 4]
-    cov = J[:, 4]
-    felt_old = np.asarray(felt_old, np.float64).ravel()
-    felt_new = np.asarray(felt_new, np.float64).ravel()
-    Jo, Jn = J.copy(), J
-    Jo[:, :4] *= (G - felt_old)[:, None]
-    Jn[:, :4] *= (G - felt_new)[:, None]
+    if shade is not None:
+        cols = cols + [5, 6, 7]
     Jo, Jn = Jo[:, cols], Jn[:, cols]
     # Least squares, not solve: a blur fitted near zero length has (almost)
     # zero derivatives (the blur acts at second order there), which must not
     # stop the centre's correction.
+    df = (felt_new - felt_old).ravel()
     try:
-        step = -np.linalg.lstsq(Jo.T @ Jn, Jo.T @ ((felt_new - felt_old) * (1.0 - cov)), rcond=1e-9)[0]
+        step = -np.linalg.lstsq(Jo.T @ Jn, Jo.T @ (df * (1.0 - cov)), rcond=1e-9)[0]
     except np.linalg.LinAlgError:
         return np.zeros(2)
     return step[:2]

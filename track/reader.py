@@ -19,7 +19,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from cuespin.render.video import quiet_native_stderr
+from cuespin.videoio import quiet_native_stderr
 
 # Codecs that store every pixel exactly (FFmpeg's names).
 LOSSLESS_CODECS = {"ffv1", "huffyuv", "ffvhuff", "png", "rawvideo", "utvideo", "magicyuv", "qtrle",

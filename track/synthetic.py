@@ -73,8 +73,12 @@ def colour_frames(scene, ball_bgr, felt_bgr, noise: float, seed: int = 0, ramp: 
 
 
 def write_av(frames, path, codec: str, pix_fmt: str, fps: float, times=None, options=None,
-             time_base=Fraction(1, 90000)) -> None:
-    """Encode BGR frames with PyAV; ``times`` (s) set each frame's presentation time."""
+             time_base=Fraction(1, 90000), bit_rate: int | None = None) -> None:
+    """Encode BGR frames with PyAV; ``times`` (s) set each frame's presentation time.
+
+    ``bit_rate`` (bit/s) for rate-controlled codecs (MJPG, mp4v): FFmpeg's
+    default (about 1 Mbit/s) flattens sensor noise into blocks.
+    """
     frames = iter(frames)
     first = next(frames)
     h, w = first.shape[:2]
@@ -83,6 +87,8 @@ def write_av(frames, path, codec: str, pix_fmt: str, fps: float, times=None, opt
         s.width, s.height, s.pix_fmt = w, h, pix_fmt
         if options:
             s.options = options
+        if bit_rate:
+            s.bit_rate = int(bit_rate)
         if times is not None:  # the encoder's clock, so frames keep their own times
             s.codec_context.time_base = time_base
             s.time_base = time_base

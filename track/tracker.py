@@ -25,6 +25,11 @@ REFINERS = ("fit", "moments")
 # length, not fitted: a symmetric smear moves no centroid, and its image
 # changes only to second order in the length, so fitting it is ill-posed.
 FIT_BLUR_PX = 3.0
+# Frames whose two fits (disc and shaded) decide the look (config.look "auto").
+LOOK_FRAMES = 12
+# The shaded look is kept when its pooled residual reduction exceeds the
+# chi-square quantile at this probability (3 parameters per frame).
+LOOK_P = 1e-3
 
 
 @dataclass(frozen=True)
@@ -46,12 +51,19 @@ class TrackerConfig:
         Decode on a second thread, overlapping decoding with background
         learning and tracking.  Batches run one single-threaded process per
         core instead.
+    look : str
+        The ball's look in the fit: ``disc`` (one level), ``shaded`` (plus a
+        lit side and a rim, :func:`cuespin.track.model.streak_model`) or
+        ``auto``: learnt from the video, by fitting both to the first
+        ``LOOK_FRAMES`` frames the ball is found in and keeping ``shaded``
+        only if it explains them significantly better (chi-square, 0.1%).
     """
 
     refine: str = "fit"
     n_background: int = 9
     search_margin_px: float = 6.0
     threaded: bool = True
+    look: str = "auto"
 
 
 @dataclass
@@ -105,6 +117,7 @@ class BallTracker:
         self.cfg = config
         self.proj = projection
         self.k = box_size(self.r)
+        self.k_out = box_size(2 * self.r) | 1  # the ring around the ball's box
         # Box-filtered noise of a frame minus a (slightly noisy) background.
         self.thresh = max(DETECT_SIGMAS * max(background.sigma, 0.5) * 1.1 / self.k,
                           0.25 * background.contrast)
@@ -117,6 +130,8 @@ class BallTracker:
         self.last_fit: tuple | None = None
         self.gone = False
         self.was_partial_edge = False
+        self.shade = {"disc": False, "shaded": True}.get(config.look)  # None: learning
+        self._look_votes: list[tuple[float, float, int]] = []
 
     # -- search ---------------------------------------------------------
     def _velocity(self, k: int):
@@ -142,14 +157,27 @@ class BallTracker:
         return D, sm, val, np.array([loc[0] + u0, loc[1] + v0], float)
 
     def _full_search(self, frame):
-        D, sm, val, loc = self._peak(frame, 0, 0, self.W, self.H)
+        """The most ball-like blob on the playing surface: a box the ball fills
+        (as in :meth:`_peak`) less the ring of felt around it.  A stick (the
+        cue) or an edge fills the ring as much as the box and scores near 0;
+        the ball scores ~0.8 of its contrast."""
+        roi = self.proj(frame)
+        D = self.pol * (roi - self.bg.image)
+        k, K = self.k, self.k_out
+        inner = cv2.blur(D, (k, k))
+        outer = cv2.boxFilter(D, -1, (K, K), normalize=False)
+        sm = inner - (outer - inner * (k * k)) / (K * K - k * k)
+        if self.mask is not None:
+            sm[~self.mask] = -np.inf
+        _, val, _, at = cv2.minMaxLoc(sm)
+        loc = np.array(at, float)
         if val < self.thresh:
             return None, NO_BALL
         # A second ball-like blob away from the first: flag, don't guess.
         mask = np.zeros_like(sm, dtype=np.uint8)
         cv2.circle(mask, (int(loc[0]), int(loc[1])), int(2.5 * self.r + 4), 1, -1)
-        sm2 = np.where(mask.astype(bool), -np.inf, sm)
-        if np.nanmax(sm2) >= max(self.thresh, 0.5 * val):
+        sm[mask.astype(bool)] = -np.inf
+        if sm.max() >= max(self.thresh, 0.5 * val):
             return loc, TWO_BLOBS
         return loc, OK
 
@@ -182,10 +210,16 @@ class BallTracker:
                 return _lost(status)
             if status != OK:
                 return _lost(status)
-            blur = None  # no velocity to predict it: measured from the image
+            # No velocity to predict the blur.  Before the ball is first found
+            # it rests (a shot is struck from rest), and a streak measured from
+            # the image there would take the cue, or the ball's shading, for
+            # motion: try it sharp first.  Once lost in flight, measure it.
+            blur = np.zeros(2) if not self.history else None
         self.last_fit = None
         self.last_patch = None
         obs = self._refine(frame, loc, blur)
+        if obs.status != OK and blur is not None and not self.history:
+            obs = self._refine(frame, loc, None)
         if obs.status == OK:
             self.history = (self.history + [(k, obs.uv)])[-2:]
         return obs
@@ -203,6 +237,22 @@ class BallTracker:
             return 0.0
         ys, xs = np.nonzero(on)
         return float(max(xs.max() - xs.min(), ys.max() - ys.min()) - 2 * self.r + 2) if len(xs) else 0.0
+
+    def _learn_look(self, patch, felt, u0, v0, f_shaded, r, G0, blur, fit_blur):
+        """One frame's vote on the look: the disc fit's residual sum against
+        the shaded one's; decided once ``LOOK_FRAMES`` frames have voted."""
+        from scipy.stats import chi2
+
+        d = fit_disc(patch, felt, u0, v0, f_shaded.c, r, G0, b0=blur, fit_blur=fit_blur)
+        if not d:
+            return
+        dof = patch.size - 6
+        self._look_votes.append((d.rms**2 * (dof + 3), f_shaded.rms**2 * dof, dof))
+        if len(self._look_votes) >= LOOK_FRAMES:
+            rss_d, rss_s, dofs = map(np.array, zip(*self._look_votes))
+            s2 = rss_s.sum() / dofs.sum()
+            stat = (rss_d - rss_s).sum() / s2
+            self.shade = bool(stat > chi2.isf(LOOK_P, 3 * len(rss_d)))
 
     def _refine(self, frame, loc, blur) -> Observation:
         r = self.r
@@ -228,16 +278,20 @@ class BallTracker:
         else:
             fit_blur = np.hypot(*blur) > FIT_BLUR_PX
             G0 = float(felt.mean()) + self.pol * max(self.bg.contrast, 1.0)
-            f = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur)
+            shade = self.shade is not False
+            f = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur, shade=shade)
             if not f and not fit_blur and self.exposure_frames > 0:
                 # A streak the prediction missed (the strike, a sudden turn).
                 blur = streak_from_moments(D, u0, v0, c, r)
                 fit_blur = np.hypot(*blur) > FIT_BLUR_PX
-                f = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur)
+                f = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur, shade=shade)
             if not f:
                 return _lost(FIT_FAILED)
+            if self.shade is None:
+                self._learn_look(patch, felt, u0, v0, f, r, G0, blur, fit_blur)
             c, se, cov = f.c, f.stderr, f.cov
-            self.last_fit = (u0, v0, v1 - v0, u1 - u0, f.c.copy(), f.b.copy(), f.G, bool(fit_blur))
+            self.last_fit = (u0, v0, v1 - v0, u1 - u0, f.c.copy(), f.b.copy(), f.G, bool(fit_blur),
+                             f.shade)
             self.last_patch = (patch, u0, v0)
         # The whole disc must lie inside the frame for the centre to be trusted.
         if (c[0] - r < -0.5 or c[1] - r < -0.5 or c[0] + r > self.W - 0.5

@@ -161,7 +161,7 @@ def learn_model(frames: list, radius_px: float, n_samples: int) -> tuple[Project
     idx = np.unique(np.linspace(0, n - 1, n_samples).round().astype(int))
     colour = frames[0].ndim == 3
     samples = np.stack([frames[i] for i in idx])
-    proj = learn_projection(samples) if colour else GREY
+    proj = learn_projection(samples, radius_px) if colour else GREY
     P = proj.many(samples) if colour else samples
     bg = learn_background(P, radius_px)
     if bg.weak_samples.any():
@@ -310,10 +310,10 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     if fits and felt.n >= 20:
         # The felt averaged over the tracked frames: correct each fit for it.
         better = felt.felt(bg.image, proj)
-        for kk, (pu, pv, ph, pw, c, b, G, fb) in fits:
+        for kk, (pu, pv, ph, pw, c, b, G, fb, shade) in fits:
             old = bg.image[pv:pv + ph, pu:pu + pw]
             new = better[pv:pv + ph, pu:pu + pw]
-            uv[kk] = c + refit_shift(old, new, pu, pv, c, b, G, radius_px, fb)
+            uv[kk] = c + refit_shift(old, new, pu, pv, c, b, G, radius_px, fb, shade)
         bg = replace(bg, image=better)
     t_track = time.perf_counter() - t_start
     status = np.array(status, np.int8)
