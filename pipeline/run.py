@@ -154,7 +154,8 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
                            scene_balls(scene.render))
     n = analysed_frames(tr.t, contact, cam.exposure_s)
     out = recover_track(tr.t[:n], tr.xy[:n], tr.ok[:n], cov_m[:n], scene.physics, cam.exposure_s,
-                        method, fit_friction, lossless=tr.lossless)
+                        method, fit_friction, lossless=tr.lossless,
+                        inter_frame=getattr(tr, "inter_frame", False))
     if scene.calibration:
         add_calibration_error(out["methods"], lambda c: _refit_through(c, tr, n, scene, method, fit_friction),
                               scene.calibration)
@@ -192,7 +193,8 @@ def _refit_through(camera, tr, n: int, scene, method: str, fit_friction: bool) -
     xy[good] = camera.to_table(uv[good])
     cov = table_covariance(camera, xy, np.asarray(tr.cov_px)[:n])
     return recover_track(tr.t[:n], xy, np.asarray(tr.ok)[:n], cov, scene.physics, scene.camera.exposure_s,
-                         method, fit_friction, lossless=tr.lossless)["methods"]
+                         method, fit_friction, lossless=tr.lossless,
+                         inter_frame=getattr(tr, "inter_frame", False))["methods"]
 
 
 MODEL_TEXT = {"full": "slip fitted (sliding, then rolling)", "rolling": "rolling from the strike (no slip)"}

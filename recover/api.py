@@ -28,7 +28,7 @@ def _num(x):
 
 def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0.0,
                   method: str = "all", fit_friction: bool = False, lossless: bool = True,
-                  return_estimate: bool = False):
+                  return_estimate: bool = False, inter_frame: bool = False):
     """v0 and w0 from a track, by the paper's method and/or maximum likelihood.
 
     Parameters
@@ -52,6 +52,9 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
     lossless : bool
         The video's codec is lossless; otherwise a resting ball's frames are
         one measurement per rest and the codec's error is measured.
+    inter_frame : bool
+        The lossy codec predicts frames from others (H.264): its error is
+        shared between neighbouring frames (recover.mle.codec_sandwich).
     return_estimate : bool
         Also return the :class:`~cuespin.recover.estimate.Estimate` (its
         measurements give the bound: pipeline.measure.mle_bound).
@@ -70,7 +73,7 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
     ok = np.asarray(ok, dtype=bool) & np.all(np.isfinite(xy), axis=1) & np.isfinite(t)
     cov = np.asarray(stderr_m, dtype=float)[ok]
     est = estimate(t[ok], xy[ok], cov, params, exposure_s, lossless, fit_friction,
-                   run_paper=method in ("paper", "all"))
+                   run_paper=method in ("paper", "all"), inter_frame=inter_frame)
     methods = {}
     if method in ("paper", "all"):
         methods["paper"] = paper_dict(est, params)

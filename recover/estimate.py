@@ -18,8 +18,8 @@ from cuespin.fit.segment import Segments, segment_track
 from cuespin.physics.motion import BallParams, phases
 from cuespin.recover.measurements import (Measurements, as_covariance, build_measurements,
                                           codec_excess, fill_covariance)
-from cuespin.recover.mle import (MLEResult, ModelFit, fit_model, fit_models, initial_guess, result,
-                                 slip_lr)
+from cuespin.recover.mle import (CodecCorrelation, MLEResult, ModelFit, correlated_codec_var, fit_model,
+                                 fit_models, initial_guess, result, slip_lr)
 from cuespin.recover.paper import PaperResult, paper_from_segments
 
 # The first fit's strike time is used to place the strike's window only
@@ -65,7 +65,7 @@ def _first_fit(meas, params, starts, exposure_s, fit_friction) -> ModelFit | Non
 
 
 def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: bool = True,
-             fit_friction: bool = False, run_paper: bool = True) -> Estimate:
+             fit_friction: bool = False, run_paper: bool = True, inter_frame: bool = False) -> Estimate:
     """Segment, decide and fit one track.
 
     Parameters
@@ -87,6 +87,10 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         Estimate mu_s and mu_r in the maximum-likelihood fit.
     run_paper : bool
         Run the paper's method as well.
+    inter_frame : bool
+        The lossy codec predicts frames from other frames (H.264): its
+        error is shared between neighbouring frames, and the standard
+        errors follow its measured correlation (recover.mle.codec_sandwich).
 
     Returns
     -------
@@ -119,11 +123,14 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
     first = _first_fit(meas1, params, starts, exposure_s, fit_friction)
     codec_var, t0 = 0.0, seg.t0
     if first is not None:
-        if not lossless:
+        if not lossless and inter_frame:
+            codec_var = correlated_codec_var(first, meas1, frame_dt)
+        elif not lossless:
             codec_var = codec_excess(meas1, first.residuals, len(first.x))
         if abs(first.shot.t0 - seg.t0) < MAX_T0_SHIFT_FRAMES * frame_dt:
             t0 = first.shot.t0
     meas = measure(t0).with_codec(codec_var)
+    codec = CodecCorrelation(codec_var, frame_dt) if inter_frame and not lossless else None
     decisions: dict[str, Decision] = {}
     mle = None
     try:
@@ -133,14 +140,14 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
     except FIT_ERRORS as exc:
         mle = MLEResult("failed", f"the fit did not run: {exc}")
     if mle is None:
-        lr = slip_lr(full, roll, meas)
+        lr = slip_lr(full, roll, meas, codec)
         decisions["sliding_seen"] = sliding_seen(lr)
         if decisions["sliding_seen"]:
             decisions["sliding_ended"] = sliding_ended(seg, t, phases(full.shot, full.params).t1,
                                                        friction_known=not fit_friction)
-            mle = result(full, meas, lr, decisions["sliding_ended"].yes)
+            mle = result(full, meas, lr, decisions["sliding_ended"].yes, codec)
         else:
-            mle = result(roll, meas, lr, True)
+            mle = result(roll, meas, lr, True, codec)
     else:
         decisions["sliding_ended"] = sliding_ended(seg, t)
     chosen = seg

@@ -241,27 +241,41 @@ def build_measurements(t, xy, cov, *, t0: float | None = None, t_rest: float | N
 def codec_excess(meas: Measurements, whitened_residuals, n_par: int) -> float:
     """Per-axis error variance (m^2) a lossy codec adds beyond the stated one.
 
-    Measured from a fit's whitened residuals over the single-frame
-    measurements (moving ball): the residual variance in excess of the
-    stated, with the fit's degrees of freedom shared out.  Signed: negative
-    when the residuals are smaller than stated (MJPG at low noise, where
-    the tracker states 1.2-1.4 times its real error).
+    Measured from a fit's residuals over all its measurements (a rest's
+    mean included: its shared compression error is the codec's too): the
+    variance ``c`` which, added to every measurement's stated variance,
+    makes the weighted residuals match the fit's degrees of freedom,
+    ``sum r^2 / (s^2 + c) = 2m - n_par`` (a weighted moment equation: the
+    stated errors vary along the track, and an unweighted excess is ruled by
+    the largest).  Signed: negative when the residuals are smaller than
+    stated (MJPG at low noise, where the tracker states 1.2-1.4 times its
+    real error); no lower than takes the smallest stated variance to
+    ``MIN_NOISE_FRACTION`` of itself.
 
     Returns
     -------
     float
-        0 when too few frames.
+        0 when too few measurements.
     """
     r = np.asarray(whitened_residuals, dtype=float)
-    single = meas.single
-    k = int(single.sum())
-    if r.shape[0] != meas.n or 2 * k <= n_par + 2:
+    m = meas.n
+    dof = 2 * m - n_par
+    if r.shape[0] != m or dof <= 2:
         return 0.0
-    # Back to metres: L r is the raw residual of each measurement.
-    W = meas.W[single]
-    L = np.linalg.inv(W)
-    raw = np.einsum("mij,mj->mi", L, r[single])
-    c = np.linalg.inv(np.einsum("mij,mkj->mik", W, W))  # each measurement's covariance
-    stated = float(np.trace(c, axis1=1, axis2=2).sum())
-    frac = 1.0 - n_par / (2.0 * meas.n)  # the fit absorbs its parameters' share of every residual
-    return float((np.sum(raw**2) - stated * frac) / (2 * k * frac))
+    L = np.linalg.inv(meas.W)
+    raw2 = np.einsum("mij,mj->mi", L, r) ** 2                   # (m, 2), m^2
+    s2 = np.diagonal(L @ np.swapaxes(L, -1, -2), axis1=1, axis2=2)  # stated per-axis variances
+
+    def excess_chi2(c):
+        return float(np.sum(raw2 / (s2 + c))) - dof
+
+    lo = -(1.0 - MIN_NOISE_FRACTION**2) * float(s2.min())
+    hi = max(float(raw2.sum()), float(s2.max()))
+    if excess_chi2(lo) <= 0:
+        return lo
+    if excess_chi2(hi) >= 0:
+        return hi
+    for _ in range(60):  # bisection: the sum falls as c grows
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if excess_chi2(mid) > 0 else (lo, mid)
+    return 0.5 * (lo + hi)

@@ -45,6 +45,19 @@ LM_TOL = 1e-7
 # standard errors under independence (one-sided 1%: 2.33); then the
 # HAC sandwich replaces the independent-error covariance.
 AUTOCORR_Z = 2.33
+# An inter-frame codec's error (H.264: motion-compensated prediction from
+# earlier frames) is shared by neighbouring frames: the correlation of its
+# per-axis error between frames k apart, rho(k) = a exp(-k / tau_long) +
+# b exp(-k / tau) for k >= 1.  Measured with the shots of
+# benchmarks/h264_honesty.py --seed 0 (12 shots, libx264 CRF 20 veryfast,
+# 120 fps, noise 3, 250 px/m; the truth sidecar's projected centres
+# against the tracker's, moving frames, the tracker's stated variance
+# taken off), fit to lags 1-200 weighted by their pair counts: a = 0.27,
+# tau_long = 118 frames, b = 0.10, tau = 7 frames (lags 1, 10, 40, 100,
+# 200: 0.31, 0.27, 0.17, 0.10, 0.02).  A fit with a constant instead of
+# the slow part (lags 1-60 only) gave too narrow intervals: a constant is
+# absorbed by x0, a drift over a second is not.
+INTER_CODEC_ACF = (0.27, 0.10, 7.0, 118.0)
 # Gauss-Legendre nodes for averaging the model over the exposure: exact for
 # the (quadratic) motion within a phase.
 _GL_T, _GL_W = np.polynomial.legendre.leggauss(3)
@@ -212,7 +225,8 @@ def fit_models(meas: Measurements, params: BallParams, start, exposure_s: float 
     return full, roll
 
 
-def slip_lr(full: ModelFit, roll: ModelFit, meas: Measurements | None = None) -> float:
+def slip_lr(full: ModelFit, roll: ModelFit, meas: Measurements | None = None,
+            codec: CodecCorrelation | None = None) -> float:
     """Likelihood-ratio statistic of free slip against rolling from the strike.
 
     The chi-square difference, in the residuals' own scale when they are
@@ -225,7 +239,14 @@ def slip_lr(full: ModelFit, roll: ModelFit, meas: Measurements | None = None) ->
     slip); fit.decide holds the threshold calibrated by simulation.
     """
     scale = max(1.0, full.chi2 / full.dof)
-    if meas is not None:
+    if meas is not None and codec is not None and codec.var > 0:
+        try:
+            base = np.linalg.inv(full.jac.T @ full.jac)
+            wide = codec_sandwich(full, meas, codec)
+            scale *= max(1.0, float(np.mean(np.diag(wide)[5:7] / np.diag(base)[5:7])))
+        except np.linalg.LinAlgError:
+            pass
+    elif meas is not None:
         rho, z = lag1_autocorrelation(meas, full.residuals)
         if z > AUTOCORR_Z:
             try:
@@ -273,15 +294,96 @@ def hac_covariance(jac, residuals, rho: float) -> np.ndarray:
     return A @ S @ A * (2 * m / max(2 * m - p, 1))
 
 
-def covariance(fit: ModelFit, meas: Measurements):
+@dataclass(frozen=True)
+class CodecCorrelation:
+    """An inter-frame codec's error shared between frames: its per-axis
+    variance ``var`` (m^2, measured from the first fit's residuals,
+    recover.measurements.codec_excess), the frame interval ``frame_dt``
+    (s) and its correlation ``acf = (a, b, tau, tau_long)`` (frames)
+    (:data:`INTER_CODEC_ACF`)."""
+
+    var: float
+    frame_dt: float
+    acf: tuple = INTER_CODEC_ACF
+
+
+def _codec_scores(J, meas: Measurements, acf, frame_dt: float) -> np.ndarray:
+    """``J^T M J`` with ``M`` the whitened measurements' covariance per unit
+    codec variance: ``W_i W_i^T`` on the diagonal, ``rho(k_ij) W_i W_j^T``
+    between single-frame measurements i != j (k_ij frames apart, from
+    their times; rests are independent of the rest)."""
+    m, p = len(J) // 2, J.shape[1]
+    g = meas.group[meas.used]
+    t_m = np.bincount(g, weights=meas.t_used, minlength=m) / np.bincount(g, minlength=m)
+    G = np.einsum("mba,mbp->map", meas.W, J.reshape(m, 2, p))  # W_i^T J_i
+    out = np.einsum("map,maq->pq", G, G)
+    single = meas.single
+    if single.sum() > 1 and frame_dt > 0:
+        a, b, tau, tau_long = acf
+        k = np.abs(t_m[single][:, None] - t_m[single][None, :]) / frame_dt
+        rho = a * np.exp(-k / tau_long) + b * np.exp(-k / tau)
+        np.fill_diagonal(rho, 0.0)
+        Gs = G[single]
+        out = out + sum(Gs[:, d, :].T @ rho @ Gs[:, d, :] for d in (0, 1))
+    return out
+
+
+def correlated_codec_var(fit: ModelFit, meas: Measurements, frame_dt: float,
+                         acf=INTER_CODEC_ACF) -> float:
+    """Per-axis variance (m^2) of an inter-frame codec's error, from a fit's
+    residuals (measurements without the codec's share): solves
+    ``E[r^T r] = (2m - p) + var tr((I - H) M)`` (``H`` the fit's hat matrix,
+    ``M`` as in :func:`_codec_scores`).  recover.measurements.codec_excess
+    assumes independent errors; a correlated error is partly absorbed by
+    the fit (measured on H.264: that one came out 40% low).  Signed."""
+    J = np.asarray(fit.jac, dtype=float)
+    m, p = len(J) // 2, J.shape[1]
+    if 2 * m <= p + 2:
+        return 0.0
+    A = np.linalg.pinv(J.T @ J)  # the hat matrix's trace needs no inverse (slip undetermined: singular)
+    trM = float(np.einsum("mab,mab->", meas.W, meas.W))
+    tr_free = trM - float(np.trace(A @ _codec_scores(J, meas, acf, frame_dt)))
+    if not tr_free > 0:
+        return 0.0
+    return float((fit.chi2 - (2 * m - p)) / tr_free)
+
+
+def codec_sandwich(fit: ModelFit, meas: Measurements, codec: CodecCorrelation) -> np.ndarray:
+    """The parameters' covariance when the codec's error is correlated
+    between frames: ``A J^T C J A`` with ``A = (J^T J)^-1`` and ``C`` the
+    whitened measurements' covariance: the identity (the stated errors,
+    the codec's variance included) plus ``var rho(k_ij) W_i W_j^T`` between
+    single-frame measurements i != j (:func:`_codec_scores` less its
+    diagonal, already in the stated errors).  Raises LinAlgError when
+    ``J^T J`` is singular."""
+    J = np.asarray(fit.jac, dtype=float)
+    A = np.linalg.inv(J.T @ J)
+    if codec.var <= 0 or codec.frame_dt <= 0:
+        return A
+    m, p = len(J) // 2, J.shape[1]
+    G = np.einsum("mba,mbp->map", meas.W, J.reshape(m, 2, p))
+    off = _codec_scores(J, meas, codec.acf, codec.frame_dt) - np.einsum("map,maq->pq", G, G)
+    return A @ (J.T @ J + codec.var * off) @ A
+
+
+def covariance(fit: ModelFit, meas: Measurements, codec: CodecCorrelation | None = None):
     """The parameters' covariance: ``(J^T J)^-1`` scaled by the reduced
     chi-square when that exceeds 1, or, when the residuals show lag-1
     autocorrelation, the HAC sandwich (its variances never below the
     former's: a sandwich estimated from one track can come out small by
-    chance).  Returns ``(cov, hac, rho1)``; raises LinAlgError when the
-    information matrix is singular."""
+    chance).  With an inter-frame codec (``codec`` given, its measured
+    variance positive), the sandwich of its correlation model
+    (:func:`codec_sandwich`) instead: that error is shared over tens of
+    frames and much of it looks like the motion, so the residuals cannot
+    show it (H.264 at CRF 20: residual lag-1 autocorrelation 0.0-0.2 while
+    the errors' long-run variance is about 6 times the per-frame one).
+    ``hac`` is then True.  Returns ``(cov, hac, rho1)``; raises LinAlgError
+    when the information matrix is singular."""
     rho, z = lag1_autocorrelation(meas, fit.residuals)
-    base = np.linalg.inv(fit.jac.T @ fit.jac) * max(1.0, fit.chi2 / fit.dof)
+    scale = max(1.0, fit.chi2 / fit.dof)
+    base = np.linalg.inv(fit.jac.T @ fit.jac) * scale
+    if codec is not None and codec.var > 0:
+        return codec_sandwich(fit, meas, codec) * scale, True, rho
     if not z > AUTOCORR_Z:
         return base, False, rho
     hac = hac_covariance(fit.jac, fit.residuals, rho)
@@ -290,7 +392,8 @@ def covariance(fit: ModelFit, meas: Measurements):
     return hac * d[:, None] * d[None, :], True, rho
 
 
-def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool) -> MLEResult:
+def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
+           codec: CodecCorrelation | None = None) -> MLEResult:
     """The MLEResult of the chosen model: standard errors, and ``degenerate``
     when v0 or w0 is not determined (``sliding_ended`` False: w0 withheld)."""
     rolling = fit.rolling
@@ -303,7 +406,7 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool) ->
                          f"{np.sqrt(chi2 / dof):.0f} times the stated noise): the fit stopped far "
                          "from the shot, or the track is not one shot", chi2=float(chi2), dof=int(dof))
     try:
-        cov, hac, rho = covariance(fit, meas)
+        cov, hac, rho = covariance(fit, meas, codec)
     except np.linalg.LinAlgError:
         return MLEResult("degenerate", "the track does not determine the shot (singular information matrix)")
     ph = phases(shot, pr)

@@ -16,6 +16,17 @@ from cuespin.render.draw import disc_coverage
 _STEP_PX = 1e-3
 
 
+
+def _window(uv_nodes, radius_px: float):
+    """The blur nodes' mean centre, their offsets from it, and the square
+    window (top-left column and row, side in px) that holds the smeared ball
+    with 3 px to spare."""
+    uv_nodes = np.asarray(uv_nodes, dtype=float)
+    centre = uv_nodes.mean(axis=0)
+    offs = uv_nodes - centre
+    half = int(np.ceil(radius_px + np.abs(offs).max() + 3))
+    return centre, offs, int(round(centre[0])) - half, int(round(centre[1])) - half, 2 * half + 1
+
 def centroid_crb(uv_nodes: np.ndarray, radius_px: float, ball_grey: float, felt: np.ndarray,
                  sigma: float, fit_blur: bool) -> np.ndarray:
     """Per-axis standard-deviation bound (px) for the centre of one frame's ball.
@@ -41,12 +52,7 @@ def centroid_crb(uv_nodes: np.ndarray, radius_px: float, ball_grey: float, felt:
         ``sqrt`` of the diagonal of the inverse Fisher information for
         ``(u, v)`` (px).
     """
-    uv_nodes = np.asarray(uv_nodes, dtype=float)
-    centre = uv_nodes.mean(axis=0)
-    offs = uv_nodes - centre
-    half = int(np.ceil(radius_px + np.abs(offs).max() + 3))
-    u0, v0 = int(round(centre[0])) - half, int(round(centre[1])) - half
-    n = 2 * half + 1
+    centre, offs, u0, v0, n = _window(uv_nodes, radius_px)
     contrast = (ball_grey - np.asarray(felt, dtype=float)[v0:v0 + n, u0:u0 + n]).ravel()
 
     taus = (np.arange(len(offs)) + 0.5) / len(offs) - 0.5  # the nodes are in time order
@@ -95,12 +101,7 @@ def centroid_crb_colour(uv_nodes: np.ndarray, radius_px: float, ball_bgr, felt_b
     -------
     ndarray, shape (2,)
     """
-    uv_nodes = np.asarray(uv_nodes, dtype=float)
-    centre = uv_nodes.mean(axis=0)
-    offs = uv_nodes - centre
-    half = int(np.ceil(radius_px + np.abs(offs).max() + 3))
-    u0, v0 = int(round(centre[0])) - half, int(round(centre[1])) - half
-    n = 2 * half + 1
+    centre, offs, u0, v0, n = _window(uv_nodes, radius_px)
     felt = np.asarray(felt_bgr, dtype=float)[v0:v0 + n, u0:u0 + n].reshape(-1, 3)
     contrast = np.asarray(ball_bgr, float)[None, :] - felt            # (m, 3)
     taus = (np.arange(len(offs)) + 0.5) / len(offs) - 0.5

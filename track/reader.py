@@ -24,6 +24,13 @@ from cuespin.videoio import quiet_native_stderr
 # Codecs that store every pixel exactly (FFmpeg's names).
 LOSSLESS_CODECS = {"ffv1", "huffyuv", "ffvhuff", "png", "rawvideo", "utvideo", "magicyuv", "qtrle",
                    "zlib", "r210", "v210", "libx264rgb"}
+# Lossy codecs that code every frame on its own (FFmpeg's names and the
+# FourCCs OpenCV reports): their error is not carried from frame to frame.
+# Any other lossy codec (h264, hevc, vp9, av1, mpeg4...) predicts frames from
+# others, and a moving ball's error is shared by neighbouring frames
+# (recover.mle.INTER_CODEC_ACF, measured on H.264).
+INTRA_CODECS = {"mjpeg", "mjpg", "jpeg", "mjpa", "mjpb", "jpeg2000", "mjp2", "prores", "apch", "apcn",
+                "dnxhd", "avdn", "dvvideo", "dvsd"}
 GREY_PIX_FMTS = {"gray", "gray8", "y8", "gray10le", "gray12le", "gray16le", "gray16be", "monow", "monob"}
 
 # A grey video's frames still decode to BGR when its stream is yuv (MJPG
@@ -70,6 +77,12 @@ class VideoInfo:
     lossless: bool
     time_base: Fraction | None
     backend: str
+
+    @property
+    def inter_frame(self) -> bool:
+        """A lossy codec that predicts frames from other frames (not in
+        :data:`INTRA_CODECS`): its error is shared between frames."""
+        return not self.lossless and self.codec.strip().lower() not in INTRA_CODECS
 
 
 def _check_path(path) -> Path:

@@ -25,6 +25,7 @@ from cuespin.physics.scene import Scene
 from cuespin.videoio import quiet_native_stderr
 from cuespin.track.background import Background, FeltAccumulator, learn_background
 from cuespin.track.colour import GREY, Projection, learn_projection
+from cuespin.track.projection import projected_centres
 from cuespin.track.model import refit_shift
 from cuespin.track.reader import FrameSource, ThreadedFrames, TrackError, frame_times, probe
 from cuespin.track.tracker import OK, STATUS_TEXT, BallTracker, TrackerConfig
@@ -75,6 +76,9 @@ class TrackResult:
         The video's codec is lossless.  A lossy codec's error is a function
         of the image, so frames of a resting ball share it: they are one
         measurement, not many.
+    inter_frame : bool
+        The lossy codec predicts frames from others (H.264...): a moving
+        ball's error is shared between neighbouring frames too.
     cov_px : ndarray, shape (n, 2, 2)
         Covariance of ``uv`` (px^2) by the sandwich over the fit; convert to
         metres with ``scene.camera.cov_to_table(xy, cov_px)``.
@@ -96,6 +100,7 @@ class TrackResult:
     error: str = ""
     seconds: dict = field(default_factory=dict)
     lossless: bool = False
+    inter_frame: bool = False
     cov_px: np.ndarray | None = None
     projection: Projection = GREY
     camera: object = None
@@ -326,13 +331,15 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         why = (" (the ball never moved, or is not in view; do physics.R and the camera "
                "match the video?)")
         error = f"no ball found in any of {k} frames" + (f"; {error}" if error else why)
+    if ok.any():
+        uv[ok] = projected_centres(cam, uv[ok], R)  # the centre's image, not the silhouette's
     xy = np.full_like(uv, np.nan)
     xy[ok] = cam.to_table(uv[ok])
     se = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0, None))
     return TrackResult(t=frame_times(path, info, k, cam.fps), uv=uv, xy=xy, ok=ok, status=status,
                        stderr_px=se, radius_px=radius_px, background=bg, error=error,
                        seconds={"background": t_bg, "track": t_track}, lossless=info.lossless,
-                       cov_px=cov, projection=proj, camera=cam)
+                       inter_frame=info.inter_frame, cov_px=cov, projection=proj, camera=cam)
 
 
 def write_track_csv(path, result: TrackResult) -> None:
