@@ -8,6 +8,7 @@ arrays in, dataclasses out (recover.api turns them into the JSON object).
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -161,7 +162,10 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         chosen = seg.unended
     paper = None
     if run_paper:
-        paper = paper_from_segments(chosen, t, xy, params, sigma, frame_dt,
+        # The paper's errors are propagated from the same per-frame noise the
+        # fit weights by: the tracker's, with the codec's measured share.
+        paper_sigma = math.sqrt(sigma**2 + max(codec_var, 0.0))
+        paper = paper_from_segments(chosen, t, xy, params, paper_sigma, frame_dt,
                                     strike_in_view(t, chosen.t0), lossless)
     return Estimate(chosen, paper, mle, meas, codec_var, decisions,
                     {"fit": t_fit, "recover": time.perf_counter() - clock})
