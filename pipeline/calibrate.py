@@ -901,7 +901,13 @@ def _with_perturbed(cal: Calibration, size, table: Table, **kw) -> Calibration:
     kw.pop("corner_sigma_px", None)
     cams = perturbed_cameras(cal.corners_px, cal.corner_sigma_px, size, table,
                              corner_sigma_px=cal.corner_sigma_px, **kw)
-    return replace(cal, perturbed=tuple(cams))
+    notes = list(cal.notes)
+    if len(cams) < 8:
+        # A corner whose move leaves no plausible camera drops its term: the
+        # calibration's share of the errors is then understated.
+        notes.append(f"only {len(cams)} of the 8 corner-moved cameras could be solved; the calibration's "
+                     f"share of the recovery's errors is understated (click the corners again)")
+    return replace(cal, perturbed=tuple(cams), notes=notes)
 
 
 # --------------------------------------------------------------------------- synthetic frames
