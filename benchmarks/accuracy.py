@@ -54,7 +54,7 @@ def one_shot(args):
         n += 1
     t_decode = time.perf_counter() - t
     cap.release()
-    # As pipeline.cli.run_recover does, keeping the fit's own measurements
+    # As pipeline.run.run_recover does, keeping the fit's own measurements
     # for the bound.
     tr = track_video(video, scene, TrackerConfig())
     cam = scene.camera

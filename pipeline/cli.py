@@ -18,7 +18,7 @@ from pathlib import Path
 
 from cuespin.pipeline.io import InputError
 # The library side lives in pipeline.run; importable from here for older callers.
-from cuespin.pipeline.run import format_recover, run_recover  # noqa: F401
+from cuespin.pipeline.run import format_recover, run_recover
 
 DEMO_SEED = 20261122
 
