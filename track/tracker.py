@@ -35,8 +35,16 @@ OUTLIER_SIGMAS = 5.0
 # Frames whose two fits (disc and shaded) decide the look (config.look "auto").
 LOOK_FRAMES = 12
 # The shaded look is kept when its pooled residual reduction exceeds the
-# chi-square quantile at this probability (3 parameters per frame).
+# chi-square quantile at this probability (3 parameters per frame)...
 LOOK_P = 1e-3
+# ...and when it moves the centre: the mean shift between the disc and the
+# shaded fits exceeds this many of the disc fit's stated errors.  A lossy
+# codec's misfit on a uniform ball passes the chi-square test on its own
+# (MJPG, yellow on green, noise 3: 536 on 36 dof) but moves the centre by
+# only 0.45 of its error, where shading moves it by several; the shaded
+# look's three extra parameters per frame then cost 2-3x the iterations
+# and widen every centre's error for nothing.
+LOOK_SHIFT_SE = 1.0
 
 
 @dataclass(frozen=True)
@@ -87,6 +95,29 @@ class Observation:
         if self.cov is None:
             self.cov = np.diag(np.square(self.stderr)) if np.all(np.isfinite(self.stderr)) \
                 else np.full((2, 2), np.nan)
+
+
+def look_moves_centre(shift: np.ndarray, cov: np.ndarray) -> bool:
+    """Whether the shaded look moves the centre enough to be worth fitting.
+
+    Parameters
+    ----------
+    shift : ndarray, shape (n, 2)
+        Disc fit's centre minus the shaded fit's, per frame (px).
+    cov : ndarray, shape (n, 2, 2)
+        The disc fit's covariance of its centre per frame (px^2).
+
+    Returns
+    -------
+    bool
+        The mean shift, in the mean stated error (Mahalanobis), exceeds
+        ``LOOK_SHIFT_SE``.
+    """
+    mean, c = np.mean(shift, axis=0), np.mean(cov, axis=0)
+    try:
+        return bool(mean @ np.linalg.solve(c, mean) > LOOK_SHIFT_SE**2)
+    except np.linalg.LinAlgError:
+        return True
 
 
 def _lost(status: int) -> Observation:
@@ -299,12 +330,13 @@ class BallTracker:
         if not d:
             return
         dof = patch.size - 6
-        self._look_votes.append((d.rms**2 * (dof + 3), f_shaded.rms**2 * dof, dof))
+        self._look_votes.append((d.rms**2 * (dof + 3), f_shaded.rms**2 * dof, dof,
+                                 d.c - f_shaded.c, d.cov))
         if len(self._look_votes) >= LOOK_FRAMES:
-            rss_d, rss_s, dofs = map(np.array, zip(*self._look_votes))
+            rss_d, rss_s, dofs, shift, cov = map(np.array, zip(*self._look_votes))
             s2 = rss_s.sum() / dofs.sum()
             stat = (rss_d - rss_s).sum() / s2
-            self.shade = bool(stat > chdtri(3 * len(rss_d), LOOK_P))
+            self.shade = bool(stat > chdtri(3 * len(rss_d), LOOK_P)) and look_moves_centre(shift, cov)
 
     def _refine(self, frame, loc, blur) -> Observation:
         r = self.r
