@@ -97,6 +97,26 @@ class Observation:
                 else np.full((2, 2), np.nan)
 
 
+def look_vote(disc, shaded, n_pixels: int) -> tuple:
+    """One frame's vote on the look from its disc and shaded fits
+    (:class:`cuespin.track.model.DiscFit`) of a patch of ``n_pixels``."""
+    dof = n_pixels - 6
+    return (disc.rms**2 * (dof + 3), shaded.rms**2 * dof, dof, disc.c - shaded.c, disc.cov)
+
+
+def shaded_look(votes: list) -> bool:
+    """The look decision from :func:`look_vote`'s votes: the shaded look
+    explains the frames significantly better (pooled chi-square at
+    ``LOOK_P``) and moves the centre (:func:`look_moves_centre`)."""
+    # scipy.special, not scipy.stats: importing scipy.stats costs ~1.5 s
+    # (measured), more than tracking a short shot; chdtri(df, p) is chi2.isf(p, df).
+    from scipy.special import chdtri
+
+    rss_d, rss_s, dofs, shift, cov = map(np.array, zip(*votes))
+    stat = (rss_d - rss_s).sum() / (rss_s.sum() / dofs.sum())
+    return bool(stat > chdtri(3 * len(rss_d), LOOK_P)) and look_moves_centre(shift, cov)
+
+
 def look_moves_centre(shift: np.ndarray, cov: np.ndarray) -> bool:
     """Whether the shaded look moves the centre enough to be worth fitting.
 
@@ -322,21 +342,12 @@ class BallTracker:
     def _learn_look(self, patch, felt, u0, v0, f_shaded, r, G0, blur, fit_blur):
         """One frame's vote on the look: the disc fit's residual sum against
         the shaded one's; decided once ``LOOK_FRAMES`` frames have voted."""
-        # scipy.special, not scipy.stats: importing scipy.stats costs ~1.5 s
-        # (measured), more than tracking a short shot; chdtri(df, p) is chi2.isf(p, df).
-        from scipy.special import chdtri
-
         d = fit_disc(patch, felt, u0, v0, f_shaded.c, r, G0, b0=blur, fit_blur=fit_blur)
         if not d:
             return
-        dof = patch.size - 6
-        self._look_votes.append((d.rms**2 * (dof + 3), f_shaded.rms**2 * dof, dof,
-                                 d.c - f_shaded.c, d.cov))
+        self._look_votes.append(look_vote(d, f_shaded, patch.size))
         if len(self._look_votes) >= LOOK_FRAMES:
-            rss_d, rss_s, dofs, shift, cov = map(np.array, zip(*self._look_votes))
-            s2 = rss_s.sum() / dofs.sum()
-            stat = (rss_d - rss_s).sum() / s2
-            self.shade = bool(stat > chdtri(3 * len(rss_d), LOOK_P)) and look_moves_centre(shift, cov)
+            self.shade = shaded_look(self._look_votes)
 
     def _refine(self, frame, loc, blur) -> Observation:
         r = self.r
