@@ -403,8 +403,16 @@ def refit_shift(felt_old: np.ndarray, felt_new: np.ndarray, u0: int, v0: int, c,
     c, b = np.asarray(c, float), np.asarray(b, float)
     felt_old = np.asarray(felt_old, np.float64)
     felt_new = np.asarray(felt_new, np.float64)
-    _, Jo = streak_model(c, b, G, felt_old, r, u0, v0, taus, shade, blur_cols=fit_blur)
-    _, Jn = streak_model(c, b, G, felt_new, r, u0, v0, taus, shade, blur_cols=fit_blur)
+    if shade is None:
+        # The disc's Jacobian is the coverage's derivatives times the
+        # contrast G - felt (and the coverage): one evaluation serves both felts.
+        _, D = streak_model(c, b, 1.0, np.zeros_like(felt_old), r, u0, v0, taus, blur_cols=fit_blur)
+        Jo, Jn = D.copy(), D
+        Jo[:, :4] *= (G - felt_old).reshape(-1, 1)
+        Jn[:, :4] *= (G - felt_new).reshape(-1, 1)
+    else:
+        _, Jo = streak_model(c, b, G, felt_old, r, u0, v0, taus, shade, blur_cols=fit_blur)
+        _, Jn = streak_model(c, b, G, felt_new, r, u0, v0, taus, shade, blur_cols=fit_blur)
     cov = Jo[:, 4]
     cols = [0, 1, 2, 3, 4] if fit_blur else [0, 1, 4]
     if shade is not None:
