@@ -3,8 +3,8 @@
 Each decision pools ``LOOK_FRAMES`` frames, as the tracker does; 34
 decisions (408 patches) per kind of ball.  A uniform ball must be fitted as
 a disc whether its image is exact or smeared by a codec (misfit that the
-chi-square test alone takes for shading); a shaded ball must be fitted as
-shaded.
+chi-square test alone takes for shading: on a lossy codec the shaded
+look must also move the centre); a shaded ball must be fitted as shaded.
 """
 
 import cv2
@@ -37,7 +37,7 @@ def patch(rng, kind):
     return img, felt, u0, v0, c
 
 
-def decisions(kind, seed=0):
+def decisions(kind, seed=0, lossless=False):
     rng = np.random.default_rng(seed)
     out = []
     for _ in range(N_DECISIONS):
@@ -49,18 +49,25 @@ def decisions(kind, seed=0):
             d = fit_disc(img, felt, u0, v0, s.c, R, BALL)
             if s and d:
                 votes.append(look_vote(d, s, img.size))
-        out.append(shaded_look(votes))
+        out.append(shaded_look(votes, lossless))
     return np.array(out)
 
 
 @pytest.mark.parametrize("kind", ["exact", "smeared"])
-def test_uniform_ball_is_fitted_as_a_disc(kind):
+def test_uniform_ball_on_a_lossy_codec_is_fitted_as_a_disc(kind):
     # The pooled shift of 12 frames has 1/12 of one frame's variance: a
     # decision against it at 1 stated error is a > 3-sigma event, so any
     # false "shaded" beyond the binomial margin of ~0 (one in 34) is a bug.
     assert decisions(kind).sum() <= 1
 
 
-def test_shaded_ball_is_fitted_as_shaded():
+@pytest.mark.parametrize("lossless", [False, True])
+def test_shaded_ball_is_fitted_as_shaded(lossless):
     # Its lit side moves the disc fit's centre by several stated errors.
-    assert decisions("shaded").mean() >= 1 - 1 / N_DECISIONS
+    assert decisions("shaded", lossless=lossless).mean() >= 1 - 1 / N_DECISIONS
+
+
+def test_uniform_ball_on_lossless_video_is_fitted_as_a_disc():
+    # Without a codec the chi-square test alone decides: at LOOK_P = 0.1%
+    # per decision, none of 34 is expected.
+    assert decisions("exact", lossless=True).sum() <= 1

@@ -37,13 +37,16 @@ LOOK_FRAMES = 12
 # The shaded look is kept when its pooled residual reduction exceeds the
 # chi-square quantile at this probability (3 parameters per frame)...
 LOOK_P = 1e-3
-# ...and when it moves the centre: the mean shift between the disc and the
-# shaded fits exceeds this many of the disc fit's stated errors.  A lossy
-# codec's misfit on a uniform ball passes the chi-square test on its own
-# (MJPG, yellow on green, noise 3: 536 on 36 dof) but moves the centre by
-# only 0.45 of its error, where shading moves it by several; the shaded
-# look's three extra parameters per frame then cost 2-3x the iterations
-# and widen every centre's error for nothing.
+# ...and, on a lossy codec, when it moves the centre: the mean shift between
+# the disc and the shaded fits exceeds this many of the disc fit's stated
+# errors.  A lossy codec's misfit on a uniform ball passes the chi-square
+# test on its own (MJPG, yellow on green, noise 3: 536 on 36 dof) but moves
+# the centre by only 0.45 of its error, where shading moves it by several;
+# the shaded look's three extra parameters per frame then cost 2-3x the
+# iterations and widen every centre's error for nothing.  Lossless video
+# has no codec misfit, and there the test alone decides: on one realistic
+# FFV1 render the shading moved the resting ball's centre (the frames that
+# vote) by under one error but the moving ball's by three (measured).
 LOOK_SHIFT_SE = 1.0
 
 
@@ -104,17 +107,19 @@ def look_vote(disc, shaded, n_pixels: int) -> tuple:
     return (disc.rms**2 * (dof + 3), shaded.rms**2 * dof, dof, disc.c - shaded.c, disc.cov)
 
 
-def shaded_look(votes: list) -> bool:
+def shaded_look(votes: list, lossless: bool = False) -> bool:
     """The look decision from :func:`look_vote`'s votes: the shaded look
     explains the frames significantly better (pooled chi-square at
-    ``LOOK_P``) and moves the centre (:func:`look_moves_centre`)."""
+    ``LOOK_P``) and, unless the video is ``lossless``, moves the centre
+    (:func:`look_moves_centre`)."""
     # scipy.special, not scipy.stats: importing scipy.stats costs ~1.5 s
     # (measured), more than tracking a short shot; chdtri(df, p) is chi2.isf(p, df).
     from scipy.special import chdtri
 
     rss_d, rss_s, dofs, shift, cov = map(np.array, zip(*votes))
     stat = (rss_d - rss_s).sum() / (rss_s.sum() / dofs.sum())
-    return bool(stat > chdtri(3 * len(rss_d), LOOK_P)) and look_moves_centre(shift, cov)
+    better = bool(stat > chdtri(3 * len(rss_d), LOOK_P))
+    return better and (lossless or look_moves_centre(shift, cov))
 
 
 def look_moves_centre(shift: np.ndarray, cov: np.ndarray) -> bool:
@@ -164,11 +169,14 @@ class BallTracker:
     max_step_px : float
         Farthest the ball can move in one frame (px): a blob found further
         from the last centre, a few frames on, is not the ball.
+    lossless : bool
+        The video's codec is lossless (no codec misfit: see ``LOOK_SHIFT_SE``).
     """
 
     def __init__(self, background: Background, radius_px: float, exposure_frames: float,
                  config: TrackerConfig = TrackerConfig(), projection: Projection = GREY,
-                 search_mask: np.ndarray | None = None, max_step_px: float = np.inf):
+                 search_mask: np.ndarray | None = None, max_step_px: float = np.inf,
+                 lossless: bool = False):
         if config.refine not in REFINERS:
             raise ValueError(f"refine must be one of {REFINERS}, got {config.refine!r}")
         self.bg = background
@@ -185,6 +193,7 @@ class BallTracker:
         self.H, self.W = background.image.shape
         self.mask = search_mask
         self.max_step_px = float(max_step_px)
+        self.lossless = bool(lossless)
         # The projected window of the last converged fit, for the felt average.
         self.last_patch: tuple | None = None
         self.history: list[tuple[int, np.ndarray]] = []
@@ -347,7 +356,7 @@ class BallTracker:
             return
         self._look_votes.append(look_vote(d, f_shaded, patch.size))
         if len(self._look_votes) >= LOOK_FRAMES:
-            self.shade = shaded_look(self._look_votes)
+            self.shade = shaded_look(self._look_votes, self.lossless)
 
     def _refine(self, frame, loc, blur) -> Observation:
         r = self.r
