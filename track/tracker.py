@@ -15,7 +15,7 @@ import numpy as np
 from cuespin.track.background import DETECT_SIGMAS, Background, box_size
 from cuespin.track.colour import GREY, Projection
 from cuespin.track.model import blur_nodes, fit_disc, moments, streak_from_moments, streak_model
-from cuespin.track.outline import is_similarity, local_outline
+from cuespin.track.outline import OutlineCache, is_similarity
 
 OK, NO_BALL, PARTIAL, TWO_BLOBS, GONE, FIT_FAILED = 0, 1, 2, 3, 4, 5
 STATUS_TEXT = {OK: "ok", NO_BALL: "no ball", PARTIAL: "ball partly out of the frame",
@@ -152,9 +152,8 @@ class BallTracker:
         self.shade = {"disc": False, "shaded": True}.get(config.look)  # None: learning
         self._look_votes: list[tuple[float, float, int]] = []
         self._candidates: tuple = ()  # the last full search's blobs
-        # The camera whose outline the fit uses; None: the disc everywhere.
-        self.cam = None if is_similarity(camera) or R is None else camera
-        self.R = R
+        # The ball's outline from the camera; None: the disc everywhere.
+        self.outline_of = None if is_similarity(camera) or R is None else OutlineCache(camera, R, self.r)
         self.outline = None  # this frame's (Ellipse or None)
 
     # -- search ---------------------------------------------------------
@@ -322,7 +321,7 @@ class BallTracker:
     def _refine(self, frame, loc, blur) -> Observation:
         r = self.r
         # The ball's outline here, from the camera (None: the disc of r).
-        ol = self.outline = local_outline(self.cam, loc, self.R, r) if self.cam is not None else None
+        ol = self.outline = self.outline_of(loc) if self.outline_of is not None else None
         r_out = r if ol is None else max(r, ol.max_radius)  # what the patch must hold
         unknown_blur = blur is None
         if unknown_blur:  # size the patch for the longest blur the exposure allows
