@@ -119,3 +119,34 @@ def test_tilted_distorted_video_tracked_to_the_projected_centre(tmp_path):
     cov_m = cam.cov_to_table(res.xy[moving], res.cov_px[moving])
     z_m = err_m / np.sqrt(np.diagonal(cov_m, axis1=1, axis2=2))
     assert 0.7 < np.sqrt(np.mean(z_m**2)) < 1.3
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("height,tilt,k1", [(3.0, 0.0, -0.25), (2.25, 8.0, -0.12), (1.5, 15.0, 0.25)])
+def test_tracked_centre_in_table_metres_at_its_bound(tmp_path, height, tilt, k1):
+    """benchmarks/perspective.py's measure on one shot per camera: the tracked
+    centre's table-metre error against the silhouette's Cramer-Rao bound, and
+    against the tracker's stated errors (through cov_to_table)."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from perspective import bounds, scene_for
+
+    from cuespin.render import FrameRenderer, render_video
+    from cuespin.track.video import track_video
+
+    scene = scene_for(0, height, tilt, k1, 2.0)
+    video = tmp_path / "p.avi"
+    truth = render_video(scene, video)
+    res = track_video(video, scene)
+    moving = np.flatnonzero(res.ok & (truth.t > scene.truth.t0 + 0.02))
+    assert len(moving) >= 30, res.status_counts()
+    cam = scene.camera
+    true_xy = cam.to_table(truth.uvc[moving])
+    err = res.xy[moving] - true_xy
+    cov_m = cam.cov_to_table(res.xy[moving], res.cov_px[moving])
+    z = err / np.sqrt(np.diagonal(cov_m, axis1=1, axis2=2))
+    bound = np.sqrt(np.mean(np.diagonal(bounds(scene, FrameRenderer(scene), moving, true_xy), axis1=1, axis2=2)))
+    assert np.sqrt(np.mean(err**2)) < 1.3 * bound
+    assert 0.8 < np.sqrt(np.mean(z**2)) < 1.25

@@ -167,35 +167,42 @@ def ellipse_corner_area(x, y, Q):
     y = np.asarray(y, float)
     xc = np.clip(x, -wv, wv)
 
-    def seg(z):  # int_{-wv}^{z} s(X) dX / (hv wv) * hv ... as hv wv (xi s + asin xi)/2
+    def seg(z):  # hv int_{-wv}^{z} s(X) dX, less its constant (cancels in differences)
         xi = np.clip(z / wv, -1.0, 1.0)
         return 0.5 * hv * wv * (xi * np.sqrt(np.maximum(1.0 - xi * xi, 0.0)) + np.arcsin(xi))
 
-    def P(z, k):  # primitive of n X + k hv s(X) - y
-        return 0.5 * n * z * z - y * z + k * seg(z)
+    def poly(z):  # the rest of the primitive of n X + k hv s(X) - y
+        return (0.5 * n * z - y) * z
 
-    T1 = 2.0 * (seg(xc) + 0.25 * np.pi * hv * wv)
+    # The square roots and arcsines are taken on x alone or on y alone (each
+    # varies along one axis of a patch), never on their broadcast: a clipped
+    # argument's segment is the segment of whichever end it was clipped to.
+    Sx = seg(xc)
+    T1 = 2.0 * Sx + 0.5 * np.pi * hv * wv
     # Where the line at height y meets the ellipse (horizontal chord ends).
     eta = np.clip(y / hh, -1.0, 1.0)
     half = wh * np.sqrt(np.maximum(1.0 - eta * eta, 0.0))
     xl, xr = m * y - half, m * y + half
     above, below = y >= hh, y <= -hh
-    # Upper arc above y on [a2, b2]: ends at roots on the upper arc (y >= n x).
-    a2 = np.where(y >= n * xl, xl, -wv)
-    b2 = np.where(y >= n * xr, xr, wv)
-    a2 = np.where(below, -wv, np.where(above, wv, a2))
-    b2 = np.where(below, wv, np.where(above, wv, b2))
-    u2 = np.clip(xc, a2, np.maximum(a2, b2))
-    I2 = P(u2, 1.0) - P(a2, 1.0)
-    # Lower arc below y on [a3, b3]: ends at roots on the lower arc (y <= n x).
-    a3 = np.where(y <= n * xl, xl, -wv)
-    b3 = np.where(y <= n * xr, xr, wv)
-    a3 = np.where(above, -wv, np.where(below, wv, a3))
-    b3 = np.where(above, wv, np.where(below, wv, b3))
-    u3 = np.clip(xc, a3, np.maximum(a3, b3))
-    I3 = -(P(u3, -1.0) - P(a3, -1.0))
-    lower = P(xc, -1.0) - P(-wv, -1.0)
-    return T1 - I2 + lower + I3
+    out = np.full(np.shape(y), wv)
+
+    def interval(on_arc_l, on_arc_r, full, empty):
+        a = np.where(full, -wv, np.where(empty, out, np.where(on_arc_l, xl, -wv)))
+        b = np.where(full, wv, np.where(empty, out, np.where(on_arc_r, xr, wv)))
+        return a, np.maximum(a, b)
+
+    def part(a, b, k):  # int_a^{clip(xc, a, b)} (n X + k hv s(X) - y) dX
+        u = np.clip(xc, a, b)
+        Sa, Sb = seg(a), seg(b)
+        Su = np.where(xc <= a, Sa, np.where(xc >= b, Sb, Sx))
+        return poly(u) - poly(a) + k * (Su - Sa)
+
+    # Upper arc above y on [a2, b2]: ends at the roots on the upper arc (y >= n x).
+    a2, b2 = interval(y >= n * xl, y >= n * xr, below, above)
+    # Lower arc below y on [a3, b3]: ends at the roots on the lower arc (y <= n x).
+    a3, b3 = interval(y <= n * xl, y <= n * xr, above, below)
+    lower = poly(xc) - poly(-wv) - (Sx - seg(np.full(np.shape(y), -wv)))
+    return T1 - part(a2, b2, 1.0) + lower - part(a3, b3, -1.0)
 
 
 def ellipse_with_gradient(cu, cv, ell: Ellipse, u0: int, v0: int, w: int, h: int):
