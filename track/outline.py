@@ -21,10 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-# Vertices of the outline polygon whose area moments give the ellipse: a
-# polygon inscribed in the outline has moments (1 - O(1/n^2)) too small;
-# at 256 the ellipse's axes are 1e-4 of the radius short (0.0014 px on a
-# 14-px ball, a size error the fitted contrast absorbs; no centre shift).
+# Vertices of the outline polygon whose area moments give the ellipse (an
+# inscribed polygon's moments are too small by O(1/n^2), corrected by
+# _inscribed): 256 for one outline, half that for the grid of OutlineGrid.
 OUTLINE_VERTICES = 256
 # An outline whose ellipse departs from the tracker's disc by less than this
 # (px, on either semi-axis, and in orientation-weighted shear) is fitted as
@@ -67,12 +66,21 @@ class Ellipse:
         return float(1.0 / np.sqrt(np.linalg.eigvalsh(self.Qm)[0]))
 
 
+def _inscribed(n: int) -> float:
+    """Second moment per area of an ellipse over that of the n-gon inscribed in it at
+    equal steps of its parameter: ``3 / (2 + cos(2 pi / n))`` (the regular
+    n-gon's polar moment per area is ``(2 + cos(2 pi / n)) / 6`` of the
+    circumradius squared, the circle's 1/2; affine maps keep the ratio).  The
+    outline's vertices are at equal steps about the cone of rays, nearly so."""
+    return 3.0 / (2.0 + np.cos(2.0 * np.pi / n))
+
+
 def moment_ellipse(poly) -> tuple[np.ndarray, Ellipse]:
     """Centroid and the ellipse with the same area and second moments as a polygon.
 
     An ellipse ``d^T Q d <= 1`` has second central moments ``Q^-1 / 4`` per
-    unit area, so ``Q = (4 M)^-1`` with ``M`` the polygon's; for a polygon
-    inscribed in an ellipse, that ellipse (to ``O(1/n^2)``).
+    unit area, so ``Q = (4 M)^-1`` with ``M`` the polygon's, scaled up by
+    :func:`_inscribed` for a polygon inscribed in the outline.
 
     Parameters
     ----------
@@ -98,7 +106,7 @@ def moment_ellipse(poly) -> tuple[np.ndarray, Ellipse]:
     Ixy = ((p[:, 0] * q[:, 1] + 2 * p[:, 0] * p[:, 1] + 2 * q[:, 0] * q[:, 1] + q[:, 0] * p[:, 1])
            * cr).sum() / 24.0
     M = np.array([[Ixx / A - cx * cx, Ixy / A - cx * cy], [Ixy / A - cx * cy, Iyy / A - cy * cy]])
-    Q = np.linalg.inv(4.0 * M)
+    Q = np.linalg.inv(4.0 * M * _inscribed(len(p)))
     Q = 0.5 * (Q + Q.T)
     return c0 + np.array([cx, cy]), Ellipse(tuple(map(tuple, Q)))
 
@@ -252,16 +260,20 @@ def is_similarity(camera, rtol: float = 1e-9) -> bool:
     return bool(np.abs(AtA - s2 * np.eye(2)).max() <= rtol * s2)
 
 
-# The outline is recomputed once the ball has moved this far (px) from where
-# it was last computed.  Its axes change by ~1e-3 px per px of travel (1.5 m,
-# 15 degrees, k1 -0.25), and a wrong size or shear of a centrally symmetric
-# model moves no centre (the fit stays symmetric about the silhouette's
-# centre), so 4 px costs nothing measurable and saves ~90% of the camera calls.
-OUTLINE_REUSE_PX = 4.0
+# The outline is reused while the ball stays within this distance (px) of
+# where it was computed (a ball at rest), and the fit is redone with the
+# outline at its own centre when that lies further from where the outline
+# was computed (track.tracker).  The shape changes by up to 0.3% per px
+# (1.5 m, 15 degrees, k1 +0.25, near the camera), and a size error matters
+# though the model is symmetric: on a ball cut by its patch's edge, and in
+# the residual it leaves on every edge pixel (2% of Q put a 17-px ball
+# 0.15 px off on a cut patch and doubled its residual RMS; measured).
+OUTLINE_REUSE_PX = 0.25
+OUTLINE_REFIT_PX = 0.5
 
 
 class OutlineCache:
-    """:func:`local_outline` along a track, recomputed only every ``OUTLINE_REUSE_PX``.
+    """:func:`local_outline` along a track, reused while the ball stays put.
 
     Parameters
     ----------
@@ -274,12 +286,12 @@ class OutlineCache:
 
     def __init__(self, camera, R: float, r_disc: float):
         self.camera, self.R, self.r_disc = camera, float(R), float(r_disc)
-        self._at = None
+        self.at = None
         self._ell = None
 
     def __call__(self, uv):
         uv = np.asarray(uv, float)
-        if self._at is None or np.hypot(*(uv - self._at)) > OUTLINE_REUSE_PX:
-            self._at = uv.copy()
+        if self.at is None or np.hypot(*(uv - self.at)) > OUTLINE_REUSE_PX:
+            self.at = uv.copy()
             self._ell = local_outline(self.camera, uv, self.R, self.r_disc)
         return self._ell

@@ -15,7 +15,7 @@ import numpy as np
 from cuespin.track.background import DETECT_SIGMAS, Background, box_size
 from cuespin.track.colour import GREY, Projection
 from cuespin.track.model import blur_nodes, fit_disc, moments, streak_from_moments, streak_model
-from cuespin.track.outline import OutlineCache, is_similarity
+from cuespin.track.outline import OUTLINE_REFIT_PX, OutlineCache, is_similarity
 
 OK, NO_BALL, PARTIAL, TWO_BLOBS, GONE, FIT_FAILED = 0, 1, 2, 3, 4, 5
 STATUS_TEXT = {OK: "ok", NO_BALL: "no ball", PARTIAL: "ball partly out of the frame",
@@ -318,7 +318,7 @@ class BallTracker:
             stat = (rss_d - rss_s).sum() / s2
             self.shade = bool(stat > chdtri(3 * len(rss_d), LOOK_P))
 
-    def _refine(self, frame, loc, blur) -> Observation:
+    def _refine(self, frame, loc, blur, recentre: bool = True) -> Observation:
         r = self.r
         # The ball's outline here, from the camera (None: the disc of r).
         ol = self.outline = self.outline_of(loc) if self.outline_of is not None else None
@@ -355,6 +355,13 @@ class BallTracker:
                              outline=ol)
             if not f:
                 return _lost(FIT_FAILED)
+            if recentre and ol is not None and np.hypot(*(f.c - self.outline_of.at)) > OUTLINE_REFIT_PX:
+                # Fitted away from where its outline was taken (a ball larger
+                # than the search's box): again with the outline there, on a
+                # patch centred there.
+                again = self._refine(frame, f.c, f.b, recentre=False)
+                if again.status == OK:
+                    return again
             if self.shade is None:
                 self._learn_look(patch, felt, u0, v0, f, r, G0, blur, fit_blur)
             c, se, cov = f.c, f.stderr, f.cov
