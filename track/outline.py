@@ -3,8 +3,9 @@
 Through a tilted camera the ball's image is a sphere's silhouette: an exact
 conic for a pinhole (the cone of rays tangent to the sphere cut by the image
 plane), through a lens nearly one.  Its size and shape vary across the
-image, so one disc at the image-centre scale misfits it (measured: centre
-RMS 0.55 px and stated errors 4.3x too small at 1.5 m, 15 degrees).  Here
+image, so one disc at the image-centre scale misfits it (measured,
+benchmarks/perspective.py: centre RMS 0.43-1.4 px, 200-490 times the bound,
+at 1.5 m and 15 degrees; the ellipse: 0.002 px, within 1.1 of the bound).  Here
 the camera gives the outline at the ball's predicted table position
 (:meth:`~cuespin.physics.camera.Camera.ball_outline`), an ellipse with the
 same area moments stands for it, and :func:`ellipse_with_gradient` gives
