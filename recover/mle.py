@@ -297,8 +297,9 @@ def hac_covariance(jac, residuals, rho: float) -> np.ndarray:
 @dataclass(frozen=True)
 class CodecCorrelation:
     """An inter-frame codec's error shared between frames: its per-axis
-    variance ``var`` (m^2, measured from the first fit's residuals,
-    recover.measurements.codec_excess), the frame interval ``frame_dt``
+    variance ``var`` (px^2 through the measurements' ``px_to_m``, else m^2;
+    measured from the first fit's residuals, :func:`correlated_codec_var`),
+    the frame interval ``frame_dt``
     (s) and its correlation ``acf = (a, b, tau, tau_long)`` (frames)
     (:data:`INTER_CODEC_ACF`)."""
 
@@ -307,15 +308,26 @@ class CodecCorrelation:
     acf: tuple = INTER_CODEC_ACF
 
 
+def _codec_G(J, meas: Measurements) -> np.ndarray:
+    """``(W_i F_i)^T J_i`` per measurement, shape (m, 2, p): the whitened
+    Jacobian seen from the codec's pixel error (``F_i`` its metres per pixel,
+    Measurements.codec_factor)."""
+    m, p = len(J) // 2, J.shape[1]
+    WF = meas.W @ meas.codec_factor()
+    return np.einsum("mba,mbp->map", WF, J.reshape(m, 2, p))
+
+
 def _codec_scores(J, meas: Measurements, acf, frame_dt: float) -> np.ndarray:
     """``J^T M J`` with ``M`` the whitened measurements' covariance per unit
-    codec variance: ``W_i W_i^T`` on the diagonal, ``rho(k_ij) W_i W_j^T``
-    between single-frame measurements i != j (k_ij frames apart, from
-    their times; rests are independent of the rest)."""
-    m, p = len(J) // 2, J.shape[1]
+    codec variance: ``W_i F_i F_i^T W_i^T`` on the diagonal,
+    ``rho(k_ij) W_i F_i F_j^T W_j^T`` between single-frame measurements
+    i != j (k_ij frames apart, from their times; rests are independent of
+    the rest); ``F_i`` carries the codec's pixel error to metres at that
+    measurement (Measurements.codec_factor)."""
+    m = len(J) // 2
     g = meas.group[meas.used]
     t_m = np.bincount(g, weights=meas.t_used, minlength=m) / np.bincount(g, minlength=m)
-    G = np.einsum("mba,mbp->map", meas.W, J.reshape(m, 2, p))  # W_i^T J_i
+    G = _codec_G(J, meas)
     out = np.einsum("map,maq->pq", G, G)
     single = meas.single
     if single.sum() > 1 and frame_dt > 0:
@@ -330,8 +342,9 @@ def _codec_scores(J, meas: Measurements, acf, frame_dt: float) -> np.ndarray:
 
 def correlated_codec_var(fit: ModelFit, meas: Measurements, frame_dt: float,
                          acf=INTER_CODEC_ACF) -> float:
-    """Per-axis variance (m^2) of an inter-frame codec's error, from a fit's
-    residuals (measurements without the codec's share): solves
+    """Per-axis variance (px^2 through the measurements' ``px_to_m``, else
+    m^2) of an inter-frame codec's error, from a fit's residuals
+    (measurements without the codec's share): solves
     ``E[r^T r] = (2m - p) + var tr((I - H) M)`` (``H`` the fit's hat matrix,
     ``M`` as in :func:`_codec_scores`).  recover.measurements.codec_excess
     assumes independent errors; a correlated error is partly absorbed by
@@ -341,7 +354,8 @@ def correlated_codec_var(fit: ModelFit, meas: Measurements, frame_dt: float,
     if 2 * m <= p + 2:
         return 0.0
     A = np.linalg.pinv(J.T @ J)  # the hat matrix's trace needs no inverse (slip undetermined: singular)
-    trM = float(np.einsum("mab,mab->", meas.W, meas.W))
+    WF = meas.W @ meas.codec_factor()
+    trM = float(np.einsum("mab,mab->", WF, WF))
     tr_free = trM - float(np.trace(A @ _codec_scores(J, meas, acf, frame_dt)))
     if not tr_free > 0:
         return 0.0
@@ -360,8 +374,7 @@ def codec_sandwich(fit: ModelFit, meas: Measurements, codec: CodecCorrelation) -
     A = np.linalg.inv(J.T @ J)
     if codec.var <= 0 or codec.frame_dt <= 0:
         return A
-    m, p = len(J) // 2, J.shape[1]
-    G = np.einsum("mba,mbp->map", meas.W, J.reshape(m, 2, p))
+    G = _codec_G(J, meas)
     off = _codec_scores(J, meas, codec.acf, codec.frame_dt) - np.einsum("map,maq->pq", G, G)
     return A @ (J.T @ J + codec.var * off) @ A
 

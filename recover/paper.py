@@ -273,9 +273,10 @@ def with_stderr(res: PaperResult, solve, x, C, params: BallParams) -> PaperResul
     return replace(res, stderr={"v0": se[0:2], "w0": se[2:4] / params.R})
 
 
-def path_shape(seg, xy, params: BallParams):
+def path_shape(seg, xy, params: BallParams, curved: bool | None = None):
     """The sliding path's shape (fit.conics.classify_path, started from the
-    segmentation's parabola), or None when fewer than 5 frames slide."""
+    segmentation's parabola; ``curved`` an earlier decision to keep), or
+    None when fewer than 5 frames slide."""
     from cuespin.fit.conics import classify_path
     from cuespin.physics.parabola import sliding_parabola
     from cuespin.recover.mle import initial_guess
@@ -287,11 +288,12 @@ def path_shape(seg, xy, params: BallParams):
         start = sliding_parabola(x0, v0, w0, params)
     except ValueError:
         start = None
-    return classify_path(np.asarray(xy)[seg.slide], start)
+    return classify_path(np.asarray(xy)[seg.slide], start, curved)
 
 
 def paper_from_segments(seg, t, xy, params: BallParams, sigma: float, frame_dt: float,
-                        strike_seen: bool = True, lossless: bool = True) -> PaperResult:
+                        strike_seen: bool = True, lossless: bool = True, curved: bool | None = None,
+                        near=None) -> PaperResult:
     """The paper's method on a segmented track (the segmentation the
     decisions chose): parabola or line by fit.decide.curved, the sliding
     time breaking ties, with the status and reason CONVENTIONS.md asks for.
@@ -312,7 +314,24 @@ def paper_from_segments(seg, t, xy, params: BallParams, sigma: float, frame_dt: 
     lossless : bool
         Passed on to the standard errors (a lossy codec's rest frames share
         one error).
+    curved : bool, optional
+        The path's shape decided before (a refit of the same track through
+        another camera keeps it); decided here when None.
+    near : tuple, optional
+        ``(v0, w0)`` of an earlier answer on the same track: of several
+        roots the nearest is the answer (the same root, moved by the camera).
     """
+    res = _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved)
+    if near is not None and res.status == "ambiguous" and res.solutions:
+        from dataclasses import replace
+        ref = np.r_[near[0], params.R * np.asarray(near[1])]
+        s = min(res.solutions, key=lambda s: float(np.linalg.norm(np.r_[s["v0"], params.R * s["w0"]] - ref)))
+        res = replace(res, status="ok", reason="", v0=s["v0"], w0=s["w0"], solutions=[])
+    return res
+
+
+def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved) -> PaperResult:
+    """paper_from_segments without the choice of root."""
     if not seg:
         return PaperResult("failed", f"the track could not be segmented: {seg.reason}")
     if not strike_seen:
@@ -326,7 +345,7 @@ def paper_from_segments(seg, t, xy, params: BallParams, sigma: float, frame_dt: 
     tol = CONSISTENCY_SIGMAS * sigma + np.hypot(*seg.v1) * frame_dt
     tau1, tau1_tol = seg.t1 - seg.t0, TIE_T1_FRAMES * frame_dt
     geo = geometry_covariance(seg, sigma, lossless)
-    shape = path_shape(seg, xy, params)
+    shape = path_shape(seg, xy, params, curved)
     if shape is not None:
         if shape.curved:
             par = shape.parabola
