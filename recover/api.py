@@ -130,6 +130,7 @@ def mle_dict(est: Estimate) -> dict:
            "x0": _num(m.x0), "t0": _num(m.t0), "t1": _num(m.t1), "t2": _num(m.t2),
            "slip_lr": _num(m.slip_lr), "chi2_per_dof": _num(m.chi2 / m.dof) if m.dof else None,
            "dof": int(m.dof) if m.dof else None, "hac": bool(m.hac), "rho1": _num(m.rho1),
+           "ar1": _num(m.ar1),
            "codec_noise_m": _num(math.copysign(math.sqrt(abs(c_m2)), c_m2)),
            "codec_noise_px": None if not in_px else _num(math.copysign(math.sqrt(abs(est.codec_var)),
                                                                          est.codec_var))}

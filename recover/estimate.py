@@ -19,8 +19,8 @@ from cuespin.fit.segment import Segments, segment_track
 from cuespin.physics.motion import BallParams, phases
 from cuespin.recover.measurements import (Measurements, as_covariance, build_measurements,
                                           codec_excess, fill_covariance)
-from cuespin.recover.mle import (CodecCorrelation, MLEResult, ModelFit, correlated_codec_var, fit_model,
-                                 fit_models, initial_guess, result, slip_lr)
+from cuespin.recover.mle import (AUTOCORR_Z, CodecCorrelation, MLEResult, ModelFit, correlated_codec_var,
+                                 fit_model, fit_models, initial_guess, lag1_autocorrelation, result, slip_lr)
 from cuespin.recover.paper import PaperResult, paper_from_segments
 
 # The first fit's strike time is used to place the strike's window only
@@ -47,7 +47,8 @@ class Decided:
     ``frames`` (the strike's and the rest's frames, fit.segment), ``t0``
     (the strike window's centre, s), ``codec_var`` (as
     :attr:`Estimate.codec_var`), ``start`` (the chosen fit's ``(x0, t0,
-    v0, w0)``, to start from) and ``paper`` (the paper's ``(v0, w0)`` or None).
+    v0, w0)``, to start from), ``paper`` (the paper's ``(v0, w0)`` or None)
+    and ``ar1`` (the AR(1) error model's lag-1 correlation; 0: none).
     """
 
     sliding_seen: bool | None
@@ -60,6 +61,7 @@ class Decided:
     codec_var: float
     start: tuple | None = None
     paper: tuple | None = None
+    ar1: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -183,6 +185,15 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         start = (first.shot.x0, first.shot.t0, first.shot.v0, first.shot.w0) if first else starts[0]
         full, roll = fit_models(meas, params, start, exposure_s, fit_friction,
                                 initial_guess(seg.rolling, params))
+        if codec is None:
+            # Residuals correlated along the track (a lossy codec at low
+            # noise): both models again under AR(1) errors of that lag-1
+            # correlation, so their likelihood ratio and covariance hold.
+            rho, z = lag1_autocorrelation(meas, full.residuals)
+            if z > AUTOCORR_Z:
+                full, roll = fit_models(meas, params, (full.shot.x0, full.shot.t0, full.shot.v0, full.shot.w0),
+                                        exposure_s, fit_friction,
+                                        (roll.shot.x0, roll.shot.t0, roll.shot.v0, roll.shot.w0), ar1=rho)
     except FIT_ERRORS as exc:
         mle = MLEResult("failed", f"the fit did not run: {exc}")
     if mle is None:
@@ -220,7 +231,8 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         segments="rolling" if chosen is seg.rolling else "unended" if chosen is seg.unended else "sliding",
         curved=shape, strike_seen=strike_seen, frames=(seg.k_move, seg.rest_k), t0=t0, codec_var=codec_var,
         start=None if fit is None else (fit.shot.x0, fit.shot.t0, fit.shot.v0, fit.shot.w0),
-        paper=(paper.v0, paper.w0) if paper is not None and paper.status == "ok" else None)
+        paper=(paper.v0, paper.w0) if paper is not None and paper.status == "ok" else None,
+        ar1=0.0 if fit is None else fit.ar1)
     return Estimate(chosen, paper, mle, meas, codec_var, decisions,
                     {"fit": t_fit, "recover": time.perf_counter() - clock}, decided)
 
@@ -241,7 +253,7 @@ def _refit(keep: Decided, seg, t, xy, params, exposure_s, fit_friction, run_pape
         decisions["sliding_seen"] = Decision(keep.sliding_seen, nan, nan)
         rolling = not keep.sliding_seen
         try:
-            fit = fit_model(meas, params, keep.start, exposure_s, rolling, fit_friction)
+            fit = fit_model(meas, params, keep.start, exposure_s, rolling, fit_friction, keep.ar1)
             mle = result(fit, meas, nan, keep.sliding_ended or rolling, codec)
         except FIT_ERRORS as exc:
             mle = MLEResult("failed", f"the fit did not run: {exc}")
