@@ -20,6 +20,7 @@ Usage: python benchmarks/accuracy.py [--n 200] [--seed 0] [--workers 2] [--csv o
 
 import argparse
 import csv
+import inspect
 import tempfile
 import time
 from multiprocessing import Pool
@@ -33,12 +34,17 @@ MAX_SECONDS = 6.0
 
 
 def one_shot(args):
-    i, seed, tmp, codec, tracks, only_cached = args
+    i, seed, tmp, codec, tracks, only_cached, noise_max = args
     from cuespin.data_gen.sampler import sample_scenes
     from cuespin.physics import phases
     from cuespin.pipeline.measure import mle_bound
     from cuespin.recover.api import recover_track
-    from cuespin.recover.measurements import pixel_to_table, table_covariance
+    from cuespin.recover.measurements import table_covariance
+    try:
+        from cuespin.recover.measurements import pixel_to_table
+    except ImportError:  # an older recover/
+        def pixel_to_table(cam, xy):
+            return None
     from cuespin.render import render_video
     from cuespin.track.tracker import TrackerConfig
     from cuespin.track.video import open_video, track_video
@@ -47,10 +53,13 @@ def one_shot(args):
     scene.render["max_duration"] = MAX_SECONDS
     if codec:
         scene.render["codec"] = codec
+    if noise_max is not None:  # the same shots at low noise: uniform in [0, noise_max), seeded by shot
+        scene.render["noise_sigma"] = float(np.random.default_rng([seed, i]).uniform(0.0, noise_max))
     cam = scene.camera
     # A track cache (--tracks DIR): the render, decode and track of a shot are
     # kept, so a change to fit/ or recover/ is re-measured in seconds.
-    cached = Path(tracks) / f"s{seed}_{codec or 'scene'}_{i}.npz" if tracks else None
+    tag = "" if noise_max is None else f"_lt{noise_max:g}"
+    cached = Path(tracks) / f"s{seed}_{codec or 'scene'}{tag}_{i}.npz" if tracks else None
     if only_cached and not (cached is not None and cached.exists()):
         return None
     if cached is not None and cached.exists():
@@ -75,9 +84,12 @@ def one_shot(args):
                      inter_frame=tr.inter_frame, frames=n, t_decode=t_decode)
     # As pipeline.run.run_recover does, keeping the fit's own measurements
     # for the bound.
+    kw = {"px_to_m": pixel_to_table(cam, tr.xy)}
+    if "px_to_m" not in inspect.signature(recover_track).parameters:  # an older recover/, for before/after tables
+        kw = {}
     out, est = recover_track(tr.t, tr.xy, tr.ok, table_covariance(cam, tr.xy, tr.cov_px), scene.physics,
                              cam.exposure_s, "all", False, lossless=tr.lossless, return_estimate=True,
-                             inter_frame=tr.inter_frame, px_to_m=pixel_to_table(cam, tr.xy))
+                             inter_frame=tr.inter_frame, **kw)
     truth, p = scene.truth, scene.physics
     v0, w0 = np.array(truth.v0), np.array(truth.w0)
     speed = np.hypot(*v0)
@@ -104,7 +116,7 @@ def one_shot(args):
         err = np.r_[mle["v0"], mle["w0"]] - truth_vw
         row["chi2_per_dof"] = mle.get("chi2_per_dof")
         row["hac"], row["rho1"] = float(bool(mle.get("hac"))), mle.get("rho1")
-        row["codec_noise_px"] = mle.get("codec_noise_px")
+        row["codec_noise_px"] = mle.get("codec_noise_px", np.nan)
         try:
             # The bound for the fit's own measurements (recover.measurements),
             # and for reference the one with every frame independent.
@@ -134,6 +146,8 @@ def main():
                     "rerun (same seed and codec): a change to fit/ or recover/ is re-measured without rendering")
     ap.add_argument("--only-cached", action="store_true", help="with --tracks: refit only the shots "
                     "whose track is kept (no rendering)")
+    ap.add_argument("--noise-max", type=float, default=None, help="render each shot at a noise drawn "
+                    "uniformly below this (grey levels; e.g. 0.5 for the low-noise band)")
     ap.add_argument("--summarize", default=None, help="only print the tables of a CSV written before "
                     "(a run cut short keeps its finished rows)")
     args = ap.parse_args()
@@ -148,7 +162,8 @@ def main():
         Path(args.tracks).mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp, Pool(args.workers) as pool:
         # Rows are written as shots finish, so a run cut short keeps them.
-        jobs = [(i, args.seed, tmp, args.codec, args.tracks, args.only_cached) for i in range(args.n)]
+        jobs = [(i, args.seed, tmp, args.codec, args.tracks, args.only_cached, args.noise_max)
+                for i in range(args.n)]
         for row in tqdm(pool.imap_unordered(one_shot, jobs),
                         total=args.n, desc="shots", disable=None):
             if row is None:

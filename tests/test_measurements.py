@@ -84,9 +84,10 @@ def test_per_position_covariance_is_what_the_fit_weights_by():
 
 def test_autocorrelated_errors_widen_the_errors():
     # AR(1) errors with lag-1 autocorrelation 0.67 (MJPG at low noise):
-    # the residuals show it, the HAC sandwich is used, and the standard
+    # the residuals show it, the fit models the errors as AR(1) with that
+    # correlation (prewhitened residuals left uncorrelated), and the standard
     # errors grow (by up to sqrt((1 + rho) / (1 - rho)) = 2.3 for a slowly
-    # varying parameter; measured 1.41 for v0 here).
+    # varying parameter).
     shot, p = sample_shot(7, "random")
     ph = phases(shot, p)
     t = np.arange(0.0, min(ph.t2 + 0.3, 4.0), 1 / 240)
@@ -100,10 +101,10 @@ def test_autocorrelated_errors_widen_the_errors():
     xy = model_track(shot, p, t) + e
     ok = np.ones(len(t), bool)
     m = recover_track(t, xy, ok, np.full(len(t), SIGMA), p)["methods"]["mle"]
-    assert m["hac"] and m["rho1"] == pytest.approx(rho, abs=0.1)
+    assert m["ar1"] == pytest.approx(rho, abs=0.1) and abs(m["rho1"]) < 0.1
     iid = recover_track(t, model_track(shot, p, t) + SIGMA * rng.standard_normal((len(t), 2)), ok,
                         np.full(len(t), SIGMA), p)["methods"]["mle"]
-    assert not iid["hac"]
+    assert not iid["hac"] and iid["ar1"] == 0.0
     assert np.mean(np.array(m["stderr"]["v0"]) / np.array(iid["stderr"]["v0"])) > 1.25
 
 
