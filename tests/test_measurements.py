@@ -179,3 +179,16 @@ def test_codec_error_in_pixels_through_the_camera():
     k = 40
     want = cov[k] + mle["codec_noise_px"] ** 2 * B[k] @ B[k].T
     assert np.allclose(est.meas.cov[k], want, rtol=1e-9)
+
+
+def test_paper_line_refuses_a_bending_path():
+    # A slide of 4 frames at 60 fps (too short to test for a parabola) whose
+    # side spin bends the path (benchmarks/accuracy.py MJPG shot 36): x1
+    # lies 5.5 mm off the line from x0 to x2; the line method answered 1300
+    # stated errors off before it was asked to check.  Now: failed, saying why.
+    from cuespin.physics.motion import BallParams, Shot
+    p = BallParams(R=0.028575, mu_s=0.294, mu_r=0.0182)
+    shot = Shot(x0=(2.2, 0.97), v0=(-0.35, -0.031), w0=(-12.97, 8.32), t0=0.124)
+    tr = simulate_track(shot, p, 60.0, 1e-5, 0, t_end=phases(shot, p).t2 + 0.3)
+    pp = recover_track(tr.t, tr.xy, np.ones(len(tr.t), bool), np.full(len(tr.t), 1e-5), p)["methods"]["paper"]
+    assert pp["status"] == "failed" and "not straight" in pp["reason"], pp
