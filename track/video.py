@@ -278,8 +278,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         t_bg = time.perf_counter() - t_start
         tracker = BallTracker(bg, radius_px, cam.exposure_s * cam.fps, config, projection=proj,
                               search_mask=mask,
-                              max_step_px=MAX_SPEED_M_S / cam.fps * cam.px_per_m(center), camera=cam, R=R,
-                              lossless=info.lossless)
+                              max_step_px=MAX_SPEED_M_S / cam.fps * cam.px_per_m(center), camera=cam, R=R)
         felt = FeltAccumulator(first.shape)
         fits = []  # (frame index, the fit's state) for the final background correction
         t_start = time.perf_counter()
