@@ -1,0 +1,68 @@
+"""The tracker on the renderer's realistic look, end to end (render, codec, track).
+
+Issue 10's targets on realistic renders: the ball found in at least 99% of
+the frames where it is wholly in view, and no false positive (a found centre
+more than a quarter radius from the truth).
+
+The fast cases are the data generator's realistic MJPG scenes (seed 5) that
+failed: other balls at rest, off the path, whose colour stands out from the
+felt as much as the struck ball's or more (shot 1: a yellow ball beside a
+yellow one; shot 4: a red ball beside a white one).  The background learnt
+from the look-ahead took them for felt the ball had hidden and filled them
+in, so they became the most ball-like blobs: shot 1 tracked the resting ball
+211 px off in every frame, shot 4 found two blobs in every frame and no ball.
+"""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from cuespin.data_gen.sampler import sample_scenes
+from cuespin.render import render_video
+from cuespin.track.tracker import TrackerConfig
+from cuespin.track.video import track_video
+
+# Issue 10: the share of wholly-in-view frames the ball must be found in, and
+# the largest error of a found centre, in ball radii.
+MIN_FOUND = 0.99
+MAX_ERR_RADII = 0.25
+
+
+def track_against_truth(scene, path):
+    """Render ``scene`` to ``path``, track it, and return (found share among
+    wholly-in-view frames, errors of the found centres in radii, the result)."""
+    render_video(scene, path)
+    tr = track_video(path, scene, TrackerConfig(threaded=False))
+    truth = pd.read_csv(path.with_suffix(".truth.csv"))
+    n = min(tr.n_frames, len(truth))
+    tuv = np.c_[truth.uc_px.values, truth.vc_px.values][:n]
+    cam, r = scene.camera, tr.radius_px
+    in_view = ((tuv[:, 0] >= r) & (tuv[:, 0] <= cam.width - 1 - r)
+               & (tuv[:, 1] >= r) & (tuv[:, 1] <= cam.height - 1 - r))
+    ok = tr.ok[:n]
+    err = np.hypot(*(tr.uv[:n] - tuv).T)[ok] / r
+    return ok[in_view].mean(), err, tr
+
+
+def assert_issue_targets(found, err, tr, what):
+    assert found >= MIN_FOUND, f"{what}: found in {found:.1%} of the frames in view ({tr.status_counts()})"
+    assert err.size and err.max() < MAX_ERR_RADII, f"{what}: a found centre {err.max():.2f} radii off"
+
+
+@pytest.mark.parametrize("shot, seconds", [(1, 0.6), (4, 0.5)])
+def test_resting_balls_that_outshine_the_ball_are_not_tracked(tmp_path, shot, seconds):
+    scene = sample_scenes(shot + 1, 5, look="realistic", codec="MJPG")[shot]
+    assert len(scene.render["balls"]) >= 2  # the failing feature: balls at rest off the path
+    scene.render["max_duration"] = seconds  # the strike and some rolling, few frames
+    found, err, tr = track_against_truth(scene, tmp_path / f"shot{shot}.avi")
+    assert_issue_targets(found, err, tr, f"seed 5 shot {shot}")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("codec", ["MJPG", "FFV1"])
+@pytest.mark.parametrize("seed", [5, 6, 7])
+def test_realistic_shots_meet_the_issue_targets(tmp_path, seed, codec):
+    for i, scene in enumerate(sample_scenes(6, seed, look="realistic", codec=codec)):
+        scene.render["max_duration"] = 2.0
+        found, err, tr = track_against_truth(scene, tmp_path / f"shot{i}.avi")
+        assert_issue_targets(found, err, tr, f"seed {seed} {codec} shot {i}")
