@@ -171,9 +171,15 @@ def learn_background(samples: np.ndarray, radius_px: float) -> Background:
         keep[:, ~near] = keep_m
     image[ys, xs] = polarity * felt
     # Where the ball came and went: samples span a good part of its contrast
-    # (a resting ball's rim spreads by the codec's error at an edge, a few sigma).
+    # (a resting ball's rim spreads by the codec's error at an edge).  The
+    # scale is the largest spans, not ``contrast``: a lossy codec smooths the
+    # noise the spread test is set by (MJPG, 4.5 per channel: sigma read as
+    # 1.2) but not its error at edges, so the rims of balls at rest spread
+    # too and pulled ``contrast`` down to 38 where the ball's span is ~290.
+    span = P.max(axis=0) - felt0
     swept = np.zeros((H, W), bool)
-    swept[ys, xs] = (P.max(axis=0) - felt0) > SWEPT_FRACTION * contrast
+    if strong.any():
+        swept[ys, xs] = span > SWEPT_FRACTION * np.percentile(span[strong], SWEPT_PERCENTILE)
     image = fill_unseen(image, hidden_ball(image, swept, polarity, contrast, sigma, radius_px))
     count = keep.sum(axis=0)
     weak = (count < MIN_FELT_SAMPLES) & (count < n)
@@ -195,6 +201,9 @@ def median_u8(img: np.ndarray, k: int) -> np.ndarray:
 # A pixel the ball came and went over spans more than this fraction of the
 # contrast over the samples (a shaded ball's rim is darker than its middle).
 SWEPT_FRACTION = 0.25
+# The percentile of the spans over the moving ball-wide pixels that gives the
+# ball's own span (the ball's sweep covers well over 1% of them).
+SWEPT_PERCENTILE = 99
 # The ring (px wide) around a candidate hidden region, and the fraction of it
 # that must lie on the path: the lens a slow ball covers in every sample is
 # ringed by path all round but at the lens's tips; a resting ball the moving
