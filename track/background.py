@@ -80,10 +80,10 @@ class Background:
 BALL_WIDE_FRACTION = 0.6
 
 
-def ball_wide(mask: np.ndarray, radius_px: float, fraction: float = BALL_WIDE_FRACTION) -> np.ndarray:
-    """The parts of ``mask`` (bool, h x w) that a disc of ``fraction`` of the
-    ball's radius fits in (a morphological opening)."""
-    d = max(3, int(round(2 * fraction * radius_px)) | 1)
+def ball_wide(mask: np.ndarray, radius_px: float) -> np.ndarray:
+    """The parts of ``mask`` (bool, h x w) that a disc of
+    ``BALL_WIDE_FRACTION`` of the ball's radius fits in (a morphological opening)."""
+    d = max(3, int(round(2 * BALL_WIDE_FRACTION * radius_px)) | 1)
     k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (d, d))
     return cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_OPEN, k).astype(bool)
 

@@ -99,14 +99,6 @@ def noise_covariance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return cov + floor * np.eye(3)
 
 
-# The colour is learnt where a disc of this fraction of the ball's radius fits
-# in what moved (the background's ``BALL_WIDE_FRACTION`` where nothing that
-# wide moved): a cue's butt with its shadow, dilated by a codec's smear,
-# fits the background's disc, and its colour, standing out from the felt
-# more than a blue ball's on blue felt, took the channel.
-COLOUR_WIDE_FRACTION = 0.8
-
-
 def learn_projection(samples: np.ndarray, radius_px: float) -> Projection:
     """The channel combination that best separates the moving ball from the felt.
 
@@ -134,18 +126,8 @@ def learn_projection(samples: np.ndarray, radius_px: float) -> Projection:
     sd = np.sqrt(np.diag(S))
     lo = samples.min(axis=0).astype(np.int16)
     hi = samples.max(axis=0).astype(np.int16)
-    # Motion in the channels together, each range in its own noise (less a
-    # level of rounding); one channel's change alone passes as before.  A
-    # ball whose colour departs from the felt's by a few sigma in each
-    # channel but by less than a per-channel test in any (blue on blue, MJPG,
-    # noise 6.4: 25 and 18 levels against 28.6) did not move in that test,
-    # and the channel was learnt on the cue alone (seed 6 MJPG shot 0: the
-    # cue tracked, 124 frames 74 px off).
-    r = np.maximum(hi - lo - 2, 0) / np.maximum(sd, 0.5).astype(np.float32)
-    spread = np.einsum("hwc,hwc->hw", r, r) > 7.5**2
-    ys, xs = np.nonzero(ball_wide(spread, radius_px, COLOUR_WIDE_FRACTION))
-    if not len(ys):
-        ys, xs = np.nonzero(ball_wide(spread, radius_px))
+    spread = np.any((hi - lo) > 7.5 * np.maximum(sd, 0.5) + 2, axis=-1)
+    ys, xs = np.nonzero(ball_wide(spread, radius_px))
     luma = np.array([0.114, 0.587, 0.299])
     w = None
     if len(ys):
