@@ -278,7 +278,7 @@ def slip_lr(full: ModelFit, roll: ModelFit, meas: Measurements | None = None,
     scale = max(1.0, full.chi2 / full.dof)
     if meas is not None and codec is not None and codec.var > 0:
         try:
-            base = np.linalg.inv(full.jac.T @ full.jac)
+            base = info_inverse(full.jac)
             wide = codec_sandwich(full, meas, codec)
             scale *= max(1.0, float(np.mean(np.diag(wide)[5:7] / np.diag(base)[5:7])))
         except np.linalg.LinAlgError:
@@ -287,12 +287,27 @@ def slip_lr(full: ModelFit, roll: ModelFit, meas: Measurements | None = None,
         rho, z = lag1_autocorrelation(meas, full.residuals)
         if z > AUTOCORR_Z:
             try:
-                base = np.linalg.inv(full.jac.T @ full.jac) * scale
+                base = info_inverse(full.jac) * scale
                 hac = hac_covariance(full.jac, full.residuals, rho)
                 scale *= max(1.0, float(np.mean(np.diag(hac)[5:7] / np.diag(base)[5:7])))
             except np.linalg.LinAlgError:
                 pass
     return float((roll.chi2 - full.chi2) / scale)
+
+
+def info_inverse(jac) -> np.ndarray:
+    """``(J^T J)^-1``, the inverse information of a whitened Jacobian, with
+    its columns scaled to unit length first (metres, seconds and rad/s
+    differ by orders of magnitude: a plain inverse of a tilted camera's
+    track once gave negative variances, benchmarks/codec_pixels.py).
+    Raises LinAlgError when the information is not positive definite (the
+    track does not determine every parameter)."""
+    J = np.asarray(jac, dtype=float)
+    s = np.sqrt(np.sum(J * J, axis=0))
+    s[s == 0] = 1.0
+    Js = J / s
+    Li = np.linalg.inv(np.linalg.cholesky(Js.T @ Js))
+    return (Li.T @ Li) / s[:, None] / s[None, :]
 
 
 def lag1_autocorrelation(meas: Measurements, residuals) -> tuple[float, float]:
@@ -327,7 +342,7 @@ def hac_covariance(jac, residuals, rho: float) -> np.ndarray:
     for lag in range(1, L + 1):
         G = scores[lag:].T @ scores[:-lag]
         S += (1 - lag / (L + 1)) * (G + G.T)
-    A = np.linalg.inv(J.T @ J)
+    A = info_inverse(J)
     return A @ S @ A * (2 * m / max(2 * m - p, 1))
 
 
@@ -408,7 +423,7 @@ def codec_sandwich(fit: ModelFit, meas: Measurements, codec: CodecCorrelation) -
     diagonal, already in the stated errors).  Raises LinAlgError when
     ``J^T J`` is singular."""
     J = np.asarray(fit.jac, dtype=float)
-    A = np.linalg.inv(J.T @ J)
+    A = info_inverse(J)
     if codec.var <= 0 or codec.frame_dt <= 0:
         return A
     G = _codec_G(J, meas)
@@ -431,7 +446,7 @@ def covariance(fit: ModelFit, meas: Measurements, codec: CodecCorrelation | None
     when the information matrix is singular."""
     rho, z = lag1_autocorrelation(meas, fit.residuals)
     scale = max(1.0, fit.chi2 / fit.dof)
-    base = np.linalg.inv(fit.jac.T @ fit.jac) * scale
+    base = info_inverse(fit.jac) * scale
     if codec is not None and codec.var > 0:
         return codec_sandwich(fit, meas, codec) * scale, True, rho
     if not z > AUTOCORR_Z:
@@ -591,4 +606,4 @@ def crb_covariance(shot: Shot, params: BallParams, meas: Measurements, exposure_
         b = model_track(_unpack(p - dp, rolling, False, params)[0], params, t, exposure_s)
         cols.append(meas.whiten_delta((a - b) / (2 * h)).ravel())
     J = np.stack(cols, axis=1)
-    return np.linalg.inv(J.T @ J)
+    return info_inverse(J)
