@@ -300,14 +300,20 @@ def info_inverse(jac) -> np.ndarray:
     its columns scaled to unit length first (metres, seconds and rad/s
     differ by orders of magnitude: a plain inverse of a tilted camera's
     track once gave negative variances, benchmarks/codec_pixels.py).
-    Raises LinAlgError when the information is not positive definite (the
-    track does not determine every parameter)."""
+    When the scaled information is not numerically positive definite, its
+    plain inverse (whose non-positive variances then say which parameters
+    the track does not determine; see :func:`result`).  Raises LinAlgError
+    when it is singular."""
     J = np.asarray(jac, dtype=float)
     s = np.sqrt(np.sum(J * J, axis=0))
     s[s == 0] = 1.0
     Js = J / s
-    Li = np.linalg.inv(np.linalg.cholesky(Js.T @ Js))
-    return (Li.T @ Li) / s[:, None] / s[None, :]
+    try:
+        Li = np.linalg.inv(np.linalg.cholesky(Js.T @ Js))
+        A = Li.T @ Li
+    except np.linalg.LinAlgError:
+        A = np.linalg.inv(Js.T @ Js)
+    return A / s[:, None] / s[None, :]
 
 
 def lag1_autocorrelation(meas: Measurements, residuals) -> tuple[float, float]:
@@ -475,7 +481,8 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
     except np.linalg.LinAlgError:
         return MLEResult("degenerate", "the track does not determine the shot (singular information matrix)")
     ph = phases(shot, pr)
-    se = np.sqrt(np.clip(np.diag(cov), 0, None))
+    var = np.diag(cov)
+    se = np.sqrt(np.where(var > 0, var, np.inf))  # a non-positive variance: not determined
     stderr = {"x0": se[0:2], "t0": float(se[2]), "v0": se[3:5]}
     if rolling:
         # w0 = z x v0 / R: its errors are v0's, rotated and scaled.
@@ -512,6 +519,9 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
         return MLEResult("degenerate",
                          f"the track ends (t = {t_end:.3f} s) before sliding does: the slip, so w0, "
                          f"is not determined (|u0| > {lower:.2f} m/s); v0 is", **out)
+    if not np.all(np.isfinite(stderr["w0"])):
+        return MLEResult("degenerate", "the track does not determine w0 (its information is not positive "
+                         "definite)", **common)
     return MLEResult("ok", "", **out)
 
 
