@@ -13,8 +13,14 @@ for the paper's method, the coverage of its stated errors.  Speed: fit plus both
 a fraction of decoding the same video (target <= 0.1).  Videos are capped at
 6 s; shots run in worker processes.
 
+``--camera tilted`` draws every shot through the sampler's real camera
+(1.5-3 m up, tilted 0-15 degrees, barrel distortion k1 down to -0.25);
+``--disc`` then tracks with one disc at the image centre's scale (the
+tracker before the ball's local outline, for comparison).
+
 Usage: python benchmarks/accuracy.py [--n 200] [--seed 0] [--workers 2] [--csv out.csv] [--codec FFV1]
                                      [--tracks DIR]   (keep tracks; a rerun refits them in seconds)
+                                     [--camera tilted] [--disc]
        python benchmarks/accuracy.py --summarize out.csv
 """
 
@@ -34,7 +40,7 @@ MAX_SECONDS = 6.0
 
 
 def one_shot(args):
-    i, seed, tmp, codec, tracks, only_cached, noise_max = args
+    i, seed, tmp, codec, tracks, only_cached, noise_max, camera, disc = args
     from cuespin.data_gen.sampler import sample_scenes
     from cuespin.physics import phases
     from cuespin.pipeline.measure import mle_bound
@@ -49,7 +55,17 @@ def one_shot(args):
     from cuespin.track.tracker import TrackerConfig
     from cuespin.track.video import open_video, track_video
 
-    scene = sample_scenes(i + 1, seed)[i]
+    if disc:
+        from cuespin.track import video as video_module
+        from cuespin.track.tracker import BallTracker
+
+        class DiscTracker(BallTracker):  # no camera: the disc everywhere
+            def __init__(self, *a, **kw):
+                kw.pop("camera", None)
+                super().__init__(*a, **kw)
+
+        video_module.BallTracker = DiscTracker
+    scene = sample_scenes(i + 1, seed, camera=camera)[i]
     scene.render["max_duration"] = MAX_SECONDS
     if codec:
         scene.render["codec"] = codec
@@ -58,7 +74,8 @@ def one_shot(args):
     cam = scene.camera
     # A track cache (--tracks DIR): the render, decode and track of a shot are
     # kept, so a change to fit/ or recover/ is re-measured in seconds.
-    tag = "" if noise_max is None else f"_lt{noise_max:g}"
+    tag = ("" if noise_max is None else f"_lt{noise_max:g}") + ("" if camera == "topdown" else f"_{camera}") \
+        + ("_disc" if disc else "")
     cached = Path(tracks) / f"s{seed}_{codec or 'scene'}{tag}_{i}.npz" if tracks else None
     if only_cached and not (cached is not None and cached.exists()):
         return None
@@ -94,6 +111,7 @@ def one_shot(args):
     v0, w0 = np.array(truth.v0), np.array(truth.w0)
     speed = np.hypot(*v0)
     row = {"i": i, "preset": scene.render.get("preset"), "fps": cam.fps, "codec": scene.render.get("codec"),
+           "camera": camera, "height_m": float(cam.centre[2]) if cam.is_pinhole else np.nan,
            "noise": scene.render.get("noise_sigma"), "frames": n, "t_decode": t_decode,
            "t_fit": out["timing_s"]["fit"], "t_recover": out["timing_s"]["recover"],
            "t1_true": phases(truth, p).t1 - truth.t0}
@@ -149,6 +167,10 @@ def main():
                     "whose track is kept (no rendering)")
     ap.add_argument("--noise-max", type=float, default=None, help="render each shot at a noise drawn "
                     "uniformly below this (grey levels; e.g. 0.5 for the low-noise band)")
+    ap.add_argument("--camera", choices=("topdown", "tilted"), default="topdown",
+                    help="the sampler's camera (tilted: 1.5-3 m, 0-15 deg, k1 -0.25 to 0)")
+    ap.add_argument("--disc", action="store_true",
+                    help="track with the image centre's disc, not the ball's local outline (comparison)")
     ap.add_argument("--summarize", default=None, help="only print the tables of a CSV written before "
                     "(a run cut short keeps its finished rows)")
     args = ap.parse_args()
@@ -163,8 +185,8 @@ def main():
         Path(args.tracks).mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp, Pool(args.workers) as pool:
         # Rows are written as shots finish, so a run cut short keeps them.
-        jobs = [(i, args.seed, tmp, args.codec, args.tracks, args.only_cached, args.noise_max)
-                for i in range(args.n)]
+        jobs = [(i, args.seed, tmp, args.codec, args.tracks, args.only_cached, args.noise_max,
+                 args.camera, args.disc) for i in range(args.n)]
         for row in tqdm(pool.imap_unordered(one_shot, jobs),
                         total=args.n, desc="shots", disable=None):
             if row is None:

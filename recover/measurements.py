@@ -210,10 +210,15 @@ class Measurements:
         """The same measurements with a codec's per-axis error variance
         ``codec_var`` (px^2 through ``px_to_m``, else m^2; signed: negative
         takes back an overstatement) added to every frame, floored at
-        ``MIN_NOISE_FRACTION`` of the stated."""
+        ``MIN_NOISE_FRACTION`` of the stated.  The floor also applies where the
+        difference is no longer a covariance: under a tilted camera a frame's
+        covariance in metres is correlated between x and y, and a negative
+        ``codec_var`` can leave its diagonal above the floor but its
+        determinant negative."""
         cov = self.cov + codec_var * self.codec_shape()
         floor = MIN_NOISE_FRACTION**2 * self.cov
-        low = (cov[:, 0, 0] < floor[:, 0, 0]) | (cov[:, 1, 1] < floor[:, 1, 1])
+        low = ((cov[:, 0, 0] < floor[:, 0, 0]) | (cov[:, 1, 1] < floor[:, 1, 1])
+               | (np.linalg.det(cov) < np.linalg.det(floor)))
         cov[low] = floor[low]
         return _make(self.t, self.xy, cov, self.group, self.px_to_m)
 
