@@ -487,7 +487,8 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
     if rolling:
         # w0 = z x v0 / R: its errors are v0's, rotated and scaled.
         Rz = np.array([[0.0, -1.0], [1.0, 0.0]]) / pr.R
-        stderr["w0"] = np.sqrt(np.diag(Rz @ cov[3:5, 3:5] @ Rz.T))
+        vw = np.diag(Rz @ cov[3:5, 3:5] @ Rz.T)
+        stderr["w0"] = np.sqrt(np.where(vw > 0, vw, np.inf))
     else:
         stderr["w0"] = se[5:7]
     fit_friction = "mu_r" in fit.names
