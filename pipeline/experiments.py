@@ -29,8 +29,17 @@ EXPERIMENTS = ("noise", "speed-accuracy", "stability")
 # Shots per setting: 20 gives a median and an interquartile range that a
 # different seed does not reorder (3 did: issue 13).
 DEFAULT_N = 20
-BASE = {"noise": 5.0, "fps": 240.0, "px_per_m": 500.0, "codec": "MJPG", "refine": "fit"}
+BASE = {"noise": 5.0, "fps": 240.0, "px_per_m": 500.0, "codec": "MJPG", "refine": "fit",
+        "view": "path"}
 MAX_SECONDS = 3.0
+# Rolling filmed after the sliding ends (s): the roll line both methods need
+# (the paper's eq. 17-19 and the MLE's rolling segment) at 30+ frames even at
+# 60 fps; filming on to the stop (up to MAX_SECONDS) cost 3-5x the frames.
+ROLL_S = 0.5
+# Pixels kept beyond the ball's outline in a "path" view (blur, the tracker's
+# window), and the grid the cut is aligned to (MJPG's 16 px macroblocks).
+PAD_PX = 24.0
+CROP_ALIGN = 16
 
 
 def shot_pool(n: int, seed: int):
@@ -56,29 +65,71 @@ def shot_pool(n: int, seed: int):
     return out
 
 
+def path_camera(shot, p, fps: float, px_per_m: float, end: float, pad_px: float = PAD_PX):
+    """The conventions' top-down camera cut down to the part of the table the
+    ball crosses until ``end`` (s), plus ``pad_px`` beyond its outline.
+
+    The cut falls on :data:`CROP_ALIGN` pixel multiples of the whole-table
+    view, so every pixel keeps its place on the codec's block grid and its
+    metres: the ball's image is the whole-table render's, only the frame
+    (and so the time to encode and decode it) is smaller.
+    """
+    from dataclasses import replace
+
+    from cuespin.physics import positions
+    from cuespin.physics.camera import default_camera
+
+    cam = default_camera(fps=fps, px_per_m=px_per_m)
+    t = np.linspace(shot.t0, max(end, shot.t0), 200)
+    xy = np.vstack([np.asarray(shot.x0, dtype=float)[None], positions(shot, p, t)])
+    uv = np.asarray(cam.to_pixels(xy))
+    r = p.R * px_per_m + pad_px
+    a = CROP_ALIGN
+    c0 = max(0, int(math.floor((uv[:, 0].min() - r) / a)) * a)
+    c1 = min(cam.width, int(math.ceil((uv[:, 0].max() + r) / a)) * a)
+    r0 = max(0, int(math.floor((uv[:, 1].min() - r) / a)) * a)
+    r1 = min(cam.height, int(math.ceil((uv[:, 1].max() + r) / a)) * a)
+    H = np.array(cam.homography, dtype=float)
+    H[0, 2] -= c0
+    H[1, 2] -= r0
+    return replace(cam, width=c1 - c0, height=r1 - r0, homography=tuple(map(tuple, H)))
+
+
 def trial(spec: dict) -> dict:
     """Render, track and recover one scene; errors, the MLE bound and timings.
 
     ``spec`` holds the shot (``x0 v0 w0 t0`` and friction) and the settings
-    (``noise fps px_per_m codec refine``) plus labels copied to the row.
+    (``noise fps px_per_m codec refine view``) plus labels copied to the row.
+    The video runs from frame 0 (the ball at rest, ``t0`` lead-in) to the
+    end of sliding plus :data:`ROLL_S` of rolling (or to the stop, or off
+    the table); ``view`` "path" films the part of the table the ball
+    crosses (:func:`path_camera`), "table" the whole table.
     """
+    from dataclasses import replace
+
     from cuespin.data_gen.sampler import make_scene
     from cuespin.pipeline.run import run_recover
     from cuespin.physics import BallParams, Shot
     from cuespin.pipeline.measure import mle_bound
-    from cuespin.render import render_video, truth_path
+    from cuespin.render import render_video, truth_path, video_length
     from cuespin.track.tracker import TrackerConfig
 
     shot = Shot(spec["x0"], spec["v0"], spec["w0"], spec["t0"])
     p = BallParams(mu_s=spec["mu_s"], mu_r=spec["mu_r"])
+    end = min(MAX_SECONDS, shot.t0 + float(spec["t1"]) + ROLL_S)
     scene = make_scene(shot, p, fps=spec["fps"], px_per_m=spec["px_per_m"],
                        render={"noise_sigma": spec["noise"], "codec": spec["codec"],
-                               "max_duration": MAX_SECONDS, "seed": spec.get("seed", 0)})
+                               "max_duration": end, "seed": spec.get("seed", 0)})
+    if spec.get("view", "table") == "path":
+        scene = replace(scene, camera=path_camera(shot, p, spec["fps"], spec["px_per_m"], end))
     row = {k: v for k, v in spec.items() if k not in ("x0", "v0", "w0")}
+    row.update(frames=video_length(scene), width=scene.camera.width, height=scene.camera.height)
     fd, name = tempfile.mkstemp(suffix=".avi")
     os.close(fd)
     try:
+        clock = time.perf_counter()
         render_video(scene, name)
+        row["t_render"] = time.perf_counter() - clock
         clock = time.perf_counter()
         out, tr = run_recover(name, scene, return_track=True,
                               config=TrackerConfig(refine=spec["refine"], threaded=False))
@@ -132,7 +183,8 @@ def specs_speed(n, seed, quick=False):
     grid = [(r, s, f) for r in ("fit", "moments") for s in (250.0, 500.0) for f in (120.0, 240.0)]
     if quick:
         grid = grid[:2]
-    return [_spec(shot, p, i, refine=r, px_per_m=s, fps=f, config=f"{r}, {s:.0f} px/m, {f:.0f} fps")
+    # The whole table in view: the time per video is a user's.
+    return [_spec(shot, p, i, refine=r, px_per_m=s, fps=f, view="table", config=f"{r}, {s:.0f} px/m, {f:.0f} fps")
             for r, s, f in grid for i, (shot, p) in enumerate(pool)]
 
 
@@ -160,28 +212,182 @@ def specs_stability(n, seed, quick=False):
 SPECS = {"noise": specs_noise, "speed-accuracy": specs_speed, "stability": specs_stability}
 
 
-def run_experiment(name: str, out: Path, n: int, seed: int, workers: int | None = None,
-                   quick: bool = False, progress=True) -> Path:
-    """Run an experiment: ``out/trials.csv`` and ``out/*.png``; returns the CSV path."""
-    from concurrent.futures import ProcessPoolExecutor
+def trial_id(spec: dict) -> str:
+    """A trial's stable name: its experiment's settings and its shot's index
+    (the same for the same ``--n`` and ``--seed``); keys the resume."""
+    keys = [k for k in ("factor", "level", "config", "angle", "mag") if k in spec]
+    return " ".join(f"{k}={spec[k]}" for k in keys) + f" shot={spec['shot']}"
 
-    from tqdm import tqdm
+
+# Columns a trial writes besides its spec's (fixed so that rows can be appended
+# to one CSV as they finish, whatever a trial answered).
+RESULT_COLUMNS = ("t_total", "t_track", "t_fit", "t_recover", "t_render", "frames", "width", "height",
+                  *(f"{c}_{m}" for m in ("paper", "mle") for c in ("status", "err_v0", "err_rw0")),
+                  "crb_v0", "crb_rw0", "reason")
+# Read back as text (the rest are numbers; an empty cell is NaN).
+TEXT_COLUMNS = {"trial_id", "factor", "level", "config", "codec", "refine", "view", "reason",
+                "status_paper", "status_mle"}
+
+
+def _columns(specs) -> list[str]:
+    keys = dict.fromkeys(["trial_id"])
+    for s in specs:
+        keys.update(dict.fromkeys(k for k in s if k not in ("x0", "v0", "w0")))
+    keys.update(dict.fromkeys(RESULT_COLUMNS))
+    return list(keys)
+
+
+def _parse(row: dict) -> dict:
+    out = {}
+    for k, v in row.items():
+        if k in TEXT_COLUMNS or k is None:
+            out[k] = v
+        else:
+            try:
+                out[k] = float(v) if v not in ("", None) else math.nan
+            except ValueError:
+                out[k] = v
+    return out
+
+
+def read_trials(path: Path) -> list[dict]:
+    """The finished trials of ``trials.csv`` (numbers as floats), without a
+    last row that a cut-short run left half written."""
+    if not Path(path).exists():
+        return []
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    return [_parse(r) for r in rows if r.get("trial_id") and r.get("status_mle")]
+
+
+def _check_run(out: Path, meta: dict) -> None:
+    """Refuse to mix trials of another run (other name, n, seed or grid) into ``out``."""
+    import json
+
+    path = out / "run.json"
+    if path.exists():
+        old = json.loads(path.read_text())
+        if old != meta:
+            diff = ", ".join(f"{k} {old.get(k)} (now {v})" for k, v in meta.items() if old.get(k) != v)
+            raise ValueError(f"{out} holds another run ({diff}): use another --out or the same settings")
+    else:
+        path.write_text(json.dumps(meta) + "\n")
+
+
+class _Progress:
+    """done/total, seconds per trial and ETA on stderr: a live bar on a
+    terminal (tqdm), otherwise a line every 5% and a last one."""
+
+    def __init__(self, name, total, initial, enabled=True):
+        import sys
+
+        from tqdm import tqdm
+
+        self.name, self.total, self.initial, self.done = name, total, initial, initial
+        self.enabled, self.start, self.stream = enabled, time.monotonic(), sys.stderr
+        self.tty = enabled and self.stream.isatty()
+        self.bar = tqdm(total=total, initial=initial, desc=name, unit="trial", dynamic_ncols=True,
+                        disable=not self.tty)
+        self.every = max(1, (total - initial) // 20)
+
+    def line(self):
+        ran = self.done - self.initial
+        head = f"{self.name}: {self.done}/{self.total} trials ({self.initial} from an earlier run)"
+        if not ran:
+            return head
+        per = (time.monotonic() - self.start) / ran
+        eta = per * (self.total - self.done)
+        return head + f", {per:.1f} s/trial" + (f", ETA {eta / 60:.1f} min" if self.done < self.total else "")
+
+    def update(self):
+        self.done += 1
+        self.bar.update(1)
+        self.printed = self.enabled and not self.tty and (self.done - self.initial) % self.every == 0
+        if self.printed:
+            print(self.line(), file=self.stream, flush=True)
+
+    def close(self):
+        self.bar.close()
+        if self.enabled and not getattr(self, "printed", False):
+            print(self.line(), file=self.stream, flush=True)
+
+
+def run_experiment(name: str, out: Path, n: int, seed: int, workers: int | None = None,
+                   quick: bool = False, progress=True, max_trials: int | None = None) -> Path:
+    """Run an experiment: ``out/trials.csv`` and ``out/*.png``; returns the CSV path.
+
+    Each trial's row is appended to ``trials.csv`` (and flushed) as it ends;
+    a rerun into the same ``out`` with the same ``n``, ``seed`` and grid runs
+    only the trials the file lacks (keyed by :func:`trial_id`) and draws the
+    charts from every row.  ``max_trials`` stops after that many new trials
+    (the charts are then drawn from what is done).
+    """
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     specs = SPECS[name](n, seed, quick)
-    workers = workers or os.cpu_count() or 1
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        rows = list(tqdm(pool.map(trial, specs), total=len(specs), desc=name, unit="trial",
-                         disable=None if progress else True))
-    cols = sorted({k for r in rows for k in r})
+    for s in specs:
+        s["trial_id"] = trial_id(s)
+    assert len({s["trial_id"] for s in specs}) == len(specs), "trial ids must be unique"
+    _check_run(out, {"experiment": name, "n": n, "seed": seed, "quick": bool(quick), "trials": len(specs)})
     path = out / "trials.csv"
-    with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=cols)
+    cols = _columns(specs)
+    rows = read_trials(path)
+    wanted = {s["trial_id"] for s in specs}
+    rows = [r for r in rows if r["trial_id"] in wanted]
+    done = {r["trial_id"] for r in rows}
+    # Rewrite what is kept (drops a half-written last line), then append.
+    tmp = path.with_suffix(".tmp")
+    with open(tmp, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=cols, extrasaction="ignore")
         w.writeheader()
-        w.writerows(rows)
+        w.writerows([{k: _cell(r.get(k)) for k in cols} for r in rows])
+    os.replace(tmp, path)
+    todo = [s for s in specs if s["trial_id"] not in done][:max_trials]
+    bar = _Progress(name, len(specs), len(done), enabled=progress)
+    workers = workers or os.cpu_count() or 1
+    with open(path, "a", newline="") as f, ProcessPoolExecutor(max_workers=workers, initializer=_warm) as pool:
+        w = csv.DictWriter(f, fieldnames=cols, extrasaction="ignore")
+        # A few trials in flight per worker: a cut loses little, the workers never wait.
+        pending, it = set(), iter(todo)
+        for s in it:
+            pending.add(pool.submit(trial, s))
+            if len(pending) >= 2 * workers:
+                break
+        while pending:
+            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in finished:
+                row = fut.result()
+                w.writerow({k: _cell(row.get(k)) for k in cols})
+                f.flush()
+                rows.append(row)
+                bar.update()
+                nxt = next(it, None)
+                if nxt is not None:
+                    pending.add(pool.submit(trial, nxt))
+    bar.close()
+    rows = read_trials(path)  # every row as the charts of a resumed run see them
     CHARTS[name](rows, out)
     return path
+
+
+def _warm():
+    """Import a worker's modules before its first trial, so that the first
+    trial's ``t_total`` times the trial, not the imports (about 2 s)."""
+    import scipy.stats  # noqa: F401  (fit.decide's import, the largest)
+
+    import cuespin.pipeline.measure  # noqa: F401
+    import cuespin.pipeline.run  # noqa: F401
+    import cuespin.recover.api  # noqa: F401
+
+
+def _cell(v):
+    if isinstance(v, float) and not math.isfinite(v):
+        return ""
+    if isinstance(v, (tuple, list)):
+        return " ".join(str(x) for x in v)
+    return v
 
 
 # -- charts ---------------------------------------------------------------------------
