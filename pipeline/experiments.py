@@ -1,7 +1,20 @@
 """Experiments: accuracy against noise and against speed, and where methods break.
 
+A *trial* is one shot rendered to a video (plain look, the given sensor
+noise, frame rate, pixels per metre and codec), tracked and recovered by
+both methods, and scored against the truth: a row of ``trials.csv`` with
+the relative errors of v0 and R w0, the MLE's Cramer-Rao bound for the same
+measurements, each method's status and the timings.  The video runs from
+frame 0 (the ball at rest for the shot's lead-in ``t0``) to the end of
+sliding plus ``ROLL_S`` of rolling (or the stop, or the ball leaving the
+table); the noise and stability trials film only the part of the table the
+ball crosses (:func:`path_camera`: the same pixels as the whole-table view,
+a smaller frame), the speed-accuracy trials the whole table, so that their
+times are a user's.
+
 Each experiment renders, tracks and recovers many scenes (in worker
-processes), writes every trial to ``trials.csv`` and draws PNG charts:
+processes), appends every trial to ``trials.csv`` as it ends (a rerun
+resumes: only missing trials run) and draws PNG charts:
 
 * ``noise``: errors of v0 and w0 for each method against noise sigma, frame
   rate, pixels per metre and codec (one factor at a time from a base of
