@@ -114,7 +114,7 @@ def test_path_view_keeps_pixels_in_place():
     a whole number of 16 px blocks, and holds the ball's path with its pad."""
     from cuespin.physics import positions
     from cuespin.physics.camera import default_camera
-    from cuespin.pipeline.experiments import PAD_PX, path_camera
+    from cuespin.pipeline.experiments import PAD_M, path_camera
 
     shot, p = shot_pool(1, seed=2)[0]
     end = phases(shot, p).t1 + 0.5
@@ -123,6 +123,11 @@ def test_path_view_keeps_pixels_in_place():
     d = np.asarray(full.to_pixels(xy)) - np.asarray(cam.to_pixels(xy))
     assert np.allclose(d, d[0]) and np.allclose(d[0] % 16, 0)
     uv = np.asarray(cam.to_pixels(xy))
-    r = p.R * 500.0 + PAD_PX
-    assert (uv - r >= -1e-9).all() and (uv[:, 0] + r <= cam.width).all() and (uv[:, 1] + r <= cam.height).all()
-    assert cam.width * cam.height < full.width * full.height / 4
+    r = (p.R + PAD_M) * 500.0
+    # The pad is kept where the whole-table view has it (the cut stops at its edges).
+    left, top = d[0]  # the cut's corner in the whole-table view
+    assert ((uv[:, 0] - r >= 0) | (left == 0)).all() and ((uv[:, 1] - r >= 0) | (top == 0)).all()
+    assert ((uv[:, 0] + r <= cam.width) | (cam.width + left == full.width)).all()
+    assert ((uv[:, 1] + r <= cam.height) | (cam.height + top == full.height)).all()
+    assert (uv - p.R * 500.0 >= 0).all() and (uv[:, 0] + p.R * 500 <= cam.width).all()
+    assert cam.width * cam.height < full.width * full.height / 2
