@@ -34,6 +34,7 @@ import math
 import os
 import tempfile
 import time
+from contextlib import nullcontext
 from pathlib import Path
 
 import numpy as np
@@ -170,7 +171,7 @@ def trial(spec: dict) -> dict:
         cov, rolling = mle_bound(scene, tr, out["methods"].get("mle"))
         row["crb_v0"] = float(np.sqrt(cov[3, 3] + cov[4, 4]) / speed)
         row["crb_rw0"] = float(p.R * np.sqrt(cov[5, 5] + cov[6, 6]) / speed) if not rolling else row["crb_v0"]
-    except (np.linalg.LinAlgError, IndexError):
+    except (np.linalg.LinAlgError, IndexError, ValueError):  # singular, or no frame tracked
         row["crb_v0"] = row["crb_rw0"] = math.nan
     return row
 
@@ -340,6 +341,7 @@ def run_experiment(name: str, out: Path, n: int, seed: int, workers: int | None 
     (the charts are then drawn from what is done).
     """
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures.process import BrokenProcessPool
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -372,25 +374,41 @@ def run_experiment(name: str, out: Path, n: int, seed: int, workers: int | None 
     todo = [specs[i] for i in order if specs[i]["trial_id"] not in done][:max_trials]
     bar = _Progress(name, len(specs), len(done), enabled=progress)
     workers = workers or os.cpu_count() or 1
-    with open(path, "a", newline="") as f, ProcessPoolExecutor(max_workers=workers, initializer=_warm) as pool:
+    with open(path, "a", newline="") as f, (ProcessPoolExecutor(max_workers=workers, initializer=_warm)
+                                             if todo else nullcontext()) as pool:
         w = csv.DictWriter(f, fieldnames=cols, extrasaction="ignore")
         # A few trials in flight per worker: a cut loses little, the workers never wait.
-        pending, it = set(), iter(todo)
+        pending, pending_spec, it = set(), {}, iter(todo)
+
+        def submit(spec):
+            fut = pool.submit(trial, spec)
+            pending.add(fut)
+            pending_spec[fut] = spec
+
         for s in it:
-            pending.add(pool.submit(trial, s))
+            submit(s)
             if len(pending) >= 2 * workers:
                 break
         while pending:
             finished, pending = wait(pending, return_when=FIRST_COMPLETED)
             for fut in finished:
-                row = fut.result()
+                try:
+                    row = fut.result()
+                except BrokenProcessPool:  # a killed worker: rerun to resume, record nothing
+                    raise
+                except Exception as exc:  # a crash in a trial is that trial's failure, not the run's
+                    spec = pending_spec.pop(fut)
+                    row = {k: v for k, v in spec.items() if k not in ("x0", "v0", "w0")}
+                    row.update(status_paper="failed", status_mle="failed", reason=f"{type(exc).__name__}: {exc}")
+                else:
+                    pending_spec.pop(fut)
                 w.writerow({k: _cell(row.get(k)) for k in cols})
                 f.flush()
                 rows.append(row)
                 bar.update()
                 nxt = next(it, None)
                 if nxt is not None:
-                    pending.add(pool.submit(trial, nxt))
+                    submit(nxt)
     bar.close()
     rows = read_trials(path)  # every row as the charts of a resumed run see them
     CHARTS[name](rows, out)
@@ -528,39 +546,49 @@ def pareto(points):
 
 def chart_speed(rows, out):
     """Median time against median error per setting and method, with interquartile bars
-    on both axes and the number of shots answered ok; the Pareto front of the medians."""
+    on both axes; the Pareto front of the medians.  Points carry their setting's number,
+    listed beside the plot with the shots each method answered ok."""
     plt = _plt()
-    pts, labels, bars, ns = [], [], [], []
-    for cfg in sorted({r["config"] for r in rows if "config" in r}):
+    pts, labels, bars = [], [], []
+    cfgs = sorted({r["config"] for r in rows if "config" in r})
+    listing = []
+    for c_i, cfg in enumerate(cfgs, 1):
         sub = [r for r in rows if r.get("config") == cfg]
+        t1, t2, t3, _ = _quartiles(sub, "t_total")
+        counts = []
         for m in ("paper", "mle"):
             ok = [r for r in sub if r.get(f"status_{m}") == "ok"]
             e1, e2, e3, n = _quartiles(ok, f"err_v0_{m}")
-            t1, t2, t3, _ = _quartiles(sub, "t_total")
+            counts.append(f"{n}/{len(sub)}")
             if np.isfinite(e2):
                 pts.append((t2, e2))
                 bars.append(((t2 - t1, t3 - t2), (e2 - e1, e3 - e2)))
-                labels.append((m, cfg))
-                ns.append((n, len(sub)))
+                labels.append((m, c_i))
+        listing.append(f"{c_i}  {cfg}\n     ok: paper {counts[0]}, MLE {counts[1]}")
     front = set(pareto(pts))
-    fig, ax = plt.subplots(figsize=(10, 6.5))
-    for i, ((t, e), (m, cfg), (xb, yb), (n, tot)) in enumerate(zip(pts, labels, bars, ns)):
+    fig, (ax, side) = plt.subplots(1, 2, figsize=(11, 6), gridspec_kw={"width_ratios": [3, 1]})
+    for i, ((t, e), (m, c_i), (xb, yb)) in enumerate(zip(pts, labels, bars)):
         st = STYLE[m]
         ax.errorbar([t], [e], xerr=[[xb[0]], [xb[1]]], yerr=[[yb[0]], [yb[1]]], fmt=st["marker"], color=st["color"],
-                    ms=9 if i in front else 5, mec="k" if i in front else st["color"], capsize=2, lw=0.8, alpha=0.9)
-        ax.annotate(f"{cfg} (n={n}/{tot})", (t, e), fontsize=7, xytext=(5, 3), textcoords="offset points",
+                    ms=9 if i in front else 6, mec="k" if i in front else st["color"], capsize=2, lw=0.8, alpha=0.9)
+        ax.annotate(str(c_i), (t, e), fontsize=9, fontweight="bold", xytext=(6, 4), textcoords="offset points",
                     color=st["color"])
     fp = sorted(pts[i] for i in front)
     ax.plot([p[0] for p in fp], [p[1] for p in fp], "k-", lw=1, label="Pareto front (medians)")
     for m in ("paper", "mle"):
         ax.errorbar([], [], fmt=STYLE[m]["marker"], color=STYLE[m]["color"], label=NAMES[m])
+    ax.set_xscale("log")
+    ax.xaxis.set_major_formatter(plt.FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.xaxis.set_minor_formatter(plt.FuncFormatter(lambda v, _: f"{v:g}" if f"{v:g}"[0] in "25" else ""))
     ax.set_yscale("log")
     ax.set_xlabel("time per video: track + fit + recover (s); median, bars 25-75%")
     ax.set_ylabel("|dv0| / |v0| over answers ok; median, bars 25-75%")
-    ax.set_title("Speed against accuracy: tracker refinement, resolution, frame rate, method "
-                 "(n = shots answered ok / shots)", fontsize=10)
+    ax.set_title("Speed against accuracy (numbers: settings, listed right)", fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend()
+    ax.legend(loc="upper right", fontsize=9)
+    side.axis("off")
+    side.text(0, 1, "settings (refinement, resolution,\nframe rate; whole table in view)\n\n" + "\n".join(listing),
+              va="top", ha="left", fontsize=8.5, family="monospace", transform=side.transAxes)
     fig.tight_layout()
     fig.savefig(out / "speed_accuracy.png", dpi=80)
     plt.close(fig)
