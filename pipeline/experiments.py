@@ -455,6 +455,19 @@ def _plt():
     return plt
 
 
+def _save(fig, path, dpi=100):
+    """The figure as a 256-colour PNG: charts of flat colours and text lose
+    nothing visible and stay under ~150 KB for the README (RGB was 140-170 KB)."""
+    import io
+
+    from PIL import Image
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi)
+    buf.seek(0)
+    Image.open(buf).convert("RGB").quantize(colors=256).save(path, optimize=True)
+
+
 def _values(rows, key):
     v = [r.get(key, math.nan) for r in rows]
     return np.array([x for x in v if isinstance(x, (int, float)) and np.isfinite(x)], dtype=float)
@@ -524,8 +537,8 @@ def chart_noise(rows, out):
                 if m != "crb":
                     for x, y, nn in zip(xs + ((k - 1) * 0.12 if categorical else 0), q2, n):
                         if np.isfinite(y):
-                            ax.annotate(f"{nn}", (x, y), fontsize=6, color=st["color"], xytext=(3, 3 if m == "mle"
-                                        else -8), textcoords="offset points")
+                            ax.annotate(f"{nn}", (x, y), fontsize=8, color=st["color"], xytext=(4, 4 if m == "mle"
+                                        else -11), textcoords="offset points")
             ax.set_yscale("log")
             if categorical:
                 ax.set_xticks(xs, levels)
@@ -534,13 +547,13 @@ def chart_noise(rows, out):
             if j == 0:
                 ax.set_ylabel(f"relative error {lab}")
             ax.grid(True, which="both", alpha=0.3)
-    axes[0, 0].legend(fontsize=8, title="median, band/bars: 25-75%", title_fontsize=7)
+    axes[0, 0].legend(fontsize=9, title="median; band/bars: 25-75%", title_fontsize=8)
     n_shots = len({r.get("shot") for r in rows})
-    fig.suptitle("Recovery error against image noise, frame rate, resolution and codec (one factor at a time; "
-                 f"base sigma 5, 240 fps, 500 px/m, MJPG; {n_shots} shots per level; small numbers: shots "
-                 "answered ok)", fontsize=10)
+    fig.suptitle("Recovery error against image noise, frame rate, resolution and codec, one factor at a time from "
+                 f"the base (sigma 5, 240 fps, 500 px/m, MJPG)\n{n_shots} shots per level; numbers beside the "
+                 "points: shots answered ok (the bound: over all shots)", fontsize=11)
     fig.tight_layout()
-    fig.savefig(out / "noise.png", dpi=80)
+    _save(fig, out / "noise.png")
     plt.close(fig)
 
 
@@ -607,7 +620,7 @@ def chart_speed(rows, out):
     side.text(0, 1, "settings (refinement, resolution,\nframe rate; whole table in view)\n\n" + "\n".join(listing),
               va="top", ha="left", fontsize=8.5, family="monospace", transform=side.transAxes)
     fig.tight_layout()
-    fig.savefig(out / "speed_accuracy.png", dpi=80)
+    _save(fig, out / "speed_accuracy.png")
     plt.close(fig)
 
 
@@ -620,7 +633,7 @@ def chart_stability(rows, out):
 
     angles = sorted({r["angle"] for r in rows})
     mags = sorted({r["mag"] for r in rows})
-    fig, axes = plt.subplots(2, 2, figsize=(16, 9))
+    fig, axes = plt.subplots(2, 2, figsize=(15, 8.5))
     for j, m in enumerate(("paper", "mle")):
         err = np.full((len(mags), len(angles)), np.nan)
         fail = np.zeros_like(err)
@@ -650,28 +663,29 @@ def chart_stability(rows, out):
                 e = err[k_i, a_i]
                 if np.isfinite(e):
                     light = np.log10(e) > -2.0  # viridis is light at its top
-                    ax.text(a_i, k_i, f"{e:.0e}\nn={counts[k_i, a_i]}", ha="center", va="center", fontsize=8,
+                    ax.text(a_i, k_i, f"{e:.0e}\nn={counts[k_i, a_i]}", ha="center", va="center", fontsize=10,
                             color="k" if light else "w", zorder=2)
                 else:
-                    ax.text(a_i, k_i, f"no ok\n0/{totals[k_i, a_i]}", ha="center", va="center", fontsize=8,
+                    ax.text(a_i, k_i, f"no ok\n0/{totals[k_i, a_i]}", ha="center", va="center", fontsize=10,
                             color="k", zorder=2)
                 f = fail[k_i, a_i]
                 ax2.text(a_i, k_i, f"{totals[k_i, a_i] - counts[k_i, a_i]}/{totals[k_i, a_i]}\n"
-                         f"{t1[k_i, a_i] * 1000:.0f} ms", ha="center", va="center", fontsize=8,
+                         f"{t1[k_i, a_i] * 1000:.0f} ms", ha="center", va="center", fontsize=10,
                          color="w" if f > 0.6 else "k")
         for a in (ax, ax2):
             a.set_xticks(range(len(angles)), [f"{x:.0f}" for x in angles])
             a.set_yticks(range(len(mags)), [f"{x:g}" for x in mags])
             a.set_xlabel("spin direction relative to v0 (deg)")
             a.set_ylabel("spin magnitude R|w0|/|v0|")
-        ax.legend(handles=[Patch(facecolor="0.85", hatch="//", edgecolor="0.55", label="no ok answer in the cell")],
-                  loc="upper right", fontsize=8, framealpha=0.9)
         ax.set_title(f"{NAMES[m]}: error of w0 (cells: median, n answers ok)")
         ax2.set_title(f"{NAMES[m]}: share not ok (cells: not ok / shots, sliding time)")
-    fig.suptitle("Where each method breaks: 90/270 deg = pure top/back spin (straight sliding), "
-                 "0/180 deg = side spin (curved)")
+    fig.legend(handles=[Patch(facecolor="0.85", hatch="//", edgecolor="0.55", label="no ok answer in the cell")],
+               loc="upper left", fontsize=9, framealpha=0.9)
+    fig.suptitle("Where each method breaks: 90/270 deg = pure top/back spin (straight sliding), 0 deg = side spin "
+                 f"(curved); {len({r.get('shot') for r in rows}) // max(len(angles) * len(mags), 1)} shots a cell"
+                 "\n135, 180 and 315 deg are the mirror images of 45, 0 and 225 deg (not run)", fontsize=11)
     fig.tight_layout()
-    fig.savefig(out / "stability.png", dpi=80)
+    _save(fig, out / "stability.png")
     plt.close(fig)
 
 
