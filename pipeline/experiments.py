@@ -547,12 +547,17 @@ def chart_noise(rows, out):
             if j == 0:
                 ax.set_ylabel(f"relative error {lab}")
             ax.grid(True, which="both", alpha=0.3)
-    axes[0, 0].legend(fontsize=9, title="median; band/bars: 25-75%", title_fontsize=8)
+            if not categorical:
+                ax.margins(x=0.08)  # room for the counts beside the last points
+    # Below the panels: inside one it hid a point.
+    handles, names = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, [f"{x} (median; band/bars: 25-75%)" if "bound" not in x else x for x in names],
+               loc="lower center", ncol=3, fontsize=10, frameon=False)
     n_shots = len({r.get("shot") for r in rows})
     fig.suptitle("Recovery error against image noise, frame rate, resolution and codec, one factor at a time from "
                  f"the base (sigma 5, 240 fps, 500 px/m, MJPG)\n{n_shots} shots per level; numbers beside the "
                  "points: shots answered ok (the bound: over all shots)", fontsize=11)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.04, 1, 1))
     _save(fig, out / "noise.png")
     plt.close(fig)
 
