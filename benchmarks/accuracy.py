@@ -13,16 +13,25 @@ for the paper's method, the coverage of its stated errors.  Speed: fit plus both
 a fraction of decoding the same video (target <= 0.1).  Videos are capped at
 6 s; shots run in worker processes.
 
+``--camera tilted`` draws every shot through the sampler's real camera
+(1.5-3 m up, tilted 0-15 degrees, barrel distortion k1 down to -0.25);
+``--disc`` then tracks with one disc at the image centre's scale (the
+tracker before the ball's local outline, for comparison).
+
 Usage: python benchmarks/accuracy.py [--n 200] [--seed 0] [--workers 2] [--csv out.csv] [--codec FFV1]
+                                     [--tracks DIR]   (keep tracks; a rerun refits them in seconds)
+                                     [--camera tilted] [--disc]
        python benchmarks/accuracy.py --summarize out.csv
 """
 
 import argparse
 import csv
+import inspect
 import tempfile
 import time
 from multiprocessing import Pool
 from pathlib import Path
+from types import SimpleNamespace
 
 
 import numpy as np
@@ -31,40 +40,78 @@ MAX_SECONDS = 6.0
 
 
 def one_shot(args):
-    i, seed, tmp, codec = args
+    i, seed, tmp, codec, tracks, only_cached, noise_max, camera, disc = args
     from cuespin.data_gen.sampler import sample_scenes
     from cuespin.physics import phases
     from cuespin.pipeline.measure import mle_bound
     from cuespin.recover.api import recover_track
     from cuespin.recover.measurements import table_covariance
+    try:
+        from cuespin.recover.measurements import pixel_to_table
+    except ImportError:  # an older recover/
+        def pixel_to_table(cam, xy):
+            return None
     from cuespin.render import render_video
     from cuespin.track.tracker import TrackerConfig
     from cuespin.track.video import open_video, track_video
 
-    scene = sample_scenes(i + 1, seed)[i]
+    if disc:
+        from cuespin.track import video as video_module
+        from cuespin.track.tracker import BallTracker
+
+        class DiscTracker(BallTracker):  # no camera: the disc everywhere
+            def __init__(self, *a, **kw):
+                kw.pop("camera", None)
+                super().__init__(*a, **kw)
+
+        video_module.BallTracker = DiscTracker
+    scene = sample_scenes(i + 1, seed, camera=camera)[i]
     scene.render["max_duration"] = MAX_SECONDS
     if codec:
         scene.render["codec"] = codec
-    video = Path(tmp) / f"shot_{i}.avi"
-    render_video(scene, video)
-    cap = open_video(video)
-    t = time.perf_counter()
-    n = 0
-    while cap.read()[0]:
-        n += 1
-    t_decode = time.perf_counter() - t
-    cap.release()
+    if noise_max is not None:  # the same shots at low noise: uniform in [0, noise_max), seeded by shot
+        scene.render["noise_sigma"] = float(np.random.default_rng([seed, i]).uniform(0.0, noise_max))
+    cam = scene.camera
+    # A track cache (--tracks DIR): the render, decode and track of a shot are
+    # kept, so a change to fit/ or recover/ is re-measured in seconds.
+    tag = ("" if noise_max is None else f"_lt{noise_max:g}") + ("" if camera == "topdown" else f"_{camera}") \
+        + ("_disc" if disc else "")
+    cached = Path(tracks) / f"s{seed}_{codec or 'scene'}{tag}_{i}.npz" if tracks else None
+    if only_cached and not (cached is not None and cached.exists()):
+        return None
+    if cached is not None and cached.exists():
+        z = np.load(cached)
+        tr = SimpleNamespace(t=z["t"], xy=z["xy"], ok=z["ok"], cov_px=z["cov_px"], lossless=bool(z["lossless"]),
+                             inter_frame=bool(z["inter_frame"]))
+        n, t_decode = int(z["frames"]), float(z["t_decode"])
+    else:
+        video = Path(tmp) / f"shot_{i}.avi"
+        render_video(scene, video)
+        cap = open_video(video)
+        t = time.perf_counter()
+        n = 0
+        while cap.read()[0]:
+            n += 1
+        t_decode = time.perf_counter() - t
+        cap.release()
+        tr = track_video(video, scene, TrackerConfig())
+        video.unlink()
+        if cached is not None:
+            np.savez(cached, t=tr.t, xy=tr.xy, ok=tr.ok, cov_px=tr.cov_px, lossless=tr.lossless,
+                     inter_frame=tr.inter_frame, frames=n, t_decode=t_decode)
     # As pipeline.run.run_recover does, keeping the fit's own measurements
     # for the bound.
-    tr = track_video(video, scene, TrackerConfig())
-    cam = scene.camera
+    kw = {"px_to_m": pixel_to_table(cam, tr.xy)}
+    if "px_to_m" not in inspect.signature(recover_track).parameters:  # an older recover/, for before/after tables
+        kw = {}
     out, est = recover_track(tr.t, tr.xy, tr.ok, table_covariance(cam, tr.xy, tr.cov_px), scene.physics,
-                             cam.exposure_s, "all", False, lossless=tr.lossless, return_estimate=True)
-    video.unlink()
+                             cam.exposure_s, "all", False, lossless=tr.lossless, return_estimate=True,
+                             inter_frame=tr.inter_frame, **kw)
     truth, p = scene.truth, scene.physics
     v0, w0 = np.array(truth.v0), np.array(truth.w0)
     speed = np.hypot(*v0)
     row = {"i": i, "preset": scene.render.get("preset"), "fps": cam.fps, "codec": scene.render.get("codec"),
+           "camera": camera, "height_m": float(cam.centre[2]) if cam.is_pinhole else np.nan,
            "noise": scene.render.get("noise_sigma"), "frames": n, "t_decode": t_decode,
            "t_fit": out["timing_s"]["fit"], "t_recover": out["timing_s"]["recover"],
            "t1_true": phases(truth, p).t1 - truth.t0}
@@ -87,7 +134,7 @@ def one_shot(args):
         err = np.r_[mle["v0"], mle["w0"]] - truth_vw
         row["chi2_per_dof"] = mle.get("chi2_per_dof")
         row["hac"], row["rho1"] = float(bool(mle.get("hac"))), mle.get("rho1")
-        row["codec_noise_px"] = (mle.get("codec_noise_m") or 0.0) * cam.px_per_m(np.asarray(mle["x0"]))
+        row["codec_noise_px"] = mle.get("codec_noise_px", np.nan)
         try:
             # The bound for the fit's own measurements (recover.measurements),
             # and for reference the one with every frame independent.
@@ -113,6 +160,16 @@ def main():
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--csv", default=None, help="write every shot's row here")
     ap.add_argument("--codec", default=None, help="render every shot with this FourCC (default: the scene's, MJPG)")
+    ap.add_argument("--tracks", default=None, help="keep each shot's track in this folder and reuse it on a "
+                    "rerun (same seed and codec): a change to fit/ or recover/ is re-measured without rendering")
+    ap.add_argument("--only-cached", action="store_true", help="with --tracks: refit only the shots "
+                    "whose track is kept (no rendering)")
+    ap.add_argument("--noise-max", type=float, default=None, help="render each shot at a noise drawn "
+                    "uniformly below this (grey levels; e.g. 0.5 for the low-noise band)")
+    ap.add_argument("--camera", choices=("topdown", "tilted"), default="topdown",
+                    help="the sampler's camera (tilted: 1.5-3 m, 0-15 deg, k1 -0.25 to 0)")
+    ap.add_argument("--disc", action="store_true",
+                    help="track with the image centre's disc, not the ball's local outline (comparison)")
     ap.add_argument("--summarize", default=None, help="only print the tables of a CSV written before "
                     "(a run cut short keeps its finished rows)")
     args = ap.parse_args()
@@ -123,10 +180,16 @@ def main():
     from tqdm import tqdm
     rows = []
     out = None
+    if args.tracks:
+        Path(args.tracks).mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp, Pool(args.workers) as pool:
         # Rows are written as shots finish, so a run cut short keeps them.
-        for row in tqdm(pool.imap_unordered(one_shot, [(i, args.seed, tmp, args.codec) for i in range(args.n)]),
+        jobs = [(i, args.seed, tmp, args.codec, args.tracks, args.only_cached, args.noise_max,
+                 args.camera, args.disc) for i in range(args.n)]
+        for row in tqdm(pool.imap_unordered(one_shot, jobs),
                         total=args.n, desc="shots", disable=None):
+            if row is None:
+                continue
             rows.append(row)
             if args.csv:
                 if out is None:

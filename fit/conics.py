@@ -150,7 +150,7 @@ def fit_parabola(p, start: Parabola) -> ParabolaFit:
     return ParabolaFit(True, "", par, res, cov)
 
 
-def classify_path(p, start: Parabola | None) -> PathShape:
+def classify_path(p, start: Parabola | None, curved: bool | None = None) -> PathShape:
     """Fit line and parabola to a sliding path and choose (fit.decide.curved).
 
     Parameters
@@ -159,6 +159,9 @@ def classify_path(p, start: Parabola | None) -> PathShape:
         Sliding-path points (m).
     start : Parabola or None
         Starting parabola; None (no curvature seen at all) means straight.
+    curved : bool, optional
+        An earlier decision on the same path to keep (a refit through
+        another camera, recover.calibration); decided here when None.
     """
     p = np.asarray(p, dtype=float)
     line = fit_line(p)
@@ -169,5 +172,5 @@ def classify_path(p, start: Parabola | None) -> PathShape:
     F = max(line.sse - par.sse, 0.0) / 2.0 / max(par.sse / (n - 4), 1e-300)
     pval = float(f_dist.sf(F, 2, n - 4))
     sigma = float(np.sqrt(par.sse / (n - 4)))
-    return PathShape(curved=decide_curved(F, n).yes, F=float(F), p_value=pval, line=line,
+    return PathShape(curved=decide_curved(F, n).yes if curved is None else bool(curved), F=float(F), p_value=pval, line=line,
                      parabola=par, sigma=sigma)

@@ -54,7 +54,8 @@ class Segments:
     is ``inf`` (and ``x1``, ``v1`` extrapolated to the last frame) when the
     ball was still sliding when the track ended.  ``slide`` and ``roll``
     index the frames of each phase; ``sigma`` is the position noise (m) the
-    fit's residuals show; ``k_move`` the first frame seen moving.
+    fit's residuals show; ``k_move`` the first frame seen moving and
+    ``rest_k`` the first frame of the final rest (None: no rest in view).
     ``geometry_cov`` holds the covariances (m^2, 2x2) of ``x0``, ``x1``,
     their cross term and ``x2`` (keys ``x0``, ``x1``, ``x0x1``, ``x2``), with
     every frame's error independent at ``sigma`` (callers floor the rests'
@@ -81,6 +82,7 @@ class Segments:
     end_F: float = 0.0
     end_dof: int = 1
     k_move: int = 0
+    rest_k: int | None = None
     geometry_cov: dict | None = None
     rolling: "Segments | None" = None
     unended: "Segments | None" = None
@@ -232,7 +234,7 @@ def noise_from_track(xy) -> float:
 
 
 def segment_track(t, xy, decel: float, sigma: float | None = None,
-                  exposure_s: float = 0.0) -> Segments:
+                  exposure_s: float = 0.0, frames: tuple | None = None) -> Segments:
     """Find the strike, the end of sliding and the rest in a track.
 
     Parameters
@@ -249,6 +251,11 @@ def segment_track(t, xy, decel: float, sigma: float | None = None,
         Exposure (s).  Frames whose exposure may hold the strike are left out
         of the fit: a half-still, half-streaking ball has a biased centre,
         and that bias near the strike would pass for a sliding phase.
+    frames : tuple, optional
+        ``(k_move, rest_k)`` of an earlier segmentation of the same frames
+        (its Segments' fields): the first moving frame and the rest's first
+        frame are kept instead of found again (a refit of the same track
+        through another camera, recover.calibration).
 
     Returns
     -------
@@ -277,6 +284,8 @@ def segment_track(t, xy, decel: float, sigma: float | None = None,
         return Segments(False, "the ball does not move in the track")
     k_move = int(np.argmax(stays))
     rest_k = find_rest_end(t, xy, still)
+    if frames is not None:
+        k_move, rest_k = int(frames[0]), None if frames[1] is None else int(frames[1])
     k_end = rest_k if rest_k is not None else len(t)
     if k_end - k_move < MIN_MOVING_FRAMES:
         return Segments(False, f"only {k_end - k_move} frames of motion")
@@ -369,7 +378,7 @@ def _finish(t, xy, tf, xf, t0, t1, beyond, decel, rest_k, k_end, k_move, dof, **
     return Segments(True, "", t0=t0, x0=x0, t1=t1, x1=x1, v0=v0, v1=v1, a_slide=a_s, a_roll=a_r,
                     t2=t2, x2=x2, slide=slide, roll=roll,
                     sigma=float(np.sqrt(sse / dof)), t_last=float(t[k_end - 1]), residuals=res,
-                    k_move=k_move, geometry_cov=geometry_cov, **extra)
+                    k_move=k_move, rest_k=rest_k, geometry_cov=geometry_cov, **extra)
 
 
 def _geometry_cov(tf, xf, t0, t1, beyond, decel, v1, s2, n_rest):

@@ -75,7 +75,8 @@ def mle_bound(scene: Scene, track, mle: dict | None = None, independent: bool = 
     (``recover_track(..., return_estimate=True)`` gives them), or a
     TrackResult and the fit's JSON ``mle``, from which they are rebuilt
     the same way (strike window at its ``t0``, the rest after its ``t2``
-    shared for a lossy codec, its ``codec_noise_m`` added); nothing is
+    shared for a lossy codec, its ``codec_noise_px`` added through the
+    camera, or ``codec_noise_m`` when it has none); nothing is
     segmented again.  With ``independent``, the tracker's errors with every
     frame its own measurement, the bound a lossy codec's shared errors put
     out of reach (a reference).
@@ -92,7 +93,7 @@ def mle_bound(scene: Scene, track, mle: dict | None = None, independent: bool = 
         When the information matrix is singular.
     """
     from cuespin.physics import contact_velocity
-    from cuespin.recover.measurements import Measurements, build_measurements, table_covariance
+    from cuespin.recover.measurements import Measurements, build_measurements, pixel_to_table, table_covariance
     from cuespin.recover.mle import crb_covariance
 
     truth, p, cam = scene.truth, scene.physics, scene.camera
@@ -108,8 +109,11 @@ def mle_bound(scene: Scene, track, mle: dict | None = None, independent: bool = 
         if independent or mle.get("t0") is None:
             meas = build_measurements(t, xy, cov)
         else:
-            c = mle.get("codec_noise_m") or 0.0
+            in_px = mle.get("codec_noise_px") is not None
+            c = (mle["codec_noise_px"] if in_px else mle.get("codec_noise_m")) or 0.0
             meas = build_measurements(t, xy, cov, t0=mle["t0"], t_rest=mle.get("t2"),
                                       exposure_s=cam.exposure_s, frame_dt=1.0 / cam.fps,
-                                      shared_rest=not track.lossless).with_codec(np.sign(c) * c * c)
+                                      shared_rest=not track.lossless,
+                                      px_to_m=pixel_to_table(cam, xy) if in_px else None
+                                      ).with_codec(np.sign(c) * c * c)
     return crb_covariance(truth, p, meas, cam.exposure_s, rolling=rolling), rolling

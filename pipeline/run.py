@@ -139,6 +139,7 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
     from cuespin.physics.contact import scene_balls
     from cuespin.recover.api import recover_track
     from cuespin.recover.calibration import add_calibration_error
+    from cuespin.recover.measurements import pixel_to_table
     from cuespin.track.tracker import TrackerConfig
     from cuespin.track.video import track_video
 
@@ -153,11 +154,14 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
     contact = find_contact(tr.t, tr.xy, tr.ok, track_stderr_m(tr, cam), scene.table, scene.physics.R,
                            scene_balls(scene.render))
     n = analysed_frames(tr.t, contact, cam.exposure_s)
-    out = recover_track(tr.t[:n], tr.xy[:n], tr.ok[:n], cov_m[:n], scene.physics, cam.exposure_s,
-                        method, fit_friction, lossless=tr.lossless,
-                        inter_frame=getattr(tr, "inter_frame", False))
+    out, est = recover_track(tr.t[:n], tr.xy[:n], tr.ok[:n], cov_m[:n], scene.physics, cam.exposure_s,
+                             method, fit_friction, lossless=tr.lossless,
+                             inter_frame=getattr(tr, "inter_frame", False), px_to_m=pixel_to_table(cam, tr.xy[:n]),
+                             return_estimate=True)
     if scene.calibration:
-        add_calibration_error(out["methods"], lambda c: _refit_through(c, tr, n, scene, method, fit_friction),
+        # Each refit keeps this fit's decisions: the share measures the camera alone.
+        add_calibration_error(out["methods"],
+                              lambda c: _refit_through(c, tr, n, scene, method, fit_friction, est.decided),
                               scene.calibration)
     out["contact"] = None if contact is None else {"t": contact.t, "kind": contact.kind}
     noise = tr.centroid_noise_px
@@ -181,11 +185,14 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
     return (result, tr) if return_track else result
 
 
-def _refit_through(camera, tr, n: int, scene, method: str, fit_friction: bool) -> dict:
+def _refit_through(camera, tr, n: int, scene, method: str, fit_friction: bool, keep=None) -> dict:
     """The methods' answers for the first ``n`` frames of a track seen through
-    another camera (the tracked pixels converted anew)."""
+    another camera (the tracked pixels converted anew), keeping the
+    decisions ``keep`` (recover.estimate.Decided) of the fit through the scene's."""
     from cuespin.recover.api import recover_track
     from cuespin.recover.measurements import table_covariance
+
+    from cuespin.recover.measurements import pixel_to_table
 
     uv = np.asarray(tr.uv, dtype=float)[:n]
     xy = np.full_like(uv, np.nan)
@@ -194,7 +201,8 @@ def _refit_through(camera, tr, n: int, scene, method: str, fit_friction: bool) -
     cov = table_covariance(camera, xy, np.asarray(tr.cov_px)[:n])
     return recover_track(tr.t[:n], xy, np.asarray(tr.ok)[:n], cov, scene.physics, scene.camera.exposure_s,
                          method, fit_friction, lossless=tr.lossless,
-                         inter_frame=getattr(tr, "inter_frame", False))["methods"]
+                         inter_frame=getattr(tr, "inter_frame", False),
+                         px_to_m=pixel_to_table(camera, xy), keep=keep)["methods"]
 
 
 MODEL_TEXT = {"full": "slip fitted (sliding, then rolling)", "rolling": "rolling from the strike (no slip)"}

@@ -28,7 +28,7 @@ def _num(x):
 
 def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0.0,
                   method: str = "all", fit_friction: bool = False, lossless: bool = True,
-                  return_estimate: bool = False, inter_frame: bool = False):
+                  return_estimate: bool = False, inter_frame: bool = False, px_to_m=None, keep=None):
     """v0 and w0 from a track, by the paper's method and/or maximum likelihood.
 
     Parameters
@@ -55,6 +55,15 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
     inter_frame : bool
         The lossy codec predicts frames from others (H.264): its error is
         shared between neighbouring frames (recover.mle.codec_sandwich).
+    px_to_m : ndarray, shape (n, 2, 2), optional
+        Metres per pixel at each frame (``recover.measurements.pixel_to_table``
+        of the scene's camera): a lossy codec's own error is measured in
+        pixels and carried to the table through it, as the tracker's is;
+        without it, in metres (tracks with no camera).
+    keep : Decided, optional
+        An earlier recovery's decisions on the same track
+        (``Estimate.decided``, from ``return_estimate``), kept by this one: a
+        refit through another camera (recover.calibration).
     return_estimate : bool
         Also return the :class:`~cuespin.recover.estimate.Estimate` (its
         measurements give the bound: pipeline.measure.mle_bound).
@@ -73,7 +82,8 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
     ok = np.asarray(ok, dtype=bool) & np.all(np.isfinite(xy), axis=1) & np.isfinite(t)
     cov = np.asarray(stderr_m, dtype=float)[ok]
     est = estimate(t[ok], xy[ok], cov, params, exposure_s, lossless, fit_friction,
-                   run_paper=method in ("paper", "all"), inter_frame=inter_frame)
+                   run_paper=method in ("paper", "all"), inter_frame=inter_frame,
+                   px_to_m=None if px_to_m is None else np.asarray(px_to_m, dtype=float)[ok], keep=keep)
     methods = {}
     if method in ("paper", "all"):
         methods["paper"] = paper_dict(est, params)
@@ -110,13 +120,20 @@ def paper_dict(est: Estimate, params: BallParams) -> dict:
 def mle_dict(est: Estimate) -> dict:
     """The maximum-likelihood fit's JSON fields (CONVENTIONS.md)."""
     m = est.mle
+    # The codec's error: measured in pixels when the track came with its
+    # camera (then also in metres at the median frame), else in metres.
+    in_px = est.meas is not None and est.meas.px_to_m is not None
+    c_m2 = est.meas.codec_m2(est.codec_var) if est.meas is not None else est.codec_var
     out = {"status": m.status, "reason": m.reason, "model": m.model or None,
            "v0": _num(m.v0), "w0": _num(m.w0),
            "stderr": {k: _num(v) for k, v in m.stderr.items()},
            "x0": _num(m.x0), "t0": _num(m.t0), "t1": _num(m.t1), "t2": _num(m.t2),
            "slip_lr": _num(m.slip_lr), "chi2_per_dof": _num(m.chi2 / m.dof) if m.dof else None,
            "dof": int(m.dof) if m.dof else None, "hac": bool(m.hac), "rho1": _num(m.rho1),
-           "codec_noise_m": _num(math.copysign(math.sqrt(abs(est.codec_var)), est.codec_var))}
+           "ar1": _num(m.ar1),
+           "codec_noise_m": _num(math.copysign(math.sqrt(abs(c_m2)), c_m2)),
+           "codec_noise_px": None if not in_px else _num(math.copysign(math.sqrt(abs(est.codec_var)),
+                                                                         est.codec_var))}
     if m.mu_s is not None or m.mu_r is not None:
         out.update(mu_s=_num(m.mu_s), mu_r=_num(m.mu_r))
     return out

@@ -6,7 +6,11 @@ corners are (a corner clicked 1 px off put v0 10-30 stated errors off,
 recovery states it separately: the same track is converted to table metres
 through each camera of the calibration's sensitivity set (the camera
 re-solved with one corner coordinate moved by its stated error, in turn;
-``cuespin calibrate`` writes them) and refitted; to first order, with the
+``cuespin calibrate`` writes them) and refitted, keeping every decision the
+fit through the calibrated camera made (sliding or rolling, sliding ended,
+the segmentation's strike and rest, the paper's path shape and root:
+recover.estimate.Decided), so the spread is the camera's alone and never a
+model that a perturbed camera tips the other way; to first order, with the
 corners' errors independent, the calibration's variance of an answer ``q`` is
 ``sum_k (q_k - q)^2``.
 """

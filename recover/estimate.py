@@ -19,8 +19,8 @@ from cuespin.fit.segment import Segments, segment_track
 from cuespin.physics.motion import BallParams, phases
 from cuespin.recover.measurements import (Measurements, as_covariance, build_measurements,
                                           codec_excess, fill_covariance)
-from cuespin.recover.mle import (CodecCorrelation, MLEResult, ModelFit, correlated_codec_var, fit_model,
-                                 fit_models, initial_guess, result, slip_lr)
+from cuespin.recover.mle import (AUTOCORR_Z, CodecCorrelation, MLEResult, ModelFit, correlated_codec_var,
+                                 fit_model, fit_models, initial_guess, lag1_autocorrelation, result, slip_lr)
 from cuespin.recover.paper import PaperResult, paper_from_segments
 
 # The first fit's strike time is used to place the strike's window only
@@ -34,14 +34,46 @@ FIT_ERRORS = (ValueError, np.linalg.LinAlgError, FloatingPointError)
 
 
 @dataclass(frozen=True)
+class Decided:
+    """What one recovery decided about a track, for a refit of the same
+    track through another camera to keep (recover.calibration): the
+    calibration's share must measure the camera alone, not a model that a
+    perturbed camera tips the other way (sliding or rolling, the path's
+    shape, the paper's root).
+
+    ``sliding_seen`` (None: the fit did not run), ``sliding_ended``,
+    ``segments`` (``sliding``, ``unended`` or ``rolling``: the segmentation
+    chosen), ``curved`` (the paper's path; None: not asked), ``strike_seen``,
+    ``frames`` (the strike's and the rest's frames, fit.segment), ``t0``
+    (the strike window's centre, s), ``codec_var`` (as
+    :attr:`Estimate.codec_var`), ``start`` (the chosen fit's ``(x0, t0,
+    v0, w0)``, to start from), ``paper`` (the paper's ``(v0, w0)`` or None)
+    and ``ar1`` (the AR(1) error model's lag-1 correlation; 0: none).
+    """
+
+    sliding_seen: bool | None
+    sliding_ended: bool
+    segments: str
+    curved: bool | None
+    strike_seen: bool
+    frames: tuple
+    t0: float
+    codec_var: float
+    start: tuple | None = None
+    paper: tuple | None = None
+    ar1: float = 0.0
+
+
+@dataclass(frozen=True)
 class Estimate:
     """Everything the recovery found in one track.
 
     ``seg`` is the segmentation the decisions chose (rolling from the
     strike, or sliding that ended in view or not); ``meas`` the
     measurements the maximum-likelihood fit used (for its bound);
-    ``codec_var`` the codec's per-axis error variance (m^2, signed) measured
-    from the first fit's residuals; ``decisions`` name each Decision taken.
+    ``codec_var`` the codec's per-axis error variance (signed; px^2 when
+    the track came with ``px_to_m``, else m^2) measured from the first
+    fit's residuals; ``decisions`` name each Decision taken.
     """
 
     seg: Segments
@@ -51,6 +83,7 @@ class Estimate:
     codec_var: float = 0.0
     decisions: dict = field(default_factory=dict)
     timing_s: dict = field(default_factory=dict)
+    decided: Decided | None = None
 
 
 def _first_fit(meas, params, starts, exposure_s, fit_friction) -> ModelFit | None:
@@ -66,7 +99,8 @@ def _first_fit(meas, params, starts, exposure_s, fit_friction) -> ModelFit | Non
 
 
 def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: bool = True,
-             fit_friction: bool = False, run_paper: bool = True, inter_frame: bool = False) -> Estimate:
+             fit_friction: bool = False, run_paper: bool = True, inter_frame: bool = False,
+             px_to_m=None, keep: Decided | None = None) -> Estimate:
     """Segment, decide and fit one track.
 
     Parameters
@@ -92,6 +126,14 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         The lossy codec predicts frames from other frames (H.264): its
         error is shared between neighbouring frames, and the standard
         errors follow its measured correlation (recover.mle.codec_sandwich).
+    px_to_m : ndarray, shape (n, 2, 2), optional
+        Metres per pixel at each frame (recover.measurements.pixel_to_table):
+        a codec's error is one variance in the image, carried to the table
+        through it; without it (simulated tracks) one variance in m^2.
+    keep : Decided, optional
+        An earlier recovery's decisions on the same frames (its
+        ``Estimate.decided``), kept instead of made again: the refits of the
+        calibration's share (recover.calibration) change the camera only.
 
     Returns
     -------
@@ -103,7 +145,8 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
     sigma = float(np.median(np.sqrt(0.5 * (cov[:, 0, 0] + cov[:, 1, 1])))) if len(t) else float("nan")
     frame_dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
     clock = time.perf_counter()
-    seg = segment_track(t, xy, 5.0 / 7.0 * params.mu_r * params.g, sigma, exposure_s)
+    seg = segment_track(t, xy, 5.0 / 7.0 * params.mu_r * params.g, sigma, exposure_s,
+                        frames=keep.frames if keep is not None else None)
     t_fit = time.perf_counter() - clock
     clock = time.perf_counter()
     if not seg:
@@ -117,8 +160,12 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
     # v0 1.6% off at 9 stated errors).
     def measure(t0):
         return build_measurements(t, xy, cov, t0=t0, t_rest=seg.t2, exposure_s=exposure_s,
-                                  frame_dt=frame_dt, shared_rest=not lossless)
+                                  frame_dt=frame_dt, shared_rest=not lossless, px_to_m=px_to_m)
 
+    if keep is not None:
+        codec = CodecCorrelation(keep.codec_var, frame_dt) if inter_frame and not lossless else None
+        return _refit(keep, seg, t, xy, params, exposure_s, fit_friction, run_paper, lossless, sigma,
+                      frame_dt, measure, codec, t_fit, clock)
     starts = [initial_guess(s, params) for s in (seg, seg.unended, seg.rolling) if s is not None]
     meas1 = measure(seg.t0)
     first = _first_fit(meas1, params, starts, exposure_s, fit_friction)
@@ -138,6 +185,15 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         start = (first.shot.x0, first.shot.t0, first.shot.v0, first.shot.w0) if first else starts[0]
         full, roll = fit_models(meas, params, start, exposure_s, fit_friction,
                                 initial_guess(seg.rolling, params))
+        if codec is None:
+            # Residuals correlated along the track (a lossy codec at low
+            # noise): both models again under AR(1) errors of that lag-1
+            # correlation, so their likelihood ratio and covariance hold.
+            rho, z = lag1_autocorrelation(meas, full.residuals)
+            if z > AUTOCORR_Z:
+                full, roll = fit_models(meas, params, (full.shot.x0, full.shot.t0, full.shot.v0, full.shot.w0),
+                                        exposure_s, fit_friction,
+                                        (roll.shot.x0, roll.shot.t0, roll.shot.v0, roll.shot.w0), ar1=rho)
     except FIT_ERRORS as exc:
         mle = MLEResult("failed", f"the fit did not run: {exc}")
     if mle is None:
@@ -160,12 +216,51 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         # into the rest (case 2): the segmentation's "unended" fit, which
         # then puts t1 where the sliding velocity vanishes (eq. 29).
         chosen = seg.unended
-    paper = None
+    paper, shape = None, None
+    strike_seen = strike_in_view(t, chosen.t0)
     if run_paper:
         # The paper's errors are propagated from the same per-frame noise the
         # fit weights by: the tracker's, with the codec's measured share.
-        paper_sigma = math.sqrt(sigma**2 + max(codec_var, 0.0))
-        paper = paper_from_segments(chosen, t, xy, params, paper_sigma, frame_dt,
-                                    strike_in_view(t, chosen.t0), lossless)
+        paper_sigma = math.sqrt(sigma**2 + max(meas.codec_m2(codec_var), 0.0))
+        paper = paper_from_segments(chosen, t, xy, params, paper_sigma, frame_dt, strike_seen, lossless)
+        shape = paper.trajectory == "parabola" if paper.trajectory else None
+    seen = decisions.get("sliding_seen")
+    fit = None if seen is None else (full if seen else roll)
+    decided = Decided(
+        sliding_seen=None if seen is None else bool(seen), sliding_ended=bool(decisions.get("sliding_ended", True)),
+        segments="rolling" if chosen is seg.rolling else "unended" if chosen is seg.unended else "sliding",
+        curved=shape, strike_seen=strike_seen, frames=(seg.k_move, seg.rest_k), t0=t0, codec_var=codec_var,
+        start=None if fit is None else (fit.shot.x0, fit.shot.t0, fit.shot.v0, fit.shot.w0),
+        paper=(paper.v0, paper.w0) if paper is not None and paper.status == "ok" else None,
+        ar1=0.0 if fit is None else fit.ar1)
     return Estimate(chosen, paper, mle, meas, codec_var, decisions,
-                    {"fit": t_fit, "recover": time.perf_counter() - clock})
+                    {"fit": t_fit, "recover": time.perf_counter() - clock}, decided)
+
+
+def _refit(keep: Decided, seg, t, xy, params, exposure_s, fit_friction, run_paper, lossless, sigma,
+           frame_dt, measure, codec, t_fit, clock) -> Estimate:
+    """:func:`estimate` keeping an earlier recovery's decisions (``keep``):
+    the same model fitted from the earlier answer, the same segmentation,
+    path shape and root for the paper's method."""
+    nan = float("nan")
+    chosen = {"rolling": seg.rolling, "unended": seg.unended}.get(keep.segments, seg) or seg
+    meas = measure(keep.t0).with_codec(keep.codec_var)
+    decisions = {"sliding_ended": Decision(keep.sliding_ended, nan, nan)}
+    mle = None
+    if keep.sliding_seen is None or keep.start is None:
+        mle = MLEResult("failed", "the fit did not run on the first camera")
+    else:
+        decisions["sliding_seen"] = Decision(keep.sliding_seen, nan, nan)
+        rolling = not keep.sliding_seen
+        try:
+            fit = fit_model(meas, params, keep.start, exposure_s, rolling, fit_friction, keep.ar1)
+            mle = result(fit, meas, nan, keep.sliding_ended or rolling, codec)
+        except FIT_ERRORS as exc:
+            mle = MLEResult("failed", f"the fit did not run: {exc}")
+    paper = None
+    if run_paper and seg:
+        paper_sigma = math.sqrt(sigma**2 + max(meas.codec_m2(keep.codec_var), 0.0))
+        paper = paper_from_segments(chosen, t, xy, params, paper_sigma, frame_dt, keep.strike_seen, lossless,
+                                    curved=keep.curved, near=keep.paper)
+    return Estimate(chosen, paper, mle, meas, keep.codec_var, decisions,
+                    {"fit": t_fit, "recover": time.perf_counter() - clock}, keep)

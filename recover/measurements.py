@@ -16,6 +16,10 @@ so all of them weight, leave out and count the same measurements.
   measurement, with one frame's covariance.  With a lossless codec every
   frame is its own measurement.
 - Degrees of freedom are counted from the measurements: 2 per measurement.
+- A codec's own error lives in the image: it is one variance in px^2 for
+  every frame, carried to metres like the tracker's through the camera's
+  Jacobian at each frame's position (``px_to_m``, :func:`pixel_to_table`);
+  without a camera (simulated tracks) it is one variance in m^2.
 
 Pure functions of arrays.
 """
@@ -69,6 +73,19 @@ def table_covariance(camera, xy, stderr_px) -> np.ndarray:
     return out
 
 
+def pixel_to_table(camera, xy) -> np.ndarray:
+    """Metres per pixel at each ball position, shape (n, 2, 2): the inverse of
+    the camera's Jacobian ``d uv / d xy`` (``camera.jacobian``), so that a
+    pixel error ``e`` is ``B e`` on the table and a pixel covariance ``C``
+    is ``B C B^T``; NaN where the frame has no position."""
+    xy = np.asarray(xy, dtype=float)
+    out = np.full((len(xy), 2, 2), np.nan)
+    good = np.all(np.isfinite(xy), axis=1)
+    if good.any():
+        out[good] = np.linalg.inv(camera.jacobian(xy[good]))
+    return out
+
+
 def fill_covariance(cov, xy) -> np.ndarray:
     """Per-frame covariances with unknown (non-finite) ones filled: by the
     median stated one when enough frames state one, else all from the
@@ -101,6 +118,9 @@ class Measurements:
     W : ndarray, shape (m, 2, 2)
         Inverse Cholesky factor of each measurement's covariance (its
         whitener); made by :func:`_make`.
+    px_to_m : ndarray, shape (n, 2, 2), or None
+        Metres per pixel at each frame (:func:`pixel_to_table`): a codec's
+        variance is in px^2 and goes to metres through it; None: in m^2.
     """
 
     t: np.ndarray
@@ -108,6 +128,7 @@ class Measurements:
     cov: np.ndarray
     group: np.ndarray
     W: np.ndarray
+    px_to_m: np.ndarray | None = None
 
     @property
     def used(self) -> np.ndarray:
@@ -151,18 +172,58 @@ class Measurements:
         g = self.group[self.used]
         return np.bincount(g, minlength=self.n) == 1
 
+    def codec_shape(self) -> np.ndarray:
+        """Each frame's covariance (m^2) per unit of codec variance, shape
+        (n, 2, 2): ``B B^T`` with ``B`` its metres per pixel, or the identity
+        without a camera."""
+        if self.px_to_m is None:
+            return np.broadcast_to(np.eye(2), self.cov.shape).copy()
+        return self.px_to_m @ np.swapaxes(self.px_to_m, -1, -2)
+
+    def codec_factor(self) -> np.ndarray:
+        """Per measurement, shape (m, 2, 2), a factor ``F`` of its codec
+        covariance per unit variance (``F F^T``): a single frame's metres per
+        pixel (the same pixel error seen through it: between frames the
+        codec's shared error is ``rho F_i F_j^T``), a rest's Cholesky factor
+        of its frames' mean :meth:`codec_shape`."""
+        g = self.group[self.used]
+        m = self.n
+        if self.px_to_m is None:
+            return np.broadcast_to(np.eye(2), (m, 2, 2)).copy()
+        K = np.zeros((m, 2, 2))
+        np.add.at(K, g, self.codec_shape()[self.used])
+        K /= np.bincount(g, minlength=m)[:, None, None]
+        F = np.linalg.cholesky(K)
+        frame = np.zeros(m, dtype=int)
+        frame[g[::-1]] = np.flatnonzero(self.used)[::-1]  # each measurement's first frame
+        one = self.single
+        F[one] = self.px_to_m[frame[one]]
+        return F
+
+    def codec_m2(self, codec_var: float) -> float:
+        """The codec's per-axis variance ``codec_var`` in table m^2 at the
+        median frame (for a single figure; the fit weights each frame by its own)."""
+        K = self.codec_shape()
+        return float(codec_var * np.median(0.5 * (K[:, 0, 0] + K[:, 1, 1]))) if len(K) else 0.0
+
     def with_codec(self, codec_var: float) -> "Measurements":
         """The same measurements with a codec's per-axis error variance
-        ``codec_var`` (m^2, signed: negative takes back an overstatement)
-        added to every frame, floored at ``MIN_NOISE_FRACTION`` of the stated."""
-        cov = self.cov + codec_var * np.eye(2)
+        ``codec_var`` (px^2 through ``px_to_m``, else m^2; signed: negative
+        takes back an overstatement) added to every frame, floored at
+        ``MIN_NOISE_FRACTION`` of the stated.  The floor also applies where the
+        difference is no longer a covariance: under a tilted camera a frame's
+        covariance in metres is correlated between x and y, and a negative
+        ``codec_var`` can leave its diagonal above the floor but its
+        determinant negative."""
+        cov = self.cov + codec_var * self.codec_shape()
         floor = MIN_NOISE_FRACTION**2 * self.cov
-        low = (cov[:, 0, 0] < floor[:, 0, 0]) | (cov[:, 1, 1] < floor[:, 1, 1])
+        low = ((cov[:, 0, 0] < floor[:, 0, 0]) | (cov[:, 1, 1] < floor[:, 1, 1])
+               | (np.linalg.det(cov) < np.linalg.det(floor)))
         cov[low] = floor[low]
-        return _make(self.t, self.xy, cov, self.group)
+        return _make(self.t, self.xy, cov, self.group, self.px_to_m)
 
 
-def _make(t, xy, cov, group) -> Measurements:
+def _make(t, xy, cov, group, px_to_m=None) -> Measurements:
     """Measurements with their whiteners: one frame's covariance for each
     (the mean of a group's frames': they share one error; a single frame's
     own), inverted through its Cholesky factor."""
@@ -174,7 +235,7 @@ def _make(t, xy, cov, group) -> Measurements:
     np.add.at(c, g, cov[used])
     c /= np.maximum(cnt, 1)[:, None, None]
     W = np.linalg.inv(np.linalg.cholesky(c)) if m else np.zeros((0, 2, 2))
-    return Measurements(t=t, xy=xy, cov=cov, group=group, W=W)
+    return Measurements(t=t, xy=xy, cov=cov, group=group, W=W, px_to_m=px_to_m)
 
 
 def strike_window(t, t0: float, exposure_s: float, frame_dt: float) -> np.ndarray:
@@ -188,7 +249,7 @@ def strike_window(t, t0: float, exposure_s: float, frame_dt: float) -> np.ndarra
 
 def build_measurements(t, xy, cov, *, t0: float | None = None, t_rest: float | None = None,
                        exposure_s: float = 0.0, frame_dt: float | None = None,
-                       shared_rest: bool = False) -> Measurements:
+                       shared_rest: bool = False, px_to_m=None) -> Measurements:
     """Turn a track into the measurements a fit uses.
 
     Parameters
@@ -211,6 +272,10 @@ def build_measurements(t, xy, cov, *, t0: float | None = None, t_rest: float | N
     shared_rest : bool
         The codec's error is shared by a still ball's frames (lossy): each
         rest becomes one measurement, the mean of its frames.
+    px_to_m : ndarray, shape (n, 2, 2), optional
+        Metres per pixel at each frame (:func:`pixel_to_table`), through
+        which a codec's pixel variance reaches the table
+        (:meth:`Measurements.with_codec`); without it that variance is in m^2.
 
     Returns
     -------
@@ -219,6 +284,13 @@ def build_measurements(t, xy, cov, *, t0: float | None = None, t_rest: float | N
     t = np.asarray(t, dtype=float)
     xy = np.asarray(xy, dtype=float)
     cov = fill_covariance(as_covariance(cov, len(t)), xy)
+    if px_to_m is not None:
+        px_to_m = np.array(px_to_m, dtype=float)
+        bad = ~np.all(np.isfinite(px_to_m.reshape(len(t), -1)), axis=1)
+        if bad.all():
+            px_to_m = None
+        elif bad.any():
+            px_to_m[bad] = np.median(px_to_m[~bad], axis=0)
     if frame_dt is None:
         frame_dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
     use = ~strike_window(t, t0, exposure_s, frame_dt) if t0 is not None else np.ones(len(t), bool)
@@ -235,17 +307,19 @@ def build_measurements(t, xy, cov, *, t0: float | None = None, t_rest: float | N
     group = np.full(len(t), -1)
     _, inv = np.unique(key[use], return_inverse=True)
     group[use] = inv
-    return _make(t, xy, cov, group)
+    return _make(t, xy, cov, group, px_to_m)
 
 
 def codec_excess(meas: Measurements, whitened_residuals, n_par: int) -> float:
-    """Per-axis error variance (m^2) a lossy codec adds beyond the stated one.
+    """Per-axis error variance a lossy codec adds beyond the stated one
+    (px^2 when ``meas`` carries ``px_to_m``, else m^2).
 
     Measured from a fit's residuals over all its measurements (a rest's
     mean included: its shared compression error is the codec's too): the
-    variance ``c`` which, added to every measurement's stated variance,
+    variance ``c`` which, added to every measurement's stated variance
+    (through its metres per pixel, ``k`` per unit: :meth:`Measurements.codec_shape`),
     makes the weighted residuals match the fit's degrees of freedom,
-    ``sum r^2 / (s^2 + c) = 2m - n_par`` (a weighted moment equation: the
+    ``sum r^2 / (s^2 + c k) = 2m - n_par`` (a weighted moment equation: the
     stated errors vary along the track, and an unweighted excess is ruled by
     the largest).  Signed: negative when the residuals are smaller than
     stated (MJPG at low noise, where the tracker states 1.2-1.4 times its
@@ -265,12 +339,14 @@ def codec_excess(meas: Measurements, whitened_residuals, n_par: int) -> float:
     L = np.linalg.inv(meas.W)
     raw2 = np.einsum("mij,mj->mi", L, r) ** 2                   # (m, 2), m^2
     s2 = np.diagonal(L @ np.swapaxes(L, -1, -2), axis1=1, axis2=2)  # stated per-axis variances
+    F = meas.codec_factor()
+    k = np.diagonal(F @ np.swapaxes(F, -1, -2), axis1=1, axis2=2)   # per unit codec variance
 
     def excess_chi2(c):
-        return float(np.sum(raw2 / (s2 + c))) - dof
+        return float(np.sum(raw2 / (s2 + c * k))) - dof
 
-    lo = -(1.0 - MIN_NOISE_FRACTION**2) * float(s2.min())
-    hi = max(float(raw2.sum()), float(s2.max()))
+    lo = -(1.0 - MIN_NOISE_FRACTION**2) * float((s2 / k).min())
+    hi = max(float(raw2.sum() / k.min()), float((s2 / k).max()))
     if excess_chi2(lo) <= 0:
         return lo
     if excess_chi2(hi) >= 0:

@@ -6,9 +6,13 @@ the exposure-averaged ball centre plus Gaussian error of its stated 2x2
 covariance; the fit minimises the whitened squared residuals (scipy's
 least_squares).  Standard errors come from the Jacobian at the optimum,
 scaled up by the reduced chi-square when the residuals are larger than
-stated; when the residuals are autocorrelated (a lossy codec's error varies
-slowly along the path at low noise), from a Newey-West (HAC) sandwich over
-the same Jacobian instead.
+stated.  When the residuals are autocorrelated (a lossy codec's error varies
+slowly along the path at low noise), the errors are modelled as AR(1) along
+the track with the residuals' lag-1 correlation and both models are fitted
+again to the prewhitened residuals (generalised least squares: the
+likelihood ratio and the Jacobian's covariance then hold under that error
+model); a Newey-West (HAC) sandwich over the same Jacobian covers what
+correlation the prewhitened residuals still show.
 
 Two models are fitted: free slip (``full``) and rolling from the strike
 (``w0 = z_hat x v0 / R``, paper case 4); which one the track shows is
@@ -58,6 +62,10 @@ AUTOCORR_Z = 2.33
 # the slow part (lags 1-60 only) gave too narrow intervals: a constant is
 # absorbed by x0, a drift over a second is not.
 INTER_CODEC_ACF = (0.27, 0.10, 7.0, 118.0)
+# The AR(1) error model's lag-1 correlation is capped here: nearer 1 the
+# prewhitened residuals are differences of neighbouring frames and the fit
+# loses what little the level says (0.67 measured on MJPG at low noise).
+MAX_AR1 = 0.95
 # Gauss-Legendre nodes for averaging the model over the exposure: exact for
 # the (quadratic) motion within a phase.
 _GL_T, _GL_W = np.polynomial.legendre.leggauss(3)
@@ -96,6 +104,7 @@ class MLEResult:
     names: tuple = ()
     hac: bool = False
     rho1: float = float("nan")
+    ar1: float = 0.0
 
     def __bool__(self):
         return self.status == "ok"
@@ -120,6 +129,7 @@ class ModelFit:
     converged: bool
     message: str
     names: tuple
+    ar1: float = 0.0
 
 
 def _unpack(p, rolling, fit_friction, params: BallParams):
@@ -152,14 +162,40 @@ def model_track(shot: Shot, params: BallParams, t, exposure_s: float = 0.0):
     return np.einsum("k,nkd->nd", 0.5 * _GL_W, x)
 
 
+def ar1_prewhiten(meas: Measurements, r, rho: float) -> np.ndarray:
+    """Whitened residuals ``r`` (m, 2) under AR(1) errors of lag-1
+    correlation ``rho`` between neighbouring frames: along the single-frame
+    measurements in time order, ``(r_i - phi r_(i-1)) / sqrt(1 - phi^2)``
+    with ``phi = rho^k`` for measurements ``k`` frames apart (a masked
+    strike between them lowers it); the first, and rests, unchanged."""
+    r = np.asarray(r, dtype=float)
+    if not rho:
+        return r
+    single = np.flatnonzero(meas.single)
+    if len(single) < 2:
+        return r
+    g = meas.group[meas.used]
+    t_m = np.bincount(g, weights=meas.t_used, minlength=meas.n) / np.bincount(g, minlength=meas.n)
+    ts = t_m[single]
+    dt = float(np.median(np.diff(ts)))
+    k = np.maximum(np.rint(np.diff(ts) / dt), 1.0) if dt > 0 else np.ones(len(ts) - 1)
+    phi = rho ** k
+    out = r.copy()
+    out[single[1:]] = (r[single[1:]] - phi[:, None] * r[single[:-1]]) / np.sqrt(1.0 - phi**2)[:, None]
+    return out
+
+
 def fit_model(meas: Measurements, params: BallParams, start, exposure_s: float, rolling: bool,
-              fit_friction: bool = False) -> ModelFit:
+              fit_friction: bool = False, ar1: float = 0.0) -> ModelFit:
     """Fit one model (free slip or rolling from the strike) to the measurements.
 
     ``start`` is ``(x0, t0, v0, w0)`` (``w0`` ignored when rolling);
-    friction starts from ``params``.  Raises ValueError or LinAlgError when
-    the fit cannot run.
+    friction starts from ``params``; ``ar1``, the errors' lag-1 correlation
+    along the track (0: independent), prewhitens the residuals
+    (:func:`ar1_prewhiten`).  Raises ValueError or LinAlgError when the fit
+    cannot run.
     """
+    ar1 = float(np.clip(ar1, 0.0, MAX_AR1))
     t = meas.t_used
     x0, t0, v0, w0 = (np.asarray(s, dtype=float) for s in start)
     p0 = np.r_[x0, t0, v0] if rolling else np.r_[x0, t0, v0, w0]
@@ -168,7 +204,7 @@ def fit_model(meas: Measurements, params: BallParams, start, exposure_s: float, 
 
     def resid(p):
         shot, pr = _unpack(p, rolling, fit_friction, params)
-        return meas.whiten(model_track(shot, pr, t, exposure_s)).ravel()
+        return ar1_prewhiten(meas, meas.whiten(model_track(shot, pr, t, exposure_s)), ar1).ravel()
 
     lo = np.full(len(p0), -np.inf)
     hi = np.full(len(p0), np.inf)
@@ -197,21 +233,22 @@ def fit_model(meas: Measurements, params: BallParams, start, exposure_s: float, 
     return ModelFit(rolling=rolling, x=r.x, shot=shot, params=pr, chi2=float(2 * r.cost),
                     dof=meas.dof(len(r.x)), jac=r.jac, residuals=r.fun.reshape(-1, 2),
                     converged=bool(r.success or r.status > 0), message=str(r.message),
-                    names=_names(rolling, fit_friction))
+                    names=_names(rolling, fit_friction), ar1=ar1)
 
 
 def fit_models(meas: Measurements, params: BallParams, start, exposure_s: float = 0.0,
-               fit_friction: bool = False, start_rolling=None):
+               fit_friction: bool = False, start_rolling=None, ar1: float = 0.0):
     """Both models: free slip from ``start`` and rolling from the strike from
-    ``start_rolling`` (default ``start``).  Returns ``(full, rolling)``.
+    ``start_rolling`` (default ``start``), with AR(1) errors of lag-1
+    correlation ``ar1`` (0: independent).  Returns ``(full, rolling)``.
 
     Rolling is nested in free slip, so a full fit worse than the rolling one
     stopped in a local minimum: it is restarted from the rolling answer,
     nudged along the start's slip, and the better kept.
     """
-    full = fit_model(meas, params, start, exposure_s, False, fit_friction)
+    full = fit_model(meas, params, start, exposure_s, False, fit_friction, ar1)
     roll = fit_model(meas, params, start_rolling if start_rolling is not None else start,
-                     exposure_s, True, fit_friction)
+                     exposure_s, True, fit_friction, ar1)
     if full.chi2 > roll.chi2:
         s = roll.shot
         w_roll = np.asarray(s.w0)
@@ -219,7 +256,7 @@ def fit_models(meas: Measurements, params: BallParams, start, exposure_s: float 
         nudge = 0.05 * np.hypot(*s.v0) / params.R
         w_start = w_roll + nudge * d / max(np.hypot(*d), 1e-12)
         again = fit_model(meas, roll.params, (s.x0, s.t0, s.v0, w_start), exposure_s, False,
-                          fit_friction)
+                          fit_friction, ar1)
         if again.chi2 < full.chi2:
             full = again
     return full, roll
@@ -297,8 +334,9 @@ def hac_covariance(jac, residuals, rho: float) -> np.ndarray:
 @dataclass(frozen=True)
 class CodecCorrelation:
     """An inter-frame codec's error shared between frames: its per-axis
-    variance ``var`` (m^2, measured from the first fit's residuals,
-    recover.measurements.codec_excess), the frame interval ``frame_dt``
+    variance ``var`` (px^2 through the measurements' ``px_to_m``, else m^2;
+    measured from the first fit's residuals, :func:`correlated_codec_var`),
+    the frame interval ``frame_dt``
     (s) and its correlation ``acf = (a, b, tau, tau_long)`` (frames)
     (:data:`INTER_CODEC_ACF`)."""
 
@@ -307,15 +345,26 @@ class CodecCorrelation:
     acf: tuple = INTER_CODEC_ACF
 
 
+def _codec_G(J, meas: Measurements) -> np.ndarray:
+    """``(W_i F_i)^T J_i`` per measurement, shape (m, 2, p): the whitened
+    Jacobian seen from the codec's pixel error (``F_i`` its metres per pixel,
+    Measurements.codec_factor)."""
+    m, p = len(J) // 2, J.shape[1]
+    WF = meas.W @ meas.codec_factor()
+    return np.einsum("mba,mbp->map", WF, J.reshape(m, 2, p))
+
+
 def _codec_scores(J, meas: Measurements, acf, frame_dt: float) -> np.ndarray:
     """``J^T M J`` with ``M`` the whitened measurements' covariance per unit
-    codec variance: ``W_i W_i^T`` on the diagonal, ``rho(k_ij) W_i W_j^T``
-    between single-frame measurements i != j (k_ij frames apart, from
-    their times; rests are independent of the rest)."""
-    m, p = len(J) // 2, J.shape[1]
+    codec variance: ``W_i F_i F_i^T W_i^T`` on the diagonal,
+    ``rho(k_ij) W_i F_i F_j^T W_j^T`` between single-frame measurements
+    i != j (k_ij frames apart, from their times; rests are independent of
+    the rest); ``F_i`` carries the codec's pixel error to metres at that
+    measurement (Measurements.codec_factor)."""
+    m = len(J) // 2
     g = meas.group[meas.used]
     t_m = np.bincount(g, weights=meas.t_used, minlength=m) / np.bincount(g, minlength=m)
-    G = np.einsum("mba,mbp->map", meas.W, J.reshape(m, 2, p))  # W_i^T J_i
+    G = _codec_G(J, meas)
     out = np.einsum("map,maq->pq", G, G)
     single = meas.single
     if single.sum() > 1 and frame_dt > 0:
@@ -330,8 +379,9 @@ def _codec_scores(J, meas: Measurements, acf, frame_dt: float) -> np.ndarray:
 
 def correlated_codec_var(fit: ModelFit, meas: Measurements, frame_dt: float,
                          acf=INTER_CODEC_ACF) -> float:
-    """Per-axis variance (m^2) of an inter-frame codec's error, from a fit's
-    residuals (measurements without the codec's share): solves
+    """Per-axis variance (px^2 through the measurements' ``px_to_m``, else
+    m^2) of an inter-frame codec's error, from a fit's residuals
+    (measurements without the codec's share): solves
     ``E[r^T r] = (2m - p) + var tr((I - H) M)`` (``H`` the fit's hat matrix,
     ``M`` as in :func:`_codec_scores`).  recover.measurements.codec_excess
     assumes independent errors; a correlated error is partly absorbed by
@@ -341,7 +391,8 @@ def correlated_codec_var(fit: ModelFit, meas: Measurements, frame_dt: float,
     if 2 * m <= p + 2:
         return 0.0
     A = np.linalg.pinv(J.T @ J)  # the hat matrix's trace needs no inverse (slip undetermined: singular)
-    trM = float(np.einsum("mab,mab->", meas.W, meas.W))
+    WF = meas.W @ meas.codec_factor()
+    trM = float(np.einsum("mab,mab->", WF, WF))
     tr_free = trM - float(np.trace(A @ _codec_scores(J, meas, acf, frame_dt)))
     if not tr_free > 0:
         return 0.0
@@ -360,8 +411,7 @@ def codec_sandwich(fit: ModelFit, meas: Measurements, codec: CodecCorrelation) -
     A = np.linalg.inv(J.T @ J)
     if codec.var <= 0 or codec.frame_dt <= 0:
         return A
-    m, p = len(J) // 2, J.shape[1]
-    G = np.einsum("mba,mbp->map", meas.W, J.reshape(m, 2, p))
+    G = _codec_G(J, meas)
     off = _codec_scores(J, meas, codec.acf, codec.frame_dt) - np.einsum("map,maq->pq", G, G)
     return A @ (J.T @ J + codec.var * off) @ A
 
@@ -425,7 +475,7 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
             stderr["mu_s"] = float(se[-2])
     common = dict(stderr=stderr, model="rolling" if rolling else "full", slip_lr=float(lr),
                   chi2=float(chi2), dof=int(dof), residuals=fit.residuals, cov=cov, names=fit.names,
-                  hac=hac, rho1=float(rho))
+                  hac=hac, rho1=float(rho), ar1=float(fit.ar1))
     out = dict(v0=np.asarray(shot.v0, float), w0=np.asarray(shot.w0, float),
                x0=np.asarray(shot.x0, float), t0=shot.t0,
                t1=ph.t1, t2=ph.t2 if np.isfinite(ph.t2) else None,

@@ -41,32 +41,42 @@ class SimTrack:
 
 def simulate_track(shot: Shot, params: BallParams, fps: float, sigma: float, rng,
                    exposure_s: float = 0.0, t_end: float | None = None,
-                   t_start: float = 0.0) -> SimTrack:
+                   t_start: float = 0.0, rho: float = 0.0) -> SimTrack:
     """The exposure-averaged centre at frame times ``k / fps`` plus N(0, sigma^2) per axis.
 
-    ``t_end`` defaults to 0.3 s after rest, at most :data:`MAX_AFTER_STRIKE_S` after the strike.
+    ``t_end`` defaults to 0.3 s after rest, at most :data:`MAX_AFTER_STRIKE_S`
+    after the strike.  ``rho``: the errors are AR(1) along the track with
+    this lag-1 correlation (the same variance; a lossy codec at low noise,
+    README), independent between axes.
     """
     rng = np.random.default_rng(rng)
     ph = phases(shot, params)
     if t_end is None:
         t_end = min(ph.t2 + 0.3, shot.t0 + MAX_AFTER_STRIKE_S)
     t = np.arange(np.ceil(t_start * fps), np.floor(t_end * fps) + 1) / fps
-    xy = model_track(shot, params, t, exposure_s) + sigma * rng.standard_normal((len(t), 2))
+    e = rng.standard_normal((len(t), 2))
+    if rho:
+        # e_k = rho e_(k-1) + sqrt(1 - rho^2) w_k, started stationary.
+        from scipy.signal import lfilter
+        e[1:] *= np.sqrt(1.0 - rho**2)
+        e = lfilter([1.0], [1.0, -rho], e, axis=0)
+    xy = model_track(shot, params, t, exposure_s) + sigma * e
     return SimTrack(t, xy, float(sigma), shot, params, float(exposure_s), float(fps))
 
 
 def null_rolling_tracks(n: int, seed: int, fps_grid=FPS_GRID, sigma_grid=SIGMA_GRID_M,
-                        blur: bool = True):
+                        blur: bool = True, rho: float = 0.0):
     """``n`` tracks rolling from the strike (paper case 4: no slip to see),
     cycling over frame rates and noise levels, exposures 0.3-1 frame half
-    the time (as the sampler draws them).  Yields :class:`SimTrack`."""
+    the time (as the sampler draws them); ``rho``: AR(1) errors
+    (:func:`simulate_track`).  Yields :class:`SimTrack`."""
     rng = np.random.default_rng(seed)
     for i in range(n):
         fps = fps_grid[i % len(fps_grid)]
         sigma = sigma_grid[(i // len(fps_grid)) % len(sigma_grid)]
         shot, params = sample_shot(rng, "case4")
         exposure = float(rng.uniform(0.3, 1.0) / fps) if blur and rng.random() < 0.5 else 0.0
-        yield simulate_track(shot, params, fps, sigma, rng, exposure)
+        yield simulate_track(shot, params, fps, sigma, rng, exposure, rho=rho)
 
 
 def sliding_tracks(n: int, seed: int, presets=("random", "case1", "case3", "case5", "masse"),

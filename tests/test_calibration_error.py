@@ -79,3 +79,56 @@ def test_clicked_corners_error_is_stated(tmp_path):
     err = np.subtract(mle["v0"], sc.truth.v0)
     assert np.all(np.abs(err) < 4 * np.asarray(mle["stderr"]["v0"])), (err, mle["stderr"])
     assert np.linalg.norm(mle["stderr_calibration"]["v0"]) > np.linalg.norm(mle["stderr_fit"]["v0"])
+
+
+def _sliding_track(seed=4):
+    from cuespin.data_gen.sampler import sample_shot
+    from cuespin.physics import phases
+    from cuespin.recover.simulate import simulate_track
+    shot, p = sample_shot(seed, "random")
+    ph = phases(shot, p)
+    return shot, p, simulate_track(shot, p, 120.0, 1e-4, seed, t_end=min(ph.t2 + 0.3, shot.t0 + 3.0))
+
+
+def test_refit_keeps_the_decisions():
+    """A refit with an earlier recovery's decisions (recover.estimate.Decided)
+    answers the same model: on the same data the same answer (the share is
+    then zero), and a kept decision is not made again, even against the data."""
+    from cuespin.recover.estimate import estimate
+    shot, p, tr = _sliding_track()
+    sig = np.full(len(tr.t), tr.sigma)
+    est = estimate(tr.t, tr.xy, sig, p)
+    assert est.mle.status == "ok" and est.mle.model == "full" and est.decided.sliding_seen
+    again = estimate(tr.t, tr.xy, sig, p, keep=est.decided)
+    assert again.mle.model == "full" and again.paper.status == est.paper.status
+    assert np.allclose(again.mle.v0, est.mle.v0, atol=1e-3 * est.mle.stderr["v0"].max())
+    forced = estimate(tr.t, tr.xy, sig, p, keep=dataclasses.replace(est.decided, sliding_seen=False))
+    assert forced.mle.model == "rolling"
+
+
+def test_calibration_refits_through_perturbed_cameras_keep_the_model():
+    """run_recover's refits through the calibration's perturbed cameras
+    (pipeline.run._refit_through) keep the main fit's decisions: every refit
+    answers with the main fit's model and the paper's root nearest its answer."""
+    from types import SimpleNamespace
+
+    from cuespin.physics.camera import pinhole_camera
+    from cuespin.pipeline.run import _refit_through
+    from cuespin.recover.api import recover_track
+    from cuespin.recover.measurements import pixel_to_table, table_covariance
+    shot, p, tr = _sliding_track()
+    cam = pinhole_camera(height_m=2.0, tilt_deg=10.0, R=p.R, fps=120.0)
+    uv = cam.to_pixels(tr.xy)
+    cov_px = np.broadcast_to(np.eye(2) * 0.03**2, (len(tr.t), 2, 2)).copy()
+    xy = cam.to_table(uv)
+    track = SimpleNamespace(t=tr.t, uv=uv, cov_px=cov_px, ok=np.ones(len(tr.t), bool), lossless=True)
+    out, est = recover_track(tr.t, xy, track.ok, table_covariance(cam, xy, cov_px), p,
+                             px_to_m=pixel_to_table(cam, xy), return_estimate=True)
+    scene = SimpleNamespace(physics=p, camera=cam)
+    for dh, dt in ((0.01, 0.0), (-0.01, 0.2), (0.0, -0.2)):
+        moved = pinhole_camera(height_m=2.0 + dh, tilt_deg=10.0 + dt, R=p.R, fps=120.0)
+        refit = _refit_through(moved, track, len(tr.t), scene, "all", False, est.decided)
+        assert refit["mle"]["model"] == out["methods"]["mle"]["model"]
+        assert refit["paper"]["trajectory"] == out["methods"]["paper"]["trajectory"]
+        if out["methods"]["paper"]["status"] == "ok":
+            assert refit["paper"]["status"] == "ok"

@@ -125,3 +125,62 @@ def centroid_crb_colour(uv_nodes: np.ndarray, radius_px: float, ball_bgr, felt_b
     Cinv = np.linalg.inv(np.asarray(noise_cov, float) + np.eye(3) / 12.0)
     fisher = np.einsum("mcp,cd,mdq->pq", J, Cinv, J)
     return np.sqrt(np.diag(np.linalg.inv(fisher))[:2])
+
+
+def centroid_crb_outline(xy_nodes, camera, R: float, ball_grey: float, felt: np.ndarray,
+                         sigma: float, fit_blur: bool) -> np.ndarray:
+    """Covariance bound (px^2) for the projected centre of one frame's ball under any camera.
+
+    The renderer's image of the ball through ``camera``: the sphere's
+    silhouette at each exposure node (its ``OUTLINE_VERTICES``-gon, exact
+    coverage), averaged.  The parameters are a shift of the whole image (the
+    centre; the outline's shape changes by ~1e-3 px per px of shift, which
+    carries no usable information), the ball's grey level and, where the
+    tracker fits it, the blur vector (node ``k`` shifted by ``tau_k`` times
+    it).  Noise as in :func:`centroid_crb`.
+
+    Parameters
+    ----------
+    xy_nodes : ndarray, shape (K, 2)
+        The exposure's nodes on the table (m).
+    camera : Camera
+    R : float
+        Ball radius (m).
+    ball_grey : float
+    felt : ndarray, shape (height, width)
+        The rendered background (grey levels).
+    sigma : float
+        Sensor noise (grey levels), before 8-bit rounding.
+    fit_blur : bool
+
+    Returns
+    -------
+    ndarray, shape (2, 2)
+        Inverse Fisher information's ``(u, v)`` block (px^2); convert with
+        ``camera.cov_to_table``.
+    """
+    from cuespin.render.draw import OUTLINE_VERTICES, polygon_coverage_batch
+
+    polys = camera.ball_outline(np.atleast_2d(xy_nodes), R, OUTLINE_VERTICES)      # (K, n, 2)
+    K = len(polys)
+    lo, hi = polys.reshape(-1, 2).min(axis=0), polys.reshape(-1, 2).max(axis=0)
+    u0, v0 = int(np.floor(lo[0])) - 3, int(np.floor(lo[1])) - 3
+    w, h = int(np.ceil(hi[0])) + 4 - u0, int(np.ceil(hi[1])) + 4 - v0
+    contrast = (ball_grey - np.asarray(felt, dtype=float)[v0:v0 + h, u0:u0 + w]).ravel()
+    taus = (np.arange(K) + 0.5) / K - 0.5
+
+    def image(d, db=(0.0, 0.0)):
+        shift = np.asarray(d, float)[None, :] + np.outer(taus, db)                  # (K, 2)
+        cov = polygon_coverage_batch(polys + shift[:, None, :], np.full(K, u0), np.full(K, v0), w, h)
+        return cov.mean(axis=0).ravel()
+
+    cols = []
+    for d in (np.array([_STEP_PX, 0.0]), np.array([0.0, _STEP_PX])):
+        cols.append(contrast * (image(d) - image(-d)) / (2 * _STEP_PX))
+    cols.append(image(np.zeros(2)))
+    if fit_blur and K > 1:
+        for d in (np.array([_STEP_PX, 0.0]), np.array([0.0, _STEP_PX])):
+            cols.append(contrast * (image(np.zeros(2), d) - image(np.zeros(2), -d)) / (2 * _STEP_PX))
+    J = np.stack(cols, axis=1)
+    fisher = J.T @ J / (sigma**2 + 1.0 / 12.0)
+    return np.linalg.inv(fisher)[:2, :2]

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cuespin.render.draw import quadrant_area
+from cuespin.track.outline import ellipse_with_gradient
 
 MAX_ITER = 24
 # After this many full Gauss-Newton steps the steps are halved: where the
@@ -82,6 +83,14 @@ def disc_with_gradient(cu, cv, r: float, u0: int, v0: int, w: int, h: int):
     return cov, d_du, d_dv
 
 
+def coverage_with_gradient(cu, cv, r, u0, v0, w, h, outline=None):
+    """:func:`disc_with_gradient`, or the ellipse's
+    (:func:`cuespin.track.outline.ellipse_with_gradient`) when ``outline`` is given."""
+    if outline is None:
+        return disc_with_gradient(cu, cv, r, u0, v0, w, h)
+    return ellipse_with_gradient(cu, cv, outline, u0, v0, w, h)
+
+
 def blur_nodes(blur_px: float) -> np.ndarray:
     """Fractions of the exposure, centred on 0, at which the streak is sampled."""
     if blur_px < 0.25:
@@ -90,7 +99,7 @@ def blur_nodes(blur_px: float) -> np.ndarray:
     return (np.arange(K) + 0.5) / K - 0.5
 
 
-def streak_model(c, b, G, felt, r, u0, v0, taus, shade=None, blur_cols=True):
+def streak_model(c, b, G, felt, r, u0, v0, taus, shade=None, blur_cols=True, outline=None):
     """Frame minus felt for a ball of grey ``G`` smeared from ``c - b/2`` to ``c + b/2``.
 
     The ball hides the felt under it, so the model is ``(G - felt) * cov``
@@ -108,13 +117,17 @@ def streak_model(c, b, G, felt, r, u0, v0, taus, shade=None, blur_cols=True):
     ``blur_cols`` False leaves the blur's columns ``d/dbu, d/dbv`` zero (a
     fit that holds the blur fixed never reads them: two tensor products
     per evaluation saved).
+
+    ``outline``, when given (an :class:`~cuespin.track.outline.Ellipse`),
+    is the ball's image in place of the disc of radius ``r`` (the look's
+    ``X / r`` still uses ``r``, the ball's scale).
     """
     h, w = felt.shape
     taus = np.asarray(taus, float)
     n = len(taus)
     cu = c[0] + b[0] * taus
     cv = c[1] + b[1] * taus
-    covs, gus, gvs = disc_with_gradient(cu, cv, r, u0, v0, w, h)      # (n, h, w)
+    covs, gus, gvs = coverage_with_gradient(cu, cv, r, u0, v0, w, h, outline)  # (n, h, w)
     felt = np.asarray(felt, float)
     if shade is None:
         cov = covs.sum(axis=0) / n
@@ -200,7 +213,8 @@ class DiscFit:
 
 
 def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float, G0: float,
-             b0=(0.0, 0.0), fit_blur: bool = False, shade: bool = False, valid=None) -> DiscFit:
+             b0=(0.0, 0.0), fit_blur: bool = False, shade: bool = False, valid=None,
+             outline=None) -> DiscFit:
     """Least-squares fit of the exact disc (or streak) model to a patch.
 
     Parameters
@@ -228,6 +242,11 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
         uniform-disc fit is pulled towards its lit side.
     valid : ndarray of bool, shape (h, w), optional
         Pixels the fit may use (others, e.g. the cue's, are left out).
+    outline : Ellipse, optional
+        The ball's local outline under perspective
+        (:func:`cuespin.track.outline.local_outline`), its shape fixed and
+        its centre fitted; ``c`` is then that ellipse's centre.  None: the
+        disc of radius ``r``.
 
     Returns
     -------
@@ -249,7 +268,7 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
     taus = blur_nodes(np.hypot(*b))
     it = 0
     for it in range(1, MAX_ITER + 1):
-        m, J = streak_model(c, b, G, felt, r, u0, v0, taus, look, blur_cols=fit_blur)
+        m, J = streak_model(c, b, G, felt, r, u0, v0, taus, look, blur_cols=fit_blur, outline=outline)
         J = J[:, cols]
         res = y - m.ravel()
         if valid is not None:  # all ones otherwise: skip two products per step
@@ -359,7 +378,7 @@ def moments(D: np.ndarray, u0: int, v0: int, c0, radius: float, n_iter: int = 3)
 
 
 def refit_shift(felt_old: np.ndarray, felt_new: np.ndarray, u0: int, v0: int, c, b, G: float,
-                r: float, fit_blur: bool, shade=None) -> np.ndarray:
+                r: float, fit_blur: bool, shade=None, outline=None) -> np.ndarray:
     """Change of a converged disc fit's centre (px) when its felt is replaced.
 
     At the old optimum the old Jacobian ``J_o`` is orthogonal to the
@@ -371,14 +390,15 @@ def refit_shift(felt_old: np.ndarray, felt_new: np.ndarray, u0: int, v0: int, c,
     the old felt was badly wrong (a felt that shows ball, where a shot
     stopped near its strike: ``J_o`` is zero there, as those pixels told the
     old fit nothing; with ``J_n`` the shift came out of the wrong sign).
-    ``shade``: the fit's look parameters, when it fitted them.
+    ``shade``: the fit's look parameters, when it fitted them; ``outline``
+    the fit's ellipse, when it used one.
     """
     taus = blur_nodes(np.hypot(*b))
     c, b = np.asarray(c, float), np.asarray(b, float)
     felt_old = np.asarray(felt_old, np.float64)
     felt_new = np.asarray(felt_new, np.float64)
-    _, Jo = streak_model(c, b, G, felt_old, r, u0, v0, taus, shade)
-    _, Jn = streak_model(c, b, G, felt_new, r, u0, v0, taus, shade)
+    _, Jo = streak_model(c, b, G, felt_old, r, u0, v0, taus, shade, outline=outline)
+    _, Jn = streak_model(c, b, G, felt_new, r, u0, v0, taus, shade, outline=outline)
     cov = Jo[:, 4]
     cols = [0, 1, 2, 3, 4] if fit_blur else [0, 1, 4]
     if shade is not None:

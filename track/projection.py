@@ -1,7 +1,9 @@
 """From the fitted image of the ball to the projection of its centre.
 
-The tracker fits a symmetric model to the ball's image, so what it locates is
-the centre of the silhouette.  Under perspective the sphere's silhouette is
+The tracker fits a centrally symmetric model to the ball's image (the disc,
+or under perspective the ellipse of the ball's local outline,
+:mod:`cuespin.track.outline`), so what it locates is the centre of the
+silhouette.  Under perspective the sphere's silhouette is
 an ellipse (through a lens, nearly one) whose centre is not the image of the
 ball's centre: the silhouette's centroid lies 0.03-0.3 px from it on a
 1280 x 720 view from 1.5-3 m tilted up to 15 degrees (up to 0.7 px with a

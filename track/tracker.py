@@ -15,6 +15,7 @@ import numpy as np
 from cuespin.track.background import DETECT_SIGMAS, Background, box_size
 from cuespin.track.colour import GREY, Projection
 from cuespin.track.model import blur_nodes, fit_disc, moments, streak_from_moments, streak_model
+from cuespin.track.outline import OUTLINE_REFIT_PX, OutlineCache, is_similarity
 
 OK, NO_BALL, PARTIAL, TWO_BLOBS, GONE, FIT_FAILED = 0, 1, 2, 3, 4, 5
 STATUS_TEXT = {OK: "ok", NO_BALL: "no ball", PARTIAL: "ball partly out of the frame",
@@ -113,11 +114,18 @@ class BallTracker:
     max_step_px : float
         Farthest the ball can move in one frame (px): a blob found further
         from the last centre, a few frames on, is not the ball.
+    camera : Camera, optional
+        The scene's camera, with ``R`` the ball's radius (m): under
+        perspective each frame's fit uses the ball's outline there
+        (:func:`cuespin.track.outline.local_outline`, an ellipse from the
+        camera at the ball's position) in place of the disc of
+        ``radius_px``.  None, or a similarity camera: the disc.
     """
 
     def __init__(self, background: Background, radius_px: float, exposure_frames: float,
                  config: TrackerConfig = TrackerConfig(), projection: Projection = GREY,
-                 search_mask: np.ndarray | None = None, max_step_px: float = np.inf):
+                 search_mask: np.ndarray | None = None, max_step_px: float = np.inf,
+                 camera=None, R: float | None = None):
         if config.refine not in REFINERS:
             raise ValueError(f"refine must be one of {REFINERS}, got {config.refine!r}")
         self.bg = background
@@ -144,6 +152,9 @@ class BallTracker:
         self.shade = {"disc": False, "shaded": True}.get(config.look)  # None: learning
         self._look_votes: list[tuple[float, float, int]] = []
         self._candidates: tuple = ()  # the last full search's blobs
+        # The ball's outline from the camera; None: the disc everywhere.
+        self.outline_of = None if is_similarity(camera) or R is None else OutlineCache(camera, R, self.r)
+        self.outline = None  # this frame's (Ellipse or None)
 
     # -- search ---------------------------------------------------------
     def _velocity(self, k: int):
@@ -279,13 +290,14 @@ class BallTracker:
         ball's window, a specular highlight.  The fit unchanged when there
         are none."""
         m, _ = streak_model(f.c, f.b, f.G, felt, r, u0, v0, blur_nodes(np.hypot(*f.b)),
-                            f.shade if shade else None)
+                            f.shade if shade else None, outline=self.outline)
         res = (patch - felt) - m
         bad = np.abs(res) > OUTLIER_SIGMAS * max(self.bg.sigma, 0.5)
         if bad.sum() < 3:
             return f
         bad = cv2.dilate(bad.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
-        g = fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=shade, valid=~bad)
+        g = fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=shade, valid=~bad,
+                     outline=self.outline)
         return g if g else f
 
     def _learn_look(self, patch, felt, u0, v0, f_shaded, r, G0, blur, fit_blur):
@@ -295,7 +307,7 @@ class BallTracker:
         # (measured), more than tracking a short shot; chdtri(df, p) is chi2.isf(p, df).
         from scipy.special import chdtri
 
-        d = fit_disc(patch, felt, u0, v0, f_shaded.c, r, G0, b0=blur, fit_blur=fit_blur)
+        d = fit_disc(patch, felt, u0, v0, f_shaded.c, r, G0, b0=blur, fit_blur=fit_blur, outline=self.outline)
         if not d:
             return
         dof = patch.size - 6
@@ -306,14 +318,17 @@ class BallTracker:
             stat = (rss_d - rss_s).sum() / s2
             self.shade = bool(stat > chdtri(3 * len(rss_d), LOOK_P))
 
-    def _refine(self, frame, loc, blur) -> Observation:
+    def _refine(self, frame, loc, blur, recentre: bool = True) -> Observation:
         r = self.r
+        # The ball's outline here, from the camera (None: the disc of r).
+        ol = self.outline = self.outline_of(loc) if self.outline_of is not None else None
+        r_out = r if ol is None else max(r, ol.max_radius)  # what the patch must hold
         unknown_blur = blur is None
         if unknown_blur:  # size the patch for the longest blur the exposure allows
             blur = np.zeros(2)
-            half = int(np.ceil(r + 3)) + int(np.ceil(self._max_blur_px(frame, loc)))
+            half = int(np.ceil(r_out + 3)) + int(np.ceil(self._max_blur_px(frame, loc)))
         else:
-            half = int(np.ceil(r + 0.5 * np.hypot(*blur) + 3))
+            half = int(np.ceil(r_out + 0.5 * np.hypot(*blur) + 3))
         u0, v0 = int(round(loc[0])) - half, int(round(loc[1])) - half
         u1, v1 = u0 + 2 * half + 1, v0 + 2 * half + 1
         if u0 < 0 or v0 < 0 or u1 > self.W or v1 > self.H:
@@ -331,19 +346,27 @@ class BallTracker:
             fit_blur = np.hypot(*blur) > FIT_BLUR_PX
             G0 = float(felt.mean()) + self.pol * max(self.bg.contrast, 1.0)
             shade = self.shade is not False
-            f = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur, shade=shade)
+            f = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur, shade=shade, outline=ol)
             if not f and not fit_blur and self.exposure_frames > 0:
                 # A streak the prediction missed (the strike, a sudden turn).
                 blur = streak_from_moments(D, u0, v0, c, r)
                 fit_blur = np.hypot(*blur) > FIT_BLUR_PX
-                f = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur, shade=shade)
+                f = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur, shade=shade,
+                             outline=ol)
             if not f:
                 return _lost(FIT_FAILED)
+            if recentre and ol is not None and np.hypot(*(f.c - self.outline_of.at)) > OUTLINE_REFIT_PX:
+                # Fitted away from where its outline was taken (a ball larger
+                # than the search's box): again with the outline there, on a
+                # patch centred there.
+                again = self._refine(frame, f.c, f.b, recentre=False)
+                if again.status == OK:
+                    return again
             if self.shade is None:
                 self._learn_look(patch, felt, u0, v0, f, r, G0, blur, fit_blur)
             c, se, cov = f.c, f.stderr, f.cov
             self.last_fit = (u0, v0, v1 - v0, u1 - u0, f.c.copy(), f.b.copy(), f.G, bool(fit_blur),
-                             f.shade)
+                             f.shade, ol)
             self.last_patch = (patch, u0, v0)
         # The whole disc must lie inside the frame for the centre to be trusted.
         if (c[0] - r < -0.5 or c[1] - r < -0.5 or c[0] + r > self.W - 0.5

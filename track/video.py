@@ -278,7 +278,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         t_bg = time.perf_counter() - t_start
         tracker = BallTracker(bg, radius_px, cam.exposure_s * cam.fps, config, projection=proj,
                               search_mask=mask,
-                              max_step_px=MAX_SPEED_M_S / cam.fps * cam.px_per_m(center))
+                              max_step_px=MAX_SPEED_M_S / cam.fps * cam.px_per_m(center), camera=cam, R=R)
         felt = FeltAccumulator(first.shape)
         fits = []  # (frame index, the fit's state) for the final background correction
         t_start = time.perf_counter()
@@ -293,7 +293,9 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
             if obs.status == OK and tracker.last_patch is not None:
                 blur_len = np.hypot(*tracker.last_fit[5])
                 patch, pu, pv = tracker.last_patch
-                mask_r = radius_px + 0.5 * blur_len + 1.5
+                outline = tracker.last_fit[9]  # the ball's own size there, under perspective
+                r_here = radius_px if outline is None else max(radius_px, outline.max_radius)
+                mask_r = r_here + 0.5 * blur_len + 1.5
                 felt.add(patch, pu, pv, obs.uv, mask_r)
                 if k % FULL_FELT_EVERY == 0:
                     felt.add_frame(item, obs.uv, mask_r)
@@ -319,10 +321,10 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     if fits and felt.n >= 20:
         # The felt averaged over the tracked frames: correct each fit for it.
         better = felt.felt(bg.image, proj)
-        for kk, (pu, pv, ph, pw, c, b, G, fb, shade) in fits:
+        for kk, (pu, pv, ph, pw, c, b, G, fb, shade, outline) in fits:
             old = bg.image[pv:pv + ph, pu:pu + pw]
             new = better[pv:pv + ph, pu:pu + pw]
-            uv[kk] = c + refit_shift(old, new, pu, pv, c, b, G, radius_px, fb, shade)
+            uv[kk] = c + refit_shift(old, new, pu, pv, c, b, G, radius_px, fb, shade, outline)
         bg = replace(bg, image=better)
     t_track = time.perf_counter() - t_start
     status = np.array(status, np.int8)
