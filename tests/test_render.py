@@ -216,16 +216,15 @@ def test_alias_noise_draws_the_tables_exact_law(sigma):
     n = an.a[hi, 0].astype(int) - 128 + (lo >= an.thr[hi, 0]) * an.d[hi, 0].astype(int)
     assert np.array_equal(np.sort(n.ravel()), np.sort(noise_lut(sigma)))
 
-    class Bytes:  # hands add_to the enumeration above as its two bytes per pixel
-        def __init__(self):
-            self.parts = [lo.astype(np.uint8).tobytes(), hi.astype(np.uint8).tobytes()]
-
-        def bytes(self, n):
-            return self.parts.pop()
+    class Raw:  # hands add_to the enumeration above as its two bytes per pixel
+        class bit_generator:
+            @staticmethod
+            def random_raw(size):
+                return np.r_[hi.ravel(), lo.ravel()].astype(np.uint8).view(np.uint64)[:size]
 
     for level in (2, 128, 250):   # saturates like the sensor's 8 bits
         img = np.full((256, 256), level, np.uint8)
-        assert np.array_equal(an.add_to(img, Bytes()), np.clip(level + n, 0, 255))
+        assert np.array_equal(add_to := an.add_to(img, Raw()), np.clip(level + n, 0, 255)), add_to
 
 
 def test_orientation_of_a_rolling_ball_turns_by_distance_over_R():
