@@ -736,12 +736,14 @@ class FrameRenderer:
         n = cov.shape[1]
         K = len(uv)
         ramp = self._ramp
+        # Each node's ramp pixel, clipped to the frame (one call, not 2K scalar clips).
+        ru = np.clip(uv[:, 0], 0, ramp.shape[1] - 1).astype(int)
+        rv = np.clip(uv[:, 1], 0, ramp.shape[0] - 1).astype(int)
         for i in range(K):
             u0, v0 = iu[i] + pad, iv[i] + pad
             if u0 + n <= 0 or v0 + n <= 0 or u0 >= w or v0 >= h:
                 continue
-            cu = int(np.clip(uv[i, 0], 0, ramp.shape[1] - 1))
-            cv = int(np.clip(uv[i, 1], 0, ramp.shape[0] - 1))
+            cu, cv = ru[i], rv[i]
             a0, b0 = max(u0, 0), max(v0, 0)
             a1, b1 = min(u0 + n, w), min(v0 + n, h)
             sl = (slice(b0 - v0, b1 - v0), slice(a0 - u0, a1 - u0))
@@ -779,10 +781,11 @@ class FrameRenderer:
         sharp = self._sharp[pv0 + B:pv0 + B + ph, pu0 + B:pu0 + B + pw]
         delta = np.zeros((ph, pw, 3), np.float32)
         ramp = self._ramp
+        ru = np.clip(uv[:, 0], 0, w - 1).astype(int)
+        rv = np.clip(uv[:, 1], 0, h - 1).astype(int)
         for i in range(len(uv)):
             a, b = iu[i] - pu0, iv[i] - pv0
-            cu = int(np.clip(uv[i, 0], 0, w - 1))
-            cv = int(np.clip(uv[i, 1], 0, h - 1))
+            cu, cv = ru[i], rv[i]
             delta[b:b + n, a:a + n] += (cov[i][..., None] / K) * (
                 colour[i] * ramp[cv, cu] - sharp[b:b + n, a:a + n])
         delta = gaussian(delta, self._psf, constant=True)
