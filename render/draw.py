@@ -838,7 +838,9 @@ class FrameRenderer:
         R = self.scene.physics.R
         # The cue's state at the frame's middle (its own blur is not drawn);
         # a cue held still is drawn once.
-        gap = float(self.cue_tip(np.array([self.truth.t[k]]))[0])
+        if getattr(self, "_cue_gaps", None) is None:   # every frame's in one vectorised call
+            self._cue_gaps = self.cue_tip(self.truth.t)
+        gap = float(self._cue_gaps[k])
         cached = getattr(self, "_cue_cache", None)
         if cached is not None and cached[0] == gap:
             return cached[1]
