@@ -20,11 +20,24 @@ from cuespin.render.draw import quadrant_area
 from cuespin.track.outline import ellipse_with_gradient
 
 MAX_ITER = 24
-# After this many full Gauss-Newton steps the steps are halved: where the
-# look departs from the model (chroma subsampled at half resolution, a
-# shaded ball) the undamped iteration can cycle between two centres
-# 0.002-0.01 px apart (measured on yuv420p FFV1 video) instead of converging.
-DAMP_AFTER = 6
+# Where the look departs from the model (chroma subsampled at half
+# resolution, a lossy codec's ringing, a shaded ball) the residuals are
+# large and Gauss-Newton converges only linearly: each step 0.4 of the one
+# before, all in one direction (MJPG colour video: 6-7 iterations a frame),
+# or cycling between two centres 0.002-0.01 px apart (yuv420p FFV1).  Both
+# are a geometric sequence of steps, whose sum the last two steps give
+# (Aitken): when two successive steps are nearly parallel (cosine beyond
+# AITKEN_COS) with ratio rho, the step is scaled by 1 / (1 - rho), rho
+# clipped to AITKEN_RHO (a cycle, rho near -1, gets the step halved).
+AITKEN_COS = 0.8
+AITKEN_RHO = (-0.9, 0.8)
+# After this many steps every step is halved as well (a last resort).
+DAMP_AFTER = 12
+# Gauss-Newton also stops when the centre moves less than this fraction of
+# its own standard error (pooled residual, the normal equations): with the
+# iteration converging at rate <= 0.5 what is left is at most as large,
+# adding at most 1% to the centre's variance.
+STEP_TOL_SE = 0.1
 # Block size (px) of the cluster-robust sandwich used with the shaded look.
 CLUSTER_PX = 3
 # A fit still stepping after MAX_ITER is kept if its last step is below this
@@ -266,7 +279,9 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
         cols = cols + [5, 6, 7]
     n_look = 3 if shade else 0
     taus = blur_nodes(np.hypot(*b))
+    n_use = float(use.sum())
     it = 0
+    prev = None
     for it in range(1, MAX_ITER + 1):
         m, J = streak_model(c, b, G, felt, r, u0, v0, taus, look, blur_cols=fit_blur, outline=outline)
         J = J[:, cols]
@@ -275,12 +290,25 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
             res *= use
             J *= use[:, None]
         JtJ = J.T @ J
+        Jtr = J.T @ res
         try:
-            step = np.linalg.solve(JtJ, J.T @ res)
+            A = np.linalg.inv(JtJ)
         except np.linalg.LinAlgError:
             return _failed("singular normal equations", c, b, G, it)
+        step = A @ Jtr
         if not np.all(np.isfinite(step)) or abs(step[0]) > w or abs(step[1]) > h:
             return _failed("diverged", c, b, G, it)
+        move = np.hypot(step[0], step[1])
+        # The centre's standard error from the pooled residual (after this step).
+        s2 = max(res @ res - Jtr @ step, 0.0) / max(n_use - len(cols), 1.0)
+        done = move < STEP_TOL_PX or move < STEP_TOL_SE * np.sqrt(s2 * min(A[0, 0], A[1, 1]))
+        raw = step
+        if prev is not None and not done:
+            pp = prev @ prev
+            rho = (step @ prev) / pp if pp > 0 else 0.0
+            if abs(rho) * np.sqrt(pp) > AITKEN_COS * np.sqrt(step @ step):
+                step = step / (1.0 - np.clip(rho, *AITKEN_RHO))
+        prev = raw
         if it > DAMP_AFTER:
             step = 0.5 * step
         c += step[:2]
@@ -290,19 +318,19 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
         if fit_blur:
             b += step[2:4]
             taus = blur_nodes(np.hypot(*b))
-        if np.hypot(step[0], step[1]) < STEP_TOL_PX:
+        if done:
             break
     else:
         # Still moving: accept only a step far below the centre's own
         # uncertainty (the sandwich below), which no estimate can resolve.
-        A = np.linalg.inv(JtJ)
         se_now = np.sqrt(np.clip(np.diag(A @ (J.T @ (J * (res * res)[:, None])) @ A)[:2], 0, None))
         if not np.hypot(step[0], step[1]) < NO_CONVERGENCE_SE * se_now.min():
             return _failed(f"no convergence in {MAX_ITER} iterations", c, b, G, it)
     # Residual and covariance from the last evaluation: the final step moved
-    # the centre by under STEP_TOL_PX, which changes neither measurably.
+    # the centre by under STEP_TOL_PX or a tenth of its error, which changes
+    # neither measurably.
     dof = max(int(use.sum()) - len(cols), 1)
-    rms = float(np.sqrt(max(res @ res - (J.T @ res) @ step, 0.0) / dof))
+    rms = float(np.sqrt(max(res @ res - Jtr @ raw, 0.0) / dof))
     inside = (u0 - 0.5 <= c[0] <= u0 + w - 0.5) and (v0 - 0.5 <= c[1] <= v0 + h - 0.5)
     if not inside:
         return _failed("centre left the patch", c, b, G, it)
@@ -319,7 +347,6 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
     # are then summed over blocks of CLUSTER_PX x CLUSTER_PX pixels first
     # (the cluster-robust sandwich, CR1).
     try:
-        A = np.linalg.inv(JtJ)
         if shade:
             B = CLUSTER_PX
             S = (J * res[:, None]).reshape(h, w, -1)
@@ -397,8 +424,17 @@ def refit_shift(felt_old: np.ndarray, felt_new: np.ndarray, u0: int, v0: int, c,
     c, b = np.asarray(c, float), np.asarray(b, float)
     felt_old = np.asarray(felt_old, np.float64)
     felt_new = np.asarray(felt_new, np.float64)
-    _, Jo = streak_model(c, b, G, felt_old, r, u0, v0, taus, shade, outline=outline)
-    _, Jn = streak_model(c, b, G, felt_new, r, u0, v0, taus, shade, outline=outline)
+    if shade is None:
+        # The disc's Jacobian is the coverage's derivatives times the
+        # contrast G - felt (and the coverage): one evaluation serves both felts.
+        _, D = streak_model(c, b, 1.0, np.zeros_like(felt_old), r, u0, v0, taus, blur_cols=fit_blur,
+                            outline=outline)
+        Jo, Jn = D.copy(), D
+        Jo[:, :4] *= (G - felt_old).reshape(-1, 1)
+        Jn[:, :4] *= (G - felt_new).reshape(-1, 1)
+    else:
+        _, Jo = streak_model(c, b, G, felt_old, r, u0, v0, taus, shade, blur_cols=fit_blur, outline=outline)
+        _, Jn = streak_model(c, b, G, felt_new, r, u0, v0, taus, shade, blur_cols=fit_blur, outline=outline)
     cov = Jo[:, 4]
     cols = [0, 1, 2, 3, 4] if fit_blur else [0, 1, 4]
     if shade is not None:
