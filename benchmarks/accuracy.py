@@ -129,11 +129,12 @@ def one_shot(args):
             row[f"{m}_cover"] = float(np.mean(np.abs(z) < 1.96))
     mle = out["methods"]["mle"]
     row["mle_crb_z"] = row["mle_crb_z_indep"] = np.nan
-    row["chi2_per_dof"] = row["codec_noise_px"] = row["hac"] = row["rho1"] = np.nan
+    row["chi2_per_dof"] = row["codec_noise_px"] = row["hac"] = row["rho1"] = row["ar1"] = np.nan
     if mle["status"] == "ok":
         err = np.r_[mle["v0"], mle["w0"]] - truth_vw
         row["chi2_per_dof"] = mle.get("chi2_per_dof")
         row["hac"], row["rho1"] = float(bool(mle.get("hac"))), mle.get("rho1")
+        row["ar1"] = mle.get("ar1", np.nan)
         row["codec_noise_px"] = mle.get("codec_noise_px", np.nan)
         try:
             # The bound for the fit's own measurements (recover.measurements),
@@ -230,7 +231,8 @@ def summarize(rows, seed=0):
     if len(chi):
         print(f"MLE: chi2/dof of the fits answered ok: median {np.median(chi):.2f} (target 0.9-1.1), "
               f"p10 {np.percentile(chi, 10):.2f}, p90 {np.percentile(chi, 90):.2f}, max {chi.max():.1f}; "
-              f"HAC used on {np.nanmean([r['hac'] for r in ok]):.0%}")
+              f"HAC used on {np.nanmean([r['hac'] for r in ok]):.0%}, the AR(1) model on "
+              f"{np.mean([bool(r.get('ar1', 0) or 0) and np.isfinite(r.get('ar1', 0)) for r in ok]):.0%}")
     for m, target in (("mle", "93-97%"), ("paper", "90-97%")):
         for band, sel in (("all", lambda r: True), ("noise < 0.5", lambda r: r["noise"] < 0.5),
                           ("noise >= 0.5", lambda r: r["noise"] >= 0.5)):

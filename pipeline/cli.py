@@ -182,7 +182,10 @@ def cmd_experiment(args) -> int:
 
     if args.n < 1:
         raise InputError("--n must be at least 1")
-    path = run_experiment(args.name, Path(args.out), args.n, args.seed, args.workers, args.quick)
+    try:
+        path = run_experiment(args.name, Path(args.out), args.n, args.seed, args.workers, args.quick)
+    except ValueError as exc:  # the folder holds another run's trials
+        raise InputError(str(exc)) from None
     charts = sorted(p.name for p in Path(args.out).glob("*.png"))
     print(f"wrote {path} and {', '.join(charts)} in {args.out}")
     return 0
@@ -339,7 +342,9 @@ def add_experiment(sub):
                                    "with the Cramer-Rao bound. speed-accuracy: time per video against "
                                    "error, Pareto front marked. stability: error and failure rate over "
                                    "spin direction and magnitude. Writes OUT/trials.csv and OUT/*.png; "
-                                   "every point is a median over N shots with its interquartile range.")
+                                   "every point is a median over N shots with its interquartile range. "
+                                   "Each trial is appended to trials.csv as it ends; rerun the same "
+                                   "command to finish a cut-short run (only missing trials run).")
     e.add_argument("name", choices=EXPERIMENTS, help="which experiment")
     e.add_argument("--out", required=True, help="output folder")
     e.add_argument("--n", type=int, default=DEFAULT_N, help="shots per setting (default: %(default)s)")

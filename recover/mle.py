@@ -278,7 +278,7 @@ def slip_lr(full: ModelFit, roll: ModelFit, meas: Measurements | None = None,
     scale = max(1.0, full.chi2 / full.dof)
     if meas is not None and codec is not None and codec.var > 0:
         try:
-            base = np.linalg.inv(full.jac.T @ full.jac)
+            base = info_inverse(full.jac)
             wide = codec_sandwich(full, meas, codec)
             scale *= max(1.0, float(np.mean(np.diag(wide)[5:7] / np.diag(base)[5:7])))
         except np.linalg.LinAlgError:
@@ -287,12 +287,33 @@ def slip_lr(full: ModelFit, roll: ModelFit, meas: Measurements | None = None,
         rho, z = lag1_autocorrelation(meas, full.residuals)
         if z > AUTOCORR_Z:
             try:
-                base = np.linalg.inv(full.jac.T @ full.jac) * scale
+                base = info_inverse(full.jac) * scale
                 hac = hac_covariance(full.jac, full.residuals, rho)
                 scale *= max(1.0, float(np.mean(np.diag(hac)[5:7] / np.diag(base)[5:7])))
             except np.linalg.LinAlgError:
                 pass
     return float((roll.chi2 - full.chi2) / scale)
+
+
+def info_inverse(jac) -> np.ndarray:
+    """``(J^T J)^-1``, the inverse information of a whitened Jacobian, with
+    its columns scaled to unit length first (metres, seconds and rad/s
+    differ by orders of magnitude: a plain inverse of a tilted camera's
+    track once gave negative variances, benchmarks/codec_pixels.py).
+    When the scaled information is not numerically positive definite, its
+    plain inverse (whose non-positive variances then say which parameters
+    the track does not determine; see :func:`result`).  Raises LinAlgError
+    when it is singular."""
+    J = np.asarray(jac, dtype=float)
+    s = np.sqrt(np.sum(J * J, axis=0))
+    s[s == 0] = 1.0
+    Js = J / s
+    try:
+        Li = np.linalg.inv(np.linalg.cholesky(Js.T @ Js))
+        A = Li.T @ Li
+    except np.linalg.LinAlgError:
+        A = np.linalg.inv(Js.T @ Js)
+    return A / s[:, None] / s[None, :]
 
 
 def lag1_autocorrelation(meas: Measurements, residuals) -> tuple[float, float]:
@@ -327,7 +348,7 @@ def hac_covariance(jac, residuals, rho: float) -> np.ndarray:
     for lag in range(1, L + 1):
         G = scores[lag:].T @ scores[:-lag]
         S += (1 - lag / (L + 1)) * (G + G.T)
-    A = np.linalg.inv(J.T @ J)
+    A = info_inverse(J)
     return A @ S @ A * (2 * m / max(2 * m - p, 1))
 
 
@@ -408,7 +429,7 @@ def codec_sandwich(fit: ModelFit, meas: Measurements, codec: CodecCorrelation) -
     diagonal, already in the stated errors).  Raises LinAlgError when
     ``J^T J`` is singular."""
     J = np.asarray(fit.jac, dtype=float)
-    A = np.linalg.inv(J.T @ J)
+    A = info_inverse(J)
     if codec.var <= 0 or codec.frame_dt <= 0:
         return A
     G = _codec_G(J, meas)
@@ -431,7 +452,7 @@ def covariance(fit: ModelFit, meas: Measurements, codec: CodecCorrelation | None
     when the information matrix is singular."""
     rho, z = lag1_autocorrelation(meas, fit.residuals)
     scale = max(1.0, fit.chi2 / fit.dof)
-    base = np.linalg.inv(fit.jac.T @ fit.jac) * scale
+    base = info_inverse(fit.jac) * scale
     if codec is not None and codec.var > 0:
         return codec_sandwich(fit, meas, codec) * scale, True, rho
     if not z > AUTOCORR_Z:
@@ -460,12 +481,14 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
     except np.linalg.LinAlgError:
         return MLEResult("degenerate", "the track does not determine the shot (singular information matrix)")
     ph = phases(shot, pr)
-    se = np.sqrt(np.clip(np.diag(cov), 0, None))
+    var = np.diag(cov)
+    se = np.sqrt(np.where(var > 0, var, np.inf))  # a non-positive variance: not determined
     stderr = {"x0": se[0:2], "t0": float(se[2]), "v0": se[3:5]}
     if rolling:
         # w0 = z x v0 / R: its errors are v0's, rotated and scaled.
         Rz = np.array([[0.0, -1.0], [1.0, 0.0]]) / pr.R
-        stderr["w0"] = np.sqrt(np.diag(Rz @ cov[3:5, 3:5] @ Rz.T))
+        vw = np.diag(Rz @ cov[3:5, 3:5] @ Rz.T)
+        stderr["w0"] = np.sqrt(np.where(vw > 0, vw, np.inf))
     else:
         stderr["w0"] = se[5:7]
     fit_friction = "mu_r" in fit.names
@@ -497,6 +520,9 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
         return MLEResult("degenerate",
                          f"the track ends (t = {t_end:.3f} s) before sliding does: the slip, so w0, "
                          f"is not determined (|u0| > {lower:.2f} m/s); v0 is", **out)
+    if not np.all(np.isfinite(stderr["w0"])):
+        return MLEResult("degenerate", "the track does not determine w0 (its information is not positive "
+                         "definite)", **common)
     return MLEResult("ok", "", **out)
 
 
@@ -591,4 +617,4 @@ def crb_covariance(shot: Shot, params: BallParams, meas: Measurements, exposure_
         b = model_track(_unpack(p - dp, rolling, False, params)[0], params, t, exposure_s)
         cols.append(meas.whiten_delta((a - b) / (2 * h)).ravel())
     J = np.stack(cols, axis=1)
-    return np.linalg.inv(J.T @ J)
+    return info_inverse(J)

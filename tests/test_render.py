@@ -7,7 +7,7 @@ import pytest
 from cuespin.data_gen.sampler import make_scene, sample_scene, sample_shot
 from cuespin.physics import positions
 from cuespin.render import FrameRenderer, disc_coverage, read_truth_csv, render_video, truth_path
-from cuespin.render.draw import noise_lut
+from cuespin.render.draw import ALIAS_MAX_SIGMA, AliasNoise, noise_lut
 
 # The issue's requirement for the drawn disc; measured max over 2000 random
 # placements, radii 8-20 px: 1.4e-3 px, RMS 4.5e-4 (pixel integration, as on a sensor).
@@ -205,6 +205,26 @@ def test_realistic_noise_is_independent_per_channel():
     assert e.std(0) == pytest.approx(np.full(3, np.sqrt(16 + 1 / 12)), rel=0.05)
     rho = np.corrcoef(e.T)
     assert np.abs(rho[np.triu_indices(3, 1)]).max() < 0.03
+
+
+@pytest.mark.parametrize("sigma", [0.5, 2.0, 5.0, 8.0, ALIAS_MAX_SIGMA])
+def test_alias_noise_draws_the_tables_exact_law(sigma):
+    # Every (first byte, second byte) pair once: the drawn values' counts
+    # are the 16-bit table's counts exactly, clipped at 0 and 255.
+    an = AliasNoise(sigma)
+    hi, lo = np.meshgrid(np.arange(256), np.arange(256), indexing="ij")
+    n = an.a[hi, 0].astype(int) - 128 + (lo >= an.thr[hi, 0]) * an.d[hi, 0].astype(int)
+    assert np.array_equal(np.sort(n.ravel()), np.sort(noise_lut(sigma)))
+
+    class Raw:  # hands add_to the enumeration above as its two bytes per pixel
+        class bit_generator:
+            @staticmethod
+            def random_raw(size):
+                return np.r_[hi.ravel(), lo.ravel()].astype(np.uint8).view(np.uint64)[:size]
+
+    for level in (2, 128, 250):   # saturates like the sensor's 8 bits
+        img = np.full((256, 256), level, np.uint8)
+        assert np.array_equal(add_to := an.add_to(img, Raw()), np.clip(level + n, 0, 255)), add_to
 
 
 def test_orientation_of_a_rolling_ball_turns_by_distance_over_R():
