@@ -295,6 +295,17 @@ def slip_lr(full: ModelFit, roll: ModelFit, meas: Measurements | None = None,
     return float((roll.chi2 - full.chi2) / scale)
 
 
+def _positive_definite(cov) -> bool:
+    """Whether a covariance is positive definite, judged on its correlation
+    matrix (the parameters' units differ by orders of magnitude)."""
+    cov = np.asarray(cov, dtype=float)
+    d = np.diag(cov)
+    if not np.all(np.isfinite(cov)) or not np.all(d > 0):
+        return False
+    corr = cov / np.sqrt(np.outer(d, d))
+    return bool(np.linalg.eigvalsh(0.5 * (corr + corr.T)).min() > 1e-12)
+
+
 def info_inverse(jac) -> np.ndarray:
     """``(J^T J)^-1``, the inverse information of a whitened Jacobian, with
     its columns scaled to unit length first (metres, seconds and rad/s
@@ -411,7 +422,13 @@ def correlated_codec_var(fit: ModelFit, meas: Measurements, frame_dt: float,
     m, p = len(J) // 2, J.shape[1]
     if 2 * m <= p + 2:
         return 0.0
-    A = np.linalg.pinv(J.T @ J)  # the hat matrix's trace needs no inverse (slip undetermined: singular)
+    # The hat matrix's trace needs no inverse (slip undetermined: singular);
+    # columns scaled to unit length first, as in info_inverse, so pinv's
+    # relative cutoff drops only directions that are truly undetermined,
+    # not ones that are small because of their units.
+    s = np.sqrt(np.sum(J * J, axis=0))
+    s[s == 0] = 1.0
+    A = np.linalg.pinv((J / s).T @ (J / s)) / s[:, None] / s[None, :]
     WF = meas.W @ meas.codec_factor()
     trM = float(np.einsum("mab,mab->", WF, WF))
     tr_free = trM - float(np.trace(A @ _codec_scores(J, meas, acf, frame_dt)))
@@ -523,6 +540,10 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
     if not np.all(np.isfinite(stderr["w0"])):
         return MLEResult("degenerate", "the track does not determine w0 (its information is not positive "
                          "definite)", **common)
+    if not _positive_definite(cov):  # a plain inverse's finite but meaningless errors
+        return MLEResult("degenerate", "the track does not determine the shot (the covariance of the "
+                         "fitted parameters is not positive definite: some combination of them is not "
+                         "determined)", **common)
     return MLEResult("ok", "", **out)
 
 

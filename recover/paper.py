@@ -409,15 +409,16 @@ def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved) -
 def line_offset(x0, x1, x2, C) -> tuple[float, float]:
     """Signed distance (m) of ``x1`` from the line through ``x0`` and ``x2``,
     and its standard error from the points' covariance ``C`` (6 x 6, m^2,
-    :func:`geometry_covariance`; the cross terms left out: to first order
-    the offset moves with x1 across the line, with x0 and with x2 scaled by
-    how far along x1 lies)."""
+    :func:`geometry_covariance`, cross terms included: to first order the
+    offset moves with x1 across the line, and against x0 and x2 scaled by
+    how far along x1 lies, ``g = [-(1 - a) n, n, -a n]``)."""
     x0, x1, x2 = (np.asarray(v, float) for v in (x0, x1, x2))
     span = x2 - x0
     length = float(np.hypot(*span))
     n_hat = z_cross(span / length)
     along = float((x1 - x0) @ span) / length**2
-    var = n_hat @ (C[2:4, 2:4] + (1 - along) ** 2 * C[0:2, 0:2] + along**2 * C[4:6, 4:6]) @ n_hat
+    g = np.r_[-(1 - along) * n_hat, n_hat, -along * n_hat]
+    var = float(g @ np.asarray(C, float)[:6, :6] @ g)
     return float((x1 - x0) @ n_hat), float(np.sqrt(max(var, 1e-30)))
 
 
