@@ -28,7 +28,6 @@ import argparse
 import csv
 import inspect
 import tempfile
-import time
 from multiprocessing import Pool
 from pathlib import Path
 from types import SimpleNamespace
@@ -53,7 +52,7 @@ def one_shot(args):
             return None
     from cuespin.render import render_video
     from cuespin.track.tracker import TrackerConfig
-    from cuespin.track.video import open_video, track_video
+    from cuespin.track.video import decode_seconds, track_video
 
     if disc:
         from cuespin.track import video as video_module
@@ -87,13 +86,7 @@ def one_shot(args):
     else:
         video = Path(tmp) / f"shot_{i}.avi"
         render_video(scene, video)
-        cap = open_video(video)
-        t = time.perf_counter()
-        n = 0
-        while cap.read()[0]:
-            n += 1
-        t_decode = time.perf_counter() - t
-        cap.release()
+        t_decode, n = decode_seconds(video)
         tr = track_video(video, scene, TrackerConfig())
         video.unlink()
         if cached is not None:

@@ -22,17 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-
-def decode_seconds(video) -> tuple[float, int]:
-    from cuespin.track.video import open_video
-    cap = open_video(video)
-    clock = time.perf_counter()
-    n = 0
-    while cap.read()[0]:
-        n += 1
-    out = time.perf_counter() - clock
-    cap.release()
-    return out, n
+from cuespin.track.video import decode_seconds
 
 
 def main():

@@ -36,7 +36,7 @@ from cuespin.data_gen.sampler import make_scene, sample_shot
 from cuespin.physics import Shot
 from cuespin.pipeline.measure import tracker_accuracy
 from cuespin.track.synthetic import colour_frames, write_av
-from cuespin.track.video import track_video
+from cuespin.track.video import decode_seconds, track_video
 
 # PyAV encoder, pixel format, options and file type per codec: what cameras
 # and common tools write.
@@ -71,16 +71,10 @@ def colour_video(tmp, codec, n_frames, fps=240.0):
 
 
 def decode_only(path) -> float:
-    cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)  # BGR, as any OpenCV user decodes
-    t = time.perf_counter()
-    n = 0
-    while True:
-        ok, _ = cap.read()
-        if not ok:
-            break
-        n += 1
-    cap.release()
-    return n / (time.perf_counter() - t)
+    """Decode-only throughput (frames/s): every frame to BGR with cv2, as any
+    OpenCV user decodes (:func:`cuespin.track.video.decode_seconds`)."""
+    seconds, n = decode_seconds(path)
+    return n / seconds
 
 
 def speed(tmp, repeat, lengths):
@@ -108,7 +102,7 @@ def speed(tmp, repeat, lengths):
 _CHILD = """
 import json, resource, sys
 from cuespin.pipeline.io import read_scene
-from cuespin.track.video import track_video
+from cuespin.track.video import decode_seconds, track_video
 scene = read_scene(sys.argv[2])
 res = track_video(sys.argv[1], scene)
 print(json.dumps({"frames": res.n_frames, "maxrss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))

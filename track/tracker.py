@@ -341,11 +341,16 @@ class BallTracker:
         if len(self._look_votes) >= LOOK_FRAMES:
             self.shade = shaded_look(self._look_votes)
 
+    def radius_with(self, outline) -> float:
+        """The ball's largest radius (px) with this frame's outline (None:
+        the disc's): what a window around it must hold."""
+        return self.r if outline is None else max(self.r, outline.max_radius)
+
     def _refine(self, frame, loc, blur, recentre: bool = True) -> Observation:
         r = self.r
         # The ball's outline here, from the camera (None: the disc of r).
         ol = self.outline = self.outline_of(loc) if self.outline_of is not None else None
-        r_out = r if ol is None else max(r, ol.max_radius)  # what the patch must hold
+        r_out = self.radius_with(ol)  # what the patch must hold
         unknown_blur = blur is None
         if unknown_blur:  # size the patch for the longest blur the exposure allows
             blur = np.zeros(2)

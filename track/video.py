@@ -137,6 +137,20 @@ def open_video(path) -> cv2.VideoCapture:
         return cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
 
 
+def decode_seconds(path) -> tuple[float, int]:
+    """Decode every frame of a video to BGR with :func:`open_video` and
+    nothing else: the decode-only baseline the benchmarks time tracking and
+    recovery against.  Returns (seconds, frames); opening is not timed."""
+    cap = open_video(path)
+    clock = time.perf_counter()
+    n = 0
+    while cap.read()[0]:
+        n += 1
+    seconds = time.perf_counter() - clock
+    cap.release()
+    return seconds, n
+
+
 def search_mask(cam, table, R: float, shape) -> np.ndarray:
     """Pixels where the ball's centre may be: the playing surface's image, grown by R.
 
@@ -293,9 +307,8 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
             if obs.status == OK and tracker.last_patch is not None:
                 blur_len = np.hypot(*tracker.last_fit[5])
                 patch, pu, pv = tracker.last_patch
-                outline = tracker.last_fit[9]  # the ball's own size there, under perspective
-                r_here = radius_px if outline is None else max(radius_px, outline.max_radius)
-                mask_r = r_here + 0.5 * blur_len + 1.5
+                # The ball's own size there, under perspective.
+                mask_r = tracker.radius_with(tracker.last_fit[9]) + 0.5 * blur_len + 1.5
                 felt.add(patch, pu, pv, obs.uv, mask_r)
                 if k % FULL_FELT_EVERY == 0:
                     felt.add_frame(item, obs.uv, mask_r)
