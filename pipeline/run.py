@@ -156,7 +156,7 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
     n = analysed_frames(tr.t, contact, cam.exposure_s)
     out, est = recover_track(tr.t[:n], tr.xy[:n], tr.ok[:n], cov_m[:n], scene.physics, cam.exposure_s,
                              method, fit_friction, lossless=tr.lossless,
-                             inter_frame=getattr(tr, "inter_frame", False), px_to_m=pixel_to_table(cam, tr.xy[:n]),
+                             inter_frame=tr.inter_frame, px_to_m=pixel_to_table(cam, tr.xy[:n]),
                              return_estimate=True)
     if scene.calibration:
         # Each refit keeps this fit's decisions: the share measures the camera alone.
@@ -190,9 +190,7 @@ def _refit_through(camera, tr, n: int, scene, method: str, fit_friction: bool, k
     another camera (the tracked pixels converted anew), keeping the
     decisions ``keep`` (recover.estimate.Decided) of the fit through the scene's."""
     from cuespin.recover.api import recover_track
-    from cuespin.recover.measurements import table_covariance
-
-    from cuespin.recover.measurements import pixel_to_table
+    from cuespin.recover.measurements import pixel_to_table, table_covariance
 
     uv = np.asarray(tr.uv, dtype=float)[:n]
     xy = np.full_like(uv, np.nan)
@@ -201,7 +199,7 @@ def _refit_through(camera, tr, n: int, scene, method: str, fit_friction: bool, k
     cov = table_covariance(camera, xy, np.asarray(tr.cov_px)[:n])
     return recover_track(tr.t[:n], xy, np.asarray(tr.ok)[:n], cov, scene.physics, scene.camera.exposure_s,
                          method, fit_friction, lossless=tr.lossless,
-                         inter_frame=getattr(tr, "inter_frame", False),
+                         inter_frame=tr.inter_frame,
                          px_to_m=pixel_to_table(camera, xy), keep=keep)["methods"]
 
 

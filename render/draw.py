@@ -757,9 +757,8 @@ class FrameRenderer:
         Returns ``(delta (h, w, 3) float32, u0, v0)`` in frame pixels, or
         ``(None, 0, 0)`` when the ball is out of view.
         """
-        orient = self._orient if self._orient is not None else None
         return self._delta_of(self._uv_nodes[k], self._xy_nodes[k], self._t_nodes[k],
-                              self._albedo, orient)
+                              self._albedo, self._orient)
 
     def _delta_of(self, uv, xy, t, albedo, orient):
         """:meth:`_ball_delta` for any ball: nodes imaged at ``uv`` (K, 2) px,
