@@ -18,7 +18,21 @@ colour:   per ball/felt colour pair, noise and codec: the colour tracker's
           RMSE against the colour Cramer-Rao bound (every channel), err/se, and
           the same frames' luma tracked grey-only, side by side.
 
-Usage: python benchmarks/track.py [speed] [memory] [colour] [accuracy] [--quick] [--frames 1000 10000]
+realistic: per look of the realistic renderer (uniform, shaded, highlight,
+          markings, lens blur; colours, noise 1-8 per channel and 60-480 fps
+          as data_gen samples them, no cue and no other balls), each shot
+          rendered once to FFV1, transcoded to MJPG and to grey (luma) FFV1,
+          and tracked three times: found %, false positives (> R/4 off),
+          RMSE on moving frames against the truth sidecar's projected centre,
+          the colour Cramer-Rao bound of that look (every channel, the look's
+          nuisance parameters: track.bound.centroid_crb_realistic), the ratio,
+          err/se (the tracker's stated errors; raw: before track.misfit's
+          factor; dm: about the shot's mean error, the constant bias x0
+          absorbs), the same for MJPG, and grey-only against the luma bound.
+
+Usage: python benchmarks/track.py [speed] [memory] [colour] [accuracy] [realistic] [--quick] [--frames 1000 10000]
+                                  [--n 60] [--seed 0] [--workers 2] [--seconds 0.6] [--csv out.csv]
+       python benchmarks/track.py realistic --summarize out.csv
 """
 
 import argparse
@@ -31,6 +45,7 @@ import time
 from pathlib import Path
 
 import cv2
+import numpy as np
 
 from cuespin.data_gen.sampler import make_scene, sample_shot
 from cuespin.physics import Shot
@@ -210,14 +225,189 @@ def colour(tmp, quick):
                       f"{rg:9.4f} {rg / b:6.2f} {zg:6.2f}", flush=True)
 
 
+# The realistic looks: render keys set over data_gen's sample of each shot
+# (which keeps its colours, light, noise, frame rate and motion blur).
+REALISTIC_LOOKS = {
+    "uniform": {"ambient": 1.0, "specular": 0.0, "markings": "none", "psf_sigma": 0.0},
+    "shaded": {"specular": 0.0, "markings": "none", "psf_sigma": 0.0},
+    "highlight": {"markings": "none", "psf_sigma": 0.0},
+    "markings": {"specular": 0.0, "psf_sigma": 0.0},
+    "blur": {"specular": 0.0, "markings": "none"},
+}
+LUMA = (0.114, 0.587, 0.299)  # OpenCV's BGR-to-grey weights
+
+
+def realistic_scene(i, seed, seconds):
+    """Shot ``i`` of the realistic benchmark and its look's name."""
+    from cuespin.data_gen.sampler import sample_scenes
+
+    scene = sample_scenes(i + 1, seed, look="realistic", codec="FFV1")[i]
+    look = list(REALISTIC_LOOKS)[i % len(REALISTIC_LOOKS)]
+    rng = np.random.default_rng([seed, i, 10])
+    r = scene.render
+    r.update(REALISTIC_LOOKS[look], cue=False, balls=[], max_duration=seconds)
+    if look == "highlight":
+        r["specular"] = round(float(rng.uniform(0.3, 0.7)), 3)
+    elif look == "markings":
+        r["markings"] = ("dots", "logo")[int(rng.integers(2))]
+    elif look == "blur":
+        r["psf_sigma"] = round(float(rng.uniform(0.5, 1.0)), 3)
+    return scene, look
+
+
+def _errors(res, tuv, t, t0, r, cam):
+    """Moving, wholly-in-view frames: found share, false positives, and the
+    errors (px), stated errors and look factor of the good ones."""
+    n = min(res.n_frames, len(tuv))
+    tuv, t = tuv[:n], t[:n]
+    view = ((tuv[:, 0] >= r) & (tuv[:, 0] <= cam.width - 1 - r)
+            & (tuv[:, 1] >= r) & (tuv[:, 1] <= cam.height - 1 - r))
+    moving = view & (t > t0 + 0.02)
+    ok = res.ok[:n]
+    err = res.uv[:n] - tuv
+    bad = ok & (np.hypot(*err.T) > 0.25 * r)
+    good = ok & ~bad & moving
+    return ok[view].mean(), int(bad.sum()), err[good], res.stderr_px[:n][good], good
+
+
+def _track_stats(res, tuv, t, t0, r, cam):
+    found, fp, e, se, good = _errors(res, tuv, t, t0, r, cam)
+    out = {"found": found, "fp": fp, "n": len(e)}
+    if len(e) < 4:
+        return out, good
+    z = e / se
+    dm = e - e.mean(axis=0)
+    out.update(rmse=float(np.sqrt(np.mean(e**2))), z=float(np.sqrt(np.mean(z**2))),
+               z_raw=float(np.sqrt(np.mean(z**2) * res.look_factor)),
+               z_dm=float(np.sqrt(np.mean((dm / se) ** 2))), bias=float(np.hypot(*e.mean(axis=0))),
+               factor=float(res.look_factor), rho=float(res.look_rho))
+    return out, good
+
+
+def realistic_shot(args):
+    """Render, transcode, track three ways and bound one realistic shot: one CSV row."""
+    i, seed, seconds, tmp = args
+    import pandas as pd
+
+    from cuespin.render import render_video
+    from cuespin.render.draw import FrameRenderer
+    from cuespin.track.bound import centroid_crb_realistic
+    from cuespin.track.tracker import FIT_BLUR_PX, TrackerConfig
+
+    scene, look = realistic_scene(i, seed, seconds)
+    cam = scene.camera
+    path = Path(tmp) / f"real_{i}.avi"
+    render_video(scene, path)
+    truth = pd.read_csv(path.with_suffix(".truth.csv"))
+    tuv, t = np.c_[truth.uc_px.values, truth.vc_px.values], truth.t.values
+    cap = cv2.VideoCapture(str(path))
+    mj, grey = Path(tmp) / f"real_{i}_mjpg.avi", Path(tmp) / f"real_{i}_grey.avi"
+    wm = wg = None
+    while True:
+        got, fr = cap.read()
+        if not got:
+            break
+        if wm is None:
+            size = (fr.shape[1], fr.shape[0])
+            wm = cv2.VideoWriter(str(mj), cv2.VideoWriter_fourcc(*"MJPG"), cam.fps, size, True)
+            wg = cv2.VideoWriter(str(grey), cv2.VideoWriter_fourcc(*"FFV1"), cam.fps, size, False)
+        wm.write(fr)
+        wg.write(cv2.cvtColor(fr, cv2.COLOR_BGR2GRAY))
+    cap.release()
+    wm.release()
+    wg.release()
+    row = {"i": i, "look": look, "fps": cam.fps, "noise": scene.render["noise_sigma"],
+           "ball": scene.render["ball_name"], "felt": scene.render["felt_name"],
+           "exposure": cam.exposure_s * cam.fps}
+    cfg = TrackerConfig(threaded=False)
+    goods = {}
+    for name, video in (("ffv1", path), ("mjpg", mj), ("grey", grey)):
+        res = track_video(video, scene, cfg)
+        stats, goods[name] = _track_stats(res, tuv, t, scene.truth.t0, res.radius_px, cam)
+        row.update({f"{name}_{k}": v for k, v in stats.items()})
+        video.unlink()
+    r = FrameRenderer(scene)
+    moving = np.flatnonzero(goods["ffv1"]) if goods["ffv1"].any() else np.flatnonzero(t > scene.truth.t0 + 0.02)
+    b_col, b_grey = [], []
+    for k in moving[np.linspace(0, len(moving) - 1, min(6, len(moving))).astype(int)]:
+        nodes = r._uv_nodes[k]
+        fit_blur = np.hypot(*(nodes[-1] - nodes[0])) * (1 + 1 / max(len(nodes) - 1, 1)) > FIT_BLUR_PX
+        b_col.append(centroid_crb_realistic(r, int(k), fit_blur))
+        b_grey.append(centroid_crb_realistic(r, int(k), fit_blur, grey_weights=LUMA))
+    row["bound"] = float(np.sqrt(np.mean(np.square(b_col))))
+    row["bound_grey"] = float(np.sqrt(np.mean(np.square(b_grey))))
+    return row
+
+
+def realistic(args):
+    """The realistic-look table (see the module docstring), per shot and per look."""
+    import csv
+    from multiprocessing import Pool
+
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp, Pool(args.workers) as pool:
+        jobs = [(i, args.seed, args.seconds, tmp) for i in range(args.n)]
+        out = None
+        for row in pool.imap_unordered(realistic_shot, jobs):
+            rows.append(row)
+            print(f"shot {row['i']:3d} {row['look']:9} fps {row['fps']:3.0f} noise {row['noise']:4.1f} "
+                  f"ffv1 rmse {row.get('ffv1_rmse', np.nan):.4f} z {row.get('ffv1_z', np.nan):.2f} "
+                  f"(raw {row.get('ffv1_z_raw', np.nan):.2f}) bound {row['bound']:.4f}", flush=True)
+            if args.csv:
+                if out is None:
+                    out = open(args.csv, "w", newline="")
+                    w = csv.DictWriter(out, fieldnames=sorted(row), restval="")
+                    w.writeheader()
+                w.writerow(row)
+                out.flush()
+    realistic_table(rows)
+
+
+def realistic_table(rows):
+    """Per look: medians over shots (found % is the pooled share's minimum and mean)."""
+    import pandas as pd
+
+    df = pd.DataFrame(rows)
+    print(f"\nrealistic looks: {len(df)} shots; per look the median over shots (found: mean, min; fp: frames)")
+    print(f"{'look':9} {'n':>3} | {'found':>12} {'fp':>4} {'rmse':>7} {'bound':>7} {'ratio':>6} {'err/se':>6} "
+          f"{'raw':>5} {'dm':>5} {'bias':>6} | {'MJPG rmse':>9} {'err/se':>6} {'raw':>5} | "
+          f"{'grey rmse':>9} {'bound':>7} {'ratio':>6} {'err/se':>6}")
+    for look, g in list(df.groupby("look", sort=False)) + [("all", df)]:
+        def med(c):
+            return float(np.nanmedian(g[c])) if c in g and np.isfinite(g[c]).any() else float("nan")
+        print(f"{look:9} {len(g):3d} | {g.ffv1_found.mean():6.1%} {g.ffv1_found.min():5.1%} {int(g.ffv1_fp.sum()):4d} "
+              f"{med('ffv1_rmse'):7.4f} {med('bound'):7.4f} {np.nanmedian(g.ffv1_rmse / g.bound):6.1f} "
+              f"{med('ffv1_z'):6.2f} {med('ffv1_z_raw'):5.2f} {med('ffv1_z_dm'):5.2f} {med('ffv1_bias'):6.3f} | "
+              f"{med('mjpg_rmse'):9.4f} {med('mjpg_z'):6.2f} {med('mjpg_z_raw'):5.2f} | "
+              f"{med('grey_rmse'):9.4f} {med('bound_grey'):7.4f} {np.nanmedian(g.grey_rmse / g.bound_grey):6.1f} "
+              f"{med('grey_z'):6.2f}")
+    for codec in ("ffv1", "mjpg"):
+        z = df[f"{codec}_z"].dropna()
+        print(f"{codec}: err/se median {z.median():.2f}, share of shots within 0.8-1.25: "
+              f"{np.mean((z >= 0.8) & (z <= 1.25)):.0%}, p10 {z.quantile(0.1):.2f}, p90 {z.quantile(0.9):.2f} "
+              f"(before the look factor: median {df[f'{codec}_z_raw'].median():.2f})")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("parts", nargs="*", default=["speed", "memory", "colour", "accuracy"])
+    ap.add_argument("--n", type=int, default=60, help="realistic: shots")
+    ap.add_argument("--seed", type=int, default=0, help="realistic: data_gen seed")
+    ap.add_argument("--workers", type=int, default=2, help="realistic: worker processes")
+    ap.add_argument("--seconds", type=float, default=0.6, help="realistic: video length cap (s)")
+    ap.add_argument("--csv", default=None, help="realistic: write every shot's row here")
+    ap.add_argument("--summarize", default=None, help="realistic: only print the table of a CSV written before")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--quick", action="store_true", help="one radius in the accuracy table")
     ap.add_argument("--frames", type=int, nargs="+", default=[1000, 10000])
     args = ap.parse_args()
+    if args.summarize:
+        import pandas as pd
+        realistic_table(pd.read_csv(args.summarize).to_dict("records"))
+        return
     cv2.setNumThreads(2)
+    if "realistic" in args.parts:
+        realistic(args)
     with tempfile.TemporaryDirectory() as tmp:
         if "speed" in args.parts:
             speed(tmp, args.repeat, args.frames)

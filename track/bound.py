@@ -184,3 +184,154 @@ def centroid_crb_outline(xy_nodes, camera, R: float, ball_grey: float, felt: np.
     J = np.stack(cols, axis=1)
     fisher = J.T @ J / (sigma**2 + 1.0 / 12.0)
     return np.linalg.inv(fisher)[:2, :2]
+
+
+# Central-difference steps for the realistic look's nuisances: light angles
+# and marking turns (rad), ambient and highlight strength (fractions), the
+# lens's PSF sigma (px), the albedo (levels).
+_LOOK_STEPS = {"ambient": 1e-3, "light_azimuth": 1e-3, "light_elevation": 1e-3, "specular": 1e-3,
+               "psf_sigma": 1e-3}
+_ALBEDO_STEP = 0.05
+_TURN_STEP = 1e-3
+
+
+def realistic_nuisances(settings: dict, fit_blur: bool) -> list[str]:
+    """The realistic look's nuisance parameters a tracker that learns the
+    ball's look from the video does not know: the ball's albedo (one per
+    channel), the ambient share, the light's two angles, the highlight's
+    strength (when there is one), the lens's PSF width (when there is
+    blur), the markings' orientation (three turns, when there are
+    markings) and, where the tracker fits it, the blur vector."""
+    names = ["albedo_b", "albedo_g", "albedo_r", "ambient", "light_azimuth", "light_elevation"]
+    if float(settings["specular"]) > 0:
+        names.append("specular")
+    if float(settings["psf_sigma"]) > 0:
+        names.append("psf_sigma")
+    if settings["markings"] != "none":
+        names += ["turn_x", "turn_y", "turn_z"]
+    if fit_blur:
+        names += ["blur_u", "blur_v"]
+    return names
+
+
+def realistic_image_jacobian(renderer, k: int, fit_blur: bool = False):
+    """Derivatives of the realistic look's noise-free colour image of frame ``k``.
+
+    The image near the ball is the blurred static scene plus the ball's
+    change to it (``FrameRenderer._delta_of``: exact coverage, shading,
+    highlight, markings at the frame's orientation, lens PSF), drawn again
+    for each parameter moved up and down (central differences): the
+    centre (every exposure node shifted by the same pixels, and its table
+    position with it), then :func:`realistic_nuisances`.  The static scene
+    under the ball is known (the tracker learns the felt from the video).
+    Top-down (similarity) cameras only.
+
+    Returns
+    -------
+    (J, names) : (ndarray, shape (m, 3, p), list of str)
+        Per pixel of a window holding the ball, the change of its B, G, R
+        levels per unit of each parameter (px for the centre).
+    """
+    import copy
+
+    from cuespin.render import look as lk
+
+    if not renderer.similar:
+        raise ValueError("realistic_image_jacobian: top-down (similarity) cameras only")
+    uv, xy, t = renderer._uv_nodes[k], renderer._xy_nodes[k], renderer._t_nodes[k]
+    K = len(uv)
+    taus = (np.arange(K) + 0.5) / K - 0.5
+    Jinv = renderer._Jinv
+    half = renderer._half + renderer._pad + 4
+    centre = uv.mean(axis=0)
+    offs = uv - centre
+    U0 = int(np.floor(centre[0] + offs[:, 0].min())) - half
+    V0 = int(np.floor(centre[1] + offs[:, 1].min())) - half
+    W = int(np.ceil(np.ptp(offs[:, 0]))) + 2 * half + 2
+    Hh = int(np.ceil(np.ptp(offs[:, 1]))) + 2 * half + 2
+    settings0 = renderer.settings
+    albedo0 = np.asarray(renderer._albedo, float)
+    orient = renderer._orient
+    names = realistic_nuisances(settings0, fit_blur)
+
+    def image(d_uv=np.zeros(2), d_blur=np.zeros(2), albedo=albedo0, settings=None, turn=None):
+        """The ball's change to the scene on the fixed window, with the parameters moved."""
+        shift = d_uv[None, :] + np.outer(taus, d_blur)
+        nodes_uv = uv + shift
+        nodes_xy = xy + shift @ Jinv.T
+        rot = orient
+        if turn is not None and orient is not None:
+            Rt = lk.quat_to_matrix(lk.quat_from_rotvec(np.asarray(turn, float)))
+
+            def rot(tt):
+                return Rt @ orient(tt)
+        r = renderer
+        if settings is not None:
+            r = copy.copy(renderer)
+            r.settings = settings
+            r._psf = float(settings["psf_sigma"])
+        delta, a0, b0 = r._delta_of(nodes_uv, nodes_xy, t, albedo, rot)
+        out = np.zeros((Hh, W, 3))
+        if delta is None:
+            return out
+        ys, xs = b0 - V0, a0 - U0
+        h, w = delta.shape[:2]
+        y0, x0 = max(ys, 0), max(xs, 0)
+        y1, x1 = min(ys + h, Hh), min(xs + w, W)
+        out[y0:y1, x0:x1] = delta[y0 - ys:y1 - ys, x0 - xs:x1 - xs]
+        return out
+
+    cols = []
+    for d in (np.array([_STEP_PX, 0.0]), np.array([0.0, _STEP_PX])):
+        cols.append((image(d_uv=d) - image(d_uv=-d)) / (2 * _STEP_PX))
+    for name in names:
+        if name.startswith("albedo"):
+            e = np.zeros(3)
+            e["bgr".index(name[-1])] = _ALBEDO_STEP
+            col = (image(albedo=albedo0 + e) - image(albedo=albedo0 - e)) / (2 * _ALBEDO_STEP)
+        elif name.startswith("turn"):
+            e = np.zeros(3)
+            e["xyz".index(name[-1])] = _TURN_STEP
+            col = (image(turn=e) - image(turn=-e)) / (2 * _TURN_STEP)
+        elif name.startswith("blur"):
+            e = np.array([_STEP_PX, 0.0]) if name == "blur_u" else np.array([0.0, _STEP_PX])
+            col = (image(d_blur=e) - image(d_blur=-e)) / (2 * _STEP_PX)
+        else:
+            h = _LOOK_STEPS[name]
+            up, down = dict(settings0), dict(settings0)
+            up[name] = float(settings0[name]) + h
+            down[name] = float(settings0[name]) - h
+            col = (image(settings=up) - image(settings=down)) / (2 * h)
+        cols.append(col)
+    J = np.stack([c.reshape(-1, 3) for c in cols], axis=2)
+    return J, ["cu", "cv"] + names
+
+
+def centroid_crb_realistic(renderer, k: int, fit_blur: bool = False, grey_weights=None) -> np.ndarray:
+    """Per-axis Cramer-Rao bound (px) for the ball's centre in frame ``k`` of a realistic render.
+
+    From :func:`realistic_image_jacobian` (every channel, the look's
+    nuisance parameters), with the renderer's noise: ``noise_sigma`` per
+    channel, independent, plus 8-bit rounding (1/12 per channel).  With
+    ``grey_weights`` (B, G, R weights, e.g. OpenCV's luma 0.114, 0.587,
+    0.299) the bound of a tracker that sees only that one channel of the
+    same frames (its noise ``|w|^2 sigma^2`` plus the grey frame's own
+    rounding, 1/12).
+
+    Returns
+    -------
+    ndarray, shape (2,)
+    """
+    J, _ = realistic_image_jacobian(renderer, k, fit_blur)
+    s2 = float(renderer.sigma) ** 2
+    if grey_weights is None:
+        fisher = np.einsum("mcp,mcq->pq", J, J) / (s2 + 1.0 / 12.0)
+    else:
+        w = np.asarray(grey_weights, float)
+        Jg = np.einsum("mcp,c->mp", J, w)
+        fisher = Jg.T @ Jg / (s2 * float(w @ w) + 1.0 / 12.0)
+    # Columns in very different units: invert the correlation-scaled matrix.
+    d = np.sqrt(np.diag(fisher))
+    d[d == 0] = 1.0
+    inv = np.linalg.pinv(fisher / np.outer(d, d)) / np.outer(d, d)
+    return np.sqrt(np.diag(inv)[:2])

@@ -26,6 +26,7 @@ from cuespin.videoio import quiet_native_stderr
 from cuespin.track.background import Background, FeltAccumulator, learn_background
 from cuespin.track.colour import GREY, Projection, learn_projection
 from cuespin.track.projection import projected_centres
+from cuespin.track.misfit import LookMisfit, look_misfit
 from cuespin.track.model import refit_shift
 from cuespin.track.reader import FrameSource, ThreadedFrames, TrackError, frame_times, probe
 from cuespin.track.tracker import OK, STATUS_TEXT, BallTracker, TrackerConfig
@@ -80,8 +81,19 @@ class TrackResult:
         The lossy codec predicts frames from others (H.264...): a moving
         ball's error is shared between neighbouring frames too.
     cov_px : ndarray, shape (n, 2, 2)
-        Covariance of ``uv`` (px^2) by the sandwich over the fit; convert to
-        metres with ``scene.camera.cov_to_table(xy, cov_px)``.
+        Covariance of ``uv`` (px^2) by the sandwich over the fit, times
+        ``look_factor``; convert to metres with
+        ``scene.camera.cov_to_table(xy, cov_px)``.
+    look_factor : float
+        What the per-frame fits' covariances were multiplied by: the track's
+        own measure of what the ball's model misses (a realistic ball's
+        shading, highlight and turning markings: an error shared by
+        neighbouring frames), :func:`cuespin.track.misfit.look_misfit`; 1
+        when the stated errors hold (a ball the model describes).
+    look_rho : float
+        Lag-1 correlation between consecutive frames of the error that
+        factor adds (0: none added, or independent): the errors are then
+        correlated along the track, and a resting ball's frames share it.
     projection : Projection
         The channel the ball was tracked in (weights on B, G, R learnt from
         the video; ``w`` None for grey video).
@@ -104,6 +116,8 @@ class TrackResult:
     cov_px: np.ndarray | None = None
     projection: Projection = GREY
     camera: object = None
+    look_factor: float = 1.0
+    look_rho: float = 0.0
 
     def __post_init__(self):
         if self.cov_px is None:
@@ -346,6 +360,14 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         why = (" (the ball never moved, or is not in view; do physics.R and the camera "
                "match the video?)")
         error = f"no ball found in any of {k} frames" + (f"; {error}" if error else why)
+    # What the ball's model misses, seen along the track (its stated errors
+    # are the per-frame fits' own; see track.misfit).  Only where the fits
+    # modelled the look (shaded: the first frames showed the disc does not
+    # describe the ball): a disc that does is left as stated (its err/se
+    # 0.91-1.02, benchmarks/track.py accuracy), and the kinks of a short,
+    # low-noise track cannot then pass for a misfit.
+    misfit = look_misfit(uv, cov, ok) if bg.polarity and tracker.shade is not False else LookMisfit()
+    cov[ok] *= misfit.factor
     if ok.any():
         uv[ok] = projected_centres(cam, uv[ok], R)  # the centre's image, not the silhouette's
     xy = np.full_like(uv, np.nan)
@@ -354,7 +376,8 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     return TrackResult(t=frame_times(path, info, k, cam.fps), uv=uv, xy=xy, ok=ok, status=status,
                        stderr_px=se, radius_px=radius_px, background=bg, error=error,
                        seconds={"background": t_bg, "track": t_track}, lossless=info.lossless,
-                       inter_frame=info.inter_frame, cov_px=cov, projection=proj, camera=cam)
+                       inter_frame=info.inter_frame, cov_px=cov, projection=proj, camera=cam,
+                       look_factor=misfit.factor, look_rho=misfit.rho)
 
 
 def write_track_csv(path, result: TrackResult) -> None:

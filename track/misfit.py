@@ -1,0 +1,189 @@
+"""How far the tracker's stated errors fall short on a ball whose look its model misses (pure).
+
+The per-frame fit states its error from its own residuals, as if what it
+does not model were independent noise in every pixel.  On a realistic ball
+(shading the model only approximates, a highlight, markings that turn with
+the spin, a lens blur) what it misses is the ball's look, the same from one
+frame to the next but for the slow turn of the markings and the ball's
+sub-pixel phase: its error in the centre is a bias that varies slowly along
+the path, 1.5-3 times the stated error and correlated over many frames
+(lag-1 0.7-0.95 at 480 fps).  No one frame shows it (the fit absorbs the
+part of the misfit that looks like a shift), but the track does: third
+differences of the centres, ``x[k+2s] - 3 x[k+s] + 3 x[k] - x[k-s]``, are
+free of any quadratic motion (a sliding or rolling phase) at every spacing
+``s``, and their variance grows with ``s`` until ``s`` exceeds the errors'
+correlation time, where it reaches 20 times the errors' full variance.
+:func:`look_misfit` fits that variogram with the stated (independent)
+errors plus an AR(1) error of variance ``excess`` times the stated one, and
+returns the factor ``1 + excess`` by which every frame's covariance must be
+scaled to be honest, and the AR(1) error's lag-1 correlation.
+
+What no track shows is the look's constant part (the same bias in every
+frame: the shading's, towards or away from the light); it shifts the whole
+path, which the recovery's ``x0`` absorbs (measured: 0.06-0.12 px on
+shaded balls, ``benchmarks/track.py realistic``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+# Frame spacings of the third differences (frames).
+SPACINGS = (1, 2, 3, 4, 6, 8, 12, 16, 24, 32)
+# A spacing's variance ratio counts once this many third differences of
+# moving frames (both axes) enter it.
+MIN_SAMPLES = 16
+# A frame moves when its centre moves more than this (px per frame): only
+# moving frames vary their misfit (a resting ball's is the same every frame).
+MOVING_PX = 0.3
+# The third differences at one spacing are pooled in blocks of consecutive
+# frames, at least this many times the spacing and BLOCK_MIN long, and the
+# variance is the median of the blocks' mean squares: a kink of the motion
+# (the strike, the end of sliding, the stop: a jump in acceleration of up to
+# mu_s g puts several stated errors into the differences that straddle it,
+# 3 s of them, at spacings of 0.02-0.1 s) or a stray frame spoils one or
+# two blocks, not the median.  Simulated tracks with such kinks and
+# independent errors, 60-480 fps: a per-difference median clipped at 4
+# sigma inflated 75-100% of them by 2.4-3.9 (kinks spoiling most of the
+# differences at the longer spacings).
+BLOCK_SPACINGS = 4
+BLOCK_MIN = 4
+# A spacing counts only with at least this many blocks.
+MIN_BLOCKS = 5
+# The excess is kept only beyond this many of its standard errors (one-sided
+# 0.1%), so that a ball whose look the model holds keeps its errors as stated.
+EXCESS_Z = 3.09
+# A correlation is considered only where the longest spacing's third
+# differences reach this share of the error's full variance: beyond, the
+# excess would be extrapolated from the variogram's rise alone (simulated
+# AR(1) errors, rho 0.8, 100 frames: one factor in ten 7 times too large).
+MIN_PLATEAU = 0.5
+# The AR(1) error's lag-1 correlation is searched on this grid.
+RHO_GRID = np.r_[0.0, np.linspace(0.05, 0.98, 32)]
+
+
+@dataclass(frozen=True)
+class LookMisfit:
+    """The track's verdict on its stated errors.
+
+    Attributes
+    ----------
+    factor : float
+        Every frame's covariance times this is its honest covariance (1:
+        the stated errors hold).
+    rho : float
+        Lag-1 correlation (between consecutive frames) of the error the
+        factor adds (0 when none is added).
+    ratios : dict
+        Per spacing (frames), the third differences' variance over what the
+        stated errors give, and how many entered it (diagnostics).
+    """
+
+    factor: float = 1.0
+    rho: float = 0.0
+    ratios: dict | None = None
+
+
+def _shape(rho, s):
+    """Variance of an AR(1) error's third difference at spacing ``s`` over 20 times its variance."""
+    p = rho ** np.asarray(s, float)
+    return (20.0 - 30.0 * p + 12.0 * p * p - 2.0 * p ** 3) / 20.0
+
+
+def variance_ratios(uv, cov, ok, spacings=SPACINGS) -> dict:
+    """Per spacing ``s``: the variance of the moving frames' third
+    differences (those spanning a kink left out, ``CLIP_SIGMAS``) over the
+    variance the stated covariances give them (independent errors), and the
+    number of differences kept (both axes).
+
+    Parameters
+    ----------
+    uv : ndarray, shape (n, 2)
+        Centres (px), one per frame in order.
+    cov : ndarray, shape (n, 2, 2)
+        Their stated covariances (px^2).
+    ok : ndarray of bool, shape (n,)
+    """
+    uv = np.asarray(uv, float)
+    var = np.diagonal(np.asarray(cov, float), axis1=1, axis2=2)
+    good = np.asarray(ok, bool) & np.all(np.isfinite(uv), axis=1) & np.all(var > 0, axis=1)
+    x = np.where(good[:, None], uv, np.nan)
+    var = np.where(good[:, None], var, np.nan)
+    n = len(x)
+    speed = np.full(n, np.nan)
+    speed[1:-1] = np.hypot(*(x[2:] - x[:-2]).T) / 2.0
+    with np.errstate(invalid="ignore"):
+        moving = speed > MOVING_PX
+    out = {}
+    for s in spacings:
+        k = np.arange(s, n - 2 * s)
+        if len(k) < MIN_SAMPLES // 2:
+            break
+        d3 = x[k + 2 * s] - 3 * x[k + s] + 3 * x[k] - x[k - s]
+        v3 = var[k + 2 * s] + 9 * var[k + s] + 9 * var[k] + var[k - s]
+        use = moving[k - s] & moving[k] & moving[k + s] & moving[k + 2 * s]
+        with np.errstate(invalid="ignore"):
+            z2 = (d3 * d3 / v3).sum(axis=1)          # both axes: 2 degrees of freedom
+        use &= np.isfinite(z2)
+        L = max(BLOCK_SPACINGS * s, BLOCK_MIN)
+        block = (k - s) // L
+        ms, counts = [], []
+        for b in np.unique(block[use]):
+            zb = z2[use & (block == b)]
+            if len(zb) >= L // 2:
+                ms.append(zb.mean() / 2.0)
+                counts.append(2 * len(zb))
+        if len(ms) < MIN_BLOCKS or sum(counts) < MIN_SAMPLES:
+            break
+        out[s] = (float(np.median(ms)), int(sum(counts)))
+    return out
+
+
+def look_misfit(uv, cov, ok) -> LookMisfit:
+    """Scale factor for the stated covariances of a track, and the lag-1
+    correlation of the error it adds (see the module's docstring).
+
+    The variance ratios ``V_s`` (:func:`variance_ratios`) are fitted by
+    ``1 + excess * shape(rho, s)``, ``shape`` the AR(1) error's third
+    difference variance (1 at long spacings), weighted by each ratio's
+    sampling variance (``2 / n_s``; overlapping differences at one spacing
+    are counted as independent, see below); ``rho`` on a
+    grid, ``excess`` in closed form.  The factor is ``1 + excess`` when the
+    excess passes ``EXCESS_Z`` of its standard error, else 1.
+    """
+    ratios = variance_ratios(uv, cov, ok)
+    if not ratios:
+        return LookMisfit(ratios=ratios)
+    s = np.array(list(ratios), float)
+    V = np.array([ratios[k][0] for k in ratios])
+    n = np.array([ratios[k][1] for k in ratios], float)
+    # Each ratio's sampling variance, 2 / n (a mean square of n normal
+    # deviates) at the independent-error model's value 1 rather than at the
+    # noisy V itself, which would favour the spacings that came out small
+    # by chance.
+    w = n / 2.0
+    best = None
+    # Two spacings or fewer cannot tell a correlated error's rho: independent.
+    for rho in (RHO_GRID if len(s) > 2 else (0.0,)):
+        f = _shape(rho, s) if rho > 0 else np.ones_like(s)
+        if f[-1] < MIN_PLATEAU:
+            continue  # the spacings never reach this error's plateau: no extrapolation
+        den = float(np.sum(w * f * f))
+        c = float(np.sum(w * f * (V - 1.0))) / den
+        sse = float(np.sum(w * (V - 1.0 - c * f) ** 2))
+        if best is None or sse < best[0]:
+            best = (sse, c, rho, 1.0 / np.sqrt(den))
+    _, c, rho, se_c = best
+    # The differences overlap (each frame enters four of them, and the
+    # errors are correlated): the effective count is smaller; the largest
+    # spacing's terms are the least dependent, so its standard error,
+    # scaled, is the one to beat.
+    se_c *= np.sqrt(float(s.max()))
+    if not c > EXCESS_Z * se_c:
+        return LookMisfit(ratios=ratios)
+    return LookMisfit(factor=1.0 + c, rho=float(rho), ratios=ratios)
+
+
+__all__ = ["LookMisfit", "look_misfit", "variance_ratios"]
