@@ -130,6 +130,16 @@ class TrackResult:
         return len(self.t)
 
     @property
+    def independent_errors(self) -> bool:
+        """Each frame's error is its own: a lossless codec and a ball its
+        model describes (``look_factor`` 1).  Otherwise the error is a
+        function of the image (a lossy codec's, a look the model misses),
+        shared by a resting ball's frames: what the recovery passes as
+        ``lossless`` (a rest one measurement, the unstated share measured
+        from the fit's residuals)."""
+        return bool(self.lossless) and self.look_factor == 1.0
+
+    @property
     def centroid_noise_px(self) -> float:
         """Typical per-axis standard error of a centroid (px), NaN if unknown."""
         se = self.stderr_px[self.ok]
