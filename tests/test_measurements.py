@@ -192,3 +192,31 @@ def test_paper_line_refuses_a_bending_path():
     tr = simulate_track(shot, p, 60.0, 1e-5, 0, t_end=phases(shot, p).t2 + 0.3)
     pp = recover_track(tr.t, tr.xy, np.ones(len(tr.t), bool), np.full(len(tr.t), 1e-5), p)["methods"]["paper"]
     assert pp["status"] == "failed" and "not straight" in pp["reason"], pp
+
+
+def test_codec_share_solves_the_weighted_moment_equation_with_its_floor():
+    # The codec's share is solved on the covariances the fit then uses
+    # (Measurements.with_codec, floor included): the weighted residuals
+    # match the degrees of freedom exactly, also when a negative share puts
+    # some frames on their floor (the stated errors vary 1-6x along the
+    # track, and a tilted camera's metres per pixel are correlated in x, y;
+    # before, the share stopped where the smallest stated error reached its
+    # floor: residuals at 0.6 and 0.8 of the stated gave 112 and 183 for 235).
+    from cuespin.recover.measurements import MIN_NOISE_FRACTION, codec_excess
+    rng = np.random.default_rng(3)
+    n = 120
+    t = np.arange(n) / 120.0
+    se = 1e-4 * np.exp(rng.uniform(0, np.log(6), n))
+    B = np.array([[2e-3, 4e-4], [-3e-4, 1.6e-3]]) * (1 + 0.3 * rng.random((n, 1, 1)))
+    meas = build_measurements(t, np.zeros((n, 2)), se, px_to_m=B)
+    for shrink in (0.6, 0.8, 1.0, 1.5):  # residuals smaller and larger than stated
+        raw = shrink * se[:, None] * rng.standard_normal((n, 2))
+        r = meas.whiten(-raw)
+        c = codec_excess(meas, r, 5)
+        w = meas.with_codec(c).whiten(-raw)
+        floored = int(np.sum(c < meas.codec_floor()))
+        left = meas.with_codec(c).cov - MIN_NOISE_FRACTION**2 * meas.cov  # at or above the floor
+        assert np.linalg.eigvalsh(left).min() > -1e-12 * meas.cov.max()
+        assert np.sum(w * w) == pytest.approx(meas.dof(5), rel=1e-6), (shrink, c, floored)
+        if shrink == 0.6:
+            assert floored > 0  # the floor is in play
