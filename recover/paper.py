@@ -326,17 +326,23 @@ def paper_from_segments(seg, t, xy, params: BallParams, sigma: float, frame_dt: 
         ``(v0, w0)`` of an earlier answer on the same track: of several
         roots the nearest is the answer (the same root, moved by the camera).
     """
-    res = _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved)
-    if near is not None and res.status == "ambiguous" and res.solutions:
-        from dataclasses import replace
-        ref = np.r_[near[0], params.R * np.asarray(near[1])]
-        s = min(res.solutions, key=lambda s: float(np.linalg.norm(np.r_[s["v0"], params.R * s["w0"]] - ref)))
-        res = replace(res, status="ok", reason="", v0=s["v0"], w0=s["w0"], solutions=[])
-    return res
+    return _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, near)
 
 
-def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved) -> PaperResult:
-    """paper_from_segments without the choice of root."""
+def nearest_root(res: PaperResult, near, params: BallParams) -> PaperResult:
+    """``res`` with, when ambiguous, the root nearest ``near = (v0, w0)``
+    as its answer (status ``ok``)."""
+    if near is None or res.status != "ambiguous" or not res.solutions:
+        return res
+    from dataclasses import replace
+    ref = np.r_[near[0], params.R * np.asarray(near[1])]
+    s = min(res.solutions, key=lambda s: float(np.linalg.norm(np.r_[s["v0"], params.R * s["w0"]] - ref)))
+    return replace(res, status="ok", reason="", v0=s["v0"], w0=s["w0"], u0=s.get("u0"), solutions=[])
+
+
+def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, near=None) -> PaperResult:
+    """paper_from_segments; the root nearest ``near`` is chosen inside each
+    solve, so a root chosen that way gets its standard errors too."""
     if not seg:
         return PaperResult("failed", f"the track could not be segmented: {seg.reason}")
     if not strike_seen:
@@ -357,7 +363,8 @@ def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved) -
 
             def solve_par(x):
                 q = Parabola(a=float(np.exp(x[0])), theta=float(x[1]), vertex=x[2:4])
-                return recover_parabola(q, x[4:6], x[6:8], params, tol, tau1, tau1_tol)
+                return nearest_root(recover_parabola(q, x[4:6], x[6:8], params, tol, tau1, tau1_tol),
+                                    near, params)
 
             x = np.r_[np.log(par.parabola.a), par.parabola.theta, par.parabola.vertex, seg.x0, seg.x1]
             C = None
@@ -377,7 +384,8 @@ def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved) -
     heading = seg.v0 / np.hypot(*seg.v0) if np.hypot(*seg.v0) > 0 else None
 
     def solve_line(x):
-        return recover_line(x[0:2], x[2:4], x[4:6], params, tol, heading, tau1, tau1_tol)
+        return nearest_root(recover_line(x[0:2], x[2:4], x[4:6], params, tol, heading, tau1, tau1_tol),
+                            near, params)
 
     if not ran_into_rest(seg):
         # The line method's premise: x0, x1, x2 on one line.  A sliding arc
@@ -397,7 +405,8 @@ def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved) -
         # with x2 - x1 about zero eq. 39's square root turned that into w0
         # errors of 4-6 stated ones (every miss of the paper's errors).
         def solve_case2(x):
-            return recover_line(x[0:2], x[2:4], x[2:4], params, tol, heading, tau1, tau1_tol)
+            return nearest_root(recover_line(x[0:2], x[2:4], x[2:4], params, tol, heading, tau1, tau1_tol),
+                                near, params)
 
         idx = np.r_[0:2, 4:6]
         x = np.r_[seg.x0, seg.x2]
