@@ -9,6 +9,9 @@
   statistic of the orthogonal-distance parabola against the line
   (fit.conics).
 - Is the strike in view?  :func:`strike_in_view`: still frames before it.
+- Are the fit's residuals autocorrelated along the track (a lossy codec at
+  low noise)?  :func:`autocorrelated`, from their lag-1 autocorrelation's z
+  score (recover.mle.lag1_autocorrelation); yes refits under AR(1) errors.
 
 None of the textbook reference distributions holds for the first three (at
 zero slip ``t1`` is not identified and the information matrix is singular;
@@ -26,7 +29,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import chi2, f as f_dist
+from scipy.stats import chi2, f as f_dist, norm
 
 # Nominal false-positive rate of each decision.
 LEVEL = 0.01
@@ -48,6 +51,14 @@ END_FACTOR = 1.0
 #   parabola's curvature runs to zero and F stays near 0 (see
 #   benchmarks/calibrate_tests.py --which curve).
 CURVE_FACTOR = 1.0
+# - autocorrelated: the residuals' lag-1 z score (at the first fit of both
+#   models) on 1,200 tracks with independent errors, rolling from the strike
+#   and sliding, half fitted as a lossy codec's (calibrate_tests.py --which
+#   ar1, seed 0, 2026-11-30): 3 above the one-sided normal 1% point
+#   (0.25%; pooled q99 0.84 of it), at most 1 of 100 in any cell (allowed
+#   2): a fit's residuals are slightly anti-correlated, so the nominal
+#   point is conservative.
+AR1_FACTOR = 1.0
 # The strike is in view when at least this many frames show the ball still
 # before it: the segmentation takes the start position as the median of the
 # first three frames (fit.segment).
@@ -122,6 +133,16 @@ def curved(F: float, n: int) -> Decision:
         return Decision(False, float("nan"), float("inf"))
     thr = CURVE_FACTOR * float(f_dist.isf(LEVEL, 2, n - 4))
     return Decision(bool(F > thr), float(F), thr)
+
+
+def autocorrelated(rho: float, z: float) -> Decision:
+    """Are the residuals autocorrelated along the track?  Their lag-1
+    autocorrelation ``rho`` with z score ``z`` (recover.mle.lag1_autocorrelation),
+    one-sided: only a positive correlation (errors shared by neighbouring
+    frames) widens the errors."""
+    thr = AR1_FACTOR * float(norm.isf(LEVEL))
+    z = float(z) if np.isfinite(z) else 0.0
+    return Decision(z > thr, z, thr)
 
 
 def strike_in_view(t, t0: float) -> bool:

@@ -14,12 +14,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from cuespin.fit.decide import Decision, sliding_ended, sliding_seen, strike_in_view, t1_in_view
+from cuespin.fit.decide import Decision, autocorrelated, sliding_ended, sliding_seen, strike_in_view, t1_in_view
 from cuespin.fit.segment import Segments, segment_track
 from cuespin.physics.motion import BallParams, phases
 from cuespin.recover.measurements import (Measurements, as_covariance, build_measurements,
                                           codec_excess, fill_covariance)
-from cuespin.recover.mle import (AUTOCORR_Z, CodecCorrelation, MLEResult, ModelFit, correlated_codec_var,
+from cuespin.recover.mle import (CodecCorrelation, MLEResult, ModelFit, correlated_codec_var,
                                  fit_model, fit_models, initial_guess, lag1_autocorrelation, result, slip_lr)
 from cuespin.recover.paper import PaperResult, paper_from_segments, ran_into_rest
 
@@ -195,7 +195,8 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
             # noise): both models again under AR(1) errors of that lag-1
             # correlation, so their likelihood ratio and covariance hold.
             rho, z = lag1_autocorrelation(meas, full.residuals)
-            if z > AUTOCORR_Z:
+            decisions["autocorrelated"] = autocorrelated(rho, z)
+            if decisions["autocorrelated"]:
                 full, roll = fit_models(meas, params, (full.shot.x0, full.shot.t0, full.shot.v0, full.shot.w0),
                                         exposure_s, fit_friction,
                                         (roll.shot.x0, roll.shot.t0, roll.shot.v0, roll.shot.w0), ar1=rho)

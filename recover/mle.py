@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
+from cuespin.fit.decide import autocorrelated
 from cuespin.physics.motion import BallParams, Shot, phases, positions, z_cross
 from cuespin.recover.measurements import Measurements, build_measurements
 
@@ -45,10 +46,6 @@ MAX_CHI2_PER_DOF = 100.0
 MAX_REL_STDERR_V0 = 0.5
 # Convergence tolerances of the Levenberg-Marquardt fit (see fit_model).
 LM_TOL = 1e-7
-# Residual autocorrelation at lag 1 is "shown" beyond this many of its
-# standard errors under independence (one-sided 1%: 2.33); then the
-# HAC sandwich replaces the independent-error covariance.
-AUTOCORR_Z = 2.33
 # An inter-frame codec's error (H.264: motion-compensated prediction from
 # earlier frames) is shared by neighbouring frames: the correlation of its
 # per-axis error between frames k apart, rho(k) = a exp(-k / tau_long) +
@@ -230,8 +227,10 @@ def fit_model(meas: Measurements, params: BallParams, start, exposure_s: float, 
         r = least_squares(resid, p0, x_scale=x_scale, method="lm", diff_step=1e-7,
                           xtol=LM_TOL, ftol=LM_TOL, gtol=LM_TOL, max_nfev=100)
     shot, pr = _unpack(r.x, rolling, fit_friction, params)
+    # The AR(1) coefficient was estimated from the same residuals: one
+    # parameter more.
     return ModelFit(rolling=rolling, x=r.x, shot=shot, params=pr, chi2=float(2 * r.cost),
-                    dof=meas.dof(len(r.x)), jac=r.jac, residuals=r.fun.reshape(-1, 2),
+                    dof=meas.dof(len(r.x) + (1 if ar1 > 0 else 0)), jac=r.jac, residuals=r.fun.reshape(-1, 2),
                     converged=bool(r.success or r.status > 0), message=str(r.message),
                     names=_names(rolling, fit_friction), ar1=ar1)
 
@@ -285,7 +284,7 @@ def slip_lr(full: ModelFit, roll: ModelFit, meas: Measurements | None = None,
             pass
     elif meas is not None:
         rho, z = lag1_autocorrelation(meas, full.residuals)
-        if z > AUTOCORR_Z:
+        if autocorrelated(rho, z):
             try:
                 base = info_inverse(full.jac) * scale
                 hac = hac_covariance(full.jac, full.residuals, rho)
@@ -472,7 +471,7 @@ def covariance(fit: ModelFit, meas: Measurements, codec: CodecCorrelation | None
     base = info_inverse(fit.jac) * scale
     if codec is not None and codec.var > 0:
         return codec_sandwich(fit, meas, codec) * scale, True, rho
-    if not z > AUTOCORR_Z:
+    if not autocorrelated(rho, z):
         return base, False, rho
     hac = hac_covariance(fit.jac, fit.residuals, rho)
     v = np.maximum(np.diag(hac), 1e-300)

@@ -92,3 +92,14 @@ def sliding_tracks(n: int, seed: int, presets=("random", "case1", "case3", "case
         ph = phases(shot, params)
         yield simulate_track(shot, params, fps, sigma, rng, exposure,
                              t_end=min(ph.t2 + 0.3, max(ph.t1 + 1.0, shot.t0 + MAX_AFTER_STRIKE_S)))
+
+
+def mixed_tracks(n: int, seed: int):
+    """``n`` tracks alternately rolling from the strike
+    (:func:`null_rolling_tracks`) and sliding (:func:`sliding_tracks`): the
+    null tracks of a question every track is asked (are the errors
+    autocorrelated?)."""
+    roll = null_rolling_tracks((n + 1) // 2, seed)
+    slide = sliding_tracks(n // 2, seed + 1)
+    for i in range(n):
+        yield next(roll) if i % 2 == 0 else next(slide)

@@ -14,8 +14,8 @@ from cuespin.fit.segment import segment_track
 from cuespin.physics import phases
 from cuespin.recover.estimate import estimate
 from cuespin.recover.paper import path_shape
-from cuespin.recover.simulate import (FPS_GRID, SIGMA_GRID_M, null_rolling_tracks, simulate_track,
-                                      sliding_tracks)
+from cuespin.recover.simulate import (FPS_GRID, SIGMA_GRID_M, mixed_tracks, null_rolling_tracks,
+                                      simulate_track, sliding_tracks)
 
 
 def allowed(n: int, level: float = LEVEL) -> int:
@@ -129,3 +129,30 @@ def test_false_sliding_rate_under_ar1_errors_every_cell():
         for level in {k[axis] for k in cells}:
             v = [x for k, vs in cells.items() if k[axis] == level for x in vs]
             assert sum(v) <= allowed(len(v)), (axis, level, sum(v), len(v))
+
+
+def false_autocorrelated(n, seed):
+    """Tracks with independent errors (rolling from the strike and sliding,
+    alternately; every other pair fitted as a lossy codec's) on which the
+    residuals were judged autocorrelated (the AR(1) refit), per cell."""
+    cells = {}
+    for i, tr in enumerate(mixed_tracks(n, seed)):
+        est = estimate(tr.t, tr.xy, np.full(len(tr.t), tr.sigma), tr.params, tr.exposure_s,
+                       lossless=i % 4 < 2, run_paper=False)
+        cells.setdefault((tr.fps, tr.sigma), []).append(bool(est.decisions.get("autocorrelated")))
+    return cells
+
+
+def test_false_autocorrelated_rate_small():
+    cells = false_autocorrelated(24, 11)
+    assert sum(sum(v) for v in cells.values()) <= allowed(24)
+
+
+@pytest.mark.slow
+def test_false_autocorrelated_rate_400_every_cell():
+    # Measured (seed 12): see fit.decide.AR1_FACTOR for the 1,200-track run.
+    cells = false_autocorrelated(408, 12)
+    hits = sum(sum(v) for v in cells.values())
+    assert hits <= allowed(408), hits
+    for k, v in cells.items():
+        assert sum(v) <= allowed(len(v)), (k, sum(v), len(v))
