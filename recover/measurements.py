@@ -29,6 +29,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import brentq
 
 from cuespin.fit.segment import noise_from_track
 
@@ -349,21 +350,26 @@ def codec_excess(meas: Measurements, whitened_residuals, n_par: int) -> float:
     if r.shape[0] != m or dof <= 2:
         return 0.0
     raw = np.einsum("mij,mj->mi", np.linalg.inv(meas.W), r)      # (m, 2), m
+    used = meas.used
+    g = meas.group[used]
+    cnt = np.bincount(g, minlength=m)[:, None, None]
+    cov, K, floor = meas.cov[used], meas.codec_shape()[used], meas.codec_floor()[used]
 
     def excess_chi2(c):
-        w = np.einsum("mij,mj->mi", meas.with_codec(c).W, raw)
+        # As with_codec(c).whiten, without building the Measurements: each
+        # measurement's covariance the mean of its frames'.
+        C = np.zeros((m, 2, 2))
+        np.add.at(C, g, cov + np.maximum(c, floor)[:, None, None] * K)
+        w = np.linalg.solve(np.linalg.cholesky(C / cnt), raw[:, :, None])[:, :, 0]
         return float(np.sum(w * w)) - dof
 
-    used = meas.used
-    s2 = np.diagonal(meas.cov[used], axis1=1, axis2=2)              # stated per-axis variances
-    k = np.diagonal(meas.codec_shape()[used], axis1=1, axis2=2)     # per unit codec variance
-    lo = float(meas.codec_floor()[used].min())                      # every frame on its floor
+    s2 = np.diagonal(cov, axis1=1, axis2=2)                          # stated per-axis variances
+    k = np.diagonal(K, axis1=1, axis2=2)                             # per unit codec variance
+    lo = float(floor.min())                                          # every frame on its floor
     hi = max(float(np.sum(raw * raw) / k.min()), float((s2 / k).max()))
     if excess_chi2(lo) <= 0:
         return lo
     if excess_chi2(hi) >= 0:
         return hi
-    for _ in range(50):  # bisection: the sum falls as c grows (continuously: Measurements.codec_floor)
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if excess_chi2(mid) > 0 else (lo, mid)
-    return 0.5 * (lo + hi)
+    # The sum falls as c grows, continuously (Measurements.codec_floor).
+    return float(brentq(excess_chi2, lo, hi, xtol=1e-12 * (hi - lo), rtol=1e-12))

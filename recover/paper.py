@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cuespin.fit.decide import stop_apart
 from cuespin.physics.motion import BallParams, z_cross
 from cuespin.physics.parabola import Parabola
 
@@ -404,6 +405,14 @@ def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, n
         # velocity vanishes, sat 2-4 of its errors off the rest on MJPG, and
         # with x2 - x1 about zero eq. 39's square root turned that into w0
         # errors of 4-6 stated ones (every miss of the paper's errors).
+        # Taken only when the two agree within their errors (a decision,
+        # fit.decide.stop_apart): a stopping point apart from the rest means
+        # the ball moved on after sliding, and case 2 does not hold.
+        apart = stop_apart(case2_distance(seg, geo))
+        if apart:
+            return PaperResult("failed", f"sliding's stopping point x1 lies {apart.statistic ** 0.5:.1f} of its "
+                               "errors from the rest x2: sliding did not run into the rest, and the "
+                               "segmentation found no breakpoint before it", "line", x0=seg.x0, x1=seg.x1, x2=seg.x2)
         def solve_case2(x):
             return nearest_root(recover_line(x[0:2], x[2:4], x[2:4], params, tol, heading, tau1, tau1_tol),
                                 near, params)
@@ -429,6 +438,18 @@ def line_offset(x0, x1, x2, C) -> tuple[float, float]:
     g = np.r_[-(1 - along) * n_hat, n_hat, -along * n_hat]
     var = float(g @ np.asarray(C, float)[:6, :6] @ g)
     return float((x1 - x0) @ n_hat), float(np.sqrt(max(var, 1e-30)))
+
+
+def case2_distance(seg, geo) -> float:
+    """``|x1 - x2|^2`` in the covariance of their difference (``geo``, the
+    points' covariance, :func:`geometry_covariance`): chi^2(2) when the
+    sliding phase's stopping point ``x1`` is the rest ``x2`` (case 2)."""
+    d = np.asarray(seg.x1, float) - np.asarray(seg.x2, float)
+    C = geo[2:4, 2:4] + geo[4:6, 4:6]  # x1 from the moving frames, x2 from the rest: independent
+    try:
+        return float(d @ np.linalg.solve(C, d))
+    except np.linalg.LinAlgError:
+        return float("inf")
 
 
 def ran_into_rest(seg) -> bool:
