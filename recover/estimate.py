@@ -184,6 +184,9 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
             t0 = first.shot.t0
     meas = measure(t0).with_codec(codec_var)
     codec = CodecCorrelation(codec_var, frame_dt) if inter_frame and not lossless else None
+    # An intra-frame lossy codec (MJPG): its error is shared by frames that
+    # show the ball at nearly the same place (recover.mle.still_codec_sandwich).
+    still = not lossless and not inter_frame
     decisions: dict[str, Decision] = {}
     mle = None
     try:
@@ -208,9 +211,9 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         if decisions["sliding_seen"]:
             decisions["sliding_ended"] = sliding_ended(seg, t, phases(full.shot, full.params).t1,
                                                        friction_known=not fit_friction)
-            mle = result(full, meas, lr, decisions["sliding_ended"].yes, codec)
+            mle = result(full, meas, lr, decisions["sliding_ended"].yes, codec, still)
         else:
-            mle = result(roll, meas, lr, True, codec)
+            mle = result(roll, meas, lr, True, codec, still)
     else:
         decisions["sliding_ended"] = sliding_ended(seg, t)
     chosen = seg
@@ -261,7 +264,7 @@ def _refit(keep: Decided, seg, t, xy, params, exposure_s, fit_friction, run_pape
         rolling = not keep.sliding_seen
         try:
             fit = fit_model(meas, params, keep.start, exposure_s, rolling, fit_friction, keep.ar1)
-            mle = result(fit, meas, nan, keep.sliding_ended or rolling, codec)
+            mle = result(fit, meas, nan, keep.sliding_ended or rolling, codec, not lossless and codec is None)
         except FIT_ERRORS as exc:
             mle = MLEResult("failed", f"the fit did not run: {exc}")
     paper = None

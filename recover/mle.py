@@ -63,6 +63,34 @@ INTER_CODEC_ACF = (0.27, 0.10, 7.0, 118.0)
 # prewhitened residuals are differences of neighbouring frames and the fit
 # loses what little the level says (0.67 measured on MJPG at low noise).
 MAX_AR1 = 0.95
+# An intra-frame lossy codec's error (MJPG: each frame compressed on its
+# own) depends on where the ball sits on the pixel grid, so frames showing
+# the ball within a fraction of a pixel of each other share it, as a rest's
+# frames do (recover.measurements), while frames further apart do not:
+# whitened error correlation r0 exp(-(d / length)^2) at image distance d
+# (px).  Measured against the truth (moving-frame pairs of the accuracy
+# benchmark's MJPG shots): noise 0-0.5, 40 shots of --seed 1 --noise-max
+# 0.5: 0.46 at d < 0.1 px, 0.17 at 0.1-0.25, under 0.05 beyond (r0 0.50,
+# length 0.166 px); 60 shots of --seed 0: noise < 0.5 0.50, 0.10; noise
+# 0.5-3 0.31, 0.16; noise > 3 0.04, 0.03 (the codec's share of a frame's
+# error falls as the noise grows).  So the length is fixed and r0 is
+# measured on each track from its residuals (still_codec_r0), at most
+# MAX_STILL_R0, from MIN_STILL_PAIRS pairs or more (fewer: none assumed;
+# they then hold too little of the track to matter).  The residuals
+# understate it (the fit absorbs part of a shared error): 0.20-0.29 on
+# three low-noise 240-480 fps shots the truth put at 0.5.
+STILL_CODEC_LENGTH_PX = 0.166
+MAX_STILL_R0 = 0.9
+MIN_STILL_PAIRS = 20
+# A fitted sliding phase seen in fewer measured frames than this does not
+# determine the slip: the slip's size then rests on where the strike and
+# the end of sliding fall between frames, which the likelihood's curvature
+# does not describe.  Measured on 258 simulated shots sliding 0.2-8 frames
+# (benchmarks/short_slide.py, seed 5: 60-240 fps, noise 2e-5-6e-4 m):
+# with 1 measured sliding frame the 95% intervals covered 83% (6 shots,
+# RMS 2.4 stated errors), with 2 95% (21), with 3-8 88-100% (141).  FFV1
+# benchmark shot 13 (1.6 frames at 120 fps) was 9 stated errors off.
+MIN_SLIDING_FRAMES = 2
 # Gauss-Legendre nodes for averaging the model over the exposure: exact for
 # the (quadratic) motion within a phase.
 _GL_T, _GL_W = np.polynomial.legendre.leggauss(3)
@@ -453,7 +481,65 @@ def codec_sandwich(fit: ModelFit, meas: Measurements, codec: CodecCorrelation) -
     return A @ (J.T @ J + codec.var * off) @ A
 
 
-def covariance(fit: ModelFit, meas: Measurements, codec: CodecCorrelation | None = None):
+def still_codec_pairs(meas: Measurements, length: float = STILL_CODEC_LENGTH_PX):
+    """Pairs of measurements that show the ball within a few correlation
+    lengths of each other on the image, and their kernel ``exp(-(d /
+    length)^2)`` (``d`` in px, through the first's metres per pixel):
+    ``(i, j, k)`` arrays, empty without metres per pixel (``px_to_m``)."""
+    empty = (np.zeros(0, int), np.zeros(0, int), np.zeros(0))
+    if meas.px_to_m is None or meas.n < 2:
+        return empty
+    from scipy.spatial import cKDTree
+    g = meas.group[meas.used]
+    cnt = np.bincount(g, minlength=meas.n)[:, None]
+    xy = np.stack([np.bincount(g, weights=meas.xy[meas.used][:, d], minlength=meas.n) for d in (0, 1)], 1) / cnt
+    B = np.zeros((meas.n, 2, 2))
+    np.add.at(B, g, meas.px_to_m[meas.used])
+    B /= cnt[:, :, None]
+    reach = 3.0 * length * float(np.max(np.linalg.norm(B, ord=2, axis=(1, 2))))
+    pairs = cKDTree(xy).query_pairs(reach, output_type="ndarray")
+    if not len(pairs):
+        return empty
+    i, j = pairs[:, 0], pairs[:, 1]
+    d_px = np.hypot(*np.einsum("nab,nb->na", np.linalg.inv(B[i]), xy[j] - xy[i]).T)
+    k = np.exp(-(d_px / length) ** 2)
+    keep = k > 1e-3
+    return i[keep], j[keep], k[keep]
+
+
+def still_codec_r0(residuals, i, j, k) -> float:
+    """The shared error's correlation at zero distance, from the whitened
+    residuals of the pairs ``(i, j)`` with kernel ``k``: the least-squares
+    ``r0`` of ``r_i . r_j / 2 = r0 k_ij``, in ``[0, MAX_STILL_R0]``; 0
+    from fewer than :data:`MIN_STILL_PAIRS` pairs."""
+    if len(i) < MIN_STILL_PAIRS:
+        return 0.0
+    r = np.asarray(residuals, dtype=float)
+    prod = 0.5 * np.sum(r[i] * r[j], axis=1)
+    return float(np.clip(np.sum(k * prod) / np.sum(k * k), 0.0, MAX_STILL_R0))
+
+
+def still_codec_sandwich(fit: ModelFit, meas: Measurements) -> np.ndarray:
+    """The parameters' covariance when an intra-frame codec's error is shared
+    by frames that show the ball at nearly the same place
+    (:func:`still_codec_pairs`, correlation ``r0 k_ij`` with ``r0`` from the
+    fit's residuals, :func:`still_codec_r0`): ``A (J^T J + sum_ij r0 k_ij
+    (J_i^T J_j + J_j^T J_i)) A`` with ``A = (J^T J)^-1`` (whitened
+    Jacobian, each axis correlated alike).  Raises LinAlgError when
+    ``J^T J`` is singular."""
+    J = np.asarray(fit.jac, dtype=float)
+    A = info_inverse(J)
+    i, j, k = still_codec_pairs(meas)
+    r0 = still_codec_r0(fit.residuals, i, j, k)
+    if not r0 > 0:
+        return A
+    Jm = J.reshape(meas.n, 2, -1)
+    off = r0 * np.einsum("k,kap,kaq->pq", k, Jm[i], Jm[j])
+    return A @ (J.T @ J + off + off.T) @ A
+
+
+def covariance(fit: ModelFit, meas: Measurements, codec: CodecCorrelation | None = None,
+               still_codec: bool = False):
     """The parameters' covariance: ``(J^T J)^-1`` scaled by the reduced
     chi-square when that exceeds 1, or, when the residuals show lag-1
     autocorrelation, the HAC sandwich (its variances never below the
@@ -464,23 +550,36 @@ def covariance(fit: ModelFit, meas: Measurements, codec: CodecCorrelation | None
     frames and much of it looks like the motion, so the residuals cannot
     show it (H.264 at CRF 20: residual lag-1 autocorrelation 0.0-0.2 while
     the errors' long-run variance is about 6 times the per-frame one).
-    ``hac`` is then True.  Returns ``(cov, hac, rho1)``; raises LinAlgError
-    when the information matrix is singular."""
+    With ``still_codec`` (an intra-frame lossy codec, MJPG), first the
+    sandwich of its error shared by frames that show the ball at nearly the
+    same place (:func:`still_codec_sandwich`), never below the former.
+    ``hac`` is True when a sandwich widened the errors.  Returns ``(cov,
+    hac, rho1)``; raises LinAlgError when the information matrix is
+    singular."""
     rho, z = lag1_autocorrelation(meas, fit.residuals)
     scale = max(1.0, fit.chi2 / fit.dof)
     base = info_inverse(fit.jac) * scale
     if codec is not None and codec.var > 0:
         return codec_sandwich(fit, meas, codec) * scale, True, rho
+    widened = False
+    if still_codec:
+        wide = _at_least(still_codec_sandwich(fit, meas) * scale, base)
+        widened = bool(np.any(np.diag(wide) > np.diag(base) * (1 + 1e-9)))
+        base = wide
     if not autocorrelated(rho, z):
-        return base, False, rho
-    hac = hac_covariance(fit.jac, fit.residuals, rho)
-    v = np.maximum(np.diag(hac), 1e-300)
+        return base, widened, rho
+    return _at_least(hac_covariance(fit.jac, fit.residuals, rho), base), True, rho
+
+
+def _at_least(C, base) -> np.ndarray:
+    """``C`` with each variance raised to at least ``base``'s (correlations kept)."""
+    v = np.maximum(np.diag(C), 1e-300)
     d = np.sqrt(np.maximum(v, np.diag(base)) / v)
-    return hac * d[:, None] * d[None, :], True, rho
+    return C * d[:, None] * d[None, :]
 
 
 def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
-           codec: CodecCorrelation | None = None) -> MLEResult:
+           codec: CodecCorrelation | None = None, still_codec: bool = False) -> MLEResult:
     """The MLEResult of the chosen model: standard errors, and ``degenerate``
     when v0 or w0 is not determined (``sliding_ended`` False: w0 withheld)."""
     rolling = fit.rolling
@@ -493,7 +592,7 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
                          f"{np.sqrt(chi2 / dof):.0f} times the stated noise): the fit stopped far "
                          "from the shot, or the track is not one shot", chi2=float(chi2), dof=int(dof))
     try:
-        cov, hac, rho = covariance(fit, meas, codec)
+        cov, hac, rho = covariance(fit, meas, codec, still_codec)
     except np.linalg.LinAlgError:
         return MLEResult("degenerate", "the track does not determine the shot (singular information matrix)")
     ph = phases(shot, pr)
@@ -528,6 +627,14 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
                          f"the track does not determine v0 (standard error {se_speed:.3g} m/s for "
                          f"|v0| = {speed:.3g} m/s): the strike at t0 is not in view, or the ball "
                          f"was tracked in too few frames", **common)
+    if not rolling and sliding_ended:
+        t_m = meas.t_used[meas.single[meas.group[meas.used]]]
+        n_slide = int(np.sum((t_m > shot.t0) & (t_m < ph.t1)))
+        if n_slide < MIN_SLIDING_FRAMES:
+            return MLEResult("degenerate",
+                             f"sliding lasted {(ph.t1 - shot.t0) * 1e3:.1f} ms, seen in {n_slide} frame(s): "
+                             f"the slip, so w0 and v0, is not determined (at least {MIN_SLIDING_FRAMES} "
+                             "frames needed)", **common)
     if not rolling and not sliding_ended:
         t_end = float(meas.t_used[-1])
         lower = 3.5 * pr.mu_s * pr.g * (t_end - shot.t0)

@@ -220,3 +220,51 @@ def test_codec_share_solves_the_weighted_moment_equation_with_its_floor():
         assert np.sum(w * w) == pytest.approx(meas.dof(5), rel=1e-6), (shrink, c, floored)
         if shrink == 0.6:
             assert floored > 0  # the floor is in play
+
+
+def test_sliding_seen_in_one_frame_is_degenerate():
+    # A slip lasting 1.5 frames at 120 fps (benchmarks/short_slide.py: with
+    # one measured sliding frame the intervals covered 83%, RMS 2.4 stated
+    # errors): degenerate, never ok with errors that do not hold.
+    from cuespin.physics.motion import Shot, z_cross
+    from cuespin.recover.estimate import estimate
+    rng = np.random.default_rng(0)
+    shot, p = sample_shot(rng, "case4")
+    u0 = 3.5 * p.mu_s * p.g * (1.5 / 120.0) * np.array([0.6, 0.8])
+    v0 = np.asarray(shot.v0, float)
+    s = Shot(x0=shot.x0, v0=v0, w0=z_cross(v0 - u0) / p.R, t0=shot.t0)
+    tr = simulate_track(s, p, 120.0, 2e-5, rng)
+    m = estimate(tr.t, tr.xy, np.full(len(tr.t), 2e-5), p, 0.0, run_paper=False).mle
+    assert m.status == "degenerate" and "seen in 1 frame" in m.reason
+
+
+def test_frames_at_one_place_on_the_image_share_a_codec_error():
+    # Frames showing the ball within a fraction of a pixel of each other
+    # (a ball creeping to its stop) are paired with their kernel; with
+    # residuals that share an error across those pairs the measured r0 is
+    # positive and the sandwich widens v0's error; residuals with no such
+    # sharing leave it as it was.
+    from types import SimpleNamespace
+
+    from cuespin.recover.mle import still_codec_pairs, still_codec_r0, still_codec_sandwich
+    rng = np.random.default_rng(1)
+    n = 200
+    t = np.arange(n) / 240.0
+    x = 0.4 * (1 - np.exp(-t / 0.2))  # slows to a creep: the last frames within 0.1 px
+    xy = np.stack([x, np.zeros(n)], 1)
+    B = np.broadcast_to(np.eye(2) / 500.0, (n, 2, 2))
+    meas = build_measurements(t, xy, 2e-5, px_to_m=B)
+    i, j, k = still_codec_pairs(meas)
+    assert len(i) > 20 and np.all((k > 0) & (k <= 1))
+    J = np.zeros((2 * n, 3))  # whitened Jacobian of (x0, v0 along x, y0)
+    J[0::2, 0], J[0::2, 1], J[1::2, 2] = 1.0, t / 0.01, 1.0
+    shared = np.repeat(rng.standard_normal(n // 10), 10)  # runs of 10 frames share one error
+    for r, widens in ((np.stack([shared, shared], 1) * 0.85 + 0.5 * rng.standard_normal((n, 2)), True),
+                      (rng.standard_normal((n, 2)), False)):
+        fit = SimpleNamespace(jac=J, residuals=r)
+        r0 = still_codec_r0(r, i, j, k)
+        wide = still_codec_sandwich(fit, meas)
+        base = np.linalg.inv(J.T @ J)
+        assert (r0 > 0.15) == widens, r0
+        if widens:
+            assert wide[1, 1] > 1.1 * base[1, 1]
