@@ -85,12 +85,13 @@ MIN_STILL_PAIRS = 20
 # A fitted sliding phase seen in fewer measured frames than this does not
 # determine the slip: the slip's size then rests on where the strike and
 # the end of sliding fall between frames, which the likelihood's curvature
-# does not describe.  Measured on 258 simulated shots sliding 0.2-8 frames
-# (benchmarks/short_slide.py, seed 5: 60-240 fps, noise 2e-5-6e-4 m):
-# with 1 measured sliding frame the 95% intervals covered 83% (6 shots,
-# RMS 2.4 stated errors), with 2 95% (21), with 3-8 88-100% (141).  FFV1
-# benchmark shot 13 (1.6 frames at 120 fps) was 9 stated errors off.
-MIN_SLIDING_FRAMES = 2
+# does not describe.  Measured on 360 simulated shots sliding 0.2-8 frames
+# (benchmarks/short_slide.py --min-frames 1, seed 5: 60-240 fps, noise
+# 2e-5-6e-4 m; frames counted as here): seen in 1 frame the 95% intervals
+# covered 80% (10 shots, RMS 2.3 stated errors), in 2 86% (29, RMS 1.9), in
+# 3 89% (33, RMS 1.3), in 4-8 90-96% (191, RMS 0.7-1.5).  FFV1 benchmark
+# shot 13 (1.6 frames at 120 fps) was 9 stated errors off.
+MIN_SLIDING_FRAMES = 3
 # Gauss-Legendre nodes for averaging the model over the exposure: exact for
 # the (quadratic) motion within a phase.
 _GL_T, _GL_W = np.polynomial.legendre.leggauss(3)
