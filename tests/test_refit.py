@@ -2,6 +2,8 @@
 (recover.estimate.Decided): the segmentation's kind and the paper's root,
 with standard errors for a root chosen that way."""
 
+from dataclasses import replace
+
 import numpy as np
 
 import cuespin.recover.paper as paper_mod
@@ -29,7 +31,7 @@ def test_root_kept_from_the_first_answer_has_standard_errors(monkeypatch):
     first = estimate(tr.t, tr.xy, sig, tr.params, 0.0)
     assert first.paper.status == "ambiguous"
     root = first.paper.solutions[1]
-    keep = first.decided.__class__(**{**first.decided.__dict__, "paper": (root["v0"], root["w0"])})
+    keep = replace(first.decided, paper=(root["v0"], root["w0"]))
     again = estimate(tr.t, tr.xy, sig, tr.params, 0.0, keep=keep)
     assert again.paper.status == "ok"
     assert np.allclose(again.paper.v0, root["v0"], rtol=1e-3)
@@ -51,8 +53,7 @@ def test_refit_keeps_a_breakpoint_in_view():
     first = estimate(tr.t, tr.xy, sig, tr.params, 0.0, run_paper=True)
     assert first.decided.breaks is not None and not np.isfinite(first.decided.breaks[1])
     t_mid = shot.t0 + 0.5 * (ph.t1 - shot.t0)
-    kept = first.decided.__class__(**{**first.decided.__dict__, "segments": "sliding",
-                                      "breaks": (first.decided.breaks[0], t_mid)})
+    kept = replace(first.decided, segments="sliding", breaks=(first.decided.breaks[0], t_mid))
     again = estimate(tr.t, tr.xy, sig, tr.params, 0.0, keep=kept)
     assert t1_in_view(again.seg.t1, tr.t)
     same = estimate(tr.t, tr.xy, sig, tr.params, 0.0, keep=first.decided)
