@@ -20,7 +20,8 @@ from cuespin.physics.motion import BallParams, phases
 from cuespin.recover.measurements import (Measurements, as_covariance, build_measurements,
                                           codec_excess, fill_covariance)
 from cuespin.recover.mle import (CodecCorrelation, MLEResult, ModelFit, correlated_codec_var,
-                                 fit_model, fit_models, initial_guess, lag1_autocorrelation, result, slip_lr)
+                                 fit_model, fit_models, initial_guess, lag1_autocorrelation, result, slip_lr,
+                                 with_profile_interval)
 from cuespin.recover.paper import PaperResult, paper_from_segments, ran_into_rest
 
 # The first fit's strike time is used to place the strike's window only
@@ -211,7 +212,8 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         if decisions["sliding_seen"]:
             decisions["sliding_ended"] = sliding_ended(seg, t, phases(full.shot, full.params).t1,
                                                        friction_known=not fit_friction)
-            mle = result(full, meas, lr, decisions["sliding_ended"].yes, codec, still)
+            mle = with_profile_interval(result(full, meas, lr, decisions["sliding_ended"].yes, codec, still),
+                                        full, meas, exposure_s)
         else:
             mle = result(roll, meas, lr, True, codec, still)
     else:

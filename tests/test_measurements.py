@@ -268,3 +268,20 @@ def test_frames_at_one_place_on_the_image_share_a_codec_error():
         assert (r0 > 0.15) == widens, r0
         if widens:
             assert wide[1, 1] > 1.1 * base[1, 1]
+
+
+def test_stop_shot_w0_error_from_the_profile_likelihood():
+    # Struck with the back spin that stops the ball as sliding ends
+    # (R|w0| = 2.5|v0|): the track moves only by the square of a change of
+    # the slip's size, so the Jacobian's error is no interval (it put R w0
+    # 3.3 errors off on seed 2); the profile likelihood's holds the error.
+    from cuespin.physics.motion import BallParams, Shot
+    from cuespin.recover.estimate import estimate
+    p = BallParams()
+    shot = Shot(x0=np.array([1.0, 0.7]), v0=np.array([1.0, 0.0]), w0=np.array([0.0, -2.5 / p.R]), t0=0.3)
+    for seed in (1, 2):
+        tr = simulate_track(shot, p, 240.0, 1e-4, np.random.default_rng(seed), t_end=phases(shot, p).t2 + 0.5)
+        m = estimate(tr.t, tr.xy, np.full(len(tr.t), 1e-4), p, 0.0, run_paper=False).mle
+        assert m.status == "ok" and m.model == "full"
+        z = (m.w0 - shot.w0) / m.stderr["w0"]
+        assert np.all(np.abs(z) < 1.96), (seed, z)
