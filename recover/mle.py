@@ -102,6 +102,20 @@ MIN_SLIDING_FRAMES = 3
 STOP_ROLL_SIGMAS = 3.0
 PROFILE_MAX_DOUBLINGS = 12
 PROFILE_BISECTIONS = 8
+# A slip the track cannot show (README known limits).  Sliding for tau1 =
+# 2|u0| / (7 mu_s g) (eq. 10) changes v by mu_s g tau1 (eq. 3) and leaves
+# the rolling path displaced by 1/2 mu_s g tau1^2 from the one rolling from
+# the strike at the same x0, t0: a rolling answer cannot exclude a slip
+# that ends before the first frame it explains (the strike time's own 95%
+# error included) or whose displacement stays under this many position
+# errors.  Measured on benchmarks/short_slide.py (seed 5, 360 shots sliding
+# 0.2-8 frames at 60-240 fps, noise 2e-5-6e-4 m): the shots answered
+# rolling slid up to 6.5 frames, displaced by up to UNSEEN_SLIP_SIGMAS
+# errors (see its --before table).
+UNSEEN_SLIP_SIGMAS = 4.0
+# Two-sided 95% normal quantile: the unseen slip's bound is stated as the
+# standard error whose 95% interval spans it.
+Z95 = 1.959964
 # Gauss-Legendre nodes for averaging the model over the exposure: exact for
 # the (quadratic) motion within a phase.
 _GL_T, _GL_W = np.polynomial.legendre.leggauss(3)
@@ -133,6 +147,7 @@ class MLEResult:
     stderr: dict = field(default_factory=dict)
     model: str = ""
     slip_lr: float = float("nan")
+    unseen_slip: float = 0.0
     chi2: float = float("nan")
     dof: int = 0
     residuals: np.ndarray | None = None
@@ -610,10 +625,22 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
     var = np.diag(cov)
     se = np.sqrt(np.where(var > 0, var, np.inf))  # a non-positive variance: not determined
     stderr = {"x0": se[0:2], "t0": float(se[2]), "v0": se[3:5]}
+    dv_unseen, tau_unseen = 0.0, 0.0
     if rolling:
         # w0 = z x v0 / R: its errors are v0's, rotated and scaled.
         Rz = np.array([[0.0, -1.0], [1.0, 0.0]]) / pr.R
         vw = np.diag(Rz @ cov[3:5, 3:5] @ Rz.T)
+        # A slip the track cannot show: v0 = v_roll + dv, w0 = w_roll -
+        # 5/2 z x dv / R (u0 = 7/2 dv, eqs. 3 and 10), |dv| <= dv_unseen in
+        # an unknown direction; its error spans that disc at 95%.
+        dv_unseen, tau_unseen = unseen_slip(fit, meas, float(se[2]))
+        s2 = (dv_unseen / Z95) ** 2
+        cov = cov.copy()
+        cov[3:5, 3:5] += s2 * np.eye(2)
+        vw = vw + (2.5 / pr.R) ** 2 * s2
+        var = np.diag(cov)
+        se = np.sqrt(np.where(var > 0, var, np.inf))
+        stderr["v0"] = se[3:5]
         stderr["w0"] = np.sqrt(np.where(vw > 0, vw, np.inf))
     else:
         stderr["w0"] = se[5:7]
@@ -623,6 +650,7 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
         if not rolling:
             stderr["mu_s"] = float(se[-2])
     common = dict(stderr=stderr, model="rolling" if rolling else "full", slip_lr=float(lr),
+                  unseen_slip=float(dv_unseen),
                   chi2=float(chi2), dof=int(dof), residuals=fit.residuals, cov=cov, names=fit.names,
                   hac=hac, rho1=float(rho), ar1=float(fit.ar1))
     out = dict(v0=np.asarray(shot.v0, float), w0=np.asarray(shot.w0, float),
@@ -661,7 +689,37 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
         return MLEResult("degenerate", "the track does not determine the shot (the covariance of the "
                          "fitted parameters is not positive definite: some combination of them is not "
                          "determined)", **common)
-    return MLEResult("ok", "", **out)
+    note = "" if not rolling else (
+        f"rolling from the strike, or sliding up to {tau_unseen * 1e3:.1f} ms unseen (a slip changing v0 by up "
+        f"to {dv_unseen:.3g} m/s, w0 by up to {2.5 * dv_unseen / pr.R:.3g} rad/s): the errors include it")
+    return MLEResult("ok", note, **out)
+
+
+def unseen_slip(fit: ModelFit, meas: Measurements, se_t0: float) -> tuple[float, float]:
+    """The largest change of v0 (m/s) and sliding time (s) of a slip that a
+    track answered "rolling from the strike" cannot exclude.
+
+    Sliding for ``tau1`` changes v by ``mu_s g tau1`` (eq. 3) and displaces
+    the later rolling path by ``1/2 mu_s g tau1^2``.  The slip is not seen
+    when sliding ends before the first measured moving frame (``tau1`` up to
+    that frame's time after t0 plus 1.96 of t0's standard error
+    ``se_t0``, s) or when its displacement stays under
+    :data:`UNSEEN_SLIP_SIGMAS` per-axis position errors (the frames' median,
+    scaled by the reduced chi-square when above 1).  Returns ``(dv, tau1)``.
+    """
+    pr = fit.params
+    mu_g = pr.mu_s * pr.g
+    t0 = float(fit.shot.t0)
+    t_m = meas.t_used[meas.single[meas.group[meas.used]]]
+    after = t_m[t_m > t0]
+    gap = float(after.min() - t0) if len(after) else 0.0
+    tau_gap = gap + Z95 * (se_t0 if np.isfinite(se_t0) else 0.0)
+    cov = meas.cov[meas.used]
+    sigma = float(np.median(np.sqrt(0.5 * (cov[:, 0, 0] + cov[:, 1, 1])))) if len(cov) else 0.0
+    sigma *= np.sqrt(max(1.0, fit.chi2 / max(fit.dof, 1)))
+    tau_noise = np.sqrt(2.0 * UNSEEN_SLIP_SIGMAS * sigma / mu_g)
+    tau = max(tau_gap, float(tau_noise))
+    return mu_g * tau, tau
 
 
 def _slip_direction(fit: ModelFit) -> np.ndarray:
