@@ -631,7 +631,7 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
         Rz = np.array([[0.0, -1.0], [1.0, 0.0]]) / pr.R
         vw = np.diag(Rz @ cov[3:5, 3:5] @ Rz.T)
         # A slip the track cannot show: v0 = v_roll + dv, w0 = w_roll -
-        # 5/2 z x dv / R (u0 = 7/2 dv, eqs. 3 and 10), |dv| <= dv_unseen in
+        # 5/2 z x dv / R (eqs. 7, 8: dv = mu_s g tau1 u_hat), |dv| <= dv_unseen in
         # an unknown direction; its error spans that disc at 95%.
         dv_unseen, tau_unseen = unseen_slip(fit, meas, float(se[2]))
         s2 = (dv_unseen / Z95) ** 2
