@@ -4,7 +4,8 @@ Renders a 240 fps, 4 s shot with ``render_video`` (drawing, noise and
 encoding, overlapped on two threads) and, in the same run, encodes the
 identical precomputed frames with the same codec and nothing else.  Prints
 frames per second of both and their ratio (target >= 0.8), the median of
-``--repeat`` alternating runs.  ``--look plain`` is the grey 1280 x 640 view;
+``--repeat`` alternating runs, and the median ratio of their CPU times
+(process-wide: drawing and encoding threads; less noisy on a shared machine).  ``--look plain`` is the grey 1280 x 640 view;
 ``--look realistic`` a colour 1280 x 720 view with rails, two resting
 balls, a highlight, dot markings and the cue.
 
@@ -60,20 +61,22 @@ def bench(codec: str, look: str, noise: float, seconds: float, repeat: int,
     frames = list(FrameRenderer(scene).frames())
     n = len(frames)
     size = (scene.camera.width, scene.camera.height)
-    enc, ren = [], []
+    enc, ren, cpu = [], [], []
     ext = video_suffix(codec)                       # .mp4 for H264 (PyAV), else .avi
     with tempfile.TemporaryDirectory() as tmp:
         for _ in range(repeat):  # alternating, median of N: the machine is shared
-            t = time.perf_counter()
+            t, c = time.perf_counter(), time.process_time()
             encode_frames(iter(frames), Path(tmp) / f"enc{ext}", codec, 240.0, size)
             enc.append(time.perf_counter() - t)
-            t = time.perf_counter()
+            c_enc = time.process_time() - c
+            t, c = time.perf_counter(), time.process_time()
             render_video(scene, Path(tmp) / f"ren{ext}")
             ren.append(time.perf_counter() - t)
+            cpu.append(c_enc / (time.process_time() - c))
     ratios = [e / r for e, r in zip(enc, ren)]
     return {"codec": codec, "look": look, "frames": n, "encode_fps": n / statistics.median(enc),
             "render_fps": n / statistics.median(ren), "ratio": statistics.median(ratios),
-            "ratios": ratios}
+            "ratios": ratios, "cpu_ratio": statistics.median(cpu)}
 
 
 OFFSET_LOOKS = {
@@ -124,13 +127,13 @@ def main():
         offsets()
         return
     print(f"camera {args.camera}")
-    print(f"{'look':9} {'codec':6} {'frames':>6} {'encode fps':>11} {'render fps':>11} {'ratio':>6}  runs")
+    print(f"{'look':9} {'codec':6} {'frames':>6} {'encode fps':>11} {'render fps':>11} {'ratio':>6} {'cpu':>5}  runs")
     for look in args.look or ["plain", "realistic"]:
         for codec in args.codec or ["MJPG", "FFV1", "H264"]:
             r = bench(codec, look, args.noise, args.seconds, args.repeat, args.camera)
             runs = " ".join(f"{x:.2f}" for x in r["ratios"])
             print(f"{r['look']:9} {r['codec']:6} {r['frames']:6d} {r['encode_fps']:11.1f} "
-                  f"{r['render_fps']:11.1f} {r['ratio']:6.2f}  {runs}", flush=True)
+                  f"{r['render_fps']:11.1f} {r['ratio']:6.2f} {r['cpu_ratio']:5.2f}  {runs}", flush=True)
 
 
 if __name__ == "__main__":

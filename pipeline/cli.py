@@ -230,7 +230,9 @@ JSON (--json), every field in docs/output.md:
   methods.paper           trajectory (parabola | line), solutions (every consistent [v0, w0]),
                           stderr (1 standard error of v0, w0, delta method)
   methods.mle             stderr (1 standard error of x0, t0, v0, w0), model (full: slip fitted;
-                          rolling: no slip), slip_lr, chi2_per_dof, dof, hac, rho1, codec_noise_m
+                          rolling: no slip seen), slip_lr, chi2_per_dof, dof, hac, rho1, codec_noise_m;
+                          unseen_slip (rolling: the largest change of v0, m/s, by a slip too short
+                          to see; stderr includes it, reason says so)
   best                    the method to trust (mle before paper, first that is ok); null if none is
   timing_s                track, fit, recover: wall time (s)
 """

@@ -92,3 +92,49 @@ def sliding_tracks(n: int, seed: int, presets=("random", "case1", "case3", "case
         ph = phases(shot, params)
         yield simulate_track(shot, params, fps, sigma, rng, exposure,
                              t_end=min(ph.t2 + 0.3, max(ph.t1 + 1.0, shot.t0 + MAX_AFTER_STRIKE_S)))
+
+
+def mixed_tracks(n: int, seed: int):
+    """``n`` tracks alternately rolling from the strike
+    (:func:`null_rolling_tracks`) and sliding (:func:`sliding_tracks`): the
+    null tracks of a question every track is asked (are the errors
+    autocorrelated?)."""
+    roll = null_rolling_tracks((n + 1) // 2, seed)
+    slide = sliding_tracks(n // 2, seed + 1)
+    for i in range(n):
+        yield next(roll) if i % 2 == 0 else next(slide)
+
+
+def case2_tracks(n: int, seed: int, fps_grid=FPS_GRID, sigma_grid=SIGMA_GRID_M, blur: bool = True):
+    """``n`` tracks of shots whose sliding runs into the rest (paper case 2:
+    ``x1 = x2``), cycling over frame rates and noise levels, seen to rest.
+    Yields :class:`SimTrack`."""
+    rng = np.random.default_rng(seed)
+    for i in range(n):
+        fps = fps_grid[i % len(fps_grid)]
+        sigma = sigma_grid[(i // len(fps_grid)) % len(sigma_grid)]
+        shot, params = sample_shot(rng, "case2")
+        exposure = float(rng.uniform(0.3, 1.0) / fps) if blur and rng.random() < 0.5 else 0.0
+        yield simulate_track(shot, params, fps, sigma, rng, exposure, t_end=phases(shot, params).t2 + 0.3)
+
+
+def short_slip_tracks(n: int, seed: int, frames=(0.2, 1.0), fps_grid=(60.0, 120.0, 240.0),
+                      sigma_grid=SIGMA_GRID_M, blur: bool = True):
+    """``n`` tracks of shots that slide for ``frames`` (a uniform range, in
+    frames) after the strike: the sampler's rolling-from-the-strike shot
+    (case 4) given a slip ``|u0| = 7/2 mu_s g tau1`` (eq. 10) in a random
+    direction, v0 kept (as benchmarks/short_slide.py draws them).  Yields
+    :class:`SimTrack`."""
+    from cuespin.physics.motion import z_cross
+    rng = np.random.default_rng(seed)
+    for i in range(n):
+        fps = fps_grid[i % len(fps_grid)]
+        sigma = sigma_grid[(i // len(fps_grid)) % len(sigma_grid)]
+        shot, params = sample_shot(rng, "case4")
+        tau1 = float(rng.uniform(*frames)) / fps
+        ang = rng.uniform(0, 2 * np.pi)
+        u0 = 3.5 * params.mu_s * params.g * tau1 * np.array([np.cos(ang), np.sin(ang)])
+        v0 = np.asarray(shot.v0, float)
+        s = Shot(x0=shot.x0, v0=v0, w0=z_cross(v0 - u0) / params.R, t0=shot.t0)
+        exposure = float(rng.uniform(0.3, 1.0) / fps) if blur and rng.random() < 0.5 else 0.0
+        yield simulate_track(s, params, fps, sigma, rng, exposure)

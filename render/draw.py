@@ -84,8 +84,10 @@ def quadrant_area(x, y, r):
     length.  ``A(x) = int_{-r}^{x} sqrt(r^2 - X^2) dX`` is half the area left
     of ``x``; for ``y >= 0`` the region below ``y`` adds ``min(y, s(X))``.
     """
-    x = np.clip(x, -r, r)
-    y = np.clip(y, -r, r)
+    # np.minimum / np.maximum rather than np.clip: the same values, without
+    # clip's call overhead, which dominated on a tracker's 38 x 38 grid.
+    x = np.minimum(np.maximum(x, -r), r)
+    y = np.minimum(np.maximum(y, -r), r)
     r2 = r * r
 
     def A(z):
@@ -97,7 +99,7 @@ def quadrant_area(x, y, r):
     # A is evaluated only on x and on c (each varies along one axis of a
     # patch), never on their broadcast: A(min(x, -c)) is A(x) or A(-c).
     Ax, Ac = A(x), A(c)
-    m = (np.where(x <= -c, Ax, A(-c)) + ya * (np.clip(x, -c, c) + c)
+    m = (np.where(x <= -c, Ax, A(-c)) + ya * (np.minimum(np.maximum(x, -c), c) + c)
          + (np.where(x >= c, Ax, Ac) - Ac))
     upper = Ax + m                   # y >= 0: int (s + min(y, s))
     lower = Ax - m                   # y < 0: the strip X <= x less its part above -y

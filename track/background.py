@@ -305,7 +305,9 @@ class FeltAccumulator:
         self.total = np.zeros(shape[:2], np.float32)
         self.count = np.zeros(shape[:2], np.int32)
         self.full = np.zeros(shape, np.float32)
-        self.full_count = np.zeros(shape[:2], np.int32)
+        # Whole frames that hid each pixel (the ball over it): the count of
+        # frames showing it is n_full less this, with no full-size pass per frame.
+        self.full_hidden = np.zeros(shape[:2], np.int32)
         self.n = 0
         self.n_full = 0
 
@@ -329,7 +331,6 @@ class FeltAccumulator:
     def add_frame(self, frame: np.ndarray, centre, radius: float) -> None:
         """Add a whole decoded frame (uint8, grey or BGR), the ball masked out."""
         cv2.accumulate(frame, self.full)
-        self.full_count += 1
         self.n_full += 1
         H, W = self.total.shape
         r = int(np.ceil(radius)) + 1
@@ -343,7 +344,7 @@ class FeltAccumulator:
             self.full[v0:v1, u0:u1] -= sub * disc[..., None]
         else:
             self.full[v0:v1, u0:u1] -= sub * disc
-        self.full_count[v0:v1, u0:u1] -= disc
+        self.full_hidden[v0:v1, u0:u1] += disc
 
     def felt(self, fallback: np.ndarray, projection, min_frames: int = 20) -> np.ndarray:
         """The mean felt where at least ``min_frames`` frames showed it, else
@@ -354,15 +355,16 @@ class FeltAccumulator:
         ``projection`` maps the whole frames' sum to the windows' channel
         (:class:`cuespin.track.colour.Projection`; its offset counts once per frame).
         """
+        full_count = self.n_full - self.full_hidden
         full = projection(self.full) if self.full.ndim == 3 else self.full
         if projection.w is not None:  # the offset was added once to a sum of many
-            full = full + np.float32(projection.offset) * (self.full_count - 1)
-        total = self.total + np.where(self.full_count > 0, full, 0)
-        count = self.count + self.full_count
+            full = full + np.float32(projection.offset) * (full_count - 1)
+        total = self.total + np.where(full_count > 0, full, 0)
+        count = self.count + full_count
         mean = total / np.maximum(count, 1)
         out = np.where(count >= min_frames, mean, fallback).astype(np.float32)
         if self.n_full:  # felt no whole frame showed: a ball that never left it
-            out = fill_unseen(out, self.full_count == 0)
+            out = fill_unseen(out, full_count == 0)
         return out
 
 

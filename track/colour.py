@@ -65,7 +65,10 @@ class Projection:
 
     def many(self, frames: np.ndarray) -> np.ndarray:
         """Project a stack of frames, shape (n, h, w[, 3]), to (n, h, w) float32."""
-        return np.stack([self(f) for f in frames])
+        out = np.empty(frames.shape[:3], np.float32)  # filled in place: no second copy of the stack
+        for i, f in enumerate(frames):
+            out[i] = self(f)
+        return out
 
 
 GREY = Projection()

@@ -135,52 +135,86 @@ def streak_model(c, b, G, felt, r, u0, v0, taus, shade=None, blur_cols=True, out
     is the ball's image in place of the disc of radius ``r`` (the look's
     ``X / r`` still uses ``r``, the ball's scale).
     """
+    m, JT = _model_rows(c, b, G, felt, r, u0, v0, taus, shade, blur_cols, outline)
+    if not blur_cols:  # the blur's rows were left out: zero columns in their place
+        JT = np.insert(JT, 2, 0.0, axis=0)
+        JT = np.insert(JT, 2, 0.0, axis=0)
+    return m, JT.T
+
+
+def _model_rows(c, b, G, felt, r, u0, v0, taus, shade=None, blur_rows=True, outline=None):
+    """:func:`streak_model` with its Jacobian transposed, shape (k, h*w), and
+    the blur's two rows left out when ``blur_rows`` is False (k = 3, or 6
+    with ``shade``).  The fit's working form: contiguous rows make ``J^T J``
+    one product, and the columns a fit does not read are never built.  A
+    sharp ball (one node at 0) is computed on 2-D arrays, without the sums
+    over nodes (measured: half of the evaluation's time went to overheads
+    of arrays this small).
+    """
     h, w = felt.shape
     taus = np.asarray(taus, float)
     n = len(taus)
+    felt = np.asarray(felt, float)
+    k = (5 if blur_rows else 3) + (3 if shade is not None else 0)
+    JT = np.empty((k, h * w))
+    R = JT.reshape(k, h, w)
+    if n == 1 and taus[0] == 0.0:
+        cov, du, dv = coverage_with_gradient(c[0], c[1], r, u0, v0, w, h, outline)  # (h, w)
+        i = 2
+        if blur_rows:  # a single node at tau = 0: the blur acts at second order only
+            R[2:4] = 0.0
+            i = 4
+        if shade is None:
+            contrast = G - felt
+            np.multiply(du, contrast, out=R[0])
+            np.multiply(dv, contrast, out=R[1])
+            R[i] = cov
+            return contrast * cov, JT
+        gu, gv, q = shade
+        X = (np.arange(u0, u0 + w) - c[0]) / r                     # (w,)
+        Y = ((np.arange(v0, v0 + h) - c[1]) / r)[:, None]          # (h, 1)
+        Q = X * X + Y * Y - 0.5
+        ball = (G - felt) + gu * X + gv * Y + q * Q
+        # d/d(centre): the edge moves (coverage) and the look moves with it.
+        np.add(du * ball, cov * ((-gu - 2 * q * X) / r), out=R[0])
+        np.add(dv * ball, cov * ((-gv - 2 * q * Y) / r), out=R[1])
+        R[i] = cov
+        np.multiply(cov, X, out=R[i + 1])
+        np.multiply(cov, Y, out=R[i + 2])
+        np.multiply(cov, Q, out=R[i + 3])
+        return cov * ball, JT
     cu = c[0] + b[0] * taus
     cv = c[1] + b[1] * taus
     covs, gus, gvs = coverage_with_gradient(cu, cv, r, u0, v0, w, h, outline)  # (n, h, w)
-    felt = np.asarray(felt, float)
+    i = 4 if blur_rows else 2
     if shade is None:
         cov = covs.sum(axis=0) / n
-        du = gus.sum(axis=0)
-        dv = gvs.sum(axis=0)
-        contrast = ((G - felt) / n).ravel()
-        J = np.empty((h * w, 5))
-        J[:, 0] = du.ravel() * contrast
-        J[:, 1] = dv.ravel() * contrast
-        if blur_cols:
-            J[:, 2] = np.tensordot(taus, gus, axes=1).ravel() * contrast
-            J[:, 3] = np.tensordot(taus, gvs, axes=1).ravel() * contrast
-        else:
-            J[:, 2:4] = 0.0
-        J[:, 4] = cov.ravel()
-        return (G - felt) * cov, J
+        contrast = (G - felt) / n
+        R[0] = gus.sum(axis=0) * contrast
+        R[1] = gvs.sum(axis=0) * contrast
+        if blur_rows:
+            R[2] = np.tensordot(taus, gus, axes=1) * contrast
+            R[3] = np.tensordot(taus, gvs, axes=1) * contrast
+        R[i] = cov
+        return (G - felt) * cov, JT
     gu, gv, q = shade
     X = (np.arange(u0, u0 + w)[None, None, :] - cu[:, None, None]) / r   # (n, 1, w)
     Y = (np.arange(v0, v0 + h)[None, :, None] - cv[:, None, None]) / r   # (n, h, 1)
     Q = X * X + Y * Y - 0.5
-    level = G + gu * X + gv * Y + q * Q                                  # (n, h, w)
-    ball = level - felt
+    ball = (G + gu * X + gv * Y + q * Q) - felt                          # (n, h, w)
     # d/d(node centre): the edge moves (coverage) and the look moves with it.
-    dlu = (-gu - 2 * q * X) / r
-    dlv = (-gv - 2 * q * Y) / r
-    node_du = gus * ball + covs * dlu
-    node_dv = gvs * ball + covs * dlv
-    J = np.empty((h * w, 8))
-    J[:, 0] = node_du.sum(axis=0).ravel() / n
-    J[:, 1] = node_dv.sum(axis=0).ravel() / n
-    if blur_cols:
-        J[:, 2] = np.tensordot(taus, node_du, axes=1).ravel() / n
-        J[:, 3] = np.tensordot(taus, node_dv, axes=1).ravel() / n
-    else:
-        J[:, 2:4] = 0.0
-    J[:, 4] = covs.sum(axis=0).ravel() / n
-    J[:, 5] = (covs * X).sum(axis=0).ravel() / n
-    J[:, 6] = (covs * Y).sum(axis=0).ravel() / n
-    J[:, 7] = (covs * Q).sum(axis=0).ravel() / n
-    return (covs * ball).sum(axis=0) / n, J
+    node_du = gus * ball + covs * ((-gu - 2 * q * X) / r)
+    node_dv = gvs * ball + covs * ((-gv - 2 * q * Y) / r)
+    R[0] = node_du.sum(axis=0) / n
+    R[1] = node_dv.sum(axis=0) / n
+    if blur_rows:
+        R[2] = np.tensordot(taus, node_du, axes=1) / n
+        R[3] = np.tensordot(taus, node_dv, axes=1) / n
+    R[i] = covs.sum(axis=0) / n
+    R[i + 1] = (covs * X).sum(axis=0) / n
+    R[i + 2] = (covs * Y).sum(axis=0) / n
+    R[i + 3] = (covs * Q).sum(axis=0) / n
+    return (covs * ball).sum(axis=0) / n, JT
 
 
 @dataclass(frozen=True)
@@ -273,24 +307,21 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
     c = np.array(c0, dtype=float)
     b = np.array(b0, dtype=float)
     G = float(G0)
-    cols = [0, 1, 2, 3, 4] if fit_blur else [0, 1, 4]
     look = np.zeros(3) if shade else None
-    if shade:
-        cols = cols + [5, 6, 7]
     n_look = 3 if shade else 0
+    n_par = (5 if fit_blur else 3) + n_look
     taus = blur_nodes(np.hypot(*b))
     n_use = float(use.sum())
     it = 0
     prev = None
     for it in range(1, MAX_ITER + 1):
-        m, J = streak_model(c, b, G, felt, r, u0, v0, taus, look, blur_cols=fit_blur, outline=outline)
-        J = J[:, cols]
+        m, JT = _model_rows(c, b, G, felt, r, u0, v0, taus, look, fit_blur, outline)  # J^T: (n_par, h*w)
         res = y - m.ravel()
         if valid is not None:  # all ones otherwise: skip two products per step
             res *= use
-            J *= use[:, None]
-        JtJ = J.T @ J
-        Jtr = J.T @ res
+            JT *= use
+        JtJ = JT @ JT.T
+        Jtr = JT @ res
         try:
             A = np.linalg.inv(JtJ)
         except np.linalg.LinAlgError:
@@ -300,7 +331,7 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
             return _failed("diverged", c, b, G, it)
         move = np.hypot(step[0], step[1])
         # The centre's standard error from the pooled residual (after this step).
-        s2 = max(res @ res - Jtr @ step, 0.0) / max(n_use - len(cols), 1.0)
+        s2 = max(res @ res - Jtr @ step, 0.0) / max(n_use - n_par, 1.0)
         done = move < STEP_TOL_PX or move < STEP_TOL_SE * np.sqrt(s2 * min(A[0, 0], A[1, 1]))
         raw = step
         if prev is not None and not done:
@@ -312,7 +343,7 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
         if it > DAMP_AFTER:
             step = 0.5 * step
         c += step[:2]
-        G += step[len(cols) - 1 - n_look]
+        G += step[n_par - 1 - n_look]
         if shade:
             look += step[-3:]
         if fit_blur:
@@ -323,13 +354,13 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
     else:
         # Still moving: accept only a step far below the centre's own
         # uncertainty (the sandwich below), which no estimate can resolve.
-        se_now = np.sqrt(np.clip(np.diag(A @ (J.T @ (J * (res * res)[:, None])) @ A)[:2], 0, None))
+        se_now = np.sqrt(np.clip(np.diag(A @ ((JT * (res * res)) @ JT.T) @ A)[:2], 0, None))
         if not np.hypot(step[0], step[1]) < NO_CONVERGENCE_SE * se_now.min():
             return _failed(f"no convergence in {MAX_ITER} iterations", c, b, G, it)
     # Residual and covariance from the last evaluation: the final step moved
     # the centre by under STEP_TOL_PX or a tenth of its error, which changes
     # neither measurably.
-    dof = max(int(use.sum()) - len(cols), 1)
+    dof = max(int(n_use) - n_par, 1)
     rms = float(np.sqrt(max(res @ res - Jtr @ raw, 0.0) / dof))
     inside = (u0 - 0.5 <= c[0] <= u0 + w - 0.5) and (v0 - 0.5 <= c[1] <= v0 + h - 0.5)
     if not inside:
@@ -349,13 +380,13 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
     try:
         if shade:
             B = CLUSTER_PX
-            S = (J * res[:, None]).reshape(h, w, -1)
-            S = np.pad(S, ((0, -h % B), (0, -w % B), (0, 0)))
-            S = S.reshape(S.shape[0] // B, B, S.shape[1] // B, B, -1).sum(axis=(1, 3)).reshape(-1, J.shape[1])
-            nb = len(S)
-            meat = S.T @ S * (use.sum() / dof) * nb / max(nb - 1, 1)
+            S = np.zeros((n_par, h + (-h % B), w + (-w % B)))
+            S[:, :h, :w] = (JT * res).reshape(n_par, h, w)
+            S = S.reshape(n_par, S.shape[1] // B, B, S.shape[2] // B, B).sum(axis=(2, 4)).reshape(n_par, -1)
+            nb = S.shape[1]
+            meat = S @ S.T * (n_use / dof) * nb / max(nb - 1, 1)
         else:
-            meat = J.T @ (J * (res * res)[:, None]) * (use.sum() / dof)
+            meat = (JT * (res * res)) @ JT.T * (n_use / dof)
         cov = (A @ meat @ A)[:2, :2]
         cov = 0.5 * (cov + cov.T)
         se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
@@ -424,28 +455,27 @@ def refit_shift(felt_old: np.ndarray, felt_new: np.ndarray, u0: int, v0: int, c,
     c, b = np.asarray(c, float), np.asarray(b, float)
     felt_old = np.asarray(felt_old, np.float64)
     felt_new = np.asarray(felt_new, np.float64)
+    # The rows before the level's (centre, blur) are linear in the felt, with
+    # the coverage's derivatives as its coefficient (the disc's rows at
+    # level 1 on zero felt); the others do not depend on it.  So one
+    # evaluation (two with the look) serves both felts.
+    iG = 4 if fit_blur else 2
+    _, D = _model_rows(c, b, 1.0, np.zeros_like(felt_old), r, u0, v0, taus, None, fit_blur, outline)
+    df = (felt_new - felt_old).ravel()
     if shade is None:
-        # The disc's Jacobian is the coverage's derivatives times the
-        # contrast G - felt (and the coverage): one evaluation serves both felts.
-        _, D = streak_model(c, b, 1.0, np.zeros_like(felt_old), r, u0, v0, taus, blur_cols=fit_blur,
-                            outline=outline)
         Jo, Jn = D.copy(), D
-        Jo[:, :4] *= (G - felt_old).reshape(-1, 1)
-        Jn[:, :4] *= (G - felt_new).reshape(-1, 1)
+        Jo[:iG] *= (G - felt_old).ravel()
+        Jn[:iG] *= (G - felt_new).ravel()
     else:
-        _, Jo = streak_model(c, b, G, felt_old, r, u0, v0, taus, shade, blur_cols=fit_blur, outline=outline)
-        _, Jn = streak_model(c, b, G, felt_new, r, u0, v0, taus, shade, blur_cols=fit_blur, outline=outline)
-    cov = Jo[:, 4]
-    cols = [0, 1, 2, 3, 4] if fit_blur else [0, 1, 4]
-    if shade is not None:
-        cols = cols + [5, 6, 7]
-    Jo, Jn = Jo[:, cols], Jn[:, cols]
+        _, Jo = _model_rows(c, b, G, felt_old, r, u0, v0, taus, shade, fit_blur, outline)
+        Jn = Jo.copy()
+        Jn[:iG] -= D[:iG] * df
+    cov = D[iG]
     # Least squares, not solve: a blur fitted near zero length has (almost)
     # zero derivatives (the blur acts at second order there), which must not
     # stop the centre's correction.
-    df = (felt_new - felt_old).ravel()
     try:
-        step = -np.linalg.lstsq(Jo.T @ Jn, Jo.T @ (df * (1.0 - cov)), rcond=1e-9)[0]
+        step = -np.linalg.lstsq(Jo @ Jn.T, Jo @ (df * (1.0 - cov)), rcond=1e-9)[0]
     except np.linalg.LinAlgError:
         return np.zeros(2)
     return step[:2]

@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from cuespin.track.outline import is_similarity
+
 # Vertices of the silhouette polygon: its centroid converges as 1/n^2
 # (720 vertices: 1e-4 px on a 20-px ball), so 256 keep it within 1e-3 px.
 OUTLINE_VERTICES = 256
@@ -46,6 +48,8 @@ def projected_centres(camera, uv_fit, R: float) -> np.ndarray:
     if len(uv_fit) == 0:
         return uv_fit.copy()
     uv = uv_fit.copy()
+    if is_similarity(camera):  # the same disc everywhere: no offset (the polygons' sums give ~1e-10 px)
+        return uv
     for _ in range(FIXED_POINT_STEPS):
         off = camera.silhouette_centroid_offset(camera.to_table(uv), R, OUTLINE_VERTICES)
         uv = uv_fit - off

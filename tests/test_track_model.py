@@ -1,0 +1,62 @@
+"""The disc fit's model and its Jacobian: analytic columns against finite differences.
+
+The fit works on the Jacobian's rows (``_model_rows``, with a 2-D path for a
+sharp ball); every column must be the derivative of the model it returns,
+for a sharp and a streaked ball, with and without the look, on a disc and on
+an ellipse.
+"""
+
+import numpy as np
+import pytest
+
+from cuespin.track.model import _model_rows, blur_nodes, fit_disc, streak_model
+from cuespin.track.outline import Ellipse
+
+H = W = 37
+U0, V0, R_PX = 500, 283, 14.3
+# Central differences of this step: the coverage is smooth but at pixels an
+# edge is tangent to, where its second derivative is unbounded; 1e-5 of the
+# column's largest value passes them (measured: 1.1e-7 of it at most).
+EPS = 1e-5
+REL_TOL = 1e-5
+
+
+def model(p, taus, shade, outline, felt):
+    """The model at parameters ``p = (cu, cv, bu, bv, G[, gu, gv, q])``."""
+    return streak_model(p[:2], p[2:4], p[4], felt, R_PX, U0, V0, taus,
+                        p[5:] if shade else None, outline=outline)[0]
+
+
+@pytest.mark.parametrize("blur", [0.0, 7.0])
+@pytest.mark.parametrize("shade", [False, True])
+@pytest.mark.parametrize("ellipse", [False, True])
+def test_jacobian_matches_finite_differences(blur, shade, ellipse):
+    rng = np.random.default_rng(3)
+    felt = 90.0 + rng.normal(0, 2, (H, W))
+    outline = Ellipse(((1 / 13.0**2, 0.0008), (0.0008, 1 / 15.0**2))) if ellipse else None
+    b = blur * np.array([0.8, 0.6])
+    p = np.r_[518.27, 301.64, b, 210.0, (12.0, -7.0, -20.0) if shade else ()]
+    taus = blur_nodes(np.hypot(*b))
+    m, J = streak_model(p[:2], p[2:4], p[4], felt, R_PX, U0, V0, taus, p[5:] if shade else None,
+                        outline=outline)
+    cols = [0, 1, 4] + ([2, 3] if blur else []) + ([5, 6, 7] if shade else [])
+    for j in cols:
+        d = np.zeros_like(p)
+        d[j] = EPS
+        fd = (model(p + d, taus, shade, outline, felt) - model(p - d, taus, shade, outline, felt)) / (2 * EPS)
+        scale = np.abs(J[:, j]).max()
+        assert np.abs(fd.ravel() - J[:, j]).max() <= REL_TOL * scale, f"column {j}"
+    # The rows the fit reads are those columns, the blur's left out when not fitted.
+    m2, JT = _model_rows(p[:2], p[2:4], p[4], felt, R_PX, U0, V0, taus, p[5:] if shade else None,
+                         False, outline)
+    keep = [0, 1, 4] + ([5, 6, 7] if shade else [])
+    assert np.array_equal(m, m2) and np.array_equal(JT, J[:, keep].T)
+
+
+def test_fit_recovers_a_noise_free_shaded_ball():
+    rng = np.random.default_rng(5)
+    felt = 90.0 + rng.normal(0, 2, (H, W))
+    c = np.array([518.31, 301.72])
+    img = felt + streak_model(c, np.zeros(2), 200.0, felt, R_PX, U0, V0, np.zeros(1), (10.0, -6.0, -15.0))[0]
+    f = fit_disc(img, felt, U0, V0, c + [0.4, -0.3], R_PX, 170.0, shade=True)
+    assert f and np.abs(f.c - c).max() < 1e-6 and np.allclose(f.shade, (10.0, -6.0, -15.0), atol=1e-4)
