@@ -299,10 +299,11 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
             while len(buf) < ahead and (img := pull()) is not None:
                 buf.append(img)
         t_bg = time.perf_counter() - t_start
+        # The top speed in px at the largest scale in view (the scale goes
+        # with the ball's radius): near a tilted camera a px is fewer metres.
+        max_step = MAX_SPEED_M_S / cam.fps * cam.px_per_m(center) * radii.r_max / radius_px
         tracker = BallTracker(bg, radius_px, cam.exposure_s * cam.fps, config, projection=proj,
-                              search_mask=mask,
-                              max_step_px=MAX_SPEED_M_S / cam.fps * cam.px_per_m(center) * radii.r_max / radius_px,
-                              camera=cam, R=R, radii=radii)
+                              search_mask=mask, max_step_px=max_step, camera=cam, R=R, radii=radii)
         felt = FeltAccumulator(first.shape)
         fits = []  # (frame index, the fit's state) for the final background correction
         t_start = time.perf_counter()
