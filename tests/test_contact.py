@@ -159,14 +159,32 @@ def test_ball_coming_back_is_not_the_shot():
     assert abs(c.index - np.searchsorted(t, traj.first_contact.t)) <= 1
 
 
-def rendered_contact(tmp_path, preset, seed, fps, px_per_m, codec="FFV1"):
-    """Render a contact scene to tail_s after its first contact and recover it."""
+def test_gentle_ball_contact_found_where_the_path_meets_the_ball():
+    # A near-glancing contact (0.35 m/s turned by 0.15 m/s) under 0.3 mm of
+    # tracking noise: the change test alone misses it (None on these five
+    # seeds), the path meeting a ball the scene lists finds it within one
+    # frame.  On the realistic look's render of ball_contact seed 4 (120
+    # fps) the change statistic was 36 against the threshold's 40.
+    ball = np.array([[1.2, 0.5 + 2 * P.R * 0.9]])
+    shot = Shot(x0=(0.6, 0.5), v0=(0.45, 0.0), w0=(0.0, 0.45 / P.R), t0=0.2)
+    traj = simulate(shot, P, TABLE, balls=ball)
+    t = np.arange(360) / 120.0
+    true_index = np.searchsorted(t, traj.first_contact.t)
+    for seed in range(5):
+        xy = traj.positions(t) + 3e-4 * np.random.default_rng(seed).standard_normal((len(t), 2))
+        c = find_contact(t, xy, np.ones(len(t), bool), 3e-4, TABLE, P.R, ball)
+        assert c is not None and c.kind == "ball"
+        assert abs(c.index - true_index) <= 1 and abs(c.t - traj.first_contact.t) * 120.0 <= 1.0
+
+
+def rendered_contact(tmp_path, preset, seed, fps, px_per_m, codec="FFV1", look="plain"):
+    """Render a contact scene to 0.3 s after its first contact and recover it."""
     import dataclasses
 
     from cuespin.pipeline.run import run_recover
     from cuespin.render.video import render_video
 
-    scene = sample_scene(seed, preset, fps=fps, px_per_m=px_per_m, noise=2.0, blur=False, codec=codec)
+    scene = sample_scene(seed, preset, fps=fps, px_per_m=px_per_m, noise=2.0, blur=False, codec=codec, look=look)
     first = scene_trajectory(scene).first_contact
     scene = dataclasses.replace(scene, render={**scene.render, "duration": first.t + 0.3})
     video = tmp_path / f"{preset}.avi"
@@ -199,3 +217,18 @@ def test_rendered_cushion_shot_end_to_end(tmp_path):
 @pytest.mark.parametrize("preset,seed", [("cushion", 1), ("ball_contact", 4)])
 def test_rendered_contact_shots_end_to_end_120fps(tmp_path, preset, seed):
     check_rendered(*rendered_contact(tmp_path, preset, seed, 120.0, 250.0))
+
+
+@pytest.mark.slow  # a realistic 120 fps render and track: about 4 min on a loaded machine
+def test_rendered_ball_contact_with_the_other_balls_drawn(tmp_path):
+    """The realistic look draws the other balls, the struck one moving after
+    the contact: the contact is found within one frame as a ball's, and the
+    struck ball is not taken for the shot.  (The realistic look's stated
+    errors are not yet honest, README known limits: the answer is not
+    checked against them here.)"""
+    scene, first, truth, res = rendered_contact(tmp_path, "ball_contact", 4, 120.0, 250.0, look="realistic")
+    c = res["track"]["contact"]
+    assert c is not None and c["kind"] == "ball"
+    true_index = np.searchsorted(truth.t, first.t)
+    assert abs(np.searchsorted(truth.t, c["t"] - 1e-12) - true_index) <= 1
+    assert res["methods"]["mle"]["status"] == "ok"

@@ -30,6 +30,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from cuespin.track.radius import as_radius_map
+
 # Detection threshold in units of the box-filtered noise's standard deviation.
 DETECT_SIGMAS = 8.0
 # A blob smaller than this fraction of the ball's area is noise or texture.
@@ -80,12 +82,29 @@ class Background:
 BALL_WIDE_FRACTION = 0.6
 
 
-def ball_wide(mask: np.ndarray, radius_px: float) -> np.ndarray:
+def ball_wide(mask: np.ndarray, radius_px) -> np.ndarray:
     """The parts of ``mask`` (bool, h x w) that a disc of
-    ``BALL_WIDE_FRACTION`` of the ball's radius fits in (a morphological opening)."""
-    d = max(3, int(round(2 * BALL_WIDE_FRACTION * radius_px)) | 1)
-    k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (d, d))
-    return cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_OPEN, k).astype(bool)
+    ``BALL_WIDE_FRACTION`` of the ball's radius fits in (a morphological opening).
+
+    ``radius_px`` is one radius (px) or a :class:`~cuespin.track.radius.RadiusMap`:
+    under perspective each pixel is opened with the ball's size there (a
+    cue a quarter of a near ball's width is wider than 0.6 of the image
+    centre's radius when the near ball is twice that size).
+    """
+    radii = as_radius_map(radius_px, mask.shape)
+    m8 = mask.astype(np.uint8)
+    out = np.zeros(mask.shape, bool)
+    H, W = mask.shape
+    for _, r, (v0, v1, u0, u1), on in radii.bands():
+        d = max(3, int(round(2 * BALL_WIDE_FRACTION * r)) | 1)
+        k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (d, d))
+        if on is None:
+            return cv2.morphologyEx(m8, cv2.MORPH_OPEN, k).astype(bool)
+        # The opening of a band needs the mask a disc's width beyond it.
+        V0, V1, U0, U1 = max(v0 - d, 0), min(v1 + d, H), max(u0 - d, 0), min(u1 + d, W)
+        opened = cv2.morphologyEx(m8[V0:V1, U0:U1], cv2.MORPH_OPEN, k).astype(bool)
+        out[v0:v1, u0:u1] |= opened[v0 - V0:v1 - V0, u0 - U0:u1 - U0] & on
+    return out
 
 
 def noise_sigma(a: np.ndarray, b: np.ndarray) -> float:
@@ -110,7 +129,7 @@ def box_size(radius_px: float) -> int:
     return max(3, int(round(1.4 * radius_px)) | 1)
 
 
-def learn_background(samples: np.ndarray, radius_px: float) -> Background:
+def learn_background(samples: np.ndarray, radius_px) -> Background:
     """Learn the felt from frames spread over a video.
 
     Parameters
@@ -118,8 +137,9 @@ def learn_background(samples: np.ndarray, radius_px: float) -> Background:
     samples : ndarray, shape (n, h, w), uint8 or float32
         Grey (or projected colour, :mod:`cuespin.track.colour`) frames
         spread over the video.
-    radius_px : float
-        Expected ball radius (px).
+    radius_px : float or RadiusMap
+        Expected ball radius (px), or its map over the image under
+        perspective (:mod:`cuespin.track.radius`).
 
     Returns
     -------
@@ -128,6 +148,7 @@ def learn_background(samples: np.ndarray, radius_px: float) -> Background:
         anywhere, or it never left its rest spot).
     """
     n, H, W = samples.shape
+    radii = as_radius_map(radius_px, (H, W))
     sigma = noise_sigma(samples[0], samples[n // 2]) if n > 1 else 0.0
     lo = samples.min(axis=0)
     hi = samples.max(axis=0)
@@ -137,8 +158,8 @@ def learn_background(samples: np.ndarray, radius_px: float) -> Background:
     spread = (hi.astype(np.float32) - lo.astype(np.float32)) > 7.5 * max(sigma, 0.5) + 2
     spread = cv2.dilate(spread.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
     ys, xs = np.nonzero(spread)
-    wide = ball_wide(spread, radius_px)
-    if wide.sum() < MIN_AREA_FRACTION * np.pi * radius_px**2:  # no ball-like thing moved
+    wide = ball_wide(spread, radii)
+    if wide.sum() < MIN_AREA_FRACTION * np.pi * radii.r_min**2:  # no ball-like thing moved
         return Background(image=image, sigma=sigma, polarity=0, contrast=0.0, n_samples=n,
                           path_pixels=int(len(ys)), weak_samples=np.zeros(n, bool))
     S = samples[:, ys, xs].astype(np.float32)  # (n, m) samples on the path
@@ -180,7 +201,8 @@ def learn_background(samples: np.ndarray, radius_px: float) -> Background:
     swept = np.zeros((H, W), bool)
     if strong.any():
         swept[ys, xs] = span > SWEPT_FRACTION * np.percentile(span[strong], SWEPT_PERCENTILE)
-    image = fill_unseen(image, hidden_ball(image, swept, polarity, contrast, sigma, radius_px))
+    # The hidden-felt window must be one the largest ball cannot fill.
+    image = fill_unseen(image, hidden_ball(image, swept, polarity, contrast, sigma, radii.r_max))
     count = keep.sum(axis=0)
     weak = (count < MIN_FELT_SAMPLES) & (count < n)
     weak_samples = keep[:, weak].any(axis=1) if weak.any() else np.zeros(n, bool)

@@ -102,16 +102,17 @@ def noise_covariance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return cov + floor * np.eye(3)
 
 
-def learn_projection(samples: np.ndarray, radius_px: float) -> Projection:
+def learn_projection(samples: np.ndarray, radius_px) -> Projection:
     """The channel combination that best separates the moving ball from the felt.
 
     Parameters
     ----------
     samples : ndarray, shape (n, h, w, 3), uint8
         BGR frames spread over the video (the background's samples).
-    radius_px : float
-        The ball's radius (px): only regions of motion a ball fits in count
-        (a cue's or a shadow's colour is not the ball's).
+    radius_px : float or RadiusMap
+        The ball's radius (px), or its map over the image
+        (:mod:`cuespin.track.radius`): only regions of motion a ball fits in
+        count (a cue's or a shadow's colour is not the ball's).
 
     Returns
     -------

@@ -16,6 +16,7 @@ from cuespin.track.background import DETECT_SIGMAS, Background, box_size
 from cuespin.track.colour import GREY, Projection
 from cuespin.track.model import blur_nodes, fit_disc, moments, streak_from_moments, streak_model
 from cuespin.track.outline import OUTLINE_REFIT_PX, OutlineCache, is_similarity
+from cuespin.track.radius import RadiusMap
 
 OK, NO_BALL, PARTIAL, TWO_BLOBS, GONE, FIT_FAILED = 0, 1, 2, 3, 4, 5
 STATUS_TEXT = {OK: "ok", NO_BALL: "no ball", PARTIAL: "ball partly out of the frame",
@@ -151,12 +152,16 @@ class BallTracker:
         (:func:`cuespin.track.outline.local_outline`, an ellipse from the
         camera at the ball's position) in place of the disc of
         ``radius_px``.  None, or a similarity camera: the disc.
+    radii : RadiusMap, optional
+        The ball's radius over the image (:mod:`cuespin.track.radius`): the
+        search's filter, its two-blob and reach rules and the moments start
+        are sized by the ball where it is.  None: ``radius_px`` everywhere.
     """
 
     def __init__(self, background: Background, radius_px: float, exposure_frames: float,
                  config: TrackerConfig = TrackerConfig(), projection: Projection = GREY,
                  search_mask: np.ndarray | None = None, max_step_px: float = np.inf,
-                 camera=None, R: float | None = None):
+                 camera=None, R: float | None = None, radii: RadiusMap | None = None):
         if config.refine not in REFINERS:
             raise ValueError(f"refine must be one of {REFINERS}, got {config.refine!r}")
         self.bg = background
@@ -165,12 +170,16 @@ class BallTracker:
         self.exposure_frames = float(exposure_frames)
         self.cfg = config
         self.proj = projection
-        self.k = box_size(self.r)
-        self.k_out = box_size(2 * self.r) | 1  # the ring around the ball's box
-        # Box-filtered noise of a frame minus a (slightly noisy) background.
-        self.thresh = max(DETECT_SIGMAS * max(background.sigma, 0.5) * 1.1 / self.k,
-                          0.25 * background.contrast)
         self.H, self.W = background.image.shape
+        self.radii = radii if radii is not None else RadiusMap((self.H, self.W), self.r)
+        # The matched filter's box and ring per scale of the radius map (one
+        # scale, the disc's, for a similarity camera).
+        self.boxes = [(box_size(r), box_size(2 * r) | 1) for r in self.radii.scales]
+        # Box-filtered noise of a frame minus a (slightly noisy) background;
+        # the smallest box's, the noisiest, for every scale.
+        k_min = min(k for k, _ in self.boxes)
+        self.thresh = max(DETECT_SIGMAS * max(background.sigma, 0.5) * 1.1 / k_min,
+                          0.25 * background.contrast)
         self.mask = search_mask
         self.max_step_px = float(max_step_px)
         # The projected window of the last converged fit, for the felt average.
@@ -183,6 +192,7 @@ class BallTracker:
         self.shade = {"disc": False, "shaded": True}.get(config.look)  # None: learning
         self._look_votes: list[tuple[float, float, int]] = []
         self._candidates: tuple = ()  # the last full search's blobs
+        self._bands = None  # the radius map's bands on the search mask (multi-scale search)
         # The ball's outline from the camera; None: the disc everywhere.
         self.outline_of = None if is_similarity(camera) or R is None else OutlineCache(camera, R, self.r)
         self.outline = None  # this frame's (Ellipse or None)
@@ -200,35 +210,53 @@ class BallTracker:
             vel = np.zeros(2)
         return c1 + vel * (k - k1), vel
 
-    def _score(self, D: np.ndarray) -> np.ndarray:
+    def _score(self, D: np.ndarray, j: int = 0) -> np.ndarray:
         """Ball-likeness at every pixel of a ball-positive image: the mean
         over a box the ball fills less the mean over the ring of felt
-        around it.  A stick (the cue) or an edge fills the ring as much as
-        the box and scores near 0; the ball scores ~0.8 of its contrast."""
-        k, K = self.k, self.k_out
+        around it, sized for scale ``j`` of the radius map.  A stick (the
+        cue) or an edge fills the ring as much as the box and scores near 0;
+        the ball scores ~0.8 of its contrast."""
+        k, K = self.boxes[j]
         inner = cv2.blur(D, (k, k))
         outer = cv2.boxFilter(D, -1, (K, K), normalize=False)
         return inner - (outer - inner * (k * k)) / (K * K - k * k)
 
-    def _peak(self, frame: np.ndarray, u0: int, v0: int, u1: int, v1: int):
-        """Peak of :meth:`_score` in a window; value and place.  The filters
-        see half the ring's width beyond the window, so the score near its
-        edges is not the image border's."""
-        m = self.k_out // 2
+    def _peak(self, frame: np.ndarray, u0: int, v0: int, u1: int, v1: int, j: int = 0):
+        """Peak of :meth:`_score` at scale ``j`` in a window; value and
+        place.  The filters see half the ring's width beyond the window, so
+        the score near its edges is not the image border's."""
+        m = self.boxes[j][1] // 2
         U0, V0 = max(u0 - m, 0), max(v0 - m, 0)
         U1, V1 = min(u1 + m, self.W), min(v1 + m, self.H)
         roi = self.proj(frame, V0, V1, U0, U1)
         D = self.pol * (roi - self.bg.image[V0:V1, U0:U1])
-        sm = self._score(D)[v0 - V0:v1 - V0, u0 - U0:u1 - U0]
+        sm = self._score(D, j)[v0 - V0:v1 - V0, u0 - U0:u1 - U0]
         if self.mask is not None:
             sm = np.where(self.mask[v0:v1, u0:u1], sm, -np.inf).astype(np.float32)
         _, val, _, loc = cv2.minMaxLoc(sm)
         return D, sm, val, np.array([loc[0] + u0, loc[1] + v0], float)
 
     def _full_search(self, frame):
-        """The most ball-like blob (:meth:`_score`) on the playing surface."""
+        """The most ball-like blob (:meth:`_score`) on the playing surface,
+        each pixel scored at its own scale of the radius map."""
         D = self.pol * (self.proj(frame) - self.bg.image)
-        sm = self._score(D)
+        if len(self.radii.scales) == 1:
+            sm = self._score(D)
+        else:
+            sm = np.full((self.H, self.W), -np.inf, np.float32)
+            if self._bands is None:  # the scales' bands on the playing surface, once
+                self._bands = list(self.radii.bands(self.mask))
+            for j, _, (v0, v1, u0, u1), on in self._bands:
+                k, K = self.boxes[j]
+                m = K // 2  # the ring's half width beyond the band
+                V0, V1, U0, U1 = max(v0 - m, 0), min(v1 + m, self.H), max(u0 - m, 0), min(u1 + m, self.W)
+                # _score's formula in two OpenCV passes (a band's box covers
+                # much of the frame: numpy's temporaries cost 5x the filters).
+                inner = cv2.blur(D[V0:V1, U0:U1], (k, k))
+                outer = cv2.boxFilter(D[V0:V1, U0:U1], -1, (K, K), normalize=False)
+                ring = float(K * K - k * k)
+                part = cv2.addWeighted(inner, 1.0 + k * k / ring, outer, -1.0 / ring, 0.0)
+                np.copyto(sm[v0:v1, u0:u1], part[v0 - V0:v1 - V0, u0 - U0:u1 - U0], where=on)
         if self.mask is not None:
             sm[~self.mask] = -np.inf
         _, val, _, at = cv2.minMaxLoc(sm)
@@ -237,7 +265,7 @@ class BallTracker:
             return None, NO_BALL
         # A second ball-like blob away from the first: flag, don't guess.
         mask = np.zeros_like(sm, dtype=np.uint8)
-        cv2.circle(mask, (int(loc[0]), int(loc[1])), int(2.5 * self.r + 4), 1, -1)
+        cv2.circle(mask, (int(loc[0]), int(loc[1])), int(2.5 * self.radii.at(loc) + 4), 1, -1)
         sm[mask.astype(bool)] = -np.inf
         _, val2, _, at2 = cv2.minMaxLoc(sm)
         if val2 >= max(self.thresh, 0.5 * val):
@@ -263,13 +291,16 @@ class BallTracker:
             return _lost(GONE)
         pred, vel = self._velocity(k)
         blur = vel * self.exposure_frames
-        reach = self.r + 0.5 * np.hypot(*blur) + self.cfg.search_margin_px + 0.5 * np.hypot(*vel)
+        r_here = self.radii.at(pred) if pred is not None else self.r
+        reach = r_here + 0.5 * np.hypot(*blur) + self.cfg.search_margin_px + 0.5 * np.hypot(*vel)
         loc = None
         if pred is not None:
             u0, v0 = max(int(pred[0] - reach), 0), max(int(pred[1] - reach), 0)
             u1, v1 = min(int(pred[0] + reach) + 2, self.W), min(int(pred[1] + reach) + 2, self.H)
-            if u1 - u0 > self.k and v1 - v0 > self.k:
-                _, _, val, at = self._peak(frame, u0, v0, u1, v1)
+            j = self.radii.scale_of(r_here)  # the window is small: one scale, the prediction's
+            k_box = self.boxes[j][0]
+            if u1 - u0 > k_box and v1 - v0 > k_box:
+                _, _, val, at = self._peak(frame, u0, v0, u1, v1, j)
                 if val >= self.thresh:
                     loc = at
         if loc is None:
@@ -285,7 +316,7 @@ class BallTracker:
                 # The ball cannot have gone further than its top speed allows:
                 # a blob beyond that is something else (the cue's tip).
                 k1, c1 = self.history[-1]
-                if np.hypot(*(loc - c1)) > self.max_step_px * (k - k1) + self.r:
+                if np.hypot(*(loc - c1)) > self.max_step_px * (k - k1) + self.radii.at(loc):
                     return _lost(NO_BALL)
             # No velocity to predict the blur.  Before the ball is first found
             # it rests (a shot is struck from rest), and a streak measured from
@@ -301,11 +332,12 @@ class BallTracker:
             self.history = (self.history + [(k, obs.uv)])[-2:]
         return obs
 
-    def _max_blur_px(self, frame, loc) -> float:
-        """Longest streak (px) the exposure allows, from the blob's extent."""
+    def _max_blur_px(self, frame, loc, r: float) -> float:
+        """Longest streak (px) the exposure allows, from the extent of the
+        blob of a ball of radius ``r`` (px)."""
         if self.exposure_frames <= 0:
             return 0.0
-        k = 4 * int(self.r) + 1
+        k = 4 * int(r) + 1
         u0, v0 = max(int(loc[0]) - k, 0), max(int(loc[1]) - k, 0)
         roi = self.pol * (self.proj(frame, v0, int(loc[1]) + k, u0, int(loc[0]) + k)
                           - self.bg.image[v0:int(loc[1]) + k, u0:int(loc[0]) + k])
@@ -313,7 +345,7 @@ class BallTracker:
         if not on.any():
             return 0.0
         ys, xs = np.nonzero(on)
-        return float(max(xs.max() - xs.min(), ys.max() - ys.min()) - 2 * self.r + 2) if len(xs) else 0.0
+        return float(max(xs.max() - xs.min(), ys.max() - ys.min()) - 2 * r + 2) if len(xs) else 0.0
 
     def _without_outliers(self, patch, felt, u0, v0, f, r, G0, blur, fit_blur, shade):
         """Refit without the pixels the model cannot explain (beyond
@@ -351,10 +383,14 @@ class BallTracker:
         # The ball's outline here, from the camera (None: the disc of r).
         ol = self.outline = self.outline_of(loc) if self.outline_of is not None else None
         r_out = self.radius_with(ol)  # what the patch must hold
+        # The ball's own largest radius here: the moments' window and the
+        # blob's extent are sized by it (a ball twice the disc's size, near a
+        # tilted camera, was cut by the disc's window).
+        r_ball = r if ol is None else ol.max_radius
         unknown_blur = blur is None
         if unknown_blur:  # size the patch for the longest blur the exposure allows
             blur = np.zeros(2)
-            half = int(np.ceil(r_out + 3)) + int(np.ceil(self._max_blur_px(frame, loc)))
+            half = int(np.ceil(r_out + 3)) + int(np.ceil(self._max_blur_px(frame, loc, r_ball)))
         else:
             half = int(np.ceil(r_out + 0.5 * np.hypot(*blur) + 3))
         u0, v0 = int(round(loc[0])) - half, int(round(loc[1])) - half
@@ -365,7 +401,7 @@ class BallTracker:
         patch = self.proj(frame, v0, v1, u0, u1)
         felt = self.bg.image[v0:v1, u0:u1]
         D = self.pol * (patch - felt)
-        c = moments(D, u0, v0, loc, half - 1 if unknown_blur else r + 2 + 0.5 * np.hypot(*blur))
+        c = moments(D, u0, v0, loc, half - 1 if unknown_blur else r_ball + 2 + 0.5 * np.hypot(*blur))
         if unknown_blur and self.exposure_frames > 0:
             blur = streak_from_moments(D, u0, v0, c, r)
         if self.cfg.refine == "moments":
@@ -396,9 +432,10 @@ class BallTracker:
             self.last_fit = (u0, v0, v1 - v0, u1 - u0, f.c.copy(), f.b.copy(), f.G, bool(fit_blur),
                              f.shade, ol)
             self.last_patch = (patch, u0, v0)
-        # The whole disc must lie inside the frame for the centre to be trusted.
-        if (c[0] - r < -0.5 or c[1] - r < -0.5 or c[0] + r > self.W - 0.5
-                or c[1] + r > self.H - 0.5):
+        # The whole ball must lie inside the frame for the centre to be trusted.
+        eu, ev = (r, r) if ol is None else ol.half_extent
+        if (c[0] - eu < -0.5 or c[1] - ev < -0.5 or c[0] + eu > self.W - 0.5
+                or c[1] + ev > self.H - 0.5):
             self.was_partial_edge = True
             return _lost(PARTIAL)
         self.was_partial_edge = False

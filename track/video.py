@@ -27,6 +27,7 @@ from cuespin.track.background import Background, FeltAccumulator, learn_backgrou
 from cuespin.track.colour import GREY, Projection, learn_projection
 from cuespin.track.projection import projected_centres
 from cuespin.track.misfit import LookMisfit, look_misfit
+from cuespin.track.radius import RadiusMap
 from cuespin.track.model import refit_shift
 from cuespin.track.reader import FrameSource, ThreadedFrames, TrackError, frame_times, probe
 from cuespin.track.tracker import OK, STATUS_TEXT, BallTracker, TrackerConfig
@@ -175,12 +176,14 @@ def decode_seconds(path) -> tuple[float, int]:
     return seconds, n
 
 
-def search_mask(cam, table, R: float, shape) -> np.ndarray:
+def search_mask(cam, table, R: float, shape, grow_px: float | None = None) -> np.ndarray:
     """Pixels where the ball's centre may be: the playing surface's image, grown by R.
 
     Centres lie within the table's rectangle (a ball touching a cushion has
     its centre R inside it); R more of margin covers a homography that is a
     little off.  Rails, pockets and sights outside are never searched.
+    ``grow_px``: the margin in px (default R at the image centre's scale;
+    under perspective the largest ball's radius, :class:`RadiusMap`).
     """
     h, w = shape
     n = 16  # points per side: a lens bends the table's edges
@@ -194,15 +197,16 @@ def search_mask(cam, table, R: float, shape) -> np.ndarray:
         return np.ones((h, w), bool)
     cv2.fillPoly(mask, [np.round(uv).astype(np.int32)], 1)
     centre = cam.to_table([[w / 2, h / 2]])[0]
-    grow = int(np.ceil(R * cam.px_per_m(centre))) + 1
+    grow = int(np.ceil(R * cam.px_per_m(centre) if grow_px is None else grow_px)) + 1
     mask = cv2.dilate(mask, np.ones((2 * grow + 1, 2 * grow + 1), np.uint8))
     return mask.astype(bool)
 
 
-def learn_model(frames: list, radius_px: float, n_samples: int) -> tuple[Projection, Background]:
+def learn_model(frames: list, radius_px, n_samples: int) -> tuple[Projection, Background]:
     """The projection and the background from ``n_samples`` frames spread over
     ``frames`` (the look-ahead), plus as many again where a resting ball hid
-    the felt from most of the first ones."""
+    the felt from most of the first ones.  ``radius_px``: the ball's radius
+    (px) or its :class:`~cuespin.track.radius.RadiusMap`."""
     n = len(frames)
     idx = np.unique(np.linspace(0, n - 1, n_samples).round().astype(int))
     colour = frames[0].ndim == 3
@@ -261,6 +265,11 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     center = cam.to_table([[cam.width / 2, cam.height / 2]])[0]
     radius_px = R * cam.px_per_m(center)
     mask = search_mask(cam, scene.table, R, (h, w))
+    # The ball's size over the image (one radius for a similarity camera),
+    # and the playing surface grown by the largest.
+    radii = RadiusMap((h, w), radius_px, cam, R, region=mask)
+    if radii.r_max > radius_px:
+        mask = search_mask(cam, scene.table, R, (h, w), grow_px=radii.r_max)
 
     source = FrameSource(path, info)
     frame_bytes = max(w * h * 3, 1)
@@ -301,7 +310,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         while len(buf) < ahead and (img := pull()) is not None:
             buf.append(img)
         while True:
-            proj, bg = learn_model(buf, radius_px, max(config.n_background, 2))
+            proj, bg = learn_model(buf, radii, max(config.n_background, 2))
             if bg.polarity or ended:
                 break
             # Nothing moved within the look-ahead: give up its older half.
@@ -314,9 +323,11 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
             while len(buf) < ahead and (img := pull()) is not None:
                 buf.append(img)
         t_bg = time.perf_counter() - t_start
+        # The top speed in px at the largest scale in view (the scale goes
+        # with the ball's radius): near a tilted camera a px is fewer metres.
+        max_step = MAX_SPEED_M_S / cam.fps * cam.px_per_m(center) * radii.r_max / radius_px
         tracker = BallTracker(bg, radius_px, cam.exposure_s * cam.fps, config, projection=proj,
-                              search_mask=mask,
-                              max_step_px=MAX_SPEED_M_S / cam.fps * cam.px_per_m(center), camera=cam, R=R)
+                              search_mask=mask, max_step_px=max_step, camera=cam, R=R, radii=radii)
         felt = FeltAccumulator(first.shape)
         fits = []  # (frame index, the fit's state) for the final background correction
         t_start = time.perf_counter()
