@@ -149,14 +149,14 @@ def learn_background(samples: np.ndarray, radius_px: float) -> Background:
     votes = np.sign(up - down)[strong]
     polarity = int(np.sign(votes.sum()) or 1)
     P = polarity * S  # ball is high in P
-    felt0 = P.min(axis=0)
+    felt0 = far_felt(P, felt_band(sigma))
     contrast = float(np.percentile((P.max(axis=0) - felt0)[strong], 75)) if strong.any() else 0.0
     # Felt samples lie within noise of the felt; a pixel partly covered by
     # the ball lies between, so the band is set by the noise, not the contrast.
     band = felt_band(sigma)
     felt = felt0
     for slack in (2.5 * sigma, 0.0):  # felt0 sits ~2 sigma below the felt's mean
-        keep = P < felt + band + slack
+        keep = (P < felt + band + slack) & (P > felt0 - band)
         felt = np.where(keep.any(axis=0),
                         (P * keep).sum(axis=0) / np.maximum(keep.sum(axis=0), 1), felt0)
     # Away from where the ball went, what moved (a cue, its shadow) may lie on
@@ -186,6 +186,33 @@ def learn_background(samples: np.ndarray, radius_px: float) -> Background:
     weak_samples = keep[:, weak].any(axis=1) if weak.any() else np.zeros(n, bool)
     return Background(image=image, sigma=sigma, polarity=polarity, contrast=contrast,
                       n_samples=n, path_pixels=int(len(ys)), weak_samples=weak_samples)
+
+
+# Samples that must agree (within felt_band) for the far side's lowest to
+# count as felt: a thin object darker than the felt (ball-positive), such as
+# the cue's chalked tip, crosses a path pixel in one sample, and taken for
+# the felt it was the felt's whole estimate there (measured on
+# sample_scene(3, realistic, FFV1): the tip's dark trace under the resting
+# ball's side pulled every fit at rest 1.5 px towards it).
+FELT_SUPPORT = 2
+
+
+def far_felt(P: np.ndarray, band: float) -> np.ndarray:
+    """The felt's first estimate at each path pixel (column) of ``P`` (n, m),
+    ball-positive samples: the lowest sample that ``FELT_SUPPORT - 1`` others
+    lie within ``band`` of, or the lowest sample where none does (the ball
+    covered the pixel in all samples but one)."""
+    Ps = np.sort(P, axis=0)
+    felt0 = Ps[0].copy()
+    found = np.zeros(P.shape[1], bool)
+    for j in range(len(Ps)):
+        support = (np.abs(Ps - Ps[j]) <= band).sum(axis=0)
+        new = ~found & (support >= FELT_SUPPORT)
+        felt0[new] = Ps[j][new]
+        found |= new
+        if found.all():
+            break
+    return felt0
 
 
 def median_u8(img: np.ndarray, k: int) -> np.ndarray:
@@ -292,36 +319,51 @@ class FeltAccumulator:
         yy, xx = np.mgrid[v0:v0 + h, u0:u0 + w]
         return (xx - centre[0]) ** 2 + (yy - centre[1]) ** 2 <= radius * radius
 
-    def add(self, patch: np.ndarray, u0: int, v0: int, centre, radius: float) -> None:
+    def add(self, patch: np.ndarray, u0: int, v0: int, centre, radius: float, exclude=None,
+            reference=None, tolerance: float = np.inf) -> None:
         """Add a projected window whose top-left pixel is ``(u0, v0)``, the
-        ball (centre, radius in px) masked out."""
+        ball (centre, radius in px) masked out, and the pixels ``exclude``
+        (bool, the window's shape: something else there, the cue) too, and
+        those departing from ``reference`` (the sampled felt, the frame's
+        shape) by more than ``tolerance``."""
         h, w = patch.shape
         H, W = self.total.shape
         if u0 < 0 or v0 < 0 or u0 + w > W or v0 + h > H:
             return
         self.n += 1
         felt = ~self._disc(u0, v0, h, w, centre, radius)
+        if exclude is not None:
+            felt &= ~exclude
+        if reference is not None:  # something other than felt: the cue, the ball's blurred rim
+            felt &= np.abs(patch - reference[v0:v0 + h, u0:u0 + w]) <= tolerance
         self.total[v0:v0 + h, u0:u0 + w] += np.where(felt, patch, 0).astype(np.float32)
         self.count[v0:v0 + h, u0:u0 + w] += felt
 
-    def add_frame(self, frame: np.ndarray, centre, radius: float) -> None:
-        """Add a whole decoded frame (uint8, grey or BGR), the ball masked out."""
+    def add_frame(self, frame: np.ndarray, centre, radius: float, reference=None, projection=None,
+                  tolerance: float = np.inf, reach: float = 0.0) -> None:
+        """Add a whole decoded frame (uint8, grey or BGR), the ball masked out,
+        and within ``reach`` (px) of it the pixels whose projected value
+        (``projection``) departs from ``reference`` (the sampled felt) by
+        more than ``tolerance``: the cue over the path at the strike."""
         cv2.accumulate(frame, self.full)
         self.full_count += 1
         self.n_full += 1
         H, W = self.total.shape
-        r = int(np.ceil(radius)) + 1
+        r = int(np.ceil(max(radius, reach if reference is not None else 0.0))) + 1
         u, v = int(round(centre[0])), int(round(centre[1]))
         u0, v0, u1, v1 = max(u - r, 0), max(v - r, 0), min(u + r + 1, W), min(v + r + 1, H)
         if u1 <= u0 or v1 <= v0:
             return
-        disc = self._disc(u0, v0, v1 - v0, u1 - u0, centre, radius)
+        out = self._disc(u0, v0, v1 - v0, u1 - u0, centre, radius)
+        if reference is not None:
+            P = projection(frame, v0, v1, u0, u1) if projection is not None else frame[v0:v1, u0:u1]
+            out |= np.abs(P - reference[v0:v1, u0:u1]) > tolerance
         sub = frame[v0:v1, u0:u1].astype(np.float32)
         if sub.ndim == 3:
-            self.full[v0:v1, u0:u1] -= sub * disc[..., None]
+            self.full[v0:v1, u0:u1] -= sub * out[..., None]
         else:
-            self.full[v0:v1, u0:u1] -= sub * disc
-        self.full_count[v0:v1, u0:u1] -= disc
+            self.full[v0:v1, u0:u1] -= sub * out
+        self.full_count[v0:v1, u0:u1] -= out
 
     def felt(self, fallback: np.ndarray, projection, min_frames: int = 20) -> np.ndarray:
         """The mean felt where at least ``min_frames`` frames showed it, else
@@ -339,8 +381,17 @@ class FeltAccumulator:
         count = self.count + self.full_count
         mean = total / np.maximum(count, 1)
         out = np.where(count >= min_frames, mean, fallback).astype(np.float32)
+        # The windows left out what was not felt (the ball, the cue, anything
+        # departing from the sampled felt); the whole frames could not (that
+        # needs them projected, ~10 ms each at 1280 x 720) and hold the cue
+        # where it lay over the path at the strike and in its follow-through
+        # (measured on sample_scene(3, realistic, FFV1): up to 84 levels off at
+        # the rest spot, which moved the fits there 1-12 px).  Where enough
+        # windows saw the felt, their mean alone is the felt.
+        windows = self.count >= min_frames
+        out[windows] = (self.total[windows] / self.count[windows]).astype(np.float32)
         if self.n_full:  # felt no whole frame showed: a ball that never left it
-            out = fill_unseen(out, self.full_count == 0)
+            out = fill_unseen(out, (self.full_count == 0) & ~windows)
         return out
 
 

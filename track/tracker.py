@@ -33,6 +33,22 @@ STILL_PX = 1.5
 # ball's model does not hold (the cue, a highlight): left out of a refit.
 # Gaussian noise passes it once in 1.7 million pixels.
 OUTLIER_SIGMAS = 5.0
+# Something else in the ball's window (the cue at the strike and in its
+# follow-through, or a cue the felt model caught where the frame has none):
+# a pixel beyond the ball's outline (its largest radius, half its blur and
+# FOREIGN_GAP_PX for the optics' blur: the realistic look's PSF sigma is
+# 0.5-1.5 px) that departs from the felt by more than OUTLIER_SIGMAS noise
+# sigmas and FOREIGN_CONTRAST of the ball's contrast (a lossy codec flattens
+# the felt's noise but not its error at the ball's edge; MJPG's chroma
+# bleeds ~2 px).  Such pixels, in groups of at least FOREIGN_MIN_PX, grown by
+# FOREIGN_GROW_PX (the object's blurred edge, and its part inside the gap:
+# a cue tip touching the ball), are left out of the fit.  Measured on
+# sample_scene(3, realistic, FFV1): the cue's tip at the ball's rear pulled
+# the fit 1.5-6 px towards it, and 11 px in the follow-through.
+FOREIGN_GAP_PX = 2.0
+FOREIGN_CONTRAST = 0.25
+FOREIGN_MIN_PX = 4
+FOREIGN_GROW_PX = 3
 # Frames whose two fits (disc and shaded) decide the look (config.look "auto").
 LOOK_FRAMES = 12
 # The shaded look is kept when its pooled residual reduction exceeds the
@@ -119,6 +135,43 @@ def shaded_look(votes: list) -> bool:
     rss_d, rss_s, dofs = (np.array([v[i] for v in votes]) for i in range(3))
     stat = (rss_d - rss_s).sum() / (rss_s.sum() / dofs.sum())
     return bool(stat > chdtri(3 * len(rss_d), LOOK_P))
+
+
+def beyond_ball(shape, u0: int, v0: int, c, b, r_out: float) -> np.ndarray:
+    """Pixels of a window (``shape`` (h, w), top-left ``(u0, v0)``) farther
+    than ``r_out + FOREIGN_GAP_PX`` from the ball's blur segment (centre
+    ``c``, blur vector ``b``, px): what they show is felt or something else,
+    never the ball."""
+    h, w = shape
+    yy, xx = np.mgrid[v0:v0 + h, u0:u0 + w].astype(np.float32)
+    c, b = np.asarray(c, float), np.asarray(b, float)
+    L2 = float(b @ b)
+    px, py = xx - c[0], yy - c[1]
+    s = np.clip((px * b[0] + py * b[1]) / L2, -0.5, 0.5) if L2 > 0 else 0.0
+    return np.hypot(px - s * b[0], py - s * b[1]) > r_out + FOREIGN_GAP_PX
+
+
+def foreign_threshold(sigma: float, contrast: float) -> float:
+    """Departure from the felt (levels) beyond which a pixel shows something
+    (``FOREIGN_GAP_PX``'s rule), for noise ``sigma`` and the ball's ``contrast``."""
+    return max(OUTLIER_SIGMAS * max(sigma, 0.5), FOREIGN_CONTRAST * contrast)
+
+
+def foreign_pixels(D: np.ndarray, beyond: np.ndarray, sigma: float, contrast: float) -> np.ndarray | None:
+    """Pixels of a ball-positive window ``D`` (frame less felt) that show
+    something other than the ball or the felt (the rule at
+    ``FOREIGN_GAP_PX``): groups of ``FOREIGN_MIN_PX`` or more beyond the
+    ball, grown by ``FOREIGN_GROW_PX``.  None when there are none."""
+    bad = (beyond & (np.abs(D) > foreign_threshold(sigma, contrast))).astype(np.uint8)
+    if bad.sum() < FOREIGN_MIN_PX:
+        return None
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(bad, connectivity=8)
+    big = np.nonzero(stats[1:, cv2.CC_STAT_AREA] >= FOREIGN_MIN_PX)[0] + 1
+    if not len(big):
+        return None
+    bad = np.isin(labels, big).astype(np.uint8)
+    g = 2 * FOREIGN_GROW_PX + 1
+    return cv2.dilate(bad, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (g, g))).astype(bool)
 
 
 def _lost(status: int) -> Observation:
@@ -383,6 +436,14 @@ class BallTracker:
                              outline=ol)
             if not f:
                 return _lost(FIT_FAILED)
+            foreign = foreign_pixels(D, beyond_ball(D.shape, u0, v0, f.c, f.b, r_out), self.bg.sigma,
+                                     self.bg.contrast)
+            if foreign is not None:
+                g = fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=shade,
+                             valid=~foreign, outline=ol)
+                if not g:
+                    return _lost(FIT_FAILED)
+                f = g
             if recentre and ol is not None and np.hypot(*(f.c - self.outline_of.at)) > OUTLINE_REFIT_PX:
                 # Fitted away from where its outline was taken (a ball larger
                 # than the search's box): again with the outline there, on a
@@ -394,7 +455,7 @@ class BallTracker:
                 self._learn_look(patch, felt, u0, v0, f, r, G0, blur, fit_blur)
             c, se, cov = f.c, f.stderr, f.cov
             self.last_fit = (u0, v0, v1 - v0, u1 - u0, f.c.copy(), f.b.copy(), f.G, bool(fit_blur),
-                             f.shade, ol)
+                             f.shade, ol, foreign)
             self.last_patch = (patch, u0, v0)
         # The whole disc must lie inside the frame for the centre to be trusted.
         if (c[0] - r < -0.5 or c[1] - r < -0.5 or c[0] + r > self.W - 0.5

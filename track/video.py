@@ -28,7 +28,8 @@ from cuespin.track.colour import GREY, Projection, learn_projection
 from cuespin.track.projection import projected_centres
 from cuespin.track.model import refit_shift
 from cuespin.track.reader import FrameSource, ThreadedFrames, TrackError, frame_times, probe
-from cuespin.track.tracker import OK, STATUS_TEXT, BallTracker, TrackerConfig
+from cuespin.track.tracker import (OK, STATUS_TEXT, BallTracker, TrackerConfig, beyond_ball, foreign_pixels,
+                                   foreign_threshold)
 
 # Bytes of decoded frames held before the background is learnt: 437 grey or
 # 145 BGR frames at 1280 x 720 (at 240 fps, 1.8 s or 0.6 s of video; the
@@ -44,6 +45,12 @@ MAX_SPEED_M_S = 12.0
 # Every this many frames the whole decoded frame joins the felt average
 # (cv2.accumulate: ~1 ms for a 1280 x 720 BGR frame, a quarter of it per frame).
 FULL_FELT_EVERY = 4
+# Within this many ball radii of the ball, a whole frame's pixels that show
+# something other than the felt (the cue lying over the path behind the ball
+# at the strike and in its follow-through, 4-5 cm past the contact point:
+# 1.4-1.8 radii past the rest spot's centre) stay out of the felt's average.
+# Farther away the frame is not projected (~10 ms a 1280 x 720 frame).
+FOREIGN_REACH_RADII = 8.0
 
 
 @dataclass
@@ -294,6 +301,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
                               search_mask=mask,
                               max_step_px=MAX_SPEED_M_S / cam.fps * cam.px_per_m(center), camera=cam, R=R)
         felt = FeltAccumulator(first.shape)
+        foreign_level = foreign_threshold(bg.sigma, bg.contrast)
         fits = []  # (frame index, the fit's state) for the final background correction
         t_start = time.perf_counter()
         k = len(status)
@@ -309,9 +317,10 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
                 patch, pu, pv = tracker.last_patch
                 # The ball's own size there, under perspective.
                 mask_r = tracker.radius_with(tracker.last_fit[9]) + 0.5 * blur_len + 1.5
-                felt.add(patch, pu, pv, obs.uv, mask_r)
+                felt.add(patch, pu, pv, obs.uv, mask_r, tracker.last_fit[10], bg.image, foreign_level)
                 if k % FULL_FELT_EVERY == 0:
-                    felt.add_frame(item, obs.uv, mask_r)
+                    felt.add_frame(item, obs.uv, mask_r, bg.image, proj if proj.w is not None else None,
+                                   foreign_level, FOREIGN_REACH_RADII * radius_px)
                 fits.append((k, tracker.last_fit))
             uv.append(obs.uv)
             cov.append(obs.cov)
@@ -334,10 +343,19 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     if fits and felt.n >= 20:
         # The felt averaged over the tracked frames: correct each fit for it.
         better = felt.felt(bg.image, proj)
-        for kk, (pu, pv, ph, pw, c, b, G, fb, shade, outline) in fits:
+        for kk, (pu, pv, ph, pw, c, b, G, fb, shade, outline, foreign) in fits:
             old = bg.image[pv:pv + ph, pu:pu + pw]
             new = better[pv:pv + ph, pu:pu + pw]
-            uv[kk] = c + refit_shift(old, new, pu, pv, c, b, G, radius_px, fb, shade, outline)
+            # Beyond the ball the fit's frame agreed with the old felt (else
+            # those pixels were left out as foreign): where the averaged felt
+            # departs from it as much, it holds something the frame does not
+            # (a cue resting there in many frames), and the old felt stays.
+            beyond = beyond_ball(old.shape, pu, pv, c, b, tracker.radius_with(outline))
+            changed = foreign_pixels(bg.polarity * (new - old), beyond, bg.sigma, bg.contrast)
+            if changed is not None:
+                new = np.where(changed & beyond, old, new)
+            uv[kk] = c + refit_shift(old, new, pu, pv, c, b, G, radius_px, fb, shade, outline,
+                                     None if foreign is None else ~foreign)
         bg = replace(bg, image=better)
     t_track = time.perf_counter() - t_start
     status = np.array(status, np.int8)
