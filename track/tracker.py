@@ -49,6 +49,13 @@ FOREIGN_GAP_PX = 2.0
 FOREIGN_CONTRAST = 0.25
 FOREIGN_MIN_PX = 4
 FOREIGN_GROW_PX = 3
+# The search's score clips each pixel's departure from the felt at this
+# multiple of the ball's contrast (Background.contrast, the 75th percentile
+# of the path's largest departures: the ball's lit middle).  Measured on
+# sample_scenes(6, 6, realistic, MJPG)[0] (blue on blue, contrast 56): the
+# ferrule, 106 levels off the felt, scored 34 at the window's edge against
+# the ball's 33, and was tracked for 44 frames after the strike.
+SCORE_CAP = 1.0
 # Frames whose two fits (disc and shaded) decide the look (config.look "auto").
 LOOK_FRAMES = 12
 # The shaded look is kept when its pooled residual reduction exceeds the
@@ -223,6 +230,7 @@ class BallTracker:
         # Box-filtered noise of a frame minus a (slightly noisy) background.
         self.thresh = max(DETECT_SIGMAS * max(background.sigma, 0.5) * 1.1 / self.k,
                           0.25 * background.contrast)
+        self.cap = np.float32(SCORE_CAP * max(background.contrast, 1.0))
         self.H, self.W = background.image.shape
         self.mask = search_mask
         self.max_step_px = float(max_step_px)
@@ -257,8 +265,13 @@ class BallTracker:
         """Ball-likeness at every pixel of a ball-positive image: the mean
         over a box the ball fills less the mean over the ring of felt
         around it.  A stick (the cue) or an edge fills the ring as much as
-        the box and scores near 0; the ball scores ~0.8 of its contrast."""
+        the box and scores near 0; the ball scores ~0.8 of its contrast.
+        No pixel counts for more than ``SCORE_CAP`` of the ball's contrast:
+        the cue's end (its ivory ferrule, its chalked tip), which departs
+        from the felt by up to twice as much as a low-contrast ball and half
+        fills the box, outscored the ball it touched."""
         k, K = self.k, self.k_out
+        D = np.clip(D, -self.cap, self.cap)
         inner = cv2.blur(D, (k, k))
         outer = cv2.boxFilter(D, -1, (K, K), normalize=False)
         return inner - (outer - inner * (k * k)) / (K * K - k * k)

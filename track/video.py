@@ -42,6 +42,13 @@ LOOKAHEAD_MIN_FRAMES = 24
 QUEUE_BYTES = 96 * 2**20
 # The fastest a struck ball moves (m/s): a hard break is 8-11 m/s.
 MAX_SPEED_M_S = 12.0
+# The look-ahead slides on until what moved in it, where a ball fits,
+# covers this many of the ball's areas (a ball that moved by about its
+# diameter), so that the felt, the polarity and the channel are learnt from
+# the ball's motion.  A crescent (the ball moved 4 px at the look-ahead's end,
+# sample_scenes(6, 7, realistic, MJPG)[1]) gave a contrast of 9 where the
+# ball's is ~250, and a resting ball's codec flicker became the ball.
+LEARN_MOVED_AREA = 2.0
 # Every this many frames the whole decoded frame joins the felt average
 # (cv2.accumulate: ~1 ms for a 1280 x 720 BGR frame, a quarter of it per frame).
 FULL_FELT_EVERY = 4
@@ -182,17 +189,19 @@ def search_mask(cam, table, R: float, shape) -> np.ndarray:
     return mask.astype(bool)
 
 
-def learn_model(frames: list, radius_px: float, n_samples: int) -> tuple[Projection, Background]:
+def learn_model(frames: list, radius_px: float, n_samples: int,
+                where: np.ndarray | None = None) -> tuple[Projection, Background]:
     """The projection and the background from ``n_samples`` frames spread over
     ``frames`` (the look-ahead), plus as many again where a resting ball hid
-    the felt from most of the first ones."""
+    the felt from most of the first ones; ``where``: the playing surface
+    (:func:`search_mask`)."""
     n = len(frames)
     idx = np.unique(np.linspace(0, n - 1, n_samples).round().astype(int))
     colour = frames[0].ndim == 3
     samples = np.stack([frames[i] for i in idx])
     proj = learn_projection(samples, radius_px) if colour else GREY
     P = proj.many(samples) if colour else samples
-    bg = learn_background(P, radius_px)
+    bg = learn_background(P, radius_px, where)
     if bg.weak_samples.any():
         # Sample the stretch whose frames showed the hidden felt, reaching
         # half a spacing beyond it on each side.
@@ -203,7 +212,7 @@ def learn_model(frames: list, radius_px: float, n_samples: int) -> tuple[Project
         if len(extra):
             more = np.stack([frames[i] for i in extra])
             P = np.concatenate([P, proj.many(more) if colour else more])
-            bg = learn_background(P, radius_px)
+            bg = learn_background(P, radius_px, where)
     return proj, bg
 
 
@@ -283,16 +292,15 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         buf = [first]
         while len(buf) < ahead and (img := pull()) is not None:
             buf.append(img)
+        n_dropped = 0
         while True:
-            proj, bg = learn_model(buf, radius_px, max(config.n_background, 2))
-            if bg.polarity or ended:
+            proj, bg = learn_model(buf, radius_px, max(config.n_background, 2), mask)
+            if (bg.polarity and bg.moved_px >= LEARN_MOVED_AREA * np.pi * radius_px**2) or ended:
                 break
-            # Nothing moved within the look-ahead: give up its older half.
+            # The ball has not moved enough within the look-ahead: slide on
+            # past its older half, decoded again once the model is learnt.
             drop = len(buf) // 2
-            for _ in range(drop):
-                uv.append(np.full(2, np.nan))
-                cov.append(np.full((2, 2), np.nan))
-                status.append(1)  # NO_BALL
+            n_dropped += drop
             buf = buf[drop:]
             while len(buf) < ahead and (img := pull()) is not None:
                 buf.append(img)
@@ -306,8 +314,20 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         t_start = time.perf_counter()
         k = len(status)
         buf.reverse()  # pop() from the end: the oldest first, each dropped once tracked
+        # The frames slid past (a long rest before the strike) from a second
+        # pass over the video's start: they are tracked like any other.
+        again = iter(FrameSource(path, info)) if n_dropped else None
         while True:
-            item = buf.pop() if buf else pull()
+            if k < n_dropped:
+                item = next(again, None)
+                if item is None:  # the second pass ended early: the rest of it lost
+                    uv.append(np.full(2, np.nan))
+                    cov.append(np.full((2, 2), np.nan))
+                    status.append(1)  # NO_BALL
+                    k += 1
+                    continue
+            else:
+                item = buf.pop() if buf else pull()
             if item is None:
                 break
             # With nothing moving there is no ball to separate from the felt.
@@ -328,6 +348,8 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
             k += 1
             if progress is not None and k % 64 == 0:
                 progress(64)
+        if again is not None:
+            again.close()  # releases its decoder
     finally:
         if config.threaded:
             feed.close()
