@@ -72,3 +72,20 @@ def test_realistic_shots_meet_the_issue_targets(tmp_path, seed, codec):
         scene.render["max_duration"] = 2.0
         found, err, tr = track_against_truth(scene, tmp_path / f"shot{i}.avi")
         assert_issue_targets(found, err, tr, f"seed {seed} {codec} shot {i}")
+
+
+def test_cue_tip_at_the_strike_is_not_the_ball(tmp_path):
+    # sample_scene(3, realistic, FFV1): an orange ball on red felt (noise
+    # 6.7, 120 fps) struck by a cue whose tip follows it through.  Before
+    # the fix the cue, in the felt's average and in the ball's window, moved
+    # found centres 3-11 px (0.4-1.2 radii) off at and after the strike.
+    from cuespin.data_gen.sampler import sample_scene
+
+    scene = sample_scene(3, look="realistic", codec="FFV1")
+    assert scene.render["cue"]
+    scene.render["max_duration"] = 0.6  # rest, strike at frame 35, follow-through, withdrawal
+    found, err, tr = track_against_truth(scene, tmp_path / "cue.avi")
+    assert err.size and err.max() < MAX_ERR_RADII, f"a found centre {err.max():.2f} radii off"
+    # Measured 72 of 73 frames in view (one fit fails as the cue touches):
+    # a frame left out is allowed, a wrong centre is not.
+    assert found >= 0.95, tr.status_counts()
