@@ -15,9 +15,16 @@ largest per-cell q99, rounded up:
 - END_FACTOR: the segmentation's end_F on tracks that end while sliding,
   over F(1, dof)'s;
 - CURVE_FACTOR: the conics F on straight sliding paths (cases 1, 3, 5),
-  over F(2, n - 4)'s.
+  over F(2, n - 4)'s;
+- AR1_FACTOR: the residuals' lag-1 autocorrelation z score
+  (recover.mle.lag1_autocorrelation, at the first fit of both models) on
+  tracks with independent errors (rolling from the strike and sliding, the
+  odd ones fitted as a lossy codec's), over the one-sided normal 1% point;
+- CASE2_FACTOR: the case-2 distance |x1 - x2|^2 in its covariance
+  (recover.paper.case2_distance) on case-2 tracks the segmentation finds
+  running into the rest, over chi^2(2)'s.
 
-Usage: python benchmarks/calibrate_tests.py [--n 1200] [--seed 0] [--which slip,end,curve] [--rho 0.67]
+Usage: python benchmarks/calibrate_tests.py [--n 1200] [--seed 0] [--which slip,end,curve,ar1,case2] [--rho 0.67]
 """
 
 import argparse
@@ -83,6 +90,39 @@ def curve_ratios(n, seed):
     return out
 
 
+def ar1_ratios(n, seed):
+    from scipy.stats import norm
+
+    from cuespin.recover.estimate import estimate
+    from cuespin.recover.simulate import mixed_tracks
+    out = defaultdict(list)
+    for i, tr in enumerate(mixed_tracks(n, seed)):
+        est = estimate(tr.t, tr.xy, np.full(len(tr.t), tr.sigma), tr.params, tr.exposure_s,
+                       lossless=i % 4 < 2, run_paper=False)
+        d = est.decisions.get("autocorrelated")
+        if d is not None:
+            out[(tr.fps, tr.sigma)].append(d.statistic / norm.isf(0.01))
+    return out
+
+
+def case2_ratios(n, seed):
+    from cuespin.fit.segment import segment_track
+    from cuespin.recover.paper import case2_distance, geometry_covariance, ran_into_rest
+    from cuespin.recover.simulate import case2_tracks
+    out = defaultdict(list)
+    for tr in case2_tracks(n, seed):
+        p = tr.params
+        seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, tr.sigma, tr.exposure_s)
+        # The segmentation that runs into the rest: its best one, or its
+        # "unended" alternative (recover.estimate takes that when the
+        # breakpoint is not clear of the rest).
+        s = seg if seg and ran_into_rest(seg) else (seg.unended if seg else None)
+        if s is not None and ran_into_rest(s):
+            d2 = case2_distance(s, geometry_covariance(s, tr.sigma, True))
+            out[(tr.fps, tr.sigma)].append(d2 / chi2.isf(0.01, 2))
+    return out
+
+
 def report(name, cells):
     allv = np.concatenate([np.asarray(v) for v in cells.values()])
     print(f"\n{name}: {len(allv)} null tracks; ratio statistic / nominal 1% point: "
@@ -102,11 +142,12 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=1200)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--which", default="slip,end,curve")
+    ap.add_argument("--which", default="slip,end,curve,ar1,case2")
     ap.add_argument("--rho", type=float, default=0.0, help="slip: AR(1) errors of this lag-1 correlation "
                     "(a lossy codec at low noise measured 0.67)")
     args = ap.parse_args()
-    for name, fn in (("slip", slip_ratios), ("end", end_ratios), ("curve", curve_ratios)):
+    for name, fn in (("slip", slip_ratios), ("end", end_ratios), ("curve", curve_ratios), ("ar1", ar1_ratios),
+                     ("case2", case2_ratios)):
         if name in args.which.split(","):
             clock = time.perf_counter()
             report(name, fn(args.n, args.seed, args.rho) if name == "slip" else fn(args.n, args.seed))

@@ -24,13 +24,15 @@ from scipy.stats import f as f_dist
 from cuespin.fit.decide import curved as decide_curved
 from cuespin.physics.parabola import Parabola
 
-# Iterations the orthogonal-distance parabola fit may take (scipy's
-# max_nfev).  On the 60 MJPG benchmark shots curved paths converged in 3-33
-# and straight ones in 8-44, but 8 of 40 crept to the cap without meeting
-# the 1e-12 tolerances; at 200 that cost 1.9 s of a 2.5 s recovery
-# (benchmarks/recover_speed.py), and at 60 the paper's figures on those
-# shots (answers, coverage 97.2%, RMS 0.85 stated errors) did not change.
-PARABOLA_MAX_NFEV = 60
+# Residual evaluations the orthogonal-distance parabola fit may take
+# (scipy's max_nfev; with the analytic Jacobian, parabola_jacobian, one per
+# iteration).  With finite differences (5 evaluations an iteration) the cap
+# was 60, about 12 iterations: on the 60 MJPG benchmark shots curved paths
+# converged in 3-33 evaluations and straight ones in 8-44, 8 of 40 crept to
+# the cap without meeting the 1e-12 tolerances, and at 200 evaluations that
+# cost 1.9 s of a 2.5 s recovery (benchmarks/recover_speed.py) while the
+# paper's figures on those shots did not change.  The same 12 iterations.
+PARABOLA_MAX_NFEV = 12
 
 
 @dataclass(frozen=True)
@@ -95,22 +97,51 @@ def fit_line(p) -> LineFit:
     return LineFit(point=c, direction=d, residuals=(p - c) @ n)
 
 
-def parabola_distances(par: Parabola, p) -> np.ndarray:
-    """Signed orthogonal distances (m) from points to a parabola (+ inside)."""
+def _foot_points(par: Parabola, p):
+    """Each point's foot on the parabola: its local coordinates ``(X, Y)``
+    and the foot's local abscissa ``x`` (Newton on the foot-point cubic
+    ``2 a^2 x^3 + (1 - 2 a Y) x - X = 0`` from ``x = X``)."""
     q = par.to_local(p)
     X, Y = q[..., 0], q[..., 1]
     a = par.a
     x = X.copy()
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        for _ in range(30):  # Newton on the foot-point cubic from x = X
+        for _ in range(30):
             f = 2 * a * a * x**3 + (1 - 2 * a * Y) * x - X
             fp = 6 * a * a * x**2 + (1 - 2 * a * Y)
             step = f / np.where(np.abs(fp) > 1e-12, fp, 1e-12)
             x -= step
             if not np.all(np.abs(step) >= 1e-15):
                 break
+    return X, Y, x
+
+
+def parabola_distances(par: Parabola, p) -> np.ndarray:
+    """Signed orthogonal distances (m) from points to a parabola (+ inside)."""
+    X, Y, x = _foot_points(par, p)
+    a = par.a
     d = np.hypot(x - X, a * x * x - Y)
     return np.where(Y >= a * X * X, d, -d)
+
+
+def parabola_jacobian(par: Parabola, p) -> np.ndarray:
+    """Derivatives of :func:`parabola_distances` with respect to ``(log a,
+    theta, vertex_x, vertex_y)``, shape (n, 4).
+
+    At the foot point the distance is ``n . (P - C)`` with ``n`` the unit
+    normal ``(-2 a x, 1) / sqrt(1 + 4 a^2 x^2)`` (local frame, pointing to
+    the inside); the foot's own shift and the normal's turning drop out (both
+    are perpendicular to ``P - C``), so each derivative is the normal
+    against the parameter's motion of the point relative to the curve:
+    ``-a x^2 n_y`` for ``log a``, ``n . (Y, -X)`` for ``theta`` and minus
+    the normal in table axes for the vertex.
+    """
+    X, Y, x = _foot_points(par, p)
+    a = par.a
+    norm = np.sqrt(1.0 + 4.0 * a * a * x * x)
+    nx, ny = -2.0 * a * x / norm, 1.0 / norm
+    c, s = np.cos(par.theta), np.sin(par.theta)
+    return np.stack([-a * x * x * ny, nx * Y - ny * X, -(c * nx - s * ny), -(s * nx + c * ny)], axis=-1)
 
 
 def fit_parabola(p, start: Parabola) -> ParabolaFit:
@@ -140,11 +171,14 @@ def fit_parabola(p, start: Parabola) -> ParabolaFit:
     def resid(q):
         return parabola_distances(build(q), p)
 
+    def jac(q):
+        return parabola_jacobian(build(q), p)
+
     q0 = np.r_[np.log(start.a), start.theta, start.vertex]
     try:
         # A straight path sends a towards 0, where the fit wanders: cap the
         # effort (PARABOLA_MAX_NFEV).
-        r = least_squares(resid, q0, method="lm", xtol=1e-12, ftol=1e-12, max_nfev=PARABOLA_MAX_NFEV)
+        r = least_squares(resid, q0, jac=jac, method="lm", xtol=1e-12, ftol=1e-12, max_nfev=PARABOLA_MAX_NFEV)
     except (ValueError, FloatingPointError) as exc:
         return ParabolaFit(False, f"parabola fit failed: {exc}")
     if not np.all(np.isfinite(r.x)):

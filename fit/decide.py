@@ -9,6 +9,12 @@
   statistic of the orthogonal-distance parabola against the line
   (fit.conics).
 - Is the strike in view?  :func:`strike_in_view`: still frames before it.
+- Did sliding run into the rest (paper case 2: ``x1 = x2``)?
+  :func:`stop_apart`, from the distance between the sliding parabola's
+  stopping point and the rest, in its errors.
+- Are the fit's residuals autocorrelated along the track (a lossy codec at
+  low noise)?  :func:`autocorrelated`, from their lag-1 autocorrelation's z
+  score (recover.mle.lag1_autocorrelation); yes refits under AR(1) errors.
 
 None of the textbook reference distributions holds for the first three (at
 zero slip ``t1`` is not identified and the information matrix is singular;
@@ -26,7 +32,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import chi2, f as f_dist
+from scipy.stats import chi2, f as f_dist, norm
 
 # Nominal false-positive rate of each decision.
 LEVEL = 0.01
@@ -48,6 +54,22 @@ END_FACTOR = 1.0
 #   parabola's curvature runs to zero and F stays near 0 (see
 #   benchmarks/calibrate_tests.py --which curve).
 CURVE_FACTOR = 1.0
+# - autocorrelated: the residuals' lag-1 z score (at the first fit of both
+#   models) on 1,200 tracks with independent errors, rolling from the strike
+#   and sliding, half fitted as a lossy codec's (calibrate_tests.py --which
+#   ar1, seed 0, 2026-11-30): 3 above the one-sided normal 1% point
+#   (0.25%; pooled q99 0.84 of it), at most 1 of 100 in any cell (allowed
+#   2): a fit's residuals are slightly anti-correlated, so the nominal
+#   point is conservative.
+AR1_FACTOR = 1.0
+# - stop apart: the case-2 distance |x1 - x2|^2 in its covariance
+#   (recover.paper.case2_distance) on 1,199 simulated case-2 tracks whose
+#   segmentation runs into the rest (calibrate_tests.py --which case2, seed
+#   0, 2026-11-30): 49 above chi^2(2)'s 1% point (4.1%), up to 9 of 100 in
+#   a cell, and a heavy tail (4 of 100 at 480 fps, 1e-4 m, above 16 times
+#   it: the sliding fit's stopping point is extrapolated past the frames
+#   it fits); largest per-cell q99 16.5.
+CASE2_FACTOR = 17.0
 # The strike is in view when at least this many frames show the ball still
 # before it: the segmentation takes the start position as the median of the
 # first three frames (fit.segment).
@@ -122,6 +144,25 @@ def curved(F: float, n: int) -> Decision:
         return Decision(False, float("nan"), float("inf"))
     thr = CURVE_FACTOR * float(f_dist.isf(LEVEL, 2, n - 4))
     return Decision(bool(F > thr), float(F), thr)
+
+
+def autocorrelated(rho: float, z: float) -> Decision:
+    """Are the residuals autocorrelated along the track?  Their lag-1
+    autocorrelation ``rho`` with z score ``z`` (recover.mle.lag1_autocorrelation),
+    one-sided: only a positive correlation (errors shared by neighbouring
+    frames) widens the errors."""
+    thr = AR1_FACTOR * float(norm.isf(LEVEL))
+    z = float(z) if np.isfinite(z) else 0.0
+    return Decision(z > thr, z, thr)
+
+
+def stop_apart(d2: float) -> Decision:
+    """Does the sliding phase's stopping point ``x1`` lie apart from the rest
+    ``x2``?  ``d2`` is ``|x1 - x2|^2`` in their covariance (chi^2(2) when
+    they coincide, as in case 2).  Yes: sliding did not run into the rest."""
+    thr = CASE2_FACTOR * float(chi2.isf(LEVEL, 2))
+    d2 = float(d2) if np.isfinite(d2) else float("inf")
+    return Decision(d2 > thr, d2, thr)
 
 
 def strike_in_view(t, t0: float) -> bool:

@@ -21,6 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cuespin.fit.decide import T1_END_MARGIN_FRAMES
+
 # Consecutive end frames within this many sigma of the final position are at rest.
 REST_SIGMAS = 5.0
 MIN_REST_FRAMES = 5
@@ -234,7 +236,8 @@ def noise_from_track(xy) -> float:
 
 
 def segment_track(t, xy, decel: float, sigma: float | None = None,
-                  exposure_s: float = 0.0, frames: tuple | None = None) -> Segments:
+                  exposure_s: float = 0.0, frames: tuple | None = None,
+                  breaks: tuple | None = None) -> Segments:
     """Find the strike, the end of sliding and the rest in a track.
 
     Parameters
@@ -256,6 +259,12 @@ def segment_track(t, xy, decel: float, sigma: float | None = None,
         (its Segments' fields): the first moving frame and the rest's first
         frame are kept instead of found again (a refit of the same track
         through another camera, recover.calibration).
+    breaks : tuple, optional
+        ``(t0, t1)`` (s) of an earlier segmentation of the same frames whose
+        kind is kept: the breakpoints are refined from there, and a
+        breakpoint in view (``t1`` finite and after ``t0``) stays in view,
+        so a refit through another camera gets the same kind of answer (a
+        sliding phase that ends, or one that runs to the end: ``t1`` inf).
 
     Returns
     -------
@@ -324,9 +333,21 @@ def segment_track(t, xy, decel: float, sigma: float | None = None,
     k = int(np.argmin(costs))
     t1_guess = float(cands[k])
     gap = max(np.diff(cands[max(k - 1, 0):k + 2]).max(initial=0.0), 2 * dt)
+    cost_main = cost_many
+    if breaks is not None and breaks[1] > breaks[0]:
+        # The kept kind: from the kept breakpoints, a breakpoint in view held
+        # before the end (else "still sliding at the end", t1 beyond).
+        t0_guess, gap = float(breaks[0]), 2 * dt
+        t1_guess = float(breaks[1]) if np.isfinite(breaks[1]) else beyond
+        if np.isfinite(breaks[1]):  # in view as fit.decide.t1_in_view has it
+            last = tf[-1] - T1_END_MARGIN_FRAMES * dt
+
+            def cost_main(t0s, t1s):
+                return np.where(np.asarray(t1s) > last, np.inf, cost_many(t0s, t1s))
+            t1_guess = min(t1_guess, last)
     # Joint refinement to a thousandth of a frame (the maximum-likelihood fit
     # refines both times further with the full model).
-    t0, t1, best_sse = _zoom(cost_many, t0_guess, t1_guess, dt, gap, 1e-3 * dt)
+    t0, t1, best_sse = _zoom(cost_main, t0_guess, t1_guess, dt, gap, 1e-3 * dt)
     t_roll, _, _ = _zoom(cost_many, t0, t0, 3 * dt, 0.0, 1e-2 * dt)
     dof = max(2 * len(tf) - 8, 1)
     end_F, t_un = 0.0, t0
@@ -362,8 +383,12 @@ def _finish(t, xy, tf, xf, t0, t1, beyond, decel, rest_k, k_end, k_move, dof, **
     if rest_k is not None and not np.isfinite(t1):
         # Sliding ran into the rest (case 2, eq. 29): both end when the
         # sliding velocity v0 + a_s tau is smallest.
+        # Not clipped at the rest's first frame: a stopping ball creeps
+        # within noise of its rest for a frame or two, so the rest is found
+        # that early, and x1 there sat 9-30 of its errors short of the rest
+        # on simulated case-2 tracks (benchmarks/calibrate_tests.py --which case2).
         tau_stop = -float(v0 @ a_s) / max(float(a_s @ a_s), 1e-300)
-        t1 = float(min(max(t0 + tau_stop, t0), t[rest_k]))
+        t1 = float(min(max(t0 + tau_stop, t0), t[-1]))
         tau1 = t1 - t0
         v1 = np.zeros(2)
         x1 = x0 + v0 * tau1 + 0.5 * a_s * tau1**2

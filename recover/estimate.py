@@ -14,14 +14,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from cuespin.fit.decide import Decision, sliding_ended, sliding_seen, strike_in_view, t1_in_view
+from cuespin.fit.decide import Decision, autocorrelated, sliding_ended, sliding_seen, strike_in_view, t1_in_view
 from cuespin.fit.segment import Segments, segment_track
 from cuespin.physics.motion import BallParams, phases
 from cuespin.recover.measurements import (Measurements, as_covariance, build_measurements,
                                           codec_excess, fill_covariance)
-from cuespin.recover.mle import (AUTOCORR_Z, CodecCorrelation, MLEResult, ModelFit, correlated_codec_var,
-                                 fit_model, fit_models, initial_guess, lag1_autocorrelation, result, slip_lr)
-from cuespin.recover.paper import PaperResult, paper_from_segments
+from cuespin.recover.mle import (CodecCorrelation, MLEResult, ModelFit, correlated_codec_var,
+                                 fit_model, fit_models, initial_guess, lag1_autocorrelation, result, slip_lr,
+                                 with_profile_interval)
+from cuespin.recover.paper import PaperResult, paper_from_segments, ran_into_rest
 
 # The first fit's strike time is used to place the strike's window only
 # when within this many frames of the segmentation's (the segmentation
@@ -47,8 +48,11 @@ class Decided:
     ``frames`` (the strike's and the rest's frames, fit.segment), ``t0``
     (the strike window's centre, s), ``codec_var`` (as
     :attr:`Estimate.codec_var`), ``start`` (the chosen fit's ``(x0, t0,
-    v0, w0)``, to start from), ``paper`` (the paper's ``(v0, w0)`` or None)
-    and ``ar1`` (the AR(1) error model's lag-1 correlation; 0: none).
+    v0, w0)``, to start from), ``paper`` (the paper's ``(v0, w0)`` or None),
+    ``ar1`` (the AR(1) error model's lag-1 correlation; 0: none) and
+    ``breaks`` (the chosen segmentation's ``(t0, t1)``, ``t1`` inf when its
+    sliding runs to the end of the motion: the refit's segmentation is
+    searched from them and keeps their kind, fit.segment.segment_track).
     """
 
     sliding_seen: bool | None
@@ -62,6 +66,7 @@ class Decided:
     start: tuple | None = None
     paper: tuple | None = None
     ar1: float = 0.0
+    breaks: tuple | None = None
 
 
 @dataclass(frozen=True)
@@ -146,7 +151,8 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
     frame_dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
     clock = time.perf_counter()
     seg = segment_track(t, xy, 5.0 / 7.0 * params.mu_r * params.g, sigma, exposure_s,
-                        frames=keep.frames if keep is not None else None)
+                        frames=keep.frames if keep is not None else None,
+                        breaks=keep.breaks if keep is not None else None)
     t_fit = time.perf_counter() - clock
     clock = time.perf_counter()
     if not seg:
@@ -179,6 +185,9 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
             t0 = first.shot.t0
     meas = measure(t0).with_codec(codec_var)
     codec = CodecCorrelation(codec_var, frame_dt) if inter_frame and not lossless else None
+    # An intra-frame lossy codec (MJPG): its error is shared by frames that
+    # show the ball at nearly the same place (recover.mle.still_codec_sandwich).
+    still = not lossless and not inter_frame
     decisions: dict[str, Decision] = {}
     mle = None
     try:
@@ -190,7 +199,8 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
             # noise): both models again under AR(1) errors of that lag-1
             # correlation, so their likelihood ratio and covariance hold.
             rho, z = lag1_autocorrelation(meas, full.residuals)
-            if z > AUTOCORR_Z:
+            decisions["autocorrelated"] = autocorrelated(rho, z)
+            if decisions["autocorrelated"]:
                 full, roll = fit_models(meas, params, (full.shot.x0, full.shot.t0, full.shot.v0, full.shot.w0),
                                         exposure_s, fit_friction,
                                         (roll.shot.x0, roll.shot.t0, roll.shot.v0, roll.shot.w0), ar1=rho)
@@ -202,9 +212,10 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         if decisions["sliding_seen"]:
             decisions["sliding_ended"] = sliding_ended(seg, t, phases(full.shot, full.params).t1,
                                                        friction_known=not fit_friction)
-            mle = result(full, meas, lr, decisions["sliding_ended"].yes, codec)
+            mle = with_profile_interval(result(full, meas, lr, decisions["sliding_ended"].yes, codec, still),
+                                        full, meas, exposure_s)
         else:
-            mle = result(roll, meas, lr, True, codec)
+            mle = result(roll, meas, lr, True, codec, still)
     else:
         decisions["sliding_ended"] = sliding_ended(seg, t)
     chosen = seg
@@ -232,7 +243,8 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         curved=shape, strike_seen=strike_seen, frames=(seg.k_move, seg.rest_k), t0=t0, codec_var=codec_var,
         start=None if fit is None else (fit.shot.x0, fit.shot.t0, fit.shot.v0, fit.shot.w0),
         paper=(paper.v0, paper.w0) if paper is not None and paper.status == "ok" else None,
-        ar1=0.0 if fit is None else fit.ar1)
+        ar1=0.0 if fit is None else fit.ar1,
+        breaks=(chosen.t0, float("inf") if runs_to_end(chosen) else chosen.t1) if chosen else None)
     return Estimate(chosen, paper, mle, meas, codec_var, decisions,
                     {"fit": t_fit, "recover": time.perf_counter() - clock}, decided)
 
@@ -243,7 +255,7 @@ def _refit(keep: Decided, seg, t, xy, params, exposure_s, fit_friction, run_pape
     the same model fitted from the earlier answer, the same segmentation,
     path shape and root for the paper's method."""
     nan = float("nan")
-    chosen = {"rolling": seg.rolling, "unended": seg.unended}.get(keep.segments, seg) or seg
+    chosen = kept_segments(seg, keep)
     meas = measure(keep.t0).with_codec(keep.codec_var)
     decisions = {"sliding_ended": Decision(keep.sliding_ended, nan, nan)}
     mle = None
@@ -254,13 +266,39 @@ def _refit(keep: Decided, seg, t, xy, params, exposure_s, fit_friction, run_pape
         rolling = not keep.sliding_seen
         try:
             fit = fit_model(meas, params, keep.start, exposure_s, rolling, fit_friction, keep.ar1)
-            mle = result(fit, meas, nan, keep.sliding_ended or rolling, codec)
+            mle = result(fit, meas, nan, keep.sliding_ended or rolling, codec, not lossless and codec is None)
         except FIT_ERRORS as exc:
             mle = MLEResult("failed", f"the fit did not run: {exc}")
     paper = None
-    if run_paper and seg:
+    if run_paper and seg and chosen is None:
+        paper = PaperResult("failed", f"the segmentation kept from the first camera ({keep.segments}) is not "
+                            "found through this camera")
+    elif run_paper and seg:
         paper_sigma = math.sqrt(sigma**2 + max(meas.codec_m2(keep.codec_var), 0.0))
         paper = paper_from_segments(chosen, t, xy, params, paper_sigma, frame_dt, keep.strike_seen, lossless,
                                     curved=keep.curved, near=keep.paper)
-    return Estimate(chosen, paper, mle, meas, keep.codec_var, decisions,
+    return Estimate(chosen or seg, paper, mle, meas, keep.codec_var, decisions,
                     {"fit": t_fit, "recover": time.perf_counter() - clock}, keep)
+
+
+def runs_to_end(seg) -> bool:
+    """The segmentation's sliding lasts to the end of the motion: still
+    sliding when the track ends (``t1`` inf), or running into the rest
+    (case 2, recover.paper.ran_into_rest)."""
+    return bool(not np.isfinite(seg.t1) or ran_into_rest(seg))
+
+
+def kept_segments(seg, keep: Decided):
+    """The refit's segmentation of the kind ``keep`` chose: rolling from the
+    strike, sliding to the end of the motion, or a breakpoint in view
+    (searched from ``keep.breaks``); None when this camera's segmentation
+    has none of that kind (never another kind in its place)."""
+    if keep.segments == "rolling":
+        return seg.rolling
+    if keep.breaks is None:  # an older Decided: by its label
+        return {"unended": seg.unended}.get(keep.segments, seg) or seg
+    to_end = not np.isfinite(keep.breaks[1])
+    for s in (seg, seg.unended):
+        if s is not None and runs_to_end(s) == to_end:
+            return s
+    return None

@@ -29,6 +29,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import brentq
 
 from cuespin.fit.segment import noise_from_track
 
@@ -206,20 +207,29 @@ class Measurements:
         K = self.codec_shape()
         return float(codec_var * np.median(0.5 * (K[:, 0, 0] + K[:, 1, 1]))) if len(K) else 0.0
 
+    def codec_floor(self) -> np.ndarray:
+        """Per frame, shape (n,), the most negative codec variance it takes:
+        ``-(1 - MIN_NOISE_FRACTION^2) lambda_min`` with ``lambda_min`` the
+        smallest generalised eigenvalue of its stated covariance against its
+        :meth:`codec_shape` (``cov v = lambda K v``), so ``cov + c K`` stays
+        at or above ``MIN_NOISE_FRACTION^2 cov`` in every direction (under a
+        tilted camera the two are correlated in x and y, and a floor on the
+        diagonal alone could leave a matrix that is no covariance)."""
+        K = self.codec_shape()
+        Li = np.linalg.inv(np.linalg.cholesky(K))
+        lam = np.linalg.eigvalsh(Li @ self.cov @ np.swapaxes(Li, -1, -2))[:, 0]
+        return -(1.0 - MIN_NOISE_FRACTION**2) * lam
+
     def with_codec(self, codec_var: float) -> "Measurements":
         """The same measurements with a codec's per-axis error variance
         ``codec_var`` (px^2 through ``px_to_m``, else m^2; signed: negative
-        takes back an overstatement) added to every frame, floored at
-        ``MIN_NOISE_FRACTION`` of the stated.  The floor also applies where the
-        difference is no longer a covariance: under a tilted camera a frame's
-        covariance in metres is correlated between x and y, and a negative
-        ``codec_var`` can leave its diagonal above the floor but its
-        determinant negative."""
-        cov = self.cov + codec_var * self.codec_shape()
-        floor = MIN_NOISE_FRACTION**2 * self.cov
-        low = ((cov[:, 0, 0] < floor[:, 0, 0]) | (cov[:, 1, 1] < floor[:, 1, 1])
-               | (np.linalg.det(cov) < np.linalg.det(floor)))
-        cov[low] = floor[low]
+        takes back an overstatement) added to every frame, each frame's share
+        no more negative than :meth:`codec_floor` (its covariance then stays
+        at least ``MIN_NOISE_FRACTION^2`` of the stated: continuous in
+        ``codec_var``, so recover.measurements.codec_excess can solve for it
+        with the floor inside the equation)."""
+        c = np.maximum(float(codec_var), self.codec_floor())
+        cov = self.cov + c[:, None, None] * self.codec_shape()
         return _make(self.t, self.xy, cov, self.group, self.px_to_m)
 
 
@@ -316,15 +326,18 @@ def codec_excess(meas: Measurements, whitened_residuals, n_par: int) -> float:
 
     Measured from a fit's residuals over all its measurements (a rest's
     mean included: its shared compression error is the codec's too): the
-    variance ``c`` which, added to every measurement's stated variance
-    (through its metres per pixel, ``k`` per unit: :meth:`Measurements.codec_shape`),
-    makes the weighted residuals match the fit's degrees of freedom,
-    ``sum r^2 / (s^2 + c k) = 2m - n_par`` (a weighted moment equation: the
-    stated errors vary along the track, and an unweighted excess is ruled by
-    the largest).  Signed: negative when the residuals are smaller than
-    stated (MJPG at low noise, where the tracker states 1.2-1.4 times its
-    real error); no lower than takes the smallest stated variance to
-    ``MIN_NOISE_FRACTION`` of itself.
+    variance ``c`` for which the residuals, weighted by the measurements
+    :meth:`Measurements.with_codec` makes of it (the codec's share through
+    each frame's metres per pixel, and the floor at ``MIN_NOISE_FRACTION``
+    of the stated errors), match the fit's degrees of freedom,
+    ``sum |W_c r|^2 = 2m - n_par`` (a weighted moment equation: the stated
+    errors vary along the track, and an unweighted excess is ruled by the
+    largest).  Solved on the very covariances the fit then uses, so the
+    floor is inside the equation, not applied after it (where it left the
+    weighted residuals short of the degrees of freedom).  Signed: negative
+    when the residuals are smaller than stated (MJPG at low noise, where
+    the tracker states 1.2-1.4 times its real error); no lower than puts
+    every frame on its floor.
 
     Returns
     -------
@@ -336,22 +349,27 @@ def codec_excess(meas: Measurements, whitened_residuals, n_par: int) -> float:
     dof = 2 * m - n_par
     if r.shape[0] != m or dof <= 2:
         return 0.0
-    L = np.linalg.inv(meas.W)
-    raw2 = np.einsum("mij,mj->mi", L, r) ** 2                   # (m, 2), m^2
-    s2 = np.diagonal(L @ np.swapaxes(L, -1, -2), axis1=1, axis2=2)  # stated per-axis variances
-    F = meas.codec_factor()
-    k = np.diagonal(F @ np.swapaxes(F, -1, -2), axis1=1, axis2=2)   # per unit codec variance
+    raw = np.einsum("mij,mj->mi", np.linalg.inv(meas.W), r)      # (m, 2), m
+    used = meas.used
+    g = meas.group[used]
+    cnt = np.bincount(g, minlength=m)[:, None, None]
+    cov, K, floor = meas.cov[used], meas.codec_shape()[used], meas.codec_floor()[used]
 
     def excess_chi2(c):
-        return float(np.sum(raw2 / (s2 + c * k))) - dof
+        # As with_codec(c).whiten, without building the Measurements: each
+        # measurement's covariance the mean of its frames'.
+        C = np.zeros((m, 2, 2))
+        np.add.at(C, g, cov + np.maximum(c, floor)[:, None, None] * K)
+        w = np.linalg.solve(np.linalg.cholesky(C / cnt), raw[:, :, None])[:, :, 0]
+        return float(np.sum(w * w)) - dof
 
-    lo = -(1.0 - MIN_NOISE_FRACTION**2) * float((s2 / k).min())
-    hi = max(float(raw2.sum() / k.min()), float((s2 / k).max()))
+    s2 = np.diagonal(cov, axis1=1, axis2=2)                          # stated per-axis variances
+    k = np.diagonal(K, axis1=1, axis2=2)                             # per unit codec variance
+    lo = float(floor.min())                                          # every frame on its floor
+    hi = max(float(np.sum(raw * raw) / k.min()), float((s2 / k).max()))
     if excess_chi2(lo) <= 0:
         return lo
     if excess_chi2(hi) >= 0:
         return hi
-    for _ in range(60):  # bisection: the sum falls as c grows
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if excess_chi2(mid) > 0 else (lo, mid)
-    return 0.5 * (lo + hi)
+    # The sum falls as c grows, continuously (Measurements.codec_floor).
+    return float(brentq(excess_chi2, lo, hi, xtol=1e-12 * (hi - lo), rtol=1e-12))

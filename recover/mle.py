@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
+from cuespin.fit.decide import autocorrelated
 from cuespin.physics.motion import BallParams, Shot, phases, positions, z_cross
 from cuespin.recover.measurements import Measurements, build_measurements
 
@@ -45,10 +46,6 @@ MAX_CHI2_PER_DOF = 100.0
 MAX_REL_STDERR_V0 = 0.5
 # Convergence tolerances of the Levenberg-Marquardt fit (see fit_model).
 LM_TOL = 1e-7
-# Residual autocorrelation at lag 1 is "shown" beyond this many of its
-# standard errors under independence (one-sided 1%: 2.33); then the
-# HAC sandwich replaces the independent-error covariance.
-AUTOCORR_Z = 2.33
 # An inter-frame codec's error (H.264: motion-compensated prediction from
 # earlier frames) is shared by neighbouring frames: the correlation of its
 # per-axis error between frames k apart, rho(k) = a exp(-k / tau_long) +
@@ -66,6 +63,45 @@ INTER_CODEC_ACF = (0.27, 0.10, 7.0, 118.0)
 # prewhitened residuals are differences of neighbouring frames and the fit
 # loses what little the level says (0.67 measured on MJPG at low noise).
 MAX_AR1 = 0.95
+# An intra-frame lossy codec's error (MJPG: each frame compressed on its
+# own) depends on where the ball sits on the pixel grid, so frames showing
+# the ball within a fraction of a pixel of each other share it, as a rest's
+# frames do (recover.measurements), while frames further apart do not:
+# whitened error correlation r0 exp(-(d / length)^2) at image distance d
+# (px).  Measured against the truth (moving-frame pairs of the accuracy
+# benchmark's MJPG shots): noise 0-0.5, 40 shots of --seed 1 --noise-max
+# 0.5: 0.46 at d < 0.1 px, 0.17 at 0.1-0.25, under 0.05 beyond (r0 0.50,
+# length 0.166 px); 60 shots of --seed 0: noise < 0.5 0.50, 0.10; noise
+# 0.5-3 0.31, 0.16; noise > 3 0.04, 0.03 (the codec's share of a frame's
+# error falls as the noise grows).  So the length is fixed and r0 is
+# measured on each track from its residuals (still_codec_r0), at most
+# MAX_STILL_R0, from MIN_STILL_PAIRS pairs or more (fewer: none assumed;
+# they then hold too little of the track to matter).  The residuals
+# understate it (the fit absorbs part of a shared error): 0.20-0.29 on
+# three low-noise 240-480 fps shots the truth put at 0.5.
+STILL_CODEC_LENGTH_PX = 0.166
+MAX_STILL_R0 = 0.9
+MIN_STILL_PAIRS = 20
+# A fitted sliding phase seen in fewer measured frames than this does not
+# determine the slip: the slip's size then rests on where the strike and
+# the end of sliding fall between frames, which the likelihood's curvature
+# does not describe.  Measured on 360 simulated shots sliding 0.2-8 frames
+# (benchmarks/short_slide.py --min-frames 1, seed 5: 60-240 fps, noise
+# 2e-5-6e-4 m; frames counted as here): seen in 1 frame the 95% intervals
+# covered 80% (10 shots, RMS 2.3 stated errors), in 2 86% (29, RMS 1.9), in
+# 3 89% (33, RMS 1.3), in 4-8 90-96% (191, RMS 0.7-1.5).  FFV1 benchmark
+# shot 13 (1.6 frames at 120 fps) was 9 stated errors off.
+MIN_SLIDING_FRAMES = 3
+# The ball "stops as sliding ends" (the stop shot: the track moves only by
+# the square of a change of the slip's size) when the fitted ball rolls less
+# than this many position errors after sliding (a rolling phase the track
+# cannot show; the fits of 4 simulated stop shots rolled 0.02-0.3 of one);
+# the interval along the slip's size then comes from the profile likelihood
+# (with_profile_interval), searched by doubling from the local error and
+# then bisection.
+STOP_ROLL_SIGMAS = 3.0
+PROFILE_MAX_DOUBLINGS = 12
+PROFILE_BISECTIONS = 8
 # Gauss-Legendre nodes for averaging the model over the exposure: exact for
 # the (quadratic) motion within a phase.
 _GL_T, _GL_W = np.polynomial.legendre.leggauss(3)
@@ -230,8 +266,10 @@ def fit_model(meas: Measurements, params: BallParams, start, exposure_s: float, 
         r = least_squares(resid, p0, x_scale=x_scale, method="lm", diff_step=1e-7,
                           xtol=LM_TOL, ftol=LM_TOL, gtol=LM_TOL, max_nfev=100)
     shot, pr = _unpack(r.x, rolling, fit_friction, params)
+    # The AR(1) coefficient was estimated from the same residuals: one
+    # parameter more.
     return ModelFit(rolling=rolling, x=r.x, shot=shot, params=pr, chi2=float(2 * r.cost),
-                    dof=meas.dof(len(r.x)), jac=r.jac, residuals=r.fun.reshape(-1, 2),
+                    dof=meas.dof(len(r.x) + (1 if ar1 > 0 else 0)), jac=r.jac, residuals=r.fun.reshape(-1, 2),
                     converged=bool(r.success or r.status > 0), message=str(r.message),
                     names=_names(rolling, fit_friction), ar1=ar1)
 
@@ -285,7 +323,7 @@ def slip_lr(full: ModelFit, roll: ModelFit, meas: Measurements | None = None,
             pass
     elif meas is not None:
         rho, z = lag1_autocorrelation(meas, full.residuals)
-        if z > AUTOCORR_Z:
+        if autocorrelated(rho, z):
             try:
                 base = info_inverse(full.jac) * scale
                 hac = hac_covariance(full.jac, full.residuals, rho)
@@ -454,7 +492,65 @@ def codec_sandwich(fit: ModelFit, meas: Measurements, codec: CodecCorrelation) -
     return A @ (J.T @ J + codec.var * off) @ A
 
 
-def covariance(fit: ModelFit, meas: Measurements, codec: CodecCorrelation | None = None):
+def still_codec_pairs(meas: Measurements, length: float = STILL_CODEC_LENGTH_PX):
+    """Pairs of measurements that show the ball within a few correlation
+    lengths of each other on the image, and their kernel ``exp(-(d /
+    length)^2)`` (``d`` in px, through the first's metres per pixel):
+    ``(i, j, k)`` arrays, empty without metres per pixel (``px_to_m``)."""
+    empty = (np.zeros(0, int), np.zeros(0, int), np.zeros(0))
+    if meas.px_to_m is None or meas.n < 2:
+        return empty
+    from scipy.spatial import cKDTree
+    g = meas.group[meas.used]
+    cnt = np.bincount(g, minlength=meas.n)[:, None]
+    xy = np.stack([np.bincount(g, weights=meas.xy[meas.used][:, d], minlength=meas.n) for d in (0, 1)], 1) / cnt
+    B = np.zeros((meas.n, 2, 2))
+    np.add.at(B, g, meas.px_to_m[meas.used])
+    B /= cnt[:, :, None]
+    reach = 3.0 * length * float(np.max(np.linalg.norm(B, ord=2, axis=(1, 2))))
+    pairs = cKDTree(xy).query_pairs(reach, output_type="ndarray")
+    if not len(pairs):
+        return empty
+    i, j = pairs[:, 0], pairs[:, 1]
+    d_px = np.hypot(*np.einsum("nab,nb->na", np.linalg.inv(B[i]), xy[j] - xy[i]).T)
+    k = np.exp(-(d_px / length) ** 2)
+    keep = k > 1e-3
+    return i[keep], j[keep], k[keep]
+
+
+def still_codec_r0(residuals, i, j, k) -> float:
+    """The shared error's correlation at zero distance, from the whitened
+    residuals of the pairs ``(i, j)`` with kernel ``k``: the least-squares
+    ``r0`` of ``r_i . r_j / 2 = r0 k_ij``, in ``[0, MAX_STILL_R0]``; 0
+    from fewer than :data:`MIN_STILL_PAIRS` pairs."""
+    if len(i) < MIN_STILL_PAIRS:
+        return 0.0
+    r = np.asarray(residuals, dtype=float)
+    prod = 0.5 * np.sum(r[i] * r[j], axis=1)
+    return float(np.clip(np.sum(k * prod) / np.sum(k * k), 0.0, MAX_STILL_R0))
+
+
+def still_codec_sandwich(fit: ModelFit, meas: Measurements) -> np.ndarray:
+    """The parameters' covariance when an intra-frame codec's error is shared
+    by frames that show the ball at nearly the same place
+    (:func:`still_codec_pairs`, correlation ``r0 k_ij`` with ``r0`` from the
+    fit's residuals, :func:`still_codec_r0`): ``A (J^T J + sum_ij r0 k_ij
+    (J_i^T J_j + J_j^T J_i)) A`` with ``A = (J^T J)^-1`` (whitened
+    Jacobian, each axis correlated alike).  Raises LinAlgError when
+    ``J^T J`` is singular."""
+    J = np.asarray(fit.jac, dtype=float)
+    A = info_inverse(J)
+    i, j, k = still_codec_pairs(meas)
+    r0 = still_codec_r0(fit.residuals, i, j, k)
+    if not r0 > 0:
+        return A
+    Jm = J.reshape(meas.n, 2, -1)
+    off = r0 * np.einsum("k,kap,kaq->pq", k, Jm[i], Jm[j])
+    return A @ (J.T @ J + off + off.T) @ A
+
+
+def covariance(fit: ModelFit, meas: Measurements, codec: CodecCorrelation | None = None,
+               still_codec: bool = False):
     """The parameters' covariance: ``(J^T J)^-1`` scaled by the reduced
     chi-square when that exceeds 1, or, when the residuals show lag-1
     autocorrelation, the HAC sandwich (its variances never below the
@@ -465,23 +561,36 @@ def covariance(fit: ModelFit, meas: Measurements, codec: CodecCorrelation | None
     frames and much of it looks like the motion, so the residuals cannot
     show it (H.264 at CRF 20: residual lag-1 autocorrelation 0.0-0.2 while
     the errors' long-run variance is about 6 times the per-frame one).
-    ``hac`` is then True.  Returns ``(cov, hac, rho1)``; raises LinAlgError
-    when the information matrix is singular."""
+    With ``still_codec`` (an intra-frame lossy codec, MJPG), first the
+    sandwich of its error shared by frames that show the ball at nearly the
+    same place (:func:`still_codec_sandwich`), never below the former.
+    ``hac`` is True when a sandwich widened the errors.  Returns ``(cov,
+    hac, rho1)``; raises LinAlgError when the information matrix is
+    singular."""
     rho, z = lag1_autocorrelation(meas, fit.residuals)
     scale = max(1.0, fit.chi2 / fit.dof)
     base = info_inverse(fit.jac) * scale
     if codec is not None and codec.var > 0:
         return codec_sandwich(fit, meas, codec) * scale, True, rho
-    if not z > AUTOCORR_Z:
-        return base, False, rho
-    hac = hac_covariance(fit.jac, fit.residuals, rho)
-    v = np.maximum(np.diag(hac), 1e-300)
+    widened = False
+    if still_codec:
+        wide = _at_least(still_codec_sandwich(fit, meas) * scale, base)
+        widened = bool(np.any(np.diag(wide) > np.diag(base) * (1 + 1e-9)))
+        base = wide
+    if not autocorrelated(rho, z):
+        return base, widened, rho
+    return _at_least(hac_covariance(fit.jac, fit.residuals, rho), base), True, rho
+
+
+def _at_least(C, base) -> np.ndarray:
+    """``C`` with each variance raised to at least ``base``'s (correlations kept)."""
+    v = np.maximum(np.diag(C), 1e-300)
     d = np.sqrt(np.maximum(v, np.diag(base)) / v)
-    return hac * d[:, None] * d[None, :], True, rho
+    return C * d[:, None] * d[None, :]
 
 
 def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
-           codec: CodecCorrelation | None = None) -> MLEResult:
+           codec: CodecCorrelation | None = None, still_codec: bool = False) -> MLEResult:
     """The MLEResult of the chosen model: standard errors, and ``degenerate``
     when v0 or w0 is not determined (``sliding_ended`` False: w0 withheld)."""
     rolling = fit.rolling
@@ -494,7 +603,7 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
                          f"{np.sqrt(chi2 / dof):.0f} times the stated noise): the fit stopped far "
                          "from the shot, or the track is not one shot", chi2=float(chi2), dof=int(dof))
     try:
-        cov, hac, rho = covariance(fit, meas, codec)
+        cov, hac, rho = covariance(fit, meas, codec, still_codec)
     except np.linalg.LinAlgError:
         return MLEResult("degenerate", "the track does not determine the shot (singular information matrix)")
     ph = phases(shot, pr)
@@ -529,6 +638,14 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
                          f"the track does not determine v0 (standard error {se_speed:.3g} m/s for "
                          f"|v0| = {speed:.3g} m/s): the strike at t0 is not in view, or the ball "
                          f"was tracked in too few frames", **common)
+    if not rolling and sliding_ended:
+        t_m = meas.t_used[meas.single[meas.group[meas.used]]]
+        n_slide = int(np.sum((t_m > shot.t0) & (t_m < ph.t1)))
+        if n_slide < MIN_SLIDING_FRAMES:
+            return MLEResult("degenerate",
+                             f"sliding lasted {(ph.t1 - shot.t0) * 1e3:.1f} ms, seen in {n_slide} frame(s): "
+                             f"the slip, so w0 and v0, is not determined (at least {MIN_SLIDING_FRAMES} "
+                             "frames needed)", **common)
     if not rolling and not sliding_ended:
         t_end = float(meas.t_used[-1])
         lower = 3.5 * pr.mu_s * pr.g * (t_end - shot.t0)
@@ -545,6 +662,90 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
                          "fitted parameters is not positive definite: some combination of them is not "
                          "determined)", **common)
     return MLEResult("ok", "", **out)
+
+
+def _slip_direction(fit: ModelFit) -> np.ndarray:
+    """Unit change of w0 that changes the slip's size only: ``R z x e`` is
+    the slip's direction (eq. 2: ``u0 = v0 + R z x w0``)."""
+    shot, pr = fit.shot, fit.params
+    u0 = np.asarray(shot.v0, float) + pr.R * z_cross(np.asarray(shot.w0, float))
+    u_hat = u0 / max(float(np.hypot(*u0)), 1e-300)
+    return -z_cross(u_hat) / pr.R
+
+
+def profile_chi2(fit: ModelFit, meas: Measurements, exposure_s: float, delta: float) -> float:
+    """The free-slip model's chi-square with w0 moved by ``delta`` along
+    :func:`_slip_direction` (the slip's size) and every other parameter
+    (x0, t0, v0, w0 across it) refitted."""
+    e = _slip_direction(fit)
+    f = np.array([-e[1], e[0]]) / max(float(np.hypot(*e)), 1e-300)  # across: the slip's direction of w0
+    shot, pr = fit.shot, fit.params
+    w_base = np.asarray(shot.w0, float) + delta * e
+    t = meas.t_used
+
+    def resid(q):
+        s = Shot(x0=q[0:2], v0=q[3:5], w0=w_base + q[5] * f, t0=float(q[2]))
+        return ar1_prewhiten(meas, meas.whiten(model_track(s, pr, t, exposure_s)), fit.ar1).ravel()
+
+    q0 = np.r_[shot.x0, shot.t0, shot.v0, 0.0]
+    r = least_squares(resid, q0, x_scale=np.r_[1e-3, 1e-3, 1e-3, 1e-2, 1e-2, 1.0], method="lm",
+                      diff_step=1e-7, xtol=LM_TOL, ftol=LM_TOL, gtol=LM_TOL, max_nfev=100)
+    return float(2 * r.cost)
+
+
+def stops_as_sliding_ends(fit: ModelFit, meas: Measurements) -> bool:
+    """The fitted ball rolls less than :data:`STOP_ROLL_SIGMAS` of the
+    measurements' median per-axis error after sliding ends (the stop shot,
+    case 2 at its kink: the rolling phase is not seen)."""
+    if fit.rolling:
+        return False
+    ph = phases(fit.shot, fit.params)
+    if not np.isfinite(ph.t2):
+        return False
+    cov = meas.cov[meas.used]
+    sigma = float(np.median(np.sqrt(0.5 * (cov[:, 0, 0] + cov[:, 1, 1])))) if len(cov) else 0.0
+    return bool(np.hypot(*(np.asarray(ph.x2) - np.asarray(ph.x1))) < STOP_ROLL_SIGMAS * sigma)
+
+
+def with_profile_interval(res: MLEResult, fit: ModelFit, meas: Measurements, exposure_s: float) -> MLEResult:
+    """``res`` with w0's error along the slip's size from the profile
+    likelihood when the ball stops as sliding ends (:func:`stops_as_sliding_ends`):
+    there the track moves by the square of a change of the slip's size, the
+    likelihood is no parabola and the Jacobian's error is no interval.  The
+    95% interval is where the profile chi-square (in the residuals' scale)
+    rises by 3.84 (chi^2(1)); it is lopsided (more back spin slides the ball
+    back, less lets it roll on), and its longer side over 1.96 is the stated
+    error along that direction, when larger than the Jacobian's.  On 12
+    simulated stop shots (240 fps, 1e-4 m) the Jacobian's error put R w0 up
+    to 3.3 errors off; the profile's sides were 0.004-0.012 |v0| and every
+    error lay inside the longer."""
+    if res.status != "ok" or res.cov is None or not stops_as_sliding_ends(fit, meas):
+        return res
+    from dataclasses import replace
+    e = _slip_direction(fit)
+    scale = max(1.0, fit.chi2 / fit.dof)
+    C = res.cov
+    var_d = float(e @ C[5:7, 5:7] @ e) / float(e @ e) ** 2  # delta's variance, w0 = w0_hat + delta e
+    step = max(np.sqrt(max(var_d, 0.0)), 1e-6 * float(np.hypot(*fit.shot.w0)) / float(np.hypot(*e)))
+    target = fit.chi2 + 3.84 * scale
+    ends = []
+    for sign in (1.0, -1.0):
+        d = step
+        for _ in range(PROFILE_MAX_DOUBLINGS):
+            if profile_chi2(fit, meas, exposure_s, sign * d) >= target:
+                break
+            d *= 2.0
+        lo, hi = (d / 2.0 if d > step else 0.0), d
+        for _ in range(PROFILE_BISECTIONS):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if profile_chi2(fit, meas, exposure_s, sign * mid) < target else (lo, mid)
+        ends.append(hi)
+    se_d = max(ends) / 1.96  # the larger side: one error must hold the whole interval
+    if not se_d**2 > var_d:
+        return res
+    C = C.copy()
+    C[5:7, 5:7] = C[5:7, 5:7] + (se_d**2 - var_d) * np.outer(e, e)
+    return replace(res, cov=C, stderr=dict(res.stderr, w0=np.sqrt(np.diag(C)[5:7])))
 
 
 def initial_guess(seg, params: BallParams):

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cuespin.fit.decide import stop_apart
 from cuespin.physics.motion import BallParams, z_cross
 from cuespin.physics.parabola import Parabola
 
@@ -326,17 +327,23 @@ def paper_from_segments(seg, t, xy, params: BallParams, sigma: float, frame_dt: 
         ``(v0, w0)`` of an earlier answer on the same track: of several
         roots the nearest is the answer (the same root, moved by the camera).
     """
-    res = _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved)
-    if near is not None and res.status == "ambiguous" and res.solutions:
-        from dataclasses import replace
-        ref = np.r_[near[0], params.R * np.asarray(near[1])]
-        s = min(res.solutions, key=lambda s: float(np.linalg.norm(np.r_[s["v0"], params.R * s["w0"]] - ref)))
-        res = replace(res, status="ok", reason="", v0=s["v0"], w0=s["w0"], solutions=[])
-    return res
+    return _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, near)
 
 
-def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved) -> PaperResult:
-    """paper_from_segments without the choice of root."""
+def nearest_root(res: PaperResult, near, params: BallParams) -> PaperResult:
+    """``res`` with, when ambiguous, the root nearest ``near = (v0, w0)``
+    as its answer (status ``ok``)."""
+    if near is None or res.status != "ambiguous" or not res.solutions:
+        return res
+    from dataclasses import replace
+    ref = np.r_[near[0], params.R * np.asarray(near[1])]
+    s = min(res.solutions, key=lambda s: float(np.linalg.norm(np.r_[s["v0"], params.R * s["w0"]] - ref)))
+    return replace(res, status="ok", reason="", v0=s["v0"], w0=s["w0"], u0=s.get("u0"), solutions=[])
+
+
+def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, near=None) -> PaperResult:
+    """paper_from_segments; the root nearest ``near`` is chosen inside each
+    solve, so a root chosen that way gets its standard errors too."""
     if not seg:
         return PaperResult("failed", f"the track could not be segmented: {seg.reason}")
     if not strike_seen:
@@ -357,7 +364,8 @@ def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved) -
 
             def solve_par(x):
                 q = Parabola(a=float(np.exp(x[0])), theta=float(x[1]), vertex=x[2:4])
-                return recover_parabola(q, x[4:6], x[6:8], params, tol, tau1, tau1_tol)
+                return nearest_root(recover_parabola(q, x[4:6], x[6:8], params, tol, tau1, tau1_tol),
+                                    near, params)
 
             x = np.r_[np.log(par.parabola.a), par.parabola.theta, par.parabola.vertex, seg.x0, seg.x1]
             C = None
@@ -377,7 +385,8 @@ def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved) -
     heading = seg.v0 / np.hypot(*seg.v0) if np.hypot(*seg.v0) > 0 else None
 
     def solve_line(x):
-        return recover_line(x[0:2], x[2:4], x[4:6], params, tol, heading, tau1, tau1_tol)
+        return nearest_root(recover_line(x[0:2], x[2:4], x[4:6], params, tol, heading, tau1, tau1_tol),
+                            near, params)
 
     if not ran_into_rest(seg):
         # The line method's premise: x0, x1, x2 on one line.  A sliding arc
@@ -396,8 +405,17 @@ def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved) -
         # velocity vanishes, sat 2-4 of its errors off the rest on MJPG, and
         # with x2 - x1 about zero eq. 39's square root turned that into w0
         # errors of 4-6 stated ones (every miss of the paper's errors).
+        # Taken only when the two agree within their errors (a decision,
+        # fit.decide.stop_apart): a stopping point apart from the rest means
+        # the ball moved on after sliding, and case 2 does not hold.
+        apart = stop_apart(case2_distance(seg, geo))
+        if apart:
+            return PaperResult("failed", f"sliding's stopping point x1 lies {apart.statistic ** 0.5:.1f} of its "
+                               "errors from the rest x2: sliding did not run into the rest, and the "
+                               "segmentation found no breakpoint before it", "line", x0=seg.x0, x1=seg.x1, x2=seg.x2)
         def solve_case2(x):
-            return recover_line(x[0:2], x[2:4], x[2:4], params, tol, heading, tau1, tau1_tol)
+            return nearest_root(recover_line(x[0:2], x[2:4], x[2:4], params, tol, heading, tau1, tau1_tol),
+                                near, params)
 
         idx = np.r_[0:2, 4:6]
         x = np.r_[seg.x0, seg.x2]
@@ -420,6 +438,18 @@ def line_offset(x0, x1, x2, C) -> tuple[float, float]:
     g = np.r_[-(1 - along) * n_hat, n_hat, -along * n_hat]
     var = float(g @ np.asarray(C, float)[:6, :6] @ g)
     return float((x1 - x0) @ n_hat), float(np.sqrt(max(var, 1e-30)))
+
+
+def case2_distance(seg, geo) -> float:
+    """``|x1 - x2|^2`` in the covariance of their difference (``geo``, the
+    points' covariance, :func:`geometry_covariance`): chi^2(2) when the
+    sliding phase's stopping point ``x1`` is the rest ``x2`` (case 2)."""
+    d = np.asarray(seg.x1, float) - np.asarray(seg.x2, float)
+    C = geo[2:4, 2:4] + geo[4:6, 4:6]  # x1 from the moving frames, x2 from the rest: independent
+    try:
+        return float(d @ np.linalg.solve(C, d))
+    except np.linalg.LinAlgError:
+        return float("inf")
 
 
 def ran_into_rest(seg) -> bool:

@@ -92,3 +92,27 @@ def sliding_tracks(n: int, seed: int, presets=("random", "case1", "case3", "case
         ph = phases(shot, params)
         yield simulate_track(shot, params, fps, sigma, rng, exposure,
                              t_end=min(ph.t2 + 0.3, max(ph.t1 + 1.0, shot.t0 + MAX_AFTER_STRIKE_S)))
+
+
+def mixed_tracks(n: int, seed: int):
+    """``n`` tracks alternately rolling from the strike
+    (:func:`null_rolling_tracks`) and sliding (:func:`sliding_tracks`): the
+    null tracks of a question every track is asked (are the errors
+    autocorrelated?)."""
+    roll = null_rolling_tracks((n + 1) // 2, seed)
+    slide = sliding_tracks(n // 2, seed + 1)
+    for i in range(n):
+        yield next(roll) if i % 2 == 0 else next(slide)
+
+
+def case2_tracks(n: int, seed: int, fps_grid=FPS_GRID, sigma_grid=SIGMA_GRID_M, blur: bool = True):
+    """``n`` tracks of shots whose sliding runs into the rest (paper case 2:
+    ``x1 = x2``), cycling over frame rates and noise levels, seen to rest.
+    Yields :class:`SimTrack`."""
+    rng = np.random.default_rng(seed)
+    for i in range(n):
+        fps = fps_grid[i % len(fps_grid)]
+        sigma = sigma_grid[(i // len(fps_grid)) % len(sigma_grid)]
+        shot, params = sample_shot(rng, "case2")
+        exposure = float(rng.uniform(0.3, 1.0) / fps) if blur and rng.random() < 0.5 else 0.0
+        yield simulate_track(shot, params, fps, sigma, rng, exposure, t_end=phases(shot, params).t2 + 0.3)

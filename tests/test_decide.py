@@ -14,8 +14,8 @@ from cuespin.fit.segment import segment_track
 from cuespin.physics import phases
 from cuespin.recover.estimate import estimate
 from cuespin.recover.paper import path_shape
-from cuespin.recover.simulate import (FPS_GRID, SIGMA_GRID_M, null_rolling_tracks, simulate_track,
-                                      sliding_tracks)
+from cuespin.recover.simulate import (FPS_GRID, SIGMA_GRID_M, mixed_tracks, null_rolling_tracks,
+                                      simulate_track, sliding_tracks)
 
 
 def allowed(n: int, level: float = LEVEL) -> int:
@@ -129,3 +129,80 @@ def test_false_sliding_rate_under_ar1_errors_every_cell():
         for level in {k[axis] for k in cells}:
             v = [x for k, vs in cells.items() if k[axis] == level for x in vs]
             assert sum(v) <= allowed(len(v)), (axis, level, sum(v), len(v))
+
+
+def false_autocorrelated(n, seed):
+    """Tracks with independent errors (rolling from the strike and sliding,
+    alternately; every other pair fitted as a lossy codec's) on which the
+    residuals were judged autocorrelated (the AR(1) refit), per cell."""
+    cells = {}
+    for i, tr in enumerate(mixed_tracks(n, seed)):
+        est = estimate(tr.t, tr.xy, np.full(len(tr.t), tr.sigma), tr.params, tr.exposure_s,
+                       lossless=i % 4 < 2, run_paper=False)
+        cells.setdefault((tr.fps, tr.sigma), []).append(bool(est.decisions.get("autocorrelated")))
+    return cells
+
+
+def test_false_autocorrelated_rate_small():
+    cells = false_autocorrelated(24, 11)
+    assert sum(sum(v) for v in cells.values()) <= allowed(24)
+
+
+@pytest.mark.slow
+def test_false_autocorrelated_rate_400_every_cell():
+    # Measured (seed 12): see fit.decide.AR1_FACTOR for the 1,200-track run.
+    cells = false_autocorrelated(408, 12)
+    hits = sum(sum(v) for v in cells.values())
+    assert hits <= allowed(408), hits
+    for k, v in cells.items():
+        assert sum(v) <= allowed(len(v)), (k, sum(v), len(v))
+
+
+def false_stop_apart(n, seed):
+    """Case-2 tracks (sliding runs into the rest) whose segmentation runs
+    into the rest, and how many of them the case-2 test calls apart."""
+    from cuespin.fit.decide import stop_apart
+    from cuespin.recover.paper import case2_distance, geometry_covariance, ran_into_rest
+    from cuespin.recover.simulate import case2_tracks
+    hits = total = 0
+    for tr in case2_tracks(n, seed):
+        p = tr.params
+        seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, tr.sigma, tr.exposure_s)
+        s = seg if seg and ran_into_rest(seg) else (seg.unended if seg else None)
+        if s is not None and ran_into_rest(s):
+            total += 1
+            hits += stop_apart(case2_distance(s, geometry_covariance(s, tr.sigma, True))).yes
+    return hits, total
+
+
+def test_false_stop_apart_rate_small():
+    hits, total = false_stop_apart(48, 21)
+    assert total >= 40 and hits <= allowed(total)
+
+
+@pytest.mark.slow
+def test_false_stop_apart_rate_400():
+    hits, total = false_stop_apart(420, 22)
+    assert total >= 400 and hits <= allowed(total), (hits, total)
+
+
+def test_case2_refused_when_the_stop_is_apart_from_the_rest():
+    # The paper's case 2 takes x1 = x2 only when they agree: a rest moved
+    # 5 mm from where sliding stopped answers failed, never case 2's x1 = x2.
+    from dataclasses import replace
+
+    from cuespin.recover.paper import paper_from_segments, ran_into_rest
+    from cuespin.recover.simulate import case2_tracks
+    for tr in case2_tracks(8, 23):
+        p = tr.params
+        seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, tr.sigma, tr.exposure_s)
+        s = seg if ran_into_rest(seg) else seg.unended
+        if s is None or not ran_into_rest(s):
+            continue
+        dt = float(np.median(np.diff(tr.t)))
+        kept = paper_from_segments(s, tr.t, tr.xy, p, tr.sigma, dt)
+        assert kept.status != "failed" or "run into the rest" not in kept.reason
+        moved = paper_from_segments(replace(s, x2=s.x2 + np.array([5e-3, 0.0])), tr.t, tr.xy, p, tr.sigma, dt)
+        assert moved.status == "failed" and "did not run into the rest" in moved.reason, moved.reason
+        return
+    pytest.fail("no case-2 track ran into the rest")

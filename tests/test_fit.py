@@ -110,6 +110,26 @@ def test_fitted_parabola_holds_the_sliding_path(seed):
     assert np.std(shape.parabola.residuals) == pytest.approx(SIGMA_M, rel=0.15)
 
 
+def test_parabola_jacobian_is_the_distances_derivative():
+    # The fit's analytic Jacobian (fit.conics.parabola_jacobian) against
+    # central differences of the orthogonal distances, points either side
+    # of the curve and across the vertex.
+    from cuespin.fit.conics import parabola_jacobian
+    from cuespin.physics.parabola import Parabola
+    rng = np.random.default_rng(0)
+    par = Parabola(a=3.0, theta=0.7, vertex=np.array([0.5, 0.3]))
+    x = np.linspace(-0.3, 0.4, 25)
+    p = par.to_table(np.stack([x, 3.0 * x**2], 1)) + rng.normal(0, 0.01, (25, 2))
+    q = np.r_[np.log(par.a), par.theta, par.vertex]
+
+    def d(q):
+        return parabola_distances(Parabola(a=float(np.exp(q[0])), theta=float(q[1]), vertex=q[2:4]), p)
+
+    h = 1e-7
+    num = np.stack([(d(q + h * e) - d(q - h * e)) / (2 * h) for e in np.eye(4)], 1)
+    assert np.abs(parabola_jacobian(par, p) - num).max() < 1e-7
+
+
 def test_straight_path_is_a_line():
     shot, params = sample_shot(40, "case3")
     t, xy, ph = noisy_track(shot, params)

@@ -1,0 +1,60 @@
+"""A refit through another camera keeps the first recovery's decisions
+(recover.estimate.Decided): the segmentation's kind and the paper's root,
+with standard errors for a root chosen that way."""
+
+from dataclasses import replace
+
+import numpy as np
+
+import cuespin.recover.paper as paper_mod
+from cuespin.data_gen.sampler import sample_shot
+from cuespin.fit.decide import t1_in_view
+from cuespin.physics import phases
+from cuespin.recover.estimate import estimate
+from cuespin.recover.simulate import simulate_track
+
+
+def _case5(seed=0):
+    rng = np.random.default_rng(seed)
+    shot, p = sample_shot(rng, "case5")
+    return simulate_track(shot, p, 120.0, 2e-5, rng, t_end=phases(shot, p).t2 + 0.3)
+
+
+def test_root_kept_from_the_first_answer_has_standard_errors(monkeypatch):
+    # A case-5 straight shot whose line method has two roots once the
+    # sliding time no longer breaks the tie (the tolerance opened): a refit
+    # keeping the first answer's root answers ok with that root and states
+    # its errors (before: ok with no standard errors).
+    tr = _case5()
+    sig = np.full(len(tr.t), tr.sigma)
+    monkeypatch.setattr(paper_mod, "TIE_T1_FRAMES", 1e6)
+    first = estimate(tr.t, tr.xy, sig, tr.params, 0.0)
+    assert first.paper.status == "ambiguous"
+    root = first.paper.solutions[1]
+    keep = replace(first.decided, paper=(root["v0"], root["w0"]))
+    again = estimate(tr.t, tr.xy, sig, tr.params, 0.0, keep=keep)
+    assert again.paper.status == "ok"
+    assert np.allclose(again.paper.v0, root["v0"], rtol=1e-3)
+    assert set(again.paper.stderr) == {"v0", "w0"}
+    assert np.all(np.isfinite(again.paper.stderr["v0"])) and np.all(again.paper.stderr["v0"] > 0)
+
+
+def test_refit_keeps_a_breakpoint_in_view():
+    # A track cut while the ball still slides: its best segmentation slides to
+    # the end.  A refit told to keep a breakpoint in view (a first camera
+    # that saw one) searches from it and keeps one in view; told to keep
+    # "sliding to the end" it keeps that (before: the default segmentation,
+    # whatever its kind).
+    rng = np.random.default_rng(4)
+    shot, p = sample_shot(rng, "masse")
+    ph = phases(shot, p)
+    tr = simulate_track(shot, p, 240.0, 1e-4, rng, t_end=shot.t0 + 0.7 * (ph.t1 - shot.t0))
+    sig = np.full(len(tr.t), tr.sigma)
+    first = estimate(tr.t, tr.xy, sig, tr.params, 0.0, run_paper=True)
+    assert first.decided.breaks is not None and not np.isfinite(first.decided.breaks[1])
+    t_mid = shot.t0 + 0.5 * (ph.t1 - shot.t0)
+    kept = replace(first.decided, segments="sliding", breaks=(first.decided.breaks[0], t_mid))
+    again = estimate(tr.t, tr.xy, sig, tr.params, 0.0, keep=kept)
+    assert t1_in_view(again.seg.t1, tr.t)
+    same = estimate(tr.t, tr.xy, sig, tr.params, 0.0, keep=first.decided)
+    assert not np.isfinite(same.seg.t1)
