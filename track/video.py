@@ -293,9 +293,16 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         while len(buf) < ahead and (img := pull()) is not None:
             buf.append(img)
         n_dropped = 0
+        best = None  # the model of the look-ahead where the ball moved most
         while True:
             proj, bg = learn_model(buf, radius_px, max(config.n_background, 2), mask)
-            if (bg.polarity and bg.moved_px >= LEARN_MOVED_AREA * np.pi * radius_px**2) or ended:
+            if bg.polarity and (best is None or bg.moved_px > best[1].moved_px):
+                best = (proj, bg)
+            if bg.polarity and bg.moved_px >= LEARN_MOVED_AREA * np.pi * radius_px**2:
+                break
+            if ended:  # the ball never moved a diameter: the most it did
+                if best is not None:
+                    proj, bg = best
                 break
             # The ball has not moved enough within the look-ahead: slide on
             # past its older half, decoded again once the model is learnt.
