@@ -59,12 +59,15 @@ def test_resting_balls_that_outshine_the_ball_are_not_tracked(tmp_path, shot, se
 
 
 @pytest.mark.slow
-# Issue 10's targets are not met yet on 6 of these 36 shots (measured: the
-# colour channel and polarity learnt from the cue on low-contrast pairs,
-# seed 6 shot 0 and seed 7 shots 1 and 5; the look-ahead dropping resting
-# frames, seed 5 FFV1 shot 5; seed 7 shot 0 at 60 fps): kept as the target,
-# marked so that the run says which cases still fail and which pass.
-@pytest.mark.xfail(reason="issue 10: colour channel learnt from the cue on some low-contrast shots", strict=False)
+# Issue 10's targets are not met yet on a few of these 36 shots (measured
+# after the cue and channel fixes of branch cuetip: seed 7 MJPG shot 5, red
+# on red under a low light, whose lit middle is brighter than the felt and
+# whose rim darker: the polarity learnt is the rim's and the search finds the
+# dark side, ~1.3 radii off, until the ball stops; seed 7 FFV1 shot 0 at 60
+# fps, up to 0.42 radii off after the strike): kept as the target, marked so
+# that the run says which cases still fail and which pass.
+@pytest.mark.xfail(reason="issue 10: a shaded ball close to the felt's colour (polarity) and a 60-fps strike",
+                   strict=False)
 @pytest.mark.parametrize("codec", ["MJPG", "FFV1"])
 @pytest.mark.parametrize("seed", [5, 6, 7])
 def test_realistic_shots_meet_the_issue_targets(tmp_path, seed, codec):
@@ -72,3 +75,20 @@ def test_realistic_shots_meet_the_issue_targets(tmp_path, seed, codec):
         scene.render["max_duration"] = 2.0
         found, err, tr = track_against_truth(scene, tmp_path / f"shot{i}.avi")
         assert_issue_targets(found, err, tr, f"seed {seed} {codec} shot {i}")
+
+
+def test_cue_tip_at_the_strike_is_not_the_ball(tmp_path):
+    # sample_scene(3, realistic, FFV1): an orange ball on red felt (noise
+    # 6.7, 120 fps) struck by a cue whose tip follows it through.  Before
+    # the fix the cue, in the felt's average and in the ball's window, moved
+    # found centres 3-11 px (0.4-1.2 radii) off at and after the strike.
+    from cuespin.data_gen.sampler import sample_scene
+
+    scene = sample_scene(3, look="realistic", codec="FFV1")
+    assert scene.render["cue"]
+    scene.render["max_duration"] = 0.6  # rest, strike at frame 35, follow-through, withdrawal
+    found, err, tr = track_against_truth(scene, tmp_path / "cue.avi")
+    assert err.size and err.max() < MAX_ERR_RADII, f"a found centre {err.max():.2f} radii off"
+    # Measured 72 of 73 frames in view (one fit fails as the cue touches):
+    # a frame left out is allowed, a wrong centre is not.
+    assert found >= 0.95, tr.status_counts()

@@ -15,9 +15,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
-from cuespin.track.background import ball_wide
+from cuespin.track.background import ball_wide, box_size, spread_threshold
+from cuespin.track.radius import as_radius_map
 
 # 8-bit rounding adds variance 1/12 per channel, whatever the sensor does.
 ROUNDING_VAR = 1.0 / 12.0
@@ -102,6 +104,45 @@ def noise_covariance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return cov + floor * np.eye(3)
 
 
+def ball_direction(samples: np.ndarray, ys: np.ndarray, xs: np.ndarray, radius_px,
+                   L: np.ndarray) -> np.ndarray | None:
+    """The whitened colour direction (unit, shape (3,)) in which the samples
+    depart from each pixel's median where a ball fits in what moved
+    (pixels ``ys``, ``xs``), or None when too few depart.
+
+    Each sample's departure is averaged over a box the ball fills
+    (:func:`cuespin.track.background.box_size`) before it is judged: a ball
+    whose colour is close to the felt's departs by less than the noise at
+    each pixel (blue on blue, noise 6.4: 4.9 sigmas) and only its highlight,
+    its markings and the cue passed the per-pixel test, and set the
+    channel (measured on sample_scenes(6, 6, realistic, MJPG)[0]: the ball
+    lost in 20 frames, 92 frames more than R/4 off).  Averaged, the ball
+    stands out by ~k noise sigmas while a cue, a highlight or a dot fills a
+    small part of the box.  The direction is the principal axis of the
+    departures' unit vectors, so that it is the one most box positions
+    share (the ball's), not the one the largest departures share.
+    """
+    n, H, W, _ = samples.shape
+    # One box for the whole image, the smallest ball's, so that the ball
+    # fills it wherever it is (a radius map under perspective).
+    k = box_size(as_radius_map(radius_px, (H, W)).r_min)
+    on = np.zeros((H, W), np.uint8)
+    on[ys, xs] = 1
+    on = cv2.dilate(on, np.ones((k, k), np.uint8)).astype(bool)
+    vs, us = np.nonzero(on)
+    v0, v1, u0, u1 = vs.min(), vs.max() + 1, us.min(), us.max() + 1
+    X = samples[:, v0:v1, u0:u1].astype(np.float32)
+    D = (X - np.median(X, axis=0)) * on[v0:v1, u0:u1, None]
+    Db = np.stack([cv2.blur(d, (k, k)) for d in D])[:, ys - v0, xs - u0].reshape(-1, 3).astype(np.float64)
+    Z = np.linalg.solve(L, Db.T).T * k                       # whitened: a box mean's noise is S / k^2
+    norm2 = np.einsum("ij,ij->i", Z, Z)
+    big = norm2 > BALL_SIGMAS**2
+    if big.sum() < 10:
+        return None
+    U = Z[big] / np.sqrt(norm2[big])[:, None]
+    return np.linalg.eigh(U.T @ U)[1][:, -1]
+
+
 def learn_projection(samples: np.ndarray, radius_px) -> Projection:
     """The channel combination that best separates the moving ball from the felt.
 
@@ -130,19 +171,15 @@ def learn_projection(samples: np.ndarray, radius_px) -> Projection:
     sd = np.sqrt(np.diag(S))
     lo = samples.min(axis=0).astype(np.int16)
     hi = samples.max(axis=0).astype(np.int16)
-    spread = np.any((hi - lo) > 7.5 * np.maximum(sd, 0.5) + 2, axis=-1)
+    span = (hi - lo).astype(np.float32)
+    noise_thr = 7.5 * np.maximum(sd, 0.5) + 2
+    spread = np.any(span > [spread_threshold(span[..., i], noise_thr[i]) for i in range(3)], axis=-1)
     ys, xs = np.nonzero(ball_wide(spread, radius_px))
     luma = np.array([0.114, 0.587, 0.299])
     w = None
     if len(ys):
-        X = samples[:, ys, xs, :].astype(np.float32)        # (n, m, 3)
-        D = (X - np.median(X, axis=0)).reshape(-1, 3).astype(np.float64)
-        Z = np.linalg.solve(L, D.T).T                         # whitened departures
-        big = np.einsum("ij,ij->i", Z, Z) > BALL_SIGMAS**2
-        if big.sum() >= 10:
-            Zb = Z[big]
-            vals, vecs = np.linalg.eigh(Zb.T @ Zb)
-            e = vecs[:, -1]
+        e = ball_direction(samples, ys, xs, radius_px, L)
+        if e is not None:
             w = np.linalg.solve(L.T, e)                       # w . d = e . z
     if w is None:
         w = luma / np.sqrt(luma @ S @ luma)

@@ -436,7 +436,7 @@ def moments(D: np.ndarray, u0: int, v0: int, c0, radius: float, n_iter: int = 3)
 
 
 def refit_shift(felt_old: np.ndarray, felt_new: np.ndarray, u0: int, v0: int, c, b, G: float,
-                r: float, fit_blur: bool, shade=None, outline=None) -> np.ndarray:
+                r: float, fit_blur: bool, shade=None, outline=None, valid=None) -> np.ndarray:
     """Change of a converged disc fit's centre (px) when its felt is replaced.
 
     At the old optimum the old Jacobian ``J_o`` is orthogonal to the
@@ -449,7 +449,8 @@ def refit_shift(felt_old: np.ndarray, felt_new: np.ndarray, u0: int, v0: int, c,
     stopped near its strike: ``J_o`` is zero there, as those pixels told the
     old fit nothing; with ``J_n`` the shift came out of the wrong sign).
     ``shade``: the fit's look parameters, when it fitted them; ``outline``
-    the fit's ellipse, when it used one.
+    the fit's ellipse, when it used one; ``valid`` (bool, the window's
+    shape) the pixels it used, when it left some out (the cue's).
     """
     taus = blur_nodes(np.hypot(*b))
     c, b = np.asarray(c, float), np.asarray(b, float)
@@ -474,6 +475,8 @@ def refit_shift(felt_old: np.ndarray, felt_new: np.ndarray, u0: int, v0: int, c,
     # Least squares, not solve: a blur fitted near zero length has (almost)
     # zero derivatives (the blur acts at second order there), which must not
     # stop the centre's correction.
+    if valid is not None:  # the pixels the fit left out tell it nothing (rows form: a column per pixel)
+        Jo = Jo * np.asarray(valid, float).reshape(1, -1)
     try:
         step = -np.linalg.lstsq(Jo @ Jn.T, Jo @ (df * (1.0 - cov)), rcond=1e-9)[0]
     except np.linalg.LinAlgError:

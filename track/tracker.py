@@ -34,6 +34,29 @@ STILL_PX = 1.5
 # ball's model does not hold (the cue, a highlight): left out of a refit.
 # Gaussian noise passes it once in 1.7 million pixels.
 OUTLIER_SIGMAS = 5.0
+# Something else in the ball's window (the cue at the strike and in its
+# follow-through, or a cue the felt model caught where the frame has none):
+# a pixel beyond the ball's outline (its largest radius, half its blur and
+# FOREIGN_GAP_PX for the optics' blur: the realistic look's PSF sigma is
+# 0.5-1.5 px) that departs from the felt by more than OUTLIER_SIGMAS noise
+# sigmas and FOREIGN_CONTRAST of the ball's contrast (a lossy codec flattens
+# the felt's noise but not its error at the ball's edge; MJPG's chroma
+# bleeds ~2 px).  Such pixels, in groups of at least FOREIGN_MIN_PX, grown by
+# FOREIGN_GROW_PX (the object's blurred edge, and its part inside the gap:
+# a cue tip touching the ball), are left out of the fit.  Measured on
+# sample_scene(3, realistic, FFV1): the cue's tip at the ball's rear pulled
+# the fit 1.5-6 px towards it, and 11 px in the follow-through.
+FOREIGN_GAP_PX = 2.0
+FOREIGN_CONTRAST = 0.25
+FOREIGN_MIN_PX = 4
+FOREIGN_GROW_PX = 3
+# The search's score clips each pixel's departure from the felt at this
+# multiple of the ball's contrast (Background.contrast, the 75th percentile
+# of the path's largest departures: the ball's lit middle).  Measured on
+# sample_scenes(6, 6, realistic, MJPG)[0] (blue on blue, contrast 56): the
+# ferrule, 106 levels off the felt, scored 34 at the window's edge against
+# the ball's 33, and was tracked for 44 frames after the strike.
+SCORE_CAP = 1.0
 # Frames whose two fits (disc and shaded) decide the look (config.look "auto").
 LOOK_FRAMES = 12
 # The shaded look is kept when its pooled residual reduction exceeds the
@@ -122,6 +145,43 @@ def shaded_look(votes: list) -> bool:
     return bool(stat > chdtri(3 * len(rss_d), LOOK_P))
 
 
+def beyond_ball(shape, u0: int, v0: int, c, b, r_out: float) -> np.ndarray:
+    """Pixels of a window (``shape`` (h, w), top-left ``(u0, v0)``) farther
+    than ``r_out + FOREIGN_GAP_PX`` from the ball's blur segment (centre
+    ``c``, blur vector ``b``, px): what they show is felt or something else,
+    never the ball."""
+    h, w = shape
+    yy, xx = np.mgrid[v0:v0 + h, u0:u0 + w].astype(np.float32)
+    c, b = np.asarray(c, float), np.asarray(b, float)
+    L2 = float(b @ b)
+    px, py = xx - c[0], yy - c[1]
+    s = np.clip((px * b[0] + py * b[1]) / L2, -0.5, 0.5) if L2 > 0 else 0.0
+    return np.hypot(px - s * b[0], py - s * b[1]) > r_out + FOREIGN_GAP_PX
+
+
+def foreign_threshold(sigma: float, contrast: float) -> float:
+    """Departure from the felt (levels) beyond which a pixel shows something
+    (``FOREIGN_GAP_PX``'s rule), for noise ``sigma`` and the ball's ``contrast``."""
+    return max(OUTLIER_SIGMAS * max(sigma, 0.5), FOREIGN_CONTRAST * contrast)
+
+
+def foreign_pixels(D: np.ndarray, beyond: np.ndarray, sigma: float, contrast: float) -> np.ndarray | None:
+    """Pixels of a ball-positive window ``D`` (frame less felt) that show
+    something other than the ball or the felt (the rule at
+    ``FOREIGN_GAP_PX``): groups of ``FOREIGN_MIN_PX`` or more beyond the
+    ball, grown by ``FOREIGN_GROW_PX``.  None when there are none."""
+    bad = (beyond & (np.abs(D) > foreign_threshold(sigma, contrast))).astype(np.uint8)
+    if bad.sum() < FOREIGN_MIN_PX:
+        return None
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(bad, connectivity=8)
+    big = np.nonzero(stats[1:, cv2.CC_STAT_AREA] >= FOREIGN_MIN_PX)[0] + 1
+    if not len(big):
+        return None
+    bad = np.isin(labels, big).astype(np.uint8)
+    g = 2 * FOREIGN_GROW_PX + 1
+    return cv2.dilate(bad, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (g, g))).astype(bool)
+
+
 def _lost(status: int) -> Observation:
     return Observation(status, np.full(2, np.nan), np.full(2, np.nan), np.full((2, 2), np.nan))
 
@@ -170,6 +230,7 @@ class BallTracker:
         self.exposure_frames = float(exposure_frames)
         self.cfg = config
         self.proj = projection
+        self.cap = np.float32(SCORE_CAP * max(background.contrast, 1.0))
         self.H, self.W = background.image.shape
         self.radii = radii if radii is not None else RadiusMap((self.H, self.W), self.r)
         # The matched filter's box and ring per scale of the radius map (one
@@ -215,8 +276,13 @@ class BallTracker:
         over a box the ball fills less the mean over the ring of felt
         around it, sized for scale ``j`` of the radius map.  A stick (the
         cue) or an edge fills the ring as much as the box and scores near 0;
-        the ball scores ~0.8 of its contrast."""
+        the ball scores ~0.8 of its contrast.  No pixel counts for more than
+        ``SCORE_CAP`` of the ball's contrast: the cue's end (its ivory
+        ferrule, its chalked tip), which departs from the felt by up to twice
+        as much as a low-contrast ball and half fills the box, outscored the
+        ball it touched."""
         k, K = self.boxes[j]
+        D = np.clip(D, -self.cap, self.cap)
         inner = cv2.blur(D, (k, k))
         outer = cv2.boxFilter(D, -1, (K, K), normalize=False)
         return inner - (outer - inner * (k * k)) / (K * K - k * k)
@@ -419,6 +485,14 @@ class BallTracker:
                              outline=ol)
             if not f:
                 return _lost(FIT_FAILED)
+            foreign = foreign_pixels(D, beyond_ball(D.shape, u0, v0, f.c, f.b, r_out), self.bg.sigma,
+                                     self.bg.contrast)
+            if foreign is not None:
+                g = fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=shade,
+                             valid=~foreign, outline=ol)
+                if not g:
+                    return _lost(FIT_FAILED)
+                f = g
             if recentre and ol is not None and np.hypot(*(f.c - self.outline_of.at)) > OUTLINE_REFIT_PX:
                 # Fitted away from where its outline was taken (a ball larger
                 # than the search's box): again with the outline there, on a
@@ -430,7 +504,7 @@ class BallTracker:
                 self._learn_look(patch, felt, u0, v0, f, r, G0, blur, fit_blur)
             c, se, cov = f.c, f.stderr, f.cov
             self.last_fit = (u0, v0, v1 - v0, u1 - u0, f.c.copy(), f.b.copy(), f.G, bool(fit_blur),
-                             f.shade, ol)
+                             f.shade, ol, foreign)
             self.last_patch = (patch, u0, v0)
         # The whole ball must lie inside the frame for the centre to be trusted.
         eu, ev = (r, r) if ol is None else ol.half_extent

@@ -30,7 +30,8 @@ from cuespin.track.misfit import LookMisfit, look_misfit
 from cuespin.track.radius import RadiusMap
 from cuespin.track.model import refit_shift
 from cuespin.track.reader import FrameSource, ThreadedFrames, TrackError, frame_times, probe
-from cuespin.track.tracker import OK, STATUS_TEXT, BallTracker, TrackerConfig
+from cuespin.track.tracker import (OK, STATUS_TEXT, BallTracker, TrackerConfig, beyond_ball, foreign_pixels,
+                                   foreign_threshold)
 
 # Bytes of decoded frames held before the background is learnt: 437 grey or
 # 145 BGR frames at 1280 x 720 (at 240 fps, 1.8 s or 0.6 s of video; the
@@ -43,9 +44,22 @@ LOOKAHEAD_MIN_FRAMES = 24
 QUEUE_BYTES = 96 * 2**20
 # The fastest a struck ball moves (m/s): a hard break is 8-11 m/s.
 MAX_SPEED_M_S = 12.0
+# The look-ahead slides on until what moved in it, where a ball fits,
+# covers this many of the ball's areas (a ball that moved by about its
+# diameter), so that the felt, the polarity and the channel are learnt from
+# the ball's motion.  A crescent (the ball moved 4 px at the look-ahead's end,
+# sample_scenes(6, 7, realistic, MJPG)[1]) gave a contrast of 9 where the
+# ball's is ~250, and a resting ball's codec flicker became the ball.
+LEARN_MOVED_AREA = 2.0
 # Every this many frames the whole decoded frame joins the felt average
 # (cv2.accumulate: ~1 ms for a 1280 x 720 BGR frame, a quarter of it per frame).
 FULL_FELT_EVERY = 4
+# Within this many ball radii of the ball, a whole frame's pixels that show
+# something other than the felt (the cue lying over the path behind the ball
+# at the strike and in its follow-through, 4-5 cm past the contact point:
+# 1.4-1.8 radii past the rest spot's centre) stay out of the felt's average.
+# Farther away the frame is not projected (~10 ms a 1280 x 720 frame).
+FOREIGN_REACH_RADII = 8.0
 
 
 @dataclass
@@ -202,18 +216,20 @@ def search_mask(cam, table, R: float, shape, grow_px: float | None = None) -> np
     return mask.astype(bool)
 
 
-def learn_model(frames: list, radius_px, n_samples: int) -> tuple[Projection, Background]:
+def learn_model(frames: list, radius_px, n_samples: int,
+                where: np.ndarray | None = None) -> tuple[Projection, Background]:
     """The projection and the background from ``n_samples`` frames spread over
     ``frames`` (the look-ahead), plus as many again where a resting ball hid
     the felt from most of the first ones.  ``radius_px``: the ball's radius
-    (px) or its :class:`~cuespin.track.radius.RadiusMap`."""
+    (px) or its :class:`~cuespin.track.radius.RadiusMap`; ``where``: the
+    playing surface (:func:`search_mask`)."""
     n = len(frames)
     idx = np.unique(np.linspace(0, n - 1, n_samples).round().astype(int))
     colour = frames[0].ndim == 3
     samples = np.stack([frames[i] for i in idx])
     proj = learn_projection(samples, radius_px) if colour else GREY
     P = proj.many(samples) if colour else samples
-    bg = learn_background(P, radius_px)
+    bg = learn_background(P, radius_px, where)
     if bg.weak_samples.any():
         # Sample the stretch whose frames showed the hidden felt, reaching
         # half a spacing beyond it on each side.
@@ -224,7 +240,7 @@ def learn_model(frames: list, radius_px, n_samples: int) -> tuple[Projection, Ba
         if len(extra):
             more = np.stack([frames[i] for i in extra])
             P = np.concatenate([P, proj.many(more) if colour else more])
-            bg = learn_background(P, radius_px)
+            bg = learn_background(P, radius_px, where)
     return proj, bg
 
 
@@ -309,16 +325,24 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         buf = [first]
         while len(buf) < ahead and (img := pull()) is not None:
             buf.append(img)
+        n_dropped = 0
+        best = None  # the model of the look-ahead where the ball moved most
         while True:
-            proj, bg = learn_model(buf, radii, max(config.n_background, 2))
-            if bg.polarity or ended:
+            proj, bg = learn_model(buf, radii, max(config.n_background, 2), mask)
+            if bg.polarity and (best is None or bg.moved_px > best[1].moved_px):
+                best = (proj, bg)
+            # The smallest ball in view: under perspective a far ball moving a
+            # diameter sweeps less than the image centre's would.
+            if bg.polarity and bg.moved_px >= LEARN_MOVED_AREA * np.pi * radii.r_min**2:
                 break
-            # Nothing moved within the look-ahead: give up its older half.
+            if ended:  # the ball never moved a diameter: the most it did
+                if best is not None:
+                    proj, bg = best
+                break
+            # The ball has not moved enough within the look-ahead: slide on
+            # past its older half, decoded again once the model is learnt.
             drop = len(buf) // 2
-            for _ in range(drop):
-                uv.append(np.full(2, np.nan))
-                cov.append(np.full((2, 2), np.nan))
-                status.append(1)  # NO_BALL
+            n_dropped += drop
             buf = buf[drop:]
             while len(buf) < ahead and (img := pull()) is not None:
                 buf.append(img)
@@ -329,12 +353,25 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         tracker = BallTracker(bg, radius_px, cam.exposure_s * cam.fps, config, projection=proj,
                               search_mask=mask, max_step_px=max_step, camera=cam, R=R, radii=radii)
         felt = FeltAccumulator(first.shape)
+        foreign_level = foreign_threshold(bg.sigma, bg.contrast)
         fits = []  # (frame index, the fit's state) for the final background correction
         t_start = time.perf_counter()
         k = len(status)
         buf.reverse()  # pop() from the end: the oldest first, each dropped once tracked
+        # The frames slid past (a long rest before the strike) from a second
+        # pass over the video's start: they are tracked like any other.
+        again = iter(FrameSource(path, info)) if n_dropped else None
         while True:
-            item = buf.pop() if buf else pull()
+            if k < n_dropped:
+                item = next(again, None)
+                if item is None:  # the second pass ended early: the rest of it lost
+                    uv.append(np.full(2, np.nan))
+                    cov.append(np.full((2, 2), np.nan))
+                    status.append(1)  # NO_BALL
+                    k += 1
+                    continue
+            else:
+                item = buf.pop() if buf else pull()
             if item is None:
                 break
             # With nothing moving there is no ball to separate from the felt.
@@ -344,9 +381,10 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
                 patch, pu, pv = tracker.last_patch
                 # The ball's own size there, under perspective.
                 mask_r = tracker.radius_with(tracker.last_fit[9]) + 0.5 * blur_len + 1.5
-                felt.add(patch, pu, pv, obs.uv, mask_r)
+                felt.add(patch, pu, pv, obs.uv, mask_r, tracker.last_fit[10], bg.image, foreign_level)
                 if k % FULL_FELT_EVERY == 0:
-                    felt.add_frame(item, obs.uv, mask_r)
+                    felt.add_frame(item, obs.uv, mask_r, bg.image, proj if proj.w is not None else None,
+                                   foreign_level, FOREIGN_REACH_RADII * radius_px)
                 fits.append((k, tracker.last_fit))
             uv.append(obs.uv)
             cov.append(obs.cov)
@@ -354,6 +392,8 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
             k += 1
             if progress is not None and k % 64 == 0:
                 progress(64)
+        if again is not None:
+            again.close()  # releases its decoder
     finally:
         if config.threaded:
             feed.close()
@@ -369,10 +409,19 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     if fits and felt.n >= 20:
         # The felt averaged over the tracked frames: correct each fit for it.
         better = felt.felt(bg.image, proj)
-        for kk, (pu, pv, ph, pw, c, b, G, fb, shade, outline) in fits:
+        for kk, (pu, pv, ph, pw, c, b, G, fb, shade, outline, foreign) in fits:
             old = bg.image[pv:pv + ph, pu:pu + pw]
             new = better[pv:pv + ph, pu:pu + pw]
-            uv[kk] = c + refit_shift(old, new, pu, pv, c, b, G, radius_px, fb, shade, outline)
+            # Beyond the ball the fit's frame agreed with the old felt (else
+            # those pixels were left out as foreign): where the averaged felt
+            # departs from it as much, it holds something the frame does not
+            # (a cue resting there in many frames), and the old felt stays.
+            beyond = beyond_ball(old.shape, pu, pv, c, b, tracker.radius_with(outline))
+            changed = foreign_pixels(bg.polarity * (new - old), beyond, bg.sigma, bg.contrast)
+            if changed is not None:
+                new = np.where(changed & beyond, old, new)
+            uv[kk] = c + refit_shift(old, new, pu, pv, c, b, G, radius_px, fb, shade, outline,
+                                     None if foreign is None else ~foreign)
         bg = replace(bg, image=better)
     t_track = time.perf_counter() - t_start
     status = np.array(status, np.int8)
