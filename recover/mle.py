@@ -793,6 +793,10 @@ def with_profile_interval(res: MLEResult, fit: ModelFit, meas: Measurements, exp
             if profile_chi2(fit, meas, exposure_s, sign * d) >= target:
                 break
             d *= 2.0
+        else:  # flat as far as searched: no interval, and no number to state
+            return replace(res, status="degenerate",
+                           reason="the ball stops as sliding ends and the track does not bound "
+                                  "the slip's size (its profile likelihood stays flat)")
         lo, hi = (d / 2.0 if d > step else 0.0), d
         for _ in range(PROFILE_BISECTIONS):
             mid = 0.5 * (lo + hi)
