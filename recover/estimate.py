@@ -52,7 +52,12 @@ class Decided:
     ``ar1`` (the AR(1) error model's lag-1 correlation; 0: none) and
     ``breaks`` (the chosen segmentation's ``(t0, t1)``, ``t1`` inf when its
     sliding runs to the end of the motion: the refit's segmentation is
-    searched from them and keeps their kind, fit.segment.segment_track).
+    searched from them and keeps their kind, fit.segment.segment_track),
+    ``hac`` (the residuals' autocorrelation answered by a HAC sandwich:
+    decided once, on the first fit; never on top of the AR(1) model),
+    ``verdicts`` (the chosen fit's status rules' answers,
+    :attr:`recover.mle.MLEResult.verdicts`) and ``stop_apart`` (the paper's
+    case 2 question, :attr:`recover.paper.PaperResult.stop_apart`).
     """
 
     sliding_seen: bool | None
@@ -67,6 +72,9 @@ class Decided:
     paper: tuple | None = None
     ar1: float = 0.0
     breaks: tuple | None = None
+    hac: bool = False
+    verdicts: dict | None = None
+    stop_apart: bool | None = None
 
 
 @dataclass(frozen=True)
@@ -190,6 +198,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
     still = not lossless and not inter_frame
     decisions: dict[str, Decision] = {}
     mle = None
+    hac = False  # no HAC sandwich: not autocorrelated, or the AR(1) model took it in
     try:
         start = (first.shot.x0, first.shot.t0, first.shot.v0, first.shot.w0) if first else starts[0]
         full, roll = fit_models(meas, params, start, exposure_s, fit_friction,
@@ -204,18 +213,23 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
                 full, roll = fit_models(meas, params, (full.shot.x0, full.shot.t0, full.shot.v0, full.shot.w0),
                                         exposure_s, fit_friction,
                                         (roll.shot.x0, roll.shot.t0, roll.shot.v0, roll.shot.w0), ar1=rho)
+        elif codec.var <= 0:
+            # No codec error measured to model: the residuals' autocorrelation,
+            # asked once here, is answered by the HAC sandwich.
+            decisions["autocorrelated"] = autocorrelated(*lag1_autocorrelation(meas, full.residuals))
+            hac = bool(decisions["autocorrelated"])
     except FIT_ERRORS as exc:
         mle = MLEResult("failed", f"the fit did not run: {exc}")
     if mle is None:
-        lr = slip_lr(full, roll, meas, codec)
+        lr = slip_lr(full, roll, meas, codec, hac)
         decisions["sliding_seen"] = sliding_seen(lr)
         if decisions["sliding_seen"]:
             decisions["sliding_ended"] = sliding_ended(seg, t, phases(full.shot, full.params).t1,
                                                        friction_known=not fit_friction)
-            mle = with_profile_interval(result(full, meas, lr, decisions["sliding_ended"].yes, codec, still),
+            mle = with_profile_interval(result(full, meas, lr, decisions["sliding_ended"].yes, codec, still, hac),
                                         full, meas, exposure_s)
         else:
-            mle = result(roll, meas, lr, True, codec, still)
+            mle = result(roll, meas, lr, True, codec, still, hac)
     else:
         decisions["sliding_ended"] = sliding_ended(seg, t)
     chosen = seg
@@ -244,7 +258,8 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         start=None if fit is None else (fit.shot.x0, fit.shot.t0, fit.shot.v0, fit.shot.w0),
         paper=(paper.v0, paper.w0) if paper is not None and paper.status == "ok" else None,
         ar1=0.0 if fit is None else fit.ar1,
-        breaks=(chosen.t0, float("inf") if runs_to_end(chosen) else chosen.t1) if chosen else None)
+        breaks=(chosen.t0, float("inf") if runs_to_end(chosen) else chosen.t1) if chosen else None,
+        hac=hac, verdicts=dict(mle.verdicts) or None, stop_apart=None if paper is None else paper.stop_apart)
     return Estimate(chosen, paper, mle, meas, codec_var, decisions,
                     {"fit": t_fit, "recover": time.perf_counter() - clock}, decided)
 
@@ -266,7 +281,8 @@ def _refit(keep: Decided, seg, t, xy, params, exposure_s, fit_friction, run_pape
         rolling = not keep.sliding_seen
         try:
             fit = fit_model(meas, params, keep.start, exposure_s, rolling, fit_friction, keep.ar1)
-            mle = result(fit, meas, nan, keep.sliding_ended or rolling, codec, not lossless and codec is None)
+            mle = result(fit, meas, nan, keep.sliding_ended or rolling, codec, not lossless and codec is None,
+                         keep.hac, keep.verdicts)
         except FIT_ERRORS as exc:
             mle = MLEResult("failed", f"the fit did not run: {exc}")
     paper = None
@@ -276,7 +292,7 @@ def _refit(keep: Decided, seg, t, xy, params, exposure_s, fit_friction, run_pape
     elif run_paper and seg:
         paper_sigma = math.sqrt(sigma**2 + max(meas.codec_m2(keep.codec_var), 0.0))
         paper = paper_from_segments(chosen, t, xy, params, paper_sigma, frame_dt, keep.strike_seen, lossless,
-                                    curved=keep.curved, near=keep.paper)
+                                    curved=keep.curved, near=keep.paper, apart=keep.stop_apart)
     return Estimate(chosen or seg, paper, mle, meas, keep.codec_var, decisions,
                     {"fit": t_fit, "recover": time.perf_counter() - clock}, keep)
 

@@ -130,7 +130,10 @@ class MLEResult:
     ``rolling`` (rolling from the strike).  ``residuals`` are the whitened
     residuals per measurement (shape (m, 2)), ``cov`` the covariance of the
     fitted parameters in the order ``names``; ``hac`` when it is the HAC
-    sandwich (residual lag-1 autocorrelation ``rho1``).
+    sandwich (residual lag-1 autocorrelation ``rho1``).  ``verdicts`` the
+    status rules' answers (``v0_determined``: v0's error within
+    :data:`MAX_REL_STDERR_V0`; ``sliding_frames``: sliding seen in at least
+    :data:`MIN_SLIDING_FRAMES` frames), for a refit to keep (:func:`result`).
     """
 
     status: str
@@ -156,6 +159,7 @@ class MLEResult:
     hac: bool = False
     rho1: float = float("nan")
     ar1: float = 0.0
+    verdicts: dict = field(default_factory=dict)
 
     def __bool__(self):
         return self.status == "ok"
@@ -316,7 +320,7 @@ def fit_models(meas: Measurements, params: BallParams, start, exposure_s: float 
 
 
 def slip_lr(full: ModelFit, roll: ModelFit, meas: Measurements | None = None,
-            codec: CodecCorrelation | None = None) -> float:
+            codec: CodecCorrelation | None = None, hac: bool | None = None) -> float:
     """Likelihood-ratio statistic of free slip against rolling from the strike.
 
     The chi-square difference, in the residuals' own scale when they are
@@ -327,6 +331,9 @@ def slip_lr(full: ModelFit, roll: ModelFit, meas: Measurements | None = None,
     one: correlated errors inflate the chi-square difference as much.  Its
     reference distribution is not chi^2(2) (t1 is not identified at zero
     slip); fit.decide holds the threshold calibrated by simulation.
+    ``hac``: whether the residuals are autocorrelated, decided once by the
+    caller (recover.estimate: no, once an AR(1) error model took the
+    correlation in); None: asked here of ``full``'s residuals.
     """
     scale = max(1.0, full.chi2 / full.dof)
     if meas is not None and codec is not None and codec.var > 0:
@@ -338,7 +345,7 @@ def slip_lr(full: ModelFit, roll: ModelFit, meas: Measurements | None = None,
             pass
     elif meas is not None:
         rho, z = lag1_autocorrelation(meas, full.residuals)
-        if autocorrelated(rho, z):
+        if autocorrelated(rho, z) if hac is None else hac:
             try:
                 base = info_inverse(full.jac) * scale
                 hac = hac_covariance(full.jac, full.residuals, rho)
@@ -565,7 +572,7 @@ def still_codec_sandwich(fit: ModelFit, meas: Measurements) -> np.ndarray:
 
 
 def covariance(fit: ModelFit, meas: Measurements, codec: CodecCorrelation | None = None,
-               still_codec: bool = False):
+               still_codec: bool = False, hac: bool | None = None):
     """The parameters' covariance: ``(J^T J)^-1`` scaled by the reduced
     chi-square when that exceeds 1, or, when the residuals show lag-1
     autocorrelation, the HAC sandwich (its variances never below the
@@ -581,7 +588,8 @@ def covariance(fit: ModelFit, meas: Measurements, codec: CodecCorrelation | None
     same place (:func:`still_codec_sandwich`), never below the former.
     ``hac`` is True when a sandwich widened the errors.  Returns ``(cov,
     hac, rho1)``; raises LinAlgError when the information matrix is
-    singular."""
+    singular.  ``hac``: the autocorrelation decided once by the caller (as
+    :func:`slip_lr`'s); None: asked here of ``fit``'s residuals."""
     rho, z = lag1_autocorrelation(meas, fit.residuals)
     scale = max(1.0, fit.chi2 / fit.dof)
     base = info_inverse(fit.jac) * scale
@@ -592,7 +600,7 @@ def covariance(fit: ModelFit, meas: Measurements, codec: CodecCorrelation | None
         wide = _at_least(still_codec_sandwich(fit, meas) * scale, base)
         widened = bool(np.any(np.diag(wide) > np.diag(base) * (1 + 1e-9)))
         base = wide
-    if not autocorrelated(rho, z):
+    if not (autocorrelated(rho, z) if hac is None else hac):
         return base, widened, rho
     return _at_least(hac_covariance(fit.jac, fit.residuals, rho), base), True, rho
 
@@ -605,9 +613,14 @@ def _at_least(C, base) -> np.ndarray:
 
 
 def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
-           codec: CodecCorrelation | None = None, still_codec: bool = False) -> MLEResult:
+           codec: CodecCorrelation | None = None, still_codec: bool = False, hac: bool | None = None,
+           verdicts: dict | None = None) -> MLEResult:
     """The MLEResult of the chosen model: standard errors, and ``degenerate``
-    when v0 or w0 is not determined (``sliding_ended`` False: w0 withheld)."""
+    when v0 or w0 is not determined (``sliding_ended`` False: w0 withheld).
+    ``hac`` as :func:`covariance`'s; ``verdicts`` an earlier fit's
+    :attr:`MLEResult.verdicts` on the same track, kept instead of asked
+    again (a refit through another camera answers by the same rules:
+    recover.calibration)."""
     rolling = fit.rolling
     shot, pr = fit.shot, fit.params
     if not fit.converged:
@@ -618,7 +631,7 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
                          f"{np.sqrt(chi2 / dof):.0f} times the stated noise): the fit stopped far "
                          "from the shot, or the track is not one shot", chi2=float(chi2), dof=int(dof))
     try:
-        cov, hac, rho = covariance(fit, meas, codec, still_codec)
+        cov, hac, rho = covariance(fit, meas, codec, still_codec, hac)
     except np.linalg.LinAlgError:
         return MLEResult("degenerate", "the track does not determine the shot (singular information matrix)")
     ph = phases(shot, pr)
@@ -653,23 +666,30 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
                   unseen_slip=float(dv_unseen),
                   chi2=float(chi2), dof=int(dof), residuals=fit.residuals, cov=cov, names=fit.names,
                   hac=hac, rho1=float(rho), ar1=float(fit.ar1))
+    verdicts = dict(verdicts or {})
+    speed = float(np.hypot(*shot.v0))
+    se_speed = float(np.hypot(*stderr["v0"]))
+    if verdicts.get("v0_determined") is None:
+        verdicts["v0_determined"] = bool(se_speed < MAX_REL_STDERR_V0 * speed)
+    n_slide = None
+    if not rolling and sliding_ended:
+        t_m = meas.t_used[meas.single[meas.group[meas.used]]]
+        n_slide = int(np.sum((t_m > shot.t0) & (t_m < ph.t1)))
+        if verdicts.get("sliding_frames") is None:
+            verdicts["sliding_frames"] = n_slide >= MIN_SLIDING_FRAMES
+    common["verdicts"] = verdicts
     out = dict(v0=np.asarray(shot.v0, float), w0=np.asarray(shot.w0, float),
                x0=np.asarray(shot.x0, float), t0=shot.t0,
                t1=ph.t1, t2=ph.t2 if np.isfinite(ph.t2) else None,
                x2=ph.x2 if np.isfinite(ph.t2) else None,
                mu_s=pr.mu_s if fit_friction and not rolling else None,
                mu_r=pr.mu_r if fit_friction else None, **common)
-    speed = float(np.hypot(*shot.v0))
-    se_speed = float(np.hypot(*stderr["v0"]))
-    if not se_speed < MAX_REL_STDERR_V0 * speed:
+    if not verdicts["v0_determined"]:
         return MLEResult("degenerate",
                          f"the track does not determine v0 (standard error {se_speed:.3g} m/s for "
                          f"|v0| = {speed:.3g} m/s): the strike at t0 is not in view, or the ball "
                          f"was tracked in too few frames", **common)
-    if not rolling and sliding_ended:
-        t_m = meas.t_used[meas.single[meas.group[meas.used]]]
-        n_slide = int(np.sum((t_m > shot.t0) & (t_m < ph.t1)))
-        if n_slide < MIN_SLIDING_FRAMES:
+    if n_slide is not None and not verdicts["sliding_frames"]:
             return MLEResult("degenerate",
                              f"sliding lasted {(ph.t1 - shot.t0) * 1e3:.1f} ms, seen in {n_slide} frame(s): "
                              f"the slip, so w0 and v0, is not determined (at least {MIN_SLIDING_FRAMES} "
@@ -871,9 +891,10 @@ def fit_mle(t, xy, sigma, params: BallParams, start, exposure_s: float = 0.0,
         full, roll = fit_models(meas, params, start, exposure_s, fit_friction, start_rolling)
     except (ValueError, np.linalg.LinAlgError, FloatingPointError) as exc:
         return MLEResult("failed", f"the fit did not run: {exc}")
-    lr = slip_lr(full, roll, meas)
+    hac = autocorrelated(*lag1_autocorrelation(meas, full.residuals))  # asked once, of the free-slip fit
+    lr = slip_lr(full, roll, meas, hac=hac)
     chosen = full if sliding_seen(lr).yes else roll
-    return result(chosen, meas, lr, sliding_ended and not _t1_beyond(chosen, meas))
+    return result(chosen, meas, lr, sliding_ended and not _t1_beyond(chosen, meas), hac=hac)
 
 
 def _t1_beyond(fit: ModelFit, meas: Measurements) -> bool:

@@ -19,7 +19,7 @@ The "cross products" after eq. 37 are dot products (CONVENTIONS.md).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -53,6 +53,8 @@ class PaperResult:
     ``solutions`` lists every consistent ``(v0, w0)`` pair when there is more
     than one (status ``ambiguous``).  ``trajectory`` is ``parabola`` or ``line``.
     ``stderr`` holds standard errors of ``v0`` and ``w0`` when ``ok``.
+    ``stop_apart`` is fit.decide.stop_apart's answer when case 2 was asked
+    (None: not asked), for a refit to keep.
     """
 
     status: str
@@ -66,6 +68,7 @@ class PaperResult:
     u0: float | None = None
     solutions: list = field(default_factory=list)
     stderr: dict = field(default_factory=dict)
+    stop_apart: bool | None = None
 
     def __bool__(self):
         return self.status == "ok"
@@ -299,7 +302,7 @@ def path_shape(seg, xy, params: BallParams, curved: bool | None = None):
 
 def paper_from_segments(seg, t, xy, params: BallParams, sigma: float, frame_dt: float,
                         strike_seen: bool = True, lossless: bool = True, curved: bool | None = None,
-                        near=None) -> PaperResult:
+                        near=None, apart: bool | None = None) -> PaperResult:
     """The paper's method on a segmented track (the segmentation the
     decisions chose): parabola or line by fit.decide.curved, the sliding
     time breaking ties, with the status and reason CONVENTIONS.md asks for.
@@ -326,8 +329,11 @@ def paper_from_segments(seg, t, xy, params: BallParams, sigma: float, frame_dt: 
     near : tuple, optional
         ``(v0, w0)`` of an earlier answer on the same track: of several
         roots the nearest is the answer (the same root, moved by the camera).
+    apart : bool, optional
+        fit.decide.stop_apart's answer decided before (an earlier answer's
+        :attr:`PaperResult.stop_apart`, kept by a refit); asked here when None.
     """
-    return _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, near)
+    return _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, near, apart)
 
 
 def nearest_root(res: PaperResult, near, params: BallParams) -> PaperResult:
@@ -341,7 +347,8 @@ def nearest_root(res: PaperResult, near, params: BallParams) -> PaperResult:
     return replace(res, status="ok", reason="", v0=s["v0"], w0=s["w0"], u0=s.get("u0"), solutions=[])
 
 
-def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, near=None) -> PaperResult:
+def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, near=None,
+           apart=None) -> PaperResult:
     """paper_from_segments; the root nearest ``near`` is chosen inside each
     solve, so a root chosen that way gets its standard errors too."""
     if not seg:
@@ -408,18 +415,20 @@ def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, n
         # Taken only when the two agree within their errors (a decision,
         # fit.decide.stop_apart): a stopping point apart from the rest means
         # the ball moved on after sliding, and case 2 does not hold.
-        apart = stop_apart(case2_distance(seg, geo))
+        d2 = case2_distance(seg, geo)
+        apart = stop_apart(d2).yes if apart is None else bool(apart)
         if apart:
-            return PaperResult("failed", f"sliding's stopping point x1 lies {apart.statistic ** 0.5:.1f} of its "
+            return PaperResult("failed", f"sliding's stopping point x1 lies {d2 ** 0.5:.1f} of its "
                                "errors from the rest x2: sliding did not run into the rest, and the "
-                               "segmentation found no breakpoint before it", "line", x0=seg.x0, x1=seg.x1, x2=seg.x2)
+                               "segmentation found no breakpoint before it", "line", x0=seg.x0, x1=seg.x1, x2=seg.x2,
+                               stop_apart=True)
         def solve_case2(x):
             return nearest_root(recover_line(x[0:2], x[2:4], x[2:4], params, tol, heading, tau1, tau1_tol),
                                 near, params)
 
         idx = np.r_[0:2, 4:6]
         x = np.r_[seg.x0, seg.x2]
-        return with_stderr(solve_case2(x), solve_case2, x, geo[np.ix_(idx, idx)], params)
+        return replace(with_stderr(solve_case2(x), solve_case2, x, geo[np.ix_(idx, idx)], params), stop_apart=False)
     x = np.r_[seg.x0, seg.x1, seg.x2]
     return with_stderr(solve_line(x), solve_line, x, geo, params)
 

@@ -58,3 +58,55 @@ def test_refit_keeps_a_breakpoint_in_view():
     assert t1_in_view(again.seg.t1, tr.t)
     same = estimate(tr.t, tr.xy, sig, tr.params, 0.0, keep=first.decided)
     assert not np.isfinite(same.seg.t1)
+
+
+def test_refit_keeps_the_first_fits_verdicts(monkeypatch):
+    # The status rules (MIN_SLIDING_FRAMES, MAX_REL_STDERR_V0), the HAC
+    # question and the paper's case-2 question are answered once, on the
+    # first camera; a refit through a perturbed camera keeps the answers.
+    # Made to answer the other way here (thresholds that no track passes,
+    # every residual autocorrelated, every stop apart), a refit that asked
+    # again would flip to degenerate/HAC/failed; it must not.
+    import cuespin.recover.mle as mle_mod
+    from cuespin.fit.decide import Decision
+
+    rng = np.random.default_rng(2)
+    shot, p = sample_shot(rng, "case2")
+    tr = simulate_track(shot, p, 120.0, 2e-5, rng, t_end=phases(shot, p).t2 + 0.3)
+    sig = np.full(len(tr.t), tr.sigma)
+    first = estimate(tr.t, tr.xy, sig, tr.params, 0.0)
+    assert first.mle.status == "ok" and first.mle.model == "full"
+    assert first.decided.verdicts == {"v0_determined": True, "sliding_frames": True}
+    assert first.decided.hac is False and first.mle.hac is False
+    assert first.paper.stop_apart is False and first.decided.stop_apart is False
+    monkeypatch.setattr(mle_mod, "MIN_SLIDING_FRAMES", 10**6)
+    monkeypatch.setattr(mle_mod, "MAX_REL_STDERR_V0", 0.0)
+    monkeypatch.setattr(mle_mod, "autocorrelated", lambda rho, z: Decision(True, z, 0.0))
+    monkeypatch.setattr(paper_mod, "stop_apart", lambda d2: Decision(True, d2, 0.0))
+    again = estimate(tr.t, tr.xy, sig, tr.params, 0.0, keep=first.decided)
+    assert again.mle.status == "ok" and again.mle.model == "full" and again.mle.hac is False
+    assert again.paper.status == first.paper.status == "ok"
+    # The same rules unkept: the first fit itself answers degenerate.
+    fresh = estimate(tr.t, tr.xy, sig, tr.params, 0.0)
+    assert fresh.mle.status == "degenerate" and fresh.mle.hac is False
+
+
+def test_no_hac_on_top_of_the_ar1_model(monkeypatch):
+    # The AR(1) question is put once (recover.estimate, on the first fit's
+    # residuals, where fit.decide calibrated it); slip_lr and the covariance
+    # do not ask it again of the prewhitened residuals.
+    import cuespin.recover.mle as mle_mod
+    from cuespin.fit.decide import Decision
+
+    calls = []
+
+    def never(rho, z):
+        calls.append(rho)
+        return Decision(True, z, 0.0)
+
+    monkeypatch.setattr(mle_mod, "autocorrelated", never)
+    tr = _case5()
+    sig = np.full(len(tr.t), tr.sigma)
+    est = estimate(tr.t, tr.xy, sig, tr.params, 0.0)
+    assert "autocorrelated" in est.decisions and not calls
+    assert est.mle.hac is False and est.decided.hac is False
