@@ -57,6 +57,7 @@ def one_shot(args):
         def pixel_to_table(cam, xy):
             return None
     from cuespin.render import render_video
+    from cuespin.track.misfit import error_ar1
     from cuespin.track.tracker import TrackerConfig
     from cuespin.track.video import decode_seconds, track_video
 
@@ -89,7 +90,8 @@ def one_shot(args):
         tr = SimpleNamespace(t=z["t"], xy=z["xy"], ok=z["ok"], cov_px=z["cov_px"], lossless=bool(z["lossless"]),
                              inter_frame=bool(z["inter_frame"]),
                              independent_errors=bool(z["independent"]) if "independent" in z else bool(z["lossless"]),
-                             look_factor=float(z["look_factor"]) if "look_factor" in z else 1.0)
+                             look_factor=float(z["look_factor"]) if "look_factor" in z else 1.0,
+                             look_rho=float(z["look_rho"]) if "look_rho" in z else 0.0)
         n, t_decode = int(z["frames"]), float(z["t_decode"])
     else:
         video = Path(tmp) / f"shot_{i}.avi"
@@ -101,10 +103,12 @@ def one_shot(args):
             np.savez(cached, t=tr.t, xy=tr.xy, ok=tr.ok, cov_px=tr.cov_px, lossless=tr.lossless,
                      inter_frame=tr.inter_frame, frames=n, t_decode=t_decode,
                      independent=getattr(tr, "independent_errors", tr.lossless),
-                     look_factor=getattr(tr, "look_factor", 1.0))
+                     look_factor=getattr(tr, "look_factor", 1.0), look_rho=getattr(tr, "look_rho", 0.0))
     # As pipeline.run.run_recover does, keeping the fit's own measurements
     # for the bound.
     kw = {"px_to_m": pixel_to_table(cam, tr.xy)}
+    if "ar1_floor" in inspect.signature(recover_track).parameters:
+        kw["ar1_floor"] = error_ar1(getattr(tr, "look_factor", 1.0), getattr(tr, "look_rho", 0.0))
     if "px_to_m" not in inspect.signature(recover_track).parameters:  # an older recover/, for before/after tables
         kw = {}
     out, est = recover_track(tr.t, tr.xy, tr.ok, table_covariance(cam, tr.xy, tr.cov_px), scene.physics,

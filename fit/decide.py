@@ -146,13 +146,15 @@ def curved(F: float, n: int) -> Decision:
     return Decision(bool(F > thr), float(F), thr)
 
 
-def autocorrelated(rho: float, z: float) -> Decision:
+def autocorrelated(rho: float, z: float, stated: bool = False) -> Decision:
     """Are the residuals autocorrelated along the track?  Their lag-1
     autocorrelation ``rho`` with z score ``z`` (recover.mle.lag1_autocorrelation),
     one-sided: only a positive correlation (errors shared by neighbouring
-    frames) widens the errors."""
-    thr = AR1_FACTOR * float(norm.isf(LEVEL))
+    frames) widens the errors.  ``stated``: the track states a correlated
+    error (track.misfit.total_rho): yes by construction, threshold -inf
+    (None in JSON: no test made)."""
     z = float(z) if np.isfinite(z) else 0.0
+    thr = -np.inf if stated else AR1_FACTOR * float(norm.isf(LEVEL))
     return Decision(z > thr, z, thr)
 
 

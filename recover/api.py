@@ -28,7 +28,8 @@ def _num(x):
 
 def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0.0,
                   method: str = "all", fit_friction: bool = False, lossless: bool = True,
-                  return_estimate: bool = False, inter_frame: bool = False, px_to_m=None, keep=None):
+                  return_estimate: bool = False, inter_frame: bool = False, px_to_m=None, keep=None,
+                  ar1_floor: float = 0.0):
     """v0 and w0 from a track, by the paper's method and/or maximum likelihood.
 
     Parameters
@@ -64,6 +65,10 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
         An earlier recovery's decisions on the same track
         (``Estimate.decided``, from ``return_estimate``), kept by this one: a
         refit through another camera (recover.calibration).
+    ar1_floor : float
+        Lag-1 correlation of the AR(1) error model the track states (the
+        tracker's ``TrackResult.error_ar1``; 0: independent): the fit is then under
+        AR(1) errors of at least this correlation (recover.estimate.estimate).
     return_estimate : bool
         Also return the :class:`~cuespin.recover.estimate.Estimate` (its
         measurements give the bound: pipeline.measure.mle_bound).
@@ -83,7 +88,8 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
     cov = np.asarray(stderr_m, dtype=float)[ok]
     est = estimate(t[ok], xy[ok], cov, params, exposure_s, lossless, fit_friction,
                    run_paper=method in ("paper", "all"), inter_frame=inter_frame,
-                   px_to_m=None if px_to_m is None else np.asarray(px_to_m, dtype=float)[ok], keep=keep)
+                   px_to_m=None if px_to_m is None else np.asarray(px_to_m, dtype=float)[ok], keep=keep,
+                   ar1_floor=ar1_floor)
     methods = {}
     if method in ("paper", "all"):
         methods["paper"] = paper_dict(est, params)

@@ -113,7 +113,7 @@ def _first_fit(meas, params, starts, exposure_s, fit_friction) -> ModelFit | Non
 
 def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: bool = True,
              fit_friction: bool = False, run_paper: bool = True, inter_frame: bool = False,
-             px_to_m=None, keep: Decided | None = None) -> Estimate:
+             px_to_m=None, keep: Decided | None = None, ar1_floor: float = 0.0) -> Estimate:
     """Segment, decide and fit one track.
 
     Parameters
@@ -147,6 +147,14 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         An earlier recovery's decisions on the same frames (its
         ``Estimate.decided``), kept instead of made again: the refits of the
         calibration's share (recover.calibration) change the camera only.
+    ar1_floor : float
+        Lag-1 correlation of the AR(1) error model the track states (the
+        tracker's measure, track.misfit.error_ar1; 0: independent).  When
+        positive the fit is under AR(1) errors of at least this correlation
+        whatever the residuals' test says: a correlated error costs a
+        velocity about (1 + rho) / (1 - rho) in variance, which a scaled
+        covariance alone does not state (41% coverage measured at rho 0.9);
+        the decision ``autocorrelated`` is then yes, stated by the track.
 
     Returns
     -------
@@ -207,12 +215,15 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
             # Residuals correlated along the track (a lossy codec at low
             # noise): both models again under AR(1) errors of that lag-1
             # correlation, so their likelihood ratio and covariance hold.
+            # A correlation the track states is used by construction, the
+            # residuals' if larger.
             rho, z = lag1_autocorrelation(meas, full.residuals)
-            decisions["autocorrelated"] = autocorrelated(rho, z)
+            decisions["autocorrelated"] = autocorrelated(rho, z, stated=ar1_floor > 0)
             if decisions["autocorrelated"]:
                 full, roll = fit_models(meas, params, (full.shot.x0, full.shot.t0, full.shot.v0, full.shot.w0),
                                         exposure_s, fit_friction,
-                                        (roll.shot.x0, roll.shot.t0, roll.shot.v0, roll.shot.w0), ar1=rho)
+                                        (roll.shot.x0, roll.shot.t0, roll.shot.v0, roll.shot.w0),
+                                        ar1=max(rho, ar1_floor))
         elif codec.var <= 0:
             # No codec error measured to model: the residuals' autocorrelation,
             # asked once here, is answered by the HAC sandwich.

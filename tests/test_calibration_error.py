@@ -122,7 +122,7 @@ def test_calibration_refits_through_perturbed_cameras_keep_the_model():
     cov_px = np.broadcast_to(np.eye(2) * 0.03**2, (len(tr.t), 2, 2)).copy()
     xy = cam.to_table(uv)
     track = SimpleNamespace(t=tr.t, uv=uv, cov_px=cov_px, ok=np.ones(len(tr.t), bool), lossless=True,
-                            independent_errors=True, inter_frame=False)
+                            independent_errors=True, error_ar1=0.0, inter_frame=False)
     out, est = recover_track(tr.t, xy, track.ok, table_covariance(cam, xy, cov_px), p,
                              px_to_m=pixel_to_table(cam, xy), return_estimate=True)
     scene = SimpleNamespace(physics=p, camera=cam)

@@ -26,7 +26,7 @@ from cuespin.videoio import quiet_native_stderr
 from cuespin.track.background import Background, FeltAccumulator, learn_background
 from cuespin.track.colour import GREY, Projection, learn_projection
 from cuespin.track.projection import projected_centres
-from cuespin.track.misfit import LookMisfit, look_misfit
+from cuespin.track.misfit import LookMisfit, error_ar1, look_misfit
 from cuespin.track.radius import RadiusMap
 from cuespin.track.model import refit_shift
 from cuespin.track.reader import FrameSource, ThreadedFrames, TrackError, frame_times, probe
@@ -153,6 +153,14 @@ class TrackResult:
         ``lossless`` (a rest one measurement, the unstated share measured
         from the fit's residuals)."""
         return bool(self.lossless) and self.look_factor == 1.0
+
+    @property
+    def error_ar1(self) -> float:
+        """Lag-1 correlation of the AR(1) error model equivalent to the
+        stated error (``cov_px``, the look's correlated share;
+        :func:`cuespin.track.misfit.error_ar1`): what the recovery passes as
+        ``ar1_floor``."""
+        return error_ar1(self.look_factor, self.look_rho)
 
     @property
     def centroid_noise_px(self) -> float:
