@@ -66,7 +66,7 @@ def main():
             continue
         ph = phases(s, p)
         meas = est.meas
-        t_m = meas.t_used[meas.single[meas.group[meas.used]]]
+        t_m = meas.t_single
         n = 0 if m.model == "rolling" else int(np.sum((t_m > m.t0) & (t_m < m.t1)))
         err = np.r_[m.v0 - v0, m.w0 - s.w0]
         se = np.r_[m.stderr["v0"], m.stderr["w0"]]

@@ -173,6 +173,22 @@ class Measurements:
         g = self.group[self.used]
         return np.bincount(g, minlength=self.n) == 1
 
+    @property
+    def t_means(self) -> np.ndarray:
+        """Each measurement's time (s), the mean of its frames', shape (m,)."""
+        g = self.group[self.used]
+        return np.bincount(g, weights=self.t_used, minlength=self.n) / np.bincount(g, minlength=self.n)
+
+    @property
+    def t_single(self) -> np.ndarray:
+        """Times (s) of the frames measured one by one (the moving ball's), in frame order."""
+        return self.t_used[self.single[self.group[self.used]]]
+
+    def median_sigma(self) -> float:
+        """The used frames' median per-axis position error (m); 0 without frames."""
+        cov = self.cov[self.used]
+        return float(np.median(np.sqrt(0.5 * (cov[:, 0, 0] + cov[:, 1, 1])))) if len(cov) else 0.0
+
     def codec_shape(self) -> np.ndarray:
         """Each frame's covariance (m^2) per unit of codec variance, shape
         (n, 2, 2): ``B B^T`` with ``B`` its metres per pixel, or the identity

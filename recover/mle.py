@@ -229,9 +229,7 @@ def ar1_prewhiten(meas: Measurements, r, rho: float) -> np.ndarray:
     single = np.flatnonzero(meas.single)
     if len(single) < 2:
         return r
-    g = meas.group[meas.used]
-    t_m = np.bincount(g, weights=meas.t_used, minlength=meas.n) / np.bincount(g, minlength=meas.n)
-    ts = t_m[single]
+    ts = meas.t_means[single]
     dt = float(np.median(np.diff(ts)))
     k = np.maximum(np.rint(np.diff(ts) / dt), 1.0) if dt > 0 else np.ones(len(ts) - 1)
     phi = rho ** k
@@ -366,6 +364,14 @@ def _positive_definite(cov) -> bool:
     return bool(np.linalg.eigvalsh(0.5 * (corr + corr.T)).min() > 1e-12)
 
 
+def _column_norms(J) -> np.ndarray:
+    """Each column's length (1 where it is zero): a Jacobian's columns put on
+    one scale before an inverse (their units differ by orders of magnitude)."""
+    s = np.sqrt(np.sum(J * J, axis=0))
+    s[s == 0] = 1.0
+    return s
+
+
 def info_inverse(jac) -> np.ndarray:
     """``(J^T J)^-1``, the inverse information of a whitened Jacobian, with
     its columns scaled to unit length first (metres, seconds and rad/s
@@ -376,8 +382,7 @@ def info_inverse(jac) -> np.ndarray:
     the track does not determine; see :func:`result`).  Raises LinAlgError
     when it is singular."""
     J = np.asarray(jac, dtype=float)
-    s = np.sqrt(np.sum(J * J, axis=0))
-    s[s == 0] = 1.0
+    s = _column_norms(J)
     Js = J / s
     try:
         Li = np.linalg.inv(np.linalg.cholesky(Js.T @ Js))
@@ -453,9 +458,7 @@ def _codec_scores(J, meas: Measurements, acf, frame_dt: float) -> np.ndarray:
     i != j (k_ij frames apart, from their times; rests are independent of
     the rest); ``F_i`` carries the codec's pixel error to metres at that
     measurement (Measurements.codec_factor)."""
-    m = len(J) // 2
-    g = meas.group[meas.used]
-    t_m = np.bincount(g, weights=meas.t_used, minlength=m) / np.bincount(g, minlength=m)
+    t_m = meas.t_means
     G = _codec_G(J, meas)
     out = np.einsum("map,maq->pq", G, G)
     single = meas.single
@@ -486,8 +489,7 @@ def correlated_codec_var(fit: ModelFit, meas: Measurements, frame_dt: float,
     # columns scaled to unit length first, as in info_inverse, so pinv's
     # relative cutoff drops only directions that are truly undetermined,
     # not ones that are small because of their units.
-    s = np.sqrt(np.sum(J * J, axis=0))
-    s[s == 0] = 1.0
+    s = _column_norms(J)
     A = np.linalg.pinv((J / s).T @ (J / s)) / s[:, None] / s[None, :]
     WF = meas.W @ meas.codec_factor()
     trM = float(np.einsum("mab,mab->", WF, WF))
@@ -673,7 +675,7 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
         verdicts["v0_determined"] = bool(se_speed < MAX_REL_STDERR_V0 * speed)
     n_slide = None
     if not rolling and sliding_ended:
-        t_m = meas.t_used[meas.single[meas.group[meas.used]]]
+        t_m = meas.t_single
         n_slide = int(np.sum((t_m > shot.t0) & (t_m < ph.t1)))
         if verdicts.get("sliding_frames") is None:
             verdicts["sliding_frames"] = n_slide >= MIN_SLIDING_FRAMES
@@ -690,10 +692,10 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
                          f"|v0| = {speed:.3g} m/s): the strike at t0 is not in view, or the ball "
                          f"was tracked in too few frames", **common)
     if n_slide is not None and not verdicts["sliding_frames"]:
-            return MLEResult("degenerate",
-                             f"sliding lasted {(ph.t1 - shot.t0) * 1e3:.1f} ms, seen in {n_slide} frame(s): "
-                             f"the slip, so w0 and v0, is not determined (at least {MIN_SLIDING_FRAMES} "
-                             "frames needed)", **common)
+        return MLEResult("degenerate",
+                         f"sliding lasted {(ph.t1 - shot.t0) * 1e3:.1f} ms, seen in {n_slide} frame(s): "
+                         f"the slip, so w0 and v0, is not determined (at least {MIN_SLIDING_FRAMES} "
+                         "frames needed)", **common)
     if not rolling and not sliding_ended:
         t_end = float(meas.t_used[-1])
         lower = 3.5 * pr.mu_s * pr.g * (t_end - shot.t0)
@@ -730,13 +732,11 @@ def unseen_slip(fit: ModelFit, meas: Measurements, se_t0: float) -> tuple[float,
     pr = fit.params
     mu_g = pr.mu_s * pr.g
     t0 = float(fit.shot.t0)
-    t_m = meas.t_used[meas.single[meas.group[meas.used]]]
+    t_m = meas.t_single
     after = t_m[t_m > t0]
     gap = float(after.min() - t0) if len(after) else 0.0
     tau_gap = gap + Z95 * (se_t0 if np.isfinite(se_t0) else 0.0)
-    cov = meas.cov[meas.used]
-    sigma = float(np.median(np.sqrt(0.5 * (cov[:, 0, 0] + cov[:, 1, 1])))) if len(cov) else 0.0
-    sigma *= np.sqrt(max(1.0, fit.chi2 / max(fit.dof, 1)))
+    sigma = meas.median_sigma() * np.sqrt(max(1.0, fit.chi2 / max(fit.dof, 1)))
     tau_noise = np.sqrt(2.0 * UNSEEN_SLIP_SIGMAS * sigma / mu_g)
     tau = max(tau_gap, float(tau_noise))
     return mu_g * tau, tau
@@ -780,9 +780,7 @@ def stops_as_sliding_ends(fit: ModelFit, meas: Measurements) -> bool:
     ph = phases(fit.shot, fit.params)
     if not np.isfinite(ph.t2):
         return False
-    cov = meas.cov[meas.used]
-    sigma = float(np.median(np.sqrt(0.5 * (cov[:, 0, 0] + cov[:, 1, 1])))) if len(cov) else 0.0
-    return bool(np.hypot(*(np.asarray(ph.x2) - np.asarray(ph.x1))) < STOP_ROLL_SIGMAS * sigma)
+    return bool(np.hypot(*(np.asarray(ph.x2) - np.asarray(ph.x1))) < STOP_ROLL_SIGMAS * meas.median_sigma())
 
 
 def with_profile_interval(res: MLEResult, fit: ModelFit, meas: Measurements, exposure_s: float) -> MLEResult:

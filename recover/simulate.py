@@ -64,6 +64,18 @@ def simulate_track(shot: Shot, params: BallParams, fps: float, sigma: float, rng
     return SimTrack(t, xy, float(sigma), shot, params, float(exposure_s), float(fps))
 
 
+def _grid_point(i: int, fps_grid, sigma_grid):
+    """The ``i``-th generated track's frame rate and noise: frame rates
+    cycle fastest, then noise levels."""
+    return fps_grid[i % len(fps_grid)], sigma_grid[(i // len(fps_grid)) % len(sigma_grid)]
+
+
+def _exposure(rng, fps: float, blur: bool) -> float:
+    """Exposure (s): 0.3-1 frame half the time (as the sampler draws them)
+    when ``blur``, else 0; draws from ``rng`` only when ``blur``."""
+    return float(rng.uniform(0.3, 1.0) / fps) if blur and rng.random() < 0.5 else 0.0
+
+
 def null_rolling_tracks(n: int, seed: int, fps_grid=FPS_GRID, sigma_grid=SIGMA_GRID_M,
                         blur: bool = True, rho: float = 0.0):
     """``n`` tracks rolling from the strike (paper case 4: no slip to see),
@@ -72,10 +84,9 @@ def null_rolling_tracks(n: int, seed: int, fps_grid=FPS_GRID, sigma_grid=SIGMA_G
     (:func:`simulate_track`).  Yields :class:`SimTrack`."""
     rng = np.random.default_rng(seed)
     for i in range(n):
-        fps = fps_grid[i % len(fps_grid)]
-        sigma = sigma_grid[(i // len(fps_grid)) % len(sigma_grid)]
+        fps, sigma = _grid_point(i, fps_grid, sigma_grid)
         shot, params = sample_shot(rng, "case4")
-        exposure = float(rng.uniform(0.3, 1.0) / fps) if blur and rng.random() < 0.5 else 0.0
+        exposure = _exposure(rng, fps, blur)
         yield simulate_track(shot, params, fps, sigma, rng, exposure, rho=rho)
 
 
@@ -85,10 +96,9 @@ def sliding_tracks(n: int, seed: int, presets=("random", "case1", "case3", "case
     frame rates and noise levels.  Yields :class:`SimTrack`."""
     rng = np.random.default_rng(seed)
     for i in range(n):
-        fps = fps_grid[i % len(fps_grid)]
-        sigma = sigma_grid[(i // len(fps_grid)) % len(sigma_grid)]
+        fps, sigma = _grid_point(i, fps_grid, sigma_grid)
         shot, params = sample_shot(rng, presets[i % len(presets)])
-        exposure = float(rng.uniform(0.3, 1.0) / fps) if blur and rng.random() < 0.5 else 0.0
+        exposure = _exposure(rng, fps, blur)
         ph = phases(shot, params)
         yield simulate_track(shot, params, fps, sigma, rng, exposure,
                              t_end=min(ph.t2 + 0.3, max(ph.t1 + 1.0, shot.t0 + MAX_AFTER_STRIKE_S)))
@@ -111,10 +121,9 @@ def case2_tracks(n: int, seed: int, fps_grid=FPS_GRID, sigma_grid=SIGMA_GRID_M, 
     Yields :class:`SimTrack`."""
     rng = np.random.default_rng(seed)
     for i in range(n):
-        fps = fps_grid[i % len(fps_grid)]
-        sigma = sigma_grid[(i // len(fps_grid)) % len(sigma_grid)]
+        fps, sigma = _grid_point(i, fps_grid, sigma_grid)
         shot, params = sample_shot(rng, "case2")
-        exposure = float(rng.uniform(0.3, 1.0) / fps) if blur and rng.random() < 0.5 else 0.0
+        exposure = _exposure(rng, fps, blur)
         yield simulate_track(shot, params, fps, sigma, rng, exposure, t_end=phases(shot, params).t2 + 0.3)
 
 
@@ -128,13 +137,12 @@ def short_slip_tracks(n: int, seed: int, frames=(0.2, 1.0), fps_grid=(60.0, 120.
     from cuespin.physics.motion import z_cross
     rng = np.random.default_rng(seed)
     for i in range(n):
-        fps = fps_grid[i % len(fps_grid)]
-        sigma = sigma_grid[(i // len(fps_grid)) % len(sigma_grid)]
+        fps, sigma = _grid_point(i, fps_grid, sigma_grid)
         shot, params = sample_shot(rng, "case4")
         tau1 = float(rng.uniform(*frames)) / fps
         ang = rng.uniform(0, 2 * np.pi)
         u0 = 3.5 * params.mu_s * params.g * tau1 * np.array([np.cos(ang), np.sin(ang)])
         v0 = np.asarray(shot.v0, float)
         s = Shot(x0=shot.x0, v0=v0, w0=z_cross(v0 - u0) / params.R, t0=shot.t0)
-        exposure = float(rng.uniform(0.3, 1.0) / fps) if blur and rng.random() < 0.5 else 0.0
+        exposure = _exposure(rng, fps, blur)
         yield simulate_track(s, params, fps, sigma, rng, exposure)
