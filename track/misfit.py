@@ -109,14 +109,17 @@ def _shape(rho, s):
 
 def variance_ratios(uv, cov, ok, spacings=SPACINGS) -> dict:
     """Per spacing ``s``: the variance of the moving frames' third
-    differences (those spanning a kink left out, ``CLIP_SIGMAS``) over the
+    differences (a median over blocks of frames, so that the few blocks a
+    kink of the motion spoils do not count; the spacings stop where a ratio
+    rises more than ``MAX_RISE``-fold) over the
     variance the stated covariances give them (independent errors), and the
     number of differences kept (both axes).
 
     Parameters
     ----------
     uv : ndarray, shape (n, 2)
-        Centres (px), one per frame in order.
+        Centres, one per frame in order: px, or table metres at a px scale
+        (track.video: where the motion is a parabola or a line).
     cov : ndarray, shape (n, 2, 2)
         Their stated covariances (px^2).
     ok : ndarray of bool, shape (n,)
