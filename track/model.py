@@ -182,6 +182,18 @@ def kernel():
     return _KERNEL
 
 
+def warm_up() -> None:
+    """Load the compiled fit (after an install, compile it: once) with one
+    small call of each kernel the tracker uses, so that the first frame's
+    fit need not wait for it.  A failure is left for that fit to raise."""
+    try:
+        felt = np.full((9, 9), 90.0)
+        fit_disc(felt + 1.0, felt, 0, 0, (4.0, 4.0), 3.0, 200.0)
+        _model_rows((4.0, 4.0), (0.0, 0.0), 1.0, felt, 3.0, 0, 0, np.zeros(1))
+    except Exception:  # the tracker's own call reports it
+        pass
+
+
 def _geometry(r: float, outline):
     """The ball's image for the kernel: (DISC, [r]) or (ELLIPSE, its chords)."""
     if outline is None:
