@@ -51,6 +51,13 @@ MAX_CORNER_RMS_PX = 4.0
 FOCAL_RANGE = (0.2, 5.0)
 # A phone's main camera: 26 mm equivalent, 69 degrees across the larger side.
 NOMINAL_FOCAL = 0.73
+# Relative 1-sigma error stated for that nominal focal length (assumed, not
+# measured on phones): main cameras span 23-28 mm equivalent (+/- 10%) and
+# video modes crop by up to 10-20% more.  The overhead camera that needs it
+# cannot fix f from its corners, and f sets the camera's height D, hence the
+# ball plane's scale (1 + R / D): its share of v0's error is R / D times this
+# (docs/calibration.md, section 6), carried by one more perturbed camera.
+NOMINAL_FOCAL_SIGMA = 0.15
 # Tilt of the optical axis from straight down beyond which the table is too
 # foreshortened to track a ball on (deg).
 MAX_TILT_DEG = 70.0
@@ -399,7 +406,10 @@ def _homography_calibration(obj, img, size, intrinsics, distortion, kappa, fps, 
 
 
 def perturbed_cameras(corners_px, sigma_px: float, size, table: Table = Table(), **kw) -> list:
-    """The cameras of the 8 corner coordinates each moved by ``sigma_px``, one at a time.
+    """The cameras of the 8 corner coordinates each moved by ``sigma_px``, one at a
+    time, and, when the focal length is the nominal one (an overhead camera
+    without a lens calibration or height), a ninth with it
+    ``1 + NOMINAL_FOCAL_SIGMA`` times longer.
 
     For propagating a calibration's error to anything computed through the
     camera (v0, w0): with ``q`` the quantity through the calibrated camera and
@@ -417,6 +427,21 @@ def perturbed_cameras(corners_px, sigma_px: float, size, table: Table = Table(),
             cams.append(calibrate_corners(c, size, table, **kw).camera)
         except CalibrationError:
             continue
+    if not (kw.get("homography") or kw.get("intrinsics") is not None or kw.get("focal_px")
+            or kw.get("camera_height_m")):
+        try:
+            cal = calibrate_corners(base, size, table, **kw)
+        except CalibrationError:
+            return cams
+        if cal.focal_source == "nominal":
+            # The assumed focal length's own error (NOMINAL_FOCAL_SIGMA): the
+            # same corners through a lens that much longer (the same bow in
+            # pixels: kappa is k1 / f^2), its pose re-solved.
+            f = float(cal.camera.K[0, 0]) * (1.0 + NOMINAL_FOCAL_SIGMA)
+            try:
+                cams.append(calibrate_corners(base, size, table, **dict(kw, focal_px=f)).camera)
+            except CalibrationError:
+                pass
     return cams
 
 
@@ -902,10 +927,11 @@ def _with_perturbed(cal: Calibration, size, table: Table, **kw) -> Calibration:
     cams = perturbed_cameras(cal.corners_px, cal.corner_sigma_px, size, table,
                              corner_sigma_px=cal.corner_sigma_px, **kw)
     notes = list(cal.notes)
-    if len(cams) < 8:
+    want = 8 + (cal.focal_source == "nominal")
+    if len(cams) < want:
         # A corner whose move leaves no plausible camera drops its term: the
         # calibration's share of the errors is then understated.
-        notes.append(f"only {len(cams)} of the 8 corner-moved cameras could be solved; the calibration's "
+        notes.append(f"only {len(cams)} of the {want} perturbed cameras could be solved; the calibration's "
                      f"share of the recovery's errors is understated (click the corners again)")
     return replace(cal, perturbed=tuple(cams), notes=notes)
 
