@@ -21,7 +21,11 @@ With ``--auto``: the automatic calibration on drawn frames of the table
 calibration: corner error against the truth, the largest metre error over the
 table, and the v0 and R w0 RMS through it beside the exact camera's.
 
-Usage: python benchmarks/calibration.py [--n 40] [--seed 0] [--track-px 0.03] [--auto]
+With ``--diagnose`` (``--height 2 --tilt 0 --k1 -0.25``): the automatic
+camera's v0 error split into its parts (corners, k1, focal length), each
+camera built from the true values but one.
+
+Usage: python benchmarks/calibration.py [--n 40] [--seed 0] [--track-px 0.03] [--auto] [--diagnose]
 """
 
 import argparse
@@ -158,6 +162,50 @@ def auto(args):
               f"{cover['exact']:.0%} / {cover['auto']:.0%}, {zv['exact']:.2f} / {zv['auto']:.2f}", flush=True)
 
 
+def diagnose(args):
+    """Where an automatic camera's v0 error comes from: the same shots through
+    cameras built from the true and the found corners, k1 and focal length."""
+    from cuespin.pipeline.calibrate import assign_corners, detect_corners, synthetic_table_frame
+
+    P = sample_shot(0)[1]
+    true = Scene(physics=P, camera=pinhole_camera(height_m=args.height, tilt_deg=args.tilt, k1=args.k1,
+                                                  size=SIZE, fps=FPS, roll_deg=ROLL_DEG)).camera
+    img = synthetic_table_frame(true, seed=int(10 * args.tilt + 100 * abs(args.k1)), cushion_m=0.05, pockets=True)
+    det = detect_corners(img)
+    cal = assign_corners(det.corners, SIZE, Table(), kappa=det.kappa, fps=FPS)
+    tc = true.project(table_corners(Table()))
+    f_true = float(true.K[0, 0])
+    k_true = args.k1 / f_true**2
+    print(f"{args.height} m, tilt {args.tilt}, k1 {args.k1}: corner error (px) {np.round(cal.corners_px - tc, 3).tolist()}; "
+          f"k1 found {det.kappa * f_true**2:+.4f} at the true f {f_true:.1f} px; f written {cal.camera.K[0, 0]:.1f} px "
+          f"({cal.focal_source})")
+    variants = {
+        "found (calibrate)": cal.camera,
+        "true corners and k1, f as found": calibrate_corners(tc, SIZE, kappa=k_true, fps=FPS).camera,
+        "corners and k1 found, true f": calibrate_corners(cal.corners_px, SIZE, kappa=det.kappa, focal_px=f_true,
+                                                          fps=FPS).camera,
+        "true corners, k1 found, true f": calibrate_corners(tc, SIZE, kappa=det.kappa, focal_px=f_true, fps=FPS).camera,
+        "corners found, true k1 and f": calibrate_corners(cal.corners_px, SIZE, kappa=k_true, focal_px=f_true,
+                                                          fps=FPS).camera,
+    }
+    res = {"exact": []} | {k: [] for k in variants}
+    for i in range(args.n):
+        shot, params = sample_shot(args.seed * 1000 + i, "random")
+        uv = track_pixels(shot, params, Scene(physics=params, camera=true).camera, np.random.default_rng(i),
+                          args.track_px)
+        row = {"exact": through(shot, params, true, *uv)} | {k: through(shot, params, c, *uv)
+                                                             for k, c in variants.items()}
+        if all(r is not None for r in row.values()):     # paired: shots every camera answers
+            for k, r in row.items():
+                res[k].append(r[0])
+    ex = np.array(res["exact"])
+    print(f"{len(ex)} of {args.n} shots answered through every camera")
+    for k, v in res.items():
+        d = np.array(v)
+        print(f"{k:36s} v0 RMS {np.sqrt(np.mean(d**2)):.2e} m/s, ratio {np.sqrt(np.mean(d**2) / np.mean(ex**2)):.2f}, "
+              f"RMS difference from the exact camera's {np.sqrt(np.mean((d - ex)**2)):.2e}")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=40)
@@ -173,9 +221,14 @@ def main():
     ap.add_argument("--overhead", action="store_true", help="--auto: the overhead cameras only")
     ap.add_argument("--propagate", action="store_true",
                     help="add the calibration's error (8 perturbed cameras) to the stated errors")
+    ap.add_argument("--k1", type=float, default=-0.25, help="--diagnose: the lens's k1")
+    ap.add_argument("--diagnose", action="store_true",
+                    help="where the automatic camera's v0 error comes from (--height, --tilt, --k1)")
     args = ap.parse_args()
     if args.auto:
         return auto(args)
+    if args.diagnose:
+        return diagnose(args)
     true = pinhole_camera(height_m=args.height, tilt_deg=args.tilt, size=SIZE, fps=FPS)
     exact = true.project(table_corners(Table()))
     print(f"camera: {args.height} m, tilt {args.tilt} deg, f {true.K[0, 0]:.0f} px, {SIZE[0]}x{SIZE[1]}; "
