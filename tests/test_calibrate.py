@@ -178,6 +178,9 @@ def test_cli_calibrate_automatic_and_with_corners(tmp_path, capsys):
     assert code == 2 and "--corners: expected 8 numbers" in err_txt
     code, _, err_txt = run_main(capsys, "calibrate", tmp_path / "none.avi", "-o", out)
     assert code == 2 and "not found" in err_txt
+    code, _, err_txt = run_main(capsys, "calibrate", video, "-o", out, "--camera-height", "2",
+                                "--camera-height-error", "-1")
+    assert code == 2 and "--camera-height-error" in err_txt and err_txt.strip().count("\n") == 0
 
 
 @pytest.mark.slow
@@ -241,6 +244,9 @@ def test_a_nominal_focal_length_carries_its_error_in_a_ninth_camera():
     assert 0.4 < move < 1.2, move
     # a focal length that was given or solved keeps the 8 corner cameras only
     assert len(perturbed_cameras(c, 0.2, SIZE, kappa=kappa, camera_height_m=2.0)) == 8
+    # a measured height with its error: the ninth camera that much higher
+    cams = perturbed_cameras(c, 0.2, SIZE, kappa=kappa, camera_height_m=2.0, height_sigma_m=0.02)
+    assert len(cams) == 9 and cams[8].centre[2] == pytest.approx(2.02, abs=1e-6)
 
 
 @pytest.mark.slow
