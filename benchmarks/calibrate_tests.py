@@ -22,9 +22,14 @@ largest per-cell q99, rounded up:
   odd ones fitted as a lossy codec's), over the one-sided normal 1% point;
 - CASE2_FACTOR: the case-2 distance |x1 - x2|^2 in its covariance
   (recover.paper.case2_distance) on case-2 tracks the segmentation finds
-  running into the rest, over chi^2(2)'s.
+  running into the rest, over chi^2(2)'s;
+- EXCESS_Z (track/misfit.py, one-sided 0.1%): the look misfit's excess
+  over its standard error (track.misfit.look_misfit's ``z``) on tracks with
+  independent errors stated right (rolling from the strike and sliding, at
+  500 px/m, fed as track.video feeds it), over EXCESS_Z; its nominal rate
+  is 0.1%, not 1% (compare the share above 1, not q99).
 
-Usage: python benchmarks/calibrate_tests.py [--n 1200] [--seed 0] [--which slip,end,curve,ar1,case2] [--rho 0.67]
+Usage: python benchmarks/calibrate_tests.py [--n 1200] [--seed 0] [--which slip,end,curve,ar1,case2,misfit] [--rho 0.67]
 """
 
 import argparse
@@ -123,6 +128,18 @@ def case2_ratios(n, seed):
     return out
 
 
+def misfit_ratios(n, seed, px_per_m=500.0):
+    from cuespin.recover.simulate import mixed_tracks
+    from cuespin.track.misfit import EXCESS_Z, look_misfit
+    out = defaultdict(list)
+    for tr in mixed_tracks(n, seed):
+        se = tr.sigma * px_per_m
+        cov = np.broadcast_to(np.eye(2) * se * se, (len(tr.t), 2, 2))
+        m = look_misfit(tr.xy * px_per_m, cov, np.ones(len(tr.t), bool))
+        out[(tr.fps, tr.sigma)].append(m.z / EXCESS_Z)
+    return out
+
+
 def report(name, cells):
     allv = np.concatenate([np.asarray(v) for v in cells.values()])
     print(f"\n{name}: {len(allv)} null tracks; ratio statistic / nominal 1% point: "
@@ -142,12 +159,14 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=1200)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--which", default="slip,end,curve,ar1,case2")
+    ap.add_argument("--which", default="slip,end,curve,ar1,case2",
+                    help="comma-separated among slip,end,curve,ar1,case2,misfit")
     ap.add_argument("--rho", type=float, default=0.0, help="slip: AR(1) errors of this lag-1 correlation "
                     "(a lossy codec at low noise measured 0.67)")
     args = ap.parse_args()
     for name, fn in (("slip", slip_ratios), ("end", end_ratios), ("curve", curve_ratios), ("ar1", ar1_ratios),
-                     ("case2", case2_ratios)):
+                     ("case2", case2_ratios),
+                     ("misfit", misfit_ratios)):
         if name in args.which.split(","):
             clock = time.perf_counter()
             report(name, fn(args.n, args.seed, args.rho) if name == "slip" else fn(args.n, args.seed))

@@ -94,11 +94,15 @@ class LookMisfit:
     ratios : dict
         Per spacing (frames), the third differences' variance over what the
         stated errors give, and how many entered it (diagnostics).
+    z : float
+        The fitted excess over its standard error, the statistic the factor
+        is kept on (beyond ``EXCESS_Z``; 0 when no spacing counts).
     """
 
     factor: float = 1.0
     rho: float = 0.0
     ratios: dict | None = None
+    z: float = 0.0
 
 
 def _shape(rho, s):
@@ -235,9 +239,10 @@ def look_misfit(uv, cov, ok, t=None) -> LookMisfit:
     # spacing's terms are the least dependent, so its standard error,
     # scaled, is the one to beat.
     se_c *= np.sqrt(float(s.max()))
-    if not c > EXCESS_Z * se_c:
-        return LookMisfit(ratios=ratios)
-    return LookMisfit(factor=1.0 + c, rho=float(rho), ratios=ratios)
+    z = c / se_c
+    if not z > EXCESS_Z:
+        return LookMisfit(ratios=ratios, z=z)
+    return LookMisfit(factor=1.0 + c, rho=float(rho), ratios=ratios, z=z)
 
 
 __all__ = ["LookMisfit", "look_misfit", "third_difference_weights", "variance_ratios"]
