@@ -60,6 +60,17 @@ BLOCK_MIN = 4
 MIN_BLOCKS = 5
 # The excess is kept only beyond this many of its standard errors (one-sided
 # 0.1%), so that a ball whose look the model holds keeps its errors as stated.
+# Measured by simulation (benchmarks/calibrate_tests.py --which misfit;
+# 2026-11-30, mixed_tracks seeds 1 and 2, 12,000 tracks with independent
+# errors stated right, 60-480 fps, 0.01-0.3 px, 1,000 per cell): on tracks
+# rolling from the strike 4 of 6,000 inflated (0.07%: nominal), on sliding
+# ones 267 of 6,000 (4.5%; 1-10% per cell at 60-240 fps, 0-0.4% at 480),
+# by factors 1.9/2.7/6.0 (p10/50/90), up to 12: the end of sliding spoils
+# two of the longest spacing's 5-6 blocks, whose median is then the largest
+# clean one (tests/test_track_misfit.py).  Not raised: the per-cell 99.9th
+# percentile is 37, and simulated excesses of 3-5 (the realistic looks')
+# reach z 10-35; MIN_BLOCKS 7 (9) cut the rate to 0.4% (0.17%) but lost
+# half of a 60-fps excess of 5 at rho 0.8 (median factor 1.8 (1.0), not 6).
 EXCESS_Z = 3.09
 # A correlation is considered only where the longest spacing's third
 # differences reach this share of the error's full variance: beyond, the
@@ -94,11 +105,15 @@ class LookMisfit:
     ratios : dict
         Per spacing (frames), the third differences' variance over what the
         stated errors give, and how many entered it (diagnostics).
+    z : float
+        The fitted excess over its standard error, the statistic the factor
+        is kept on (beyond ``EXCESS_Z``; 0 when no spacing counts).
     """
 
     factor: float = 1.0
     rho: float = 0.0
     ratios: dict | None = None
+    z: float = 0.0
 
 
 def _shape(rho, s):
@@ -235,9 +250,10 @@ def look_misfit(uv, cov, ok, t=None) -> LookMisfit:
     # spacing's terms are the least dependent, so its standard error,
     # scaled, is the one to beat.
     se_c *= np.sqrt(float(s.max()))
-    if not c > EXCESS_Z * se_c:
-        return LookMisfit(ratios=ratios)
-    return LookMisfit(factor=1.0 + c, rho=float(rho), ratios=ratios)
+    z = c / se_c
+    if not z > EXCESS_Z:
+        return LookMisfit(ratios=ratios, z=z)
+    return LookMisfit(factor=1.0 + c, rho=float(rho), ratios=ratios, z=z)
 
 
 __all__ = ["LookMisfit", "look_misfit", "third_difference_weights", "variance_ratios"]
