@@ -151,10 +151,10 @@ def beyond_ball(shape, u0: int, v0: int, c, b, r_out: float) -> np.ndarray:
     ``c``, blur vector ``b``, px): what they show is felt or something else,
     never the ball."""
     h, w = shape
-    yy, xx = np.mgrid[v0:v0 + h, u0:u0 + w].astype(np.float32)
     c, b = np.asarray(c, float), np.asarray(b, float)
     L2 = float(b @ b)
-    px, py = xx - c[0], yy - c[1]
+    # Along each axis, broadcast (no index grids).
+    px, py = (np.arange(u0, u0 + w) - c[0])[None, :], (np.arange(v0, v0 + h) - c[1])[:, None]
     s = np.clip((px * b[0] + py * b[1]) / L2, -0.5, 0.5) if L2 > 0 else 0.0
     return np.hypot(px - s * b[0], py - s * b[1]) > r_out + FOREIGN_GAP_PX
 

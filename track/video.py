@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import csv
 import os
+import threading
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -28,7 +29,7 @@ from cuespin.track.colour import GREY, Projection, learn_projection
 from cuespin.track.projection import projected_centres
 from cuespin.track.misfit import LookMisfit, error_ar1, look_misfit
 from cuespin.track.radius import RadiusMap
-from cuespin.track.model import refit_shift
+from cuespin.track.model import refit_shift, warm_up
 from cuespin.track.reader import FrameSource, ThreadedFrames, TrackError, frame_times, probe
 from cuespin.track.tracker import (OK, STATUS_TEXT, BallTracker, TrackerConfig, beyond_ball, foreign_pixels,
                                    foreign_threshold)
@@ -298,6 +299,11 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     source = FrameSource(path, info)
     frame_bytes = max(w * h * 3, 1)
     feed = ThreadedFrames(source, QUEUE_BYTES // frame_bytes) if config.threaded else source
+    if config.threaded and config.refine == "fit":
+        # The compiled fit loads (numba: ~0.7 s of CPU a process; after an
+        # install it compiles, ~13 s once) on a helper thread while the
+        # look-ahead fills, when this thread only waits for frames.
+        threading.Thread(target=warm_up, daemon=True).start()
     frames = iter(feed)
     error = ""
     ended = False
