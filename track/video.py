@@ -167,8 +167,10 @@ class TrackResult:
         realistic --preset case4, seed 4): the moving ball's median error
         across its path minus the first rest's mean, RMS 0.7 (up to 1.5) of
         one frame's stated error; as independent frames the rest's mean
-        states 1/sqrt(n) of it, and free slip was chosen on 6 of 24 (v0 10-13
-        stated errors off); as one measurement of one frame's error, on 1."""
+        states 1/sqrt(n) of it, and free slip was chosen on 6 of 24 (3
+        answered ok, v0 10-13 stated errors off); as one measurement of one
+        frame's error, and the cue's frames left out
+        (recover.measurements.CUE_CLEAR_R), on 2 (degenerate), none ok."""
         return bool(self.lossless) and self.look_factor == 1.0 and not self.look_shaded
 
     @property
