@@ -90,9 +90,13 @@ def one_shot(args):
         return None
     if cached is not None and cached.exists():
         z = np.load(cached)
+        # Tracks kept before TrackResult.look_shaded: a realistic look was
+        # tracked shaded (every realistic track kept since states it).
+        shaded = bool(z["shaded"]) if "shaded" in z else look == "realistic"
+        independent = bool(z["independent"]) if "independent" in z else bool(z["lossless"])
         tr = SimpleNamespace(t=z["t"], xy=z["xy"], ok=z["ok"], cov_px=z["cov_px"], lossless=bool(z["lossless"]),
                              inter_frame=bool(z["inter_frame"]),
-                             independent_errors=bool(z["independent"]) if "independent" in z else bool(z["lossless"]),
+                             independent_errors=independent and not shaded,
                              look_factor=float(z["look_factor"]) if "look_factor" in z else 1.0,
                              look_rho=float(z["look_rho"]) if "look_rho" in z else 0.0)
         n, t_decode = int(z["frames"]), float(z["t_decode"])
@@ -106,6 +110,7 @@ def one_shot(args):
             np.savez(cached, t=tr.t, xy=tr.xy, ok=tr.ok, cov_px=tr.cov_px, lossless=tr.lossless,
                      inter_frame=tr.inter_frame, frames=n, t_decode=t_decode,
                      independent=getattr(tr, "independent_errors", tr.lossless),
+                     shaded=getattr(tr, "look_shaded", False),
                      look_factor=getattr(tr, "look_factor", 1.0), look_rho=getattr(tr, "look_rho", 0.0))
     # As pipeline.run.run_recover does, keeping the fit's own measurements
     # for the bound.

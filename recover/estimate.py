@@ -18,7 +18,7 @@ from cuespin.fit.decide import Decision, autocorrelated, sliding_ended, sliding_
 from cuespin.fit.segment import Segments, segment_track
 from cuespin.physics.motion import BallParams, phases
 from cuespin.recover.measurements import (Measurements, as_covariance, build_measurements,
-                                          codec_excess, fill_covariance)
+                                          codec_excess, cue_clear_s, fill_covariance)
 from cuespin.recover.mle import (CodecCorrelation, MLEResult, ModelFit, correlated_codec_var,
                                  fit_model, fit_models, initial_guess, lag1_autocorrelation, result, slip_lr,
                                  with_profile_interval)
@@ -56,8 +56,10 @@ class Decided:
     ``hac`` (the residuals' autocorrelation answered by a HAC sandwich:
     decided once, on the first fit; never on top of the AR(1) model),
     ``verdicts`` (the chosen fit's status rules' answers,
-    :attr:`recover.mle.MLEResult.verdicts`) and ``stop_apart`` (the paper's
-    case 2 question, :attr:`recover.paper.PaperResult.stop_apart`).
+    :attr:`recover.mle.MLEResult.verdicts`), ``stop_apart`` (the paper's
+    case 2 question, :attr:`recover.paper.PaperResult.stop_apart`) and
+    ``clear_s`` (the time after ``t0`` whose frames the cue's tip may touch,
+    left out: recover.measurements.cue_clear_s).
     """
 
     sliding_seen: bool | None
@@ -75,6 +77,7 @@ class Decided:
     hac: bool = False
     verdicts: dict | None = None
     stop_apart: bool | None = None
+    clear_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -100,15 +103,22 @@ class Estimate:
 
 
 def _first_fit(meas, params, starts, exposure_s, fit_friction) -> ModelFit | None:
-    """The free-slip fit from the first start that runs and converges."""
+    """The free-slip fit of least chi-square among those from ``starts``
+    that run and converge.  Not the first that converges: a sliding
+    segment of a few frames can start it at ten times the speed (a
+    rolling shot whose first moving frames lie off the path: 16.9 m/s for
+    1.7), and it then converges far from the shot, and the codec's share
+    measured from its residuals (3-73 px on 5 of 24 realistic rolling
+    renders) made every answer's errors meaningless."""
+    best = None
     for start in starts:
         try:
             fit = fit_model(meas, params, start, exposure_s, False, fit_friction)
         except FIT_ERRORS:
             continue
-        if fit.converged:
-            return fit
-    return None
+        if fit.converged and (best is None or fit.chi2 < best.chi2):
+            best = fit
+    return best
 
 
 def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: bool = True,
@@ -180,16 +190,20 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
     # segmentation's t0 can miss by most of a frame at 60 fps, and the frame
     # it then keeps, half still and half moving, passed for slip (measured:
     # v0 1.6% off at 9 stated errors).
-    def measure(t0):
+    # The frames after the strike whose ball the cue's tip still touches are
+    # left out too, for the time the ball takes to clear it at the speed the
+    # segmentation and then the first fit give (recover.measurements.CUE_CLEAR_R).
+    def measure(t0, clear_s):
         return build_measurements(t, xy, cov, t0=t0, t_rest=seg.t2, exposure_s=exposure_s,
-                                  frame_dt=frame_dt, shared_rest=not lossless, px_to_m=px_to_m)
+                                  frame_dt=frame_dt, shared_rest=not lossless, px_to_m=px_to_m, clear_s=clear_s)
 
     if keep is not None:
         codec = CodecCorrelation(keep.codec_var, frame_dt) if inter_frame and not lossless else None
         return _refit(keep, seg, t, xy, params, exposure_s, fit_friction, run_paper, lossless, sigma,
                       frame_dt, measure, codec, t_fit, clock)
     starts = [initial_guess(s, params) for s in (seg, seg.unended, seg.rolling) if s is not None]
-    meas1 = measure(seg.t0)
+    clear_s = cue_clear_s(np.hypot(*starts[0][2]), params.R, frame_dt) if starts else 0.0
+    meas1 = measure(seg.t0, clear_s)
     first = _first_fit(meas1, params, starts, exposure_s, fit_friction)
     codec_var, t0 = 0.0, seg.t0
     if first is not None:
@@ -199,7 +213,8 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
             codec_var = codec_excess(meas1, first.residuals, len(first.x))
         if abs(first.shot.t0 - seg.t0) < MAX_T0_SHIFT_FRAMES * frame_dt:
             t0 = first.shot.t0
-    meas = measure(t0).with_codec(codec_var)
+            clear_s = cue_clear_s(np.hypot(*first.shot.v0), params.R, frame_dt)
+    meas = measure(t0, clear_s).with_codec(codec_var)
     codec = CodecCorrelation(codec_var, frame_dt) if inter_frame and not lossless else None
     # An intra-frame lossy codec (MJPG): its error is shared by frames that
     # show the ball at nearly the same place (recover.mle.still_codec_sandwich).
@@ -270,7 +285,8 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         paper=(paper.v0, paper.w0) if paper is not None and paper.status == "ok" else None,
         ar1=0.0 if fit is None else fit.ar1,
         breaks=(chosen.t0, float("inf") if runs_to_end(chosen) else chosen.t1) if chosen else None,
-        hac=hac, verdicts=dict(mle.verdicts) or None, stop_apart=None if paper is None else paper.stop_apart)
+        hac=hac, verdicts=dict(mle.verdicts) or None, stop_apart=None if paper is None else paper.stop_apart,
+        clear_s=clear_s)
     return Estimate(chosen, paper, mle, meas, codec_var, decisions,
                     {"fit": t_fit, "recover": time.perf_counter() - clock}, decided)
 
@@ -282,7 +298,7 @@ def _refit(keep: Decided, seg, t, xy, params, exposure_s, fit_friction, run_pape
     path shape and root for the paper's method."""
     nan = float("nan")
     chosen = kept_segments(seg, keep)
-    meas = measure(keep.t0).with_codec(keep.codec_var)
+    meas = measure(keep.t0, keep.clear_s).with_codec(keep.codec_var)
     decisions = {"sliding_ended": Decision(keep.sliding_ended, nan, nan)}
     mle = None
     if keep.sliding_seen is None or keep.start is None:

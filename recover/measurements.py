@@ -10,7 +10,9 @@ so all of them weight, leave out and count the same measurements.
   ``scene.camera.cov_to_table``); per-axis standard errors are accepted too.
 - Frames whose exposure holds the strike are left out by a mask (never by a
   huge error): their image is a ball still for part of the exposure and
-  streaking for the rest, which no tracker model describes.
+  streaking for the rest, which no tracker model describes.  So are the
+  frames just after it whose ball the cue's tip still touches
+  (:data:`CUE_CLEAR_R`).
 - With a lossy codec, the frames of a resting ball share one compression
   error (the same image, compressed the same way): their mean is one
   measurement, with one frame's covariance.  With a lossless codec a rest
@@ -41,6 +43,34 @@ from cuespin.fit.segment import noise_from_track
 # exposure, are left out as well: the margin for the strike time's own
 # error (the first fit places it to a small fraction of a frame).
 STRIKE_MARGIN_FRAMES = 0.25
+# The cue follows the departing ball through the strike (on the realistic
+# look at half its speed, render.draw.cue_tip; a real cue's follow-through
+# trails the ball too), so the first frames after it show the cue's tip
+# inside the ball's blurred outline, where the tracker cannot keep it out
+# (its foreign-pixel mask starts track.tracker.FOREIGN_GAP_PX beyond the
+# outline): frames whose exposure starts before the ball has moved this many
+# radii from where it was struck are left out as well.  Measured against the
+# truth on 38 realistic rolling-from-the-strike renders (benchmarks/
+# accuracy.py --look realistic --preset case4 --codec FFV1, seeds 3-5, two
+# tracks lost at the strike left out): the error along the path, in stated
+# errors, of frames whose exposure started with the ball moved 0-0.25 R: RMS
+# 2.9, up to 11 (the first frame after the strike: 0.1-0.66 px ahead of or
+# behind the ball); 0.25-0.5 R: 1.7, up to 3.8; 0.5-1 R: 1.25, up to 4.2;
+# beyond 1 R 0.99, up to 3.8 (by frame: the first RMS 2.9, the next three
+# 1.1-1.3).  At most CUE_CLEAR_FRAMES frame intervals: a longer gap after
+# the strike lets the free-slip fit hide a slip in it (uncapped, a plain
+# 0.38 m/s shot at 480 fps lost its whole 60-ms slide to the gap and was
+# answered 13 stated errors off) and widens the unseen slip a rolling
+# answer states (recover.mle.unseen_slip counts from the first frame used;
+# at 60 fps 2 frames take a 0.5 m/s shot's bound from 0.11 to 0.20 of
+# |v0|).  On 40 realistic renders (seeds 3-5), a resting shaded ball one
+# measurement (track.video): free slip chosen on none answered ok (2
+# degenerate) with 1 R and 2 frames at most, on 1 (v0 10 stated errors
+# off) with 1 frame at most.  The price on 25 plain MJPG shots (seed 0):
+# one rolling shot (240 fps) taken for sliding (degenerate, likelihood
+# ratio 12.2 against 9.2; rolling with 1 frame at most).
+CUE_CLEAR_R = 1.0
+CUE_CLEAR_FRAMES = 2.0
 # A codec's measured share may lower the stated errors (see codec_excess)
 # to no less than this fraction of them: MJPG at low noise measured the
 # tracker's stated errors 1.2-1.4 times the real ones (README), so 0.5 is
@@ -332,18 +362,34 @@ def _make(t, xy, cov, group, px_to_m=None, rest_scatter: bool = False) -> Measur
     return Measurements(t=t, xy=xy, cov=cov, group=group, W=W, px_to_m=px_to_m, rest_scatter=rest_scatter)
 
 
-def strike_window(t, t0: float, exposure_s: float, frame_dt: float) -> np.ndarray:
-    """Mask of the frames whose exposure may hold the strike at ``t0`` (the
-    one definition of the strike's window)."""
-    if exposure_s <= 0 or t0 is None or not np.isfinite(t0):
+def cue_clear_s(speed: float, R: float, frame_dt: float) -> float:
+    """Time (s) after the strike until the ball, leaving at ``speed`` (m/s),
+    has moved :data:`CUE_CLEAR_R` radii ``R`` (m) from the cue's tip, at
+    most :data:`CUE_CLEAR_FRAMES` frame intervals ``frame_dt`` (s); 0 when
+    the speed is unknown."""
+    speed = float(speed) if speed is not None else float("nan")
+    if not (np.isfinite(speed) and speed > 0):
+        return 0.0
+    return min(CUE_CLEAR_R * float(R) / speed, CUE_CLEAR_FRAMES * float(frame_dt))
+
+
+def strike_window(t, t0: float, exposure_s: float, frame_dt: float, clear_s: float = 0.0) -> np.ndarray:
+    """Mask of the frames whose exposure may hold the strike at ``t0``, or
+    starts within ``clear_s`` seconds after it (the cue's tip still on the
+    ball: :func:`cue_clear_s`); the one definition of the strike's window."""
+    t = np.asarray(t, dtype=float)
+    if t0 is None or not np.isfinite(t0):
         return np.zeros(len(t), bool)
+    cue = (t > t0) & (t - 0.5 * exposure_s < t0 + clear_s)
+    if exposure_s <= 0:
+        return cue
     half = 0.5 * exposure_s + STRIKE_MARGIN_FRAMES * frame_dt
-    return np.abs(np.asarray(t) - t0) < half
+    return (np.abs(t - t0) < half) | cue
 
 
 def build_measurements(t, xy, cov, *, t0: float | None = None, t_rest: float | None = None,
                        exposure_s: float = 0.0, frame_dt: float | None = None,
-                       shared_rest: bool = False, px_to_m=None) -> Measurements:
+                       shared_rest: bool = False, px_to_m=None, clear_s: float = 0.0) -> Measurements:
     """Turn a track into the measurements a fit uses.
 
     Parameters
@@ -370,6 +416,10 @@ def build_measurements(t, xy, cov, *, t0: float | None = None, t_rest: float | N
         Metres per pixel at each frame (:func:`pixel_to_table`), through
         which a codec's pixel variance reaches the table
         (:meth:`Measurements.with_codec`); without it that variance is in m^2.
+    clear_s : float
+        Time (s) after ``t0`` for the ball to clear the cue's tip
+        (:func:`cue_clear_s`): frames whose exposure starts before then are
+        left out.
 
     Returns
     -------
@@ -387,7 +437,7 @@ def build_measurements(t, xy, cov, *, t0: float | None = None, t_rest: float | N
             px_to_m[bad] = np.median(px_to_m[~bad], axis=0)
     if frame_dt is None:
         frame_dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
-    use = ~strike_window(t, t0, exposure_s, frame_dt) if t0 is not None else np.ones(len(t), bool)
+    use = ~strike_window(t, t0, exposure_s, frame_dt, clear_s) if t0 is not None else np.ones(len(t), bool)
     key = np.arange(len(t), dtype=float)
     # A rest is one measurement (group_covariance): with a lossy codec
     # always, with a lossless one when its frames' scatter is measured.

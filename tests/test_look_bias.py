@@ -1,0 +1,107 @@
+"""A realistic look's biases do not pass for slip (issue 10, point 3): a
+shot rolling from the strike comes out ``rolling``.
+
+Two biases of the realistic renders, measured against the truth on
+rolling-from-the-strike FFV1 renders (benchmarks/accuracy.py --look
+realistic --preset case4, seeds 3-5): the cue's tip on the ball in the
+first frame after the strike (up to 11 stated errors along the path,
+recover.measurements.CUE_CLEAR_R) and the moving ball's error across its
+path differing from the resting ball's (RMS 0.7, up to 1.5 of one frame's
+stated error, track.video.TrackResult.independent_errors).  Here both are
+put on simulated tracks at those sizes; the fast test checks that they made
+the slip test say "sliding" before (the test can fail) and do not now."""
+
+import numpy as np
+import pytest
+
+from cuespin.recover import measurements
+from cuespin.recover.estimate import estimate
+from cuespin.recover.simulate import null_rolling_tracks
+from cuespin.track.video import TrackResult
+
+# The biases measured (module docstring), in stated errors: the cue's
+# largest, the rest's RMS (at its largest, 1.5, the likelihood ratio's
+# noncentrality is about 2.5 and free slip is chosen on about 5% of tracks).
+CUE_FRAME_SIGMAS = 11.0
+REST_OFFSET_SIGMAS = 0.7
+
+
+def _biased(tr):
+    """The track with the first frame after the strike moved along the path
+    by CUE_FRAME_SIGMAS and every moving frame across it by
+    REST_OFFSET_SIGMAS of its error (the rest's frames unmoved)."""
+    xy = tr.xy.copy()
+    d = np.asarray(tr.shot.v0) / np.hypot(*tr.shot.v0)
+    n = np.array([-d[1], d[0]])
+    moving = tr.t - 0.5 * tr.exposure_s > tr.shot.t0
+    xy[moving] += REST_OFFSET_SIGMAS * tr.sigma * n
+    xy[np.flatnonzero(moving)[0]] += CUE_FRAME_SIGMAS * tr.sigma * d
+    return xy
+
+
+def _tracks():
+    # 120 and 240 fps at the realistic renders' median error (about 1.5e-4
+    # m: 0.05 px at 300 px/m).
+    return list(null_rolling_tracks(4, 21, fps_grid=(120.0, 240.0), sigma_grid=(1.5e-4,)))
+
+
+def test_look_biases_no_longer_pass_for_slip(monkeypatch):
+    for tr in _tracks():
+        xy = _biased(tr)
+        est = estimate(tr.t, xy, np.full(len(tr.t), tr.sigma), tr.params, tr.exposure_s, lossless=False,
+                       run_paper=False)
+        m = est.mle
+        assert m.status == "ok" and m.model == "rolling", (m.status, m.model, m.slip_lr, m.reason)
+        err = np.abs(m.v0 - tr.shot.v0) / m.stderr["v0"]
+        assert np.all(err < 3.0), err
+    # Before: every frame after the strike measured, the rest's frames each
+    # their own measurement.
+    monkeypatch.setattr(measurements, "CUE_CLEAR_R", 0.0)
+    slips = 0
+    for tr in _tracks():
+        est = estimate(tr.t, _biased(tr), np.full(len(tr.t), tr.sigma), tr.params, tr.exposure_s, lossless=True,
+                       run_paper=False)
+        slips += est.mle.model == "full"
+    assert slips >= 3, slips
+
+
+def test_a_shaded_look_shares_the_rest_error():
+    n = 4
+    base = dict(t=np.arange(n) / 60.0, uv=np.zeros((n, 2)), xy=np.zeros((n, 2)), ok=np.ones(n, bool),
+                status=np.zeros(n, np.int8), stderr_px=np.full((n, 2), 0.05), radius_px=8.0, background=None,
+                lossless=True)
+    assert TrackResult(**base).independent_errors
+    assert not TrackResult(**base, look_shaded=True).independent_errors
+    assert not TrackResult(**base, look_factor=1.5).independent_errors
+
+
+@pytest.mark.slow
+def test_realistic_rolling_renders_come_out_rolling(tmp_path):
+    """Seed 4's rolling-from-the-strike renders that came out free slip
+    before (shots 4, 19, 21: v0 10-13 stated errors off): rolling, or v0
+    within 3 stated errors."""
+    from cuespin.data_gen.sampler import sample_scenes
+    from cuespin.recover.api import recover_track
+    from cuespin.recover.measurements import pixel_to_table, table_covariance
+    from cuespin.render import render_video
+    from cuespin.track.tracker import TrackerConfig
+    from cuespin.track.video import track_video
+
+    scenes = sample_scenes(22, 4, preset="case4", look="realistic")
+    for i in (4, 19, 21):
+        scene = scenes[i]
+        scene.render["max_duration"] = 6.0
+        scene.render["codec"] = "FFV1"
+        video = tmp_path / f"shot_{i}.avi"
+        render_video(scene, video)
+        tr = track_video(video, scene, TrackerConfig())
+        assert tr.look_shaded and not tr.independent_errors
+        cam = scene.camera
+        out = recover_track(tr.t, tr.xy, tr.ok, table_covariance(cam, tr.xy, tr.cov_px), scene.physics,
+                            cam.exposure_s, "mle", lossless=tr.independent_errors, inter_frame=tr.inter_frame,
+                            px_to_m=pixel_to_table(cam, tr.xy), ar1_floor=tr.error_ar1)
+        m = out["methods"]["mle"]
+        assert m["status"] == "ok", (i, m["reason"])
+        if m["model"] != "rolling":
+            err = np.abs(np.array(m["v0"]) - scene.truth.v0) / np.array(m["stderr"]["v0"])
+            assert np.all(err < 3.0), (i, err)
