@@ -139,6 +139,10 @@ def mle_dict(est: Estimate) -> dict:
            "chi2_per_dof": _num(m.chi2 / m.dof) if m.dof else None,
            "dof": int(m.dof) if m.dof else None, "hac": bool(m.hac), "rho1": _num(m.rho1),
            "ar1": _num(m.ar1),
+           # The frames after t0 left out while the cue's tip may touch the
+           # ball (recover.measurements.cue_clear_s): the bound leaves out
+           # the same frames.
+           "cue_clear_s": _num(est.decided.clear_s) if est.decided is not None else None,
            "codec_noise_m": _num(math.copysign(math.sqrt(abs(c_m2)), c_m2)),
            "codec_noise_px": None if not in_px else _num(math.copysign(math.sqrt(abs(est.codec_var)),
                                                                          est.codec_var))}
