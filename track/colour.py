@@ -30,6 +30,9 @@ CONDITION_FLOOR = 0.05
 # A sample differs from its pixel's median by more than this many whitened
 # noise sigmas: the ball (or something else moving) covers it.
 BALL_SIGMAS = 6.0
+# A box position votes on the ball's colour when its departure is at least
+# this fraction of the largest in its sample (the ball's whole box).
+PEAK_FRACTION = 0.5
 # Pixels the noise covariance is estimated from: its variances' relative
 # error is sqrt(2 / n), 0.4%, and the medians over a whole 1280 x 720 frame
 # cost ~1.5 s, more than tracking a short shot.
@@ -136,7 +139,13 @@ def ball_direction(samples: np.ndarray, ys: np.ndarray, xs: np.ndarray, radius_p
     Db = np.stack([cv2.blur(d, (k, k)) for d in D])[:, ys - v0, xs - u0].astype(np.float64)
     Z = np.linalg.solve(L, Db.reshape(-1, 3).T).T.reshape(Db.shape) * k  # whitened: a box mean's noise is S / k^2
     norm2 = np.einsum("sij,sij->si", Z, Z)
-    big = norm2 > BALL_SIGMAS**2
+    # Only departures near the sample's largest: a ball fills the box, while
+    # a lossy codec's error (MJPG's blocks, correlated over the box, so not
+    # averaged away) departs by a fraction of it but over the whole moving
+    # region (blue on blue, MJPG: 2600-3800 such box positions per sample
+    # against the ball's 430, and the direction was the codec's).
+    peak2 = norm2.max(axis=1, keepdims=True)
+    big = (norm2 > BALL_SIGMAS**2) & (norm2 > PEAK_FRACTION**2 * peak2)
     if big.sum() < 10:
         return None
     # One vote per sample (its unit vectors' mean outer product): the ball
