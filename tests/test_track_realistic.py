@@ -92,3 +92,18 @@ def test_cue_tip_at_the_strike_is_not_the_ball(tmp_path):
     # Measured 72 of 73 frames in view (one fit fails as the cue touches):
     # a frame left out is allowed, a wrong centre is not.
     assert found >= 0.95, tr.status_counts()
+
+
+def test_red_ball_on_red_felt_in_low_light_reports_no_false_centre(tmp_path):
+    # sample_scenes(6, 7, realistic, MJPG)[5]: a red ball on red felt under
+    # a low light (ambient 0.39), 60 fps, no cue: its lit middle is brighter
+    # than the felt and its rim darker, and the search's blob was the rim's
+    # crescent: 43 of 81 frames were reported 1.3-1.4 radii off.  The fits
+    # pulled there explain their windows 2-5 times worse than the track's
+    # typical fit and are dropped (measured: 31 of 81 frames found, none
+    # false); a frame left out is allowed, a wrong centre is not.
+    scene = sample_scenes(6, 7, look="realistic", codec="MJPG")[5]
+    scene.render["max_duration"] = 2.0
+    found, err, tr = track_against_truth(scene, tmp_path / "red.avi")
+    assert err.size and err.max() < MAX_ERR_RADII, f"a found centre {err.max():.2f} radii off"
+    assert found >= 0.3, tr.status_counts()
