@@ -85,11 +85,9 @@ class Background:
 BALL_WIDE_FRACTION = 0.6
 
 
-def ball_wide(mask: np.ndarray, radius_px, grow_px: int = 0) -> np.ndarray:
+def ball_wide(mask: np.ndarray, radius_px) -> np.ndarray:
     """The parts of ``mask`` (bool, h x w) that a disc of
-    ``BALL_WIDE_FRACTION`` of the ball's radius fits in (a morphological
-    opening), its diameter grown by ``grow_px`` (a mask of box means: the
-    box widens everything by its width less one).
+    ``BALL_WIDE_FRACTION`` of the ball's radius fits in (a morphological opening).
 
     ``radius_px`` is one radius (px) or a :class:`~cuespin.track.radius.RadiusMap`:
     under perspective each pixel is opened with the ball's size there (a
@@ -101,7 +99,7 @@ def ball_wide(mask: np.ndarray, radius_px, grow_px: int = 0) -> np.ndarray:
     out = np.zeros(mask.shape, bool)
     H, W = mask.shape
     for _, r, (v0, v1, u0, u1), on in radii.bands():
-        d = max(3, int(round(2 * BALL_WIDE_FRACTION * r + grow_px)) | 1)
+        d = max(3, int(round(2 * BALL_WIDE_FRACTION * r)) | 1)
         k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (d, d))
         if on is None:
             return cv2.morphologyEx(m8, cv2.MORPH_OPEN, k).astype(bool)

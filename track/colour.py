@@ -213,13 +213,7 @@ def learn_projection(samples: np.ndarray, radius_px) -> Projection:
     S = noise_covariance(samples[0], samples[n // 2]) if n > 1 else np.eye(3) * ROUNDING_VAR
     L = np.linalg.cholesky(S)
     sd = np.sqrt(np.diag(S))
-    # The box means widen a cue (a quarter of the ball's width) by the box's
-    # width less one, which let it pass as ball-wide: the opening grows by as
-    # much (a 240-fps shot whose ball moved 6 px in the look-ahead,
-    # sample_scenes(6, 9, realistic, FFV1)[1]: the channel was the cue's, at
-    # |cos| 0.01 with the ball's; none found, the look-ahead slides on).
-    k = box_size(as_radius_map(radius_px, samples.shape[1:3]).r_min)
-    ys, xs = np.nonzero(ball_wide(moved_boxes(samples, radius_px, sd), radius_px, grow_px=k - 1))
+    ys, xs = np.nonzero(ball_wide(moved_boxes(samples, radius_px, sd), radius_px))
     luma = np.array([0.114, 0.587, 0.299])
     w = None
     if len(ys):
