@@ -42,6 +42,9 @@ from types import SimpleNamespace
 import numpy as np
 
 MAX_SECONDS = 6.0
+# The answer's components whose 95% intervals are counted (each its own
+# marginal interval, estimate +/- 1.96 of the JSON's stated error).
+COMPONENTS = ("v0x", "v0y", "w0x", "w0y")
 
 
 def one_shot(args):
@@ -130,18 +133,22 @@ def one_shot(args):
         row[f"{m}_ev"] = np.hypot(*(np.array(d["v0"]) - v0)) / speed if d["v0"] else np.nan
         row[f"{m}_ew"] = p.R * np.hypot(*(np.array(d["w0"]) - w0)) / speed if d["w0"] else np.nan
         row[f"{m}_z"] = row[f"{m}_cover"] = np.nan
+        row.update({f"{m}_z_{name}": np.nan for name in COMPONENTS})
         se = d.get("stderr") or {}
         if d["status"] == "ok" and se.get("v0") and se.get("w0"):
             err = np.r_[d["v0"], d["w0"]] - truth_vw
             z = err / np.r_[se["v0"], se["w0"]]
             row[f"{m}_z"] = float(np.sqrt(np.mean(z**2)))
             row[f"{m}_cover"] = float(np.mean(np.abs(z) < 1.96))
+            for k, name in enumerate(COMPONENTS):  # per component, for intervals over shots (summarize)
+                row[f"{m}_z_{name}"] = float(z[k])
     mle = out["methods"]["mle"]
     row["mle_model"] = mle.get("model") or ""
     row["mle_v0_z"] = np.nan  # |v0 error| in its stated errors (the worse axis)
     if mle["status"] == "ok" and (mle.get("stderr") or {}).get("v0"):
         row["mle_v0_z"] = float(np.max(np.abs((np.array(mle["v0"]) - v0) / np.array(mle["stderr"]["v0"]))))
     row["mle_crb_z"] = row["mle_crb_z_indep"] = np.nan
+    row.update({f"mle_crb_{name}": np.nan for name in COMPONENTS})
     row["chi2_per_dof"] = row["codec_noise_px"] = row["hac"] = row["rho1"] = row["ar1"] = np.nan
     if mle["status"] == "ok":
         err = np.r_[mle["v0"], mle["w0"]] - truth_vw
@@ -157,9 +164,51 @@ def one_shot(args):
                 idx = [3, 4] if rolling else [3, 4, 5, 6]
                 e = err[:2] if rolling else err
                 row[key] = float(np.sqrt(np.mean((e / np.sqrt(np.diag(cov)[idx])) ** 2)))
+                if not indep:  # per component (NaN for w0 on a rolling answer: its bound is v0's)
+                    zc = np.r_[e / np.sqrt(np.diag(cov)[idx]), [np.nan] * (4 - len(idx))]
+                    for k, name in enumerate(COMPONENTS):
+                        row[f"mle_crb_{name}"] = float(zc[k])
         except np.linalg.LinAlgError:  # the bound is a diagnostic; never lose the row
             pass
     return row
+
+
+def wilson(k: int, n: int, z: float = 1.959964):
+    """Wilson score interval (95%) of a proportion k / n."""
+    p, d = k / n, 1.0 + z * z / n
+    c, h = (p + z * z / (2 * n)) / d, z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / d
+    return c - h, c + h
+
+
+def intervals(rows, n_boot: int = 4000, seed: int = 0):
+    """The MLE's coverage, RMS error in stated errors and RMS error / bound
+    per noise band, with 95% intervals: coverage counts each component of
+    v0 and w0 (each its own interval, estimate +/- 1.96 stated errors);
+    Wilson's interval treats the components as independent (too narrow: a
+    shot's v0 and w0 errors are strongly correlated), the bootstrap
+    resamples shots (percentile interval, ``n_boot`` draws)."""
+    rng = np.random.default_rng(seed)
+    print("\nMLE with 95% intervals (components of v0, w0; bootstrap over shots)")
+    for band, sel in (("all", lambda r: True), ("noise < 0.5", lambda r: r["noise"] < 0.5),
+                      ("noise >= 0.5", lambda r: r["noise"] >= 0.5)):
+        ok = [r for r in rows if r["mle_status"] == "ok" and sel(r) and f"mle_z_{COMPONENTS[0]}" in r
+              and np.isfinite(r[f"mle_z_{COMPONENTS[0]}"])]
+        if len(ok) < 2:
+            continue
+        Z = np.array([[r[f"mle_z_{c}"] for c in COMPONENTS] for r in ok], float)
+        K = np.array([[r.get(f"mle_crb_{c}", np.nan) for c in COMPONENTS] for r in ok], float)
+        hit = np.abs(Z) < 1.959964
+        k, m = int(hit.sum()), Z.size
+        idx = rng.integers(0, len(ok), (n_boot, len(ok)))
+        boot = {name: np.percentile([f(A[i]) for i in idx], [2.5, 97.5]) for name, f, A in (
+            ("cover", lambda a: np.mean(np.abs(a) < 1.959964), Z),
+            ("rms", lambda a: np.sqrt(np.nanmean(a * a)), Z), ("crb", lambda a: np.sqrt(np.nanmean(a * a)), K))}
+        lo, hi = wilson(k, m)
+        print(f"  {band}: {len(ok)} ok; coverage {k}/{m} = {k / m:.1%} (Wilson {lo:.1%}-{hi:.1%}, "
+              f"bootstrap {boot['cover'][0]:.1%}-{boot['cover'][1]:.1%}); RMS / stated error "
+              f"{np.sqrt(np.mean(Z * Z)):.2f} ({boot['rms'][0]:.2f}-{boot['rms'][1]:.2f}); RMS / bound "
+              f"{np.sqrt(np.nanmean(K * K)):.2f} ({boot['crb'][0]:.2f}-{boot['crb'][1]:.2f}); chi2/dof median "
+              f"{np.nanmedian([r['chi2_per_dof'] for r in ok]):.2f}")
 
 
 def pct(x, q):
@@ -189,11 +238,16 @@ def main():
     ap.add_argument("--preset", default=None, help="the sampler's preset for every shot (e.g. case4: rolling "
                     "from the strike); default its mix")
     ap.add_argument("--summarize", default=None, help="only print the tables of a CSV written before "
-                    "(a run cut short keeps its finished rows)")
+                    "(a run cut short keeps its finished rows); several, comma-separated, are pooled")
     args = ap.parse_args()
     if args.summarize:
         import pandas as pd
-        summarize(pd.read_csv(args.summarize).to_dict("records"), args.seed)
+        # Several CSVs (comma-separated: seeds of one band) pooled; shot
+        # numbers made unique per file for the tables' order.
+        rows = []
+        for k, path in enumerate(args.summarize.split(",")):
+            rows += [dict(r, i=r["i"] + 100000 * k) for r in pd.read_csv(path).to_dict("records")]
+        summarize(rows, args.seed)
         return
     from tqdm import tqdm
     rows = []
@@ -258,6 +312,7 @@ def summarize(rows, seed=0):
                 print(f"{m}: {band}: coverage of 95% intervals {np.mean([r[f'{m}_cover'] for r in zs]):.1%} "
                       f"(target {target}); RMS error / own stderr "
                       f"{np.sqrt(np.mean(np.square([r[f'{m}_z'] for r in zs]))):.2f} (target 0.9-1.1); {len(zs)} shots")
+    intervals(rows)
     rolling = [r for r in rows if r.get("preset") == "case4" and r["mle_status"] == "ok"]
     if rolling:
         slip = [r for r in rolling if r.get("mle_model") == "full"]

@@ -22,9 +22,21 @@ largest per-cell q99, rounded up:
   odd ones fitted as a lossy codec's), over the one-sided normal 1% point;
 - CASE2_FACTOR: the case-2 distance |x1 - x2|^2 in its covariance
   (recover.paper.case2_distance) on case-2 tracks the segmentation finds
-  running into the rest, over chi^2(2)'s.
+  running into the rest, over chi^2(2)'s;
+- EXCESS_Z (track/misfit.py, one-sided 0.1%): the look misfit's excess
+  over its standard error (track.misfit.look_misfit's ``z``) on tracks with
+  independent errors stated right (rolling from the strike and sliding, at
+  500 px/m, fed as track.video feeds it), over EXCESS_Z; its nominal rate
+  is 0.1%, not 1% (compare the share above 1, not q99).
 
-Usage: python benchmarks/calibrate_tests.py [--n 1200] [--seed 0] [--which slip,end,curve,ar1,case2] [--rho 0.67]
+``--which power`` prints stop_apart's power instead: case-2 shots whose v0
+is scaled so that sliding ends ``--gaps`` position errors (per-axis sigma)
+before the rest, how often they are called apart (rolling found by the
+segmentation, or case 2 with stop_apart yes), and how often they would be
+with CASE2_FACTOR 1.
+
+Usage: python benchmarks/calibrate_tests.py [--n 1200] [--seed 0] [--rho 0.67]
+    [--which slip,end,curve,ar1,case2,misfit,power] [--gaps 3,6]
 """
 
 import argparse
@@ -123,6 +135,65 @@ def case2_ratios(n, seed):
     return out
 
 
+def misfit_ratios(n, seed, px_per_m=500.0):
+    from cuespin.recover.simulate import mixed_tracks
+    from cuespin.track.misfit import EXCESS_Z, look_misfit
+    out = defaultdict(list)
+    for tr in mixed_tracks(n, seed):
+        se = tr.sigma * px_per_m
+        cov = np.broadcast_to(np.eye(2) * se * se, (len(tr.t), 2, 2))
+        m = look_misfit(tr.xy * px_per_m, cov, np.ones(len(tr.t), bool))
+        out[(tr.fps, tr.sigma)].append(m.z / EXCESS_Z)
+    return out
+
+
+def case2_power(n, seed, gap):
+    import dataclasses
+
+    from scipy.optimize import brentq
+
+    from cuespin.data_gen.sampler import sample_shot
+    from cuespin.fit.decide import CASE2_FACTOR, stop_apart
+    from cuespin.fit.segment import segment_track
+    from cuespin.physics import phases
+    from cuespin.recover.paper import case2_distance, geometry_covariance, ran_into_rest
+    from cuespin.recover.simulate import FPS_GRID, SIGMA_GRID_M, _exposure, simulate_track
+    rng = np.random.default_rng(seed)
+    out = defaultdict(list)
+    for i in range(n):
+        fps, sigma = FPS_GRID[i % len(FPS_GRID)], SIGMA_GRID_M[(i // len(FPS_GRID)) % len(SIGMA_GRID_M)]
+        shot, p = sample_shot(rng, "case2")
+
+        def scaled(e, shot=shot):
+            return dataclasses.replace(shot, v0=tuple(np.asarray(shot.v0) * (1 + e)))
+
+        def short(e, p=p, sigma=sigma):
+            ph = phases(scaled(e), p)
+            return float(np.hypot(*(np.asarray(ph.x2) - np.asarray(ph.x1)))) - gap * sigma
+        try:
+            e = brentq(short, 0.0, 0.2, xtol=1e-12)
+        except ValueError:
+            continue
+        sh = scaled(e)
+        tr = simulate_track(sh, p, fps, sigma, rng, _exposure(rng, fps, True), t_end=phases(sh, p).t2 + 0.3)
+        seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, tr.sigma, tr.exposure_s)
+        if not seg:
+            continue
+        s = seg if ran_into_rest(seg) else seg.unended
+        if s is not None and ran_into_rest(s):
+            d = stop_apart(case2_distance(s, geometry_covariance(s, tr.sigma, True)))
+            out[(fps, sigma)].append((d.yes, d.statistic > d.threshold / CASE2_FACTOR))
+        else:
+            out[(fps, sigma)].append((True, True))
+    allv = np.concatenate([np.asarray(v) for v in out.values()])
+    print(f"\npower, sliding ending {gap:g} sigma before the rest: {len(allv)} shots, called apart "
+          f"{allv[:, 0].mean():.1%} (CASE2_FACTOR {CASE2_FACTOR:g}), {allv[:, 1].mean():.1%} with 1")
+    for k in sorted(out):
+        v = np.asarray(out[k])
+        print(f"  fps {k[0]:5.0f} sigma {k[1]:.0e}: n {len(v):4d} apart {v[:, 0].mean():6.1%} "
+              f"(with 1: {v[:, 1].mean():6.1%})")
+
+
 def report(name, cells):
     allv = np.concatenate([np.asarray(v) for v in cells.values()])
     print(f"\n{name}: {len(allv)} null tracks; ratio statistic / nominal 1% point: "
@@ -142,12 +213,18 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=1200)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--which", default="slip,end,curve,ar1,case2")
+    ap.add_argument("--which", default="slip,end,curve,ar1,case2",
+                    help="comma-separated among slip,end,curve,ar1,case2,misfit")
     ap.add_argument("--rho", type=float, default=0.0, help="slip: AR(1) errors of this lag-1 correlation "
                     "(a lossy codec at low noise measured 0.67)")
+    ap.add_argument("--gaps", default="3,6", help="power: sliding ends this many sigma before the rest")
     args = ap.parse_args()
+    if "power" in args.which.split(","):
+        for g in args.gaps.split(","):
+            case2_power(args.n, args.seed, float(g))
     for name, fn in (("slip", slip_ratios), ("end", end_ratios), ("curve", curve_ratios), ("ar1", ar1_ratios),
-                     ("case2", case2_ratios)):
+                     ("case2", case2_ratios),
+                     ("misfit", misfit_ratios)):
         if name in args.which.split(","):
             clock = time.perf_counter()
             report(name, fn(args.n, args.seed, args.rho) if name == "slip" else fn(args.n, args.seed))

@@ -21,7 +21,11 @@ With ``--auto``: the automatic calibration on drawn frames of the table
 calibration: corner error against the truth, the largest metre error over the
 table, and the v0 and R w0 RMS through it beside the exact camera's.
 
-Usage: python benchmarks/calibration.py [--n 40] [--seed 0] [--track-px 0.03] [--auto]
+With ``--diagnose`` (``--height 2 --tilt 0 --k1 -0.25``): the automatic
+camera's v0 error split into its parts (corners, k1, focal length), each
+camera built from the true values but one.
+
+Usage: python benchmarks/calibration.py [--n 40] [--seed 0] [--track-px 0.03] [--auto] [--diagnose]
 """
 
 import argparse
@@ -100,23 +104,31 @@ def through(shot, params, camera, t, uv, track_px):
 
 def auto(args):
     """Automatic calibration on drawn frames: corners, metres, v0 against the exact camera."""
-    from cuespin.pipeline.calibrate import assign_corners, detect_corners, synthetic_table_frame
+    from cuespin.pipeline.calibrate import (AUTO_CORNER_SIGMA_FLOOR_PX, assign_corners, detect_corners,
+                                            synthetic_table_frame)
 
     print(f"cushions {args.cushion} m; {args.n} shots per camera; tracker error {args.track_px} px")
     print("height tilt    k1 | corner_rms_px edge_rms_px k1_est focal_from | max_m_err | "
-          "v0_rms exact / auto (m/s), Rw0_rms exact / auto")
+          "v0_rms exact / auto (m/s), Rw0_rms exact / auto | n sigma_px cameras | "
+          "cover95 (v0, R w0) exact fit-only / auto with the calibration's share, v0 RMS z exact / auto")
     xs, ys = np.meshgrid(np.linspace(0.1, 2.44, 9), np.linspace(0.1, 1.17, 5))
     grid = np.column_stack([xs.ravel(), ys.ravel()])
-    for height, tilt, k1 in [(2.0, 0.0, 0.0), (2.0, 10.0, 0.0), (1.5, 15.0, 0.0), (3.0, 5.0, -0.25),
-                             (2.0, 10.0, -0.25), (1.5, 15.0, -0.25), (2.0, 12.0, 0.25), (2.0, 0.0, -0.25)]:
+    cams = [(2.0, 0.0, 0.0), (2.0, 10.0, 0.0), (1.5, 15.0, 0.0), (3.0, 5.0, -0.25),
+            (2.0, 10.0, -0.25), (1.5, 15.0, -0.25), (2.0, 12.0, 0.25), (2.0, 0.0, -0.25)]
+    for height, tilt, k1 in [c for c in cams if not args.overhead or c[1] == 0.0]:
         true = Scene(physics=sample_shot(0)[1], camera=pinhole_camera(
             height_m=height, tilt_deg=tilt, k1=k1, size=SIZE, fps=FPS, roll_deg=ROLL_DEG)).camera
         img = synthetic_table_frame(true, seed=int(10 * tilt + 100 * abs(k1)), cushion_m=args.cushion,
                                     pockets=args.cushion > 0)
         det = detect_corners(img)
         quad, edge_rms, kappa = det.corners, det.edge_rms, det.kappa
-        cal = assign_corners(quad, SIZE, Table(), kappa=kappa, fps=FPS,
-                             corner_sigma_px=max(edge_rms * np.sqrt(4.0 / 500.0), 0.02))
+        # the corner error calibrate_video states (edges' scatter, floored)
+        sigma = max(edge_rms * np.sqrt(4.0 / ((SIZE[0] + SIZE[1]) / 4.0)), AUTO_CORNER_SIGMA_FLOOR_PX)
+        # --true-focal: the true focal length given (--focal-px), to tell its share from the rest
+        fk = {"focal_px": float(true.K[0, 0])} if args.true_focal else {}
+        cal = assign_corners(quad, SIZE, Table(), kappa=kappa, fps=FPS, corner_sigma_px=sigma, **fk)
+        pert = perturbed_cameras(cal.corners_px, sigma, SIZE, Table(), kappa=kappa, fps=FPS,
+                                 corner_sigma_px=sigma, **fk)
         truth = true.project(table_corners(Table()))
         c_rms = float(np.sqrt(np.mean(np.sum((cal.corners_px - truth) ** 2, axis=1))))
         cam = Scene(physics=sample_shot(0)[1], camera=cal.camera).camera
@@ -126,15 +138,72 @@ def auto(args):
             shot, params = sample_shot(args.seed * 1000 + i, "random")
             tr = Scene(physics=params, camera=true).camera
             uv = track_pixels(shot, params, tr, np.random.default_rng(i), args.track_px)
-            for name, c in (("exact", true), ("auto", cal.camera)):
-                r = through(shot, params, c, *uv)
-                if r is not None:
-                    res[name].append(r)
+            r = {name: through(shot, params, c, *uv) for name, c in (("exact", true), ("auto", cal.camera))}
+            if r["exact"] is None or r["auto"] is None:
+                continue                    # paired: the same shots in both columns
+            res["exact"].append(r["exact"])
+            dv, dw, sv, sw = r["auto"]
+            extra_v, extra_w = np.zeros(2), np.zeros(2)
+            for c in pert:                  # the calibration's share, as the recovery adds it
+                rk = through(shot, params, c, *uv)
+                if rk is not None:
+                    extra_v += (rk[0] - dv) ** 2
+                    extra_w += (rk[1] - dw) ** 2
+            res["auto"].append((dv, dw, np.sqrt(sv**2 + extra_v), np.sqrt(sw**2 + extra_w)))
         rv = {k: np.sqrt(np.mean([np.sum(r[0] ** 2) / 2 for r in v])) for k, v in res.items()}
         rw = {k: np.sqrt(np.mean([np.sum(r[1] ** 2) / 2 for r in v])) for k, v in res.items()}
+        cover = {k: np.mean([np.abs(np.concatenate([r[0] / r[2], r[1] / r[3]])) < 1.96 for r in v])
+                 for k, v in res.items()}
+        zv = {k: np.sqrt(np.mean([np.sum((r[0] / r[2]) ** 2) / 2 for r in v])) for k, v in res.items()}
         print(f"{height:6.1f} {tilt:4.0f} {k1:+.2f} | {c_rms:13.3f} {edge_rms:11.3f} "
               f"{kappa * cal.camera.K[0, 0] ** 2:+.3f} {cal.focal_source:10s} {det.edge:6s} | {m_err:9.1e} | "
-              f"{rv['exact']:.2e} / {rv['auto']:.2e}, {rw['exact']:.2e} / {rw['auto']:.2e}")
+              f"{rv['exact']:.2e} / {rv['auto']:.2e} ({rv['auto'] / rv['exact']:.2f}x), "
+              f"{rw['exact']:.2e} / {rw['auto']:.2e} | {len(res['auto'])} {sigma:.2f} {len(pert)} | "
+              f"{cover['exact']:.0%} / {cover['auto']:.0%}, {zv['exact']:.2f} / {zv['auto']:.2f}", flush=True)
+
+
+def diagnose(args):
+    """Where an automatic camera's v0 error comes from: the same shots through
+    cameras built from the true and the found corners, k1 and focal length."""
+    from cuespin.pipeline.calibrate import assign_corners, detect_corners, synthetic_table_frame
+
+    P = sample_shot(0)[1]
+    true = Scene(physics=P, camera=pinhole_camera(height_m=args.height, tilt_deg=args.tilt, k1=args.k1,
+                                                  size=SIZE, fps=FPS, roll_deg=ROLL_DEG)).camera
+    img = synthetic_table_frame(true, seed=int(10 * args.tilt + 100 * abs(args.k1)), cushion_m=0.05, pockets=True)
+    det = detect_corners(img)
+    cal = assign_corners(det.corners, SIZE, Table(), kappa=det.kappa, fps=FPS)
+    tc = true.project(table_corners(Table()))
+    f_true = float(true.K[0, 0])
+    k_true = args.k1 / f_true**2
+    print(f"{args.height} m, tilt {args.tilt}, k1 {args.k1}: corner error (px) {np.round(cal.corners_px - tc, 3).tolist()}; "
+          f"k1 found {det.kappa * f_true**2:+.4f} at the true f {f_true:.1f} px; f written {cal.camera.K[0, 0]:.1f} px "
+          f"({cal.focal_source})")
+    variants = {
+        "found (calibrate)": cal.camera,
+        "true corners and k1, f as found": calibrate_corners(tc, SIZE, kappa=k_true, fps=FPS).camera,
+        "corners and k1 found, true f": calibrate_corners(cal.corners_px, SIZE, kappa=det.kappa, focal_px=f_true,
+                                                          fps=FPS).camera,
+        "true corners, k1 found, true f": calibrate_corners(tc, SIZE, kappa=det.kappa, focal_px=f_true, fps=FPS).camera,
+        "corners found, true k1 and f": calibrate_corners(cal.corners_px, SIZE, kappa=k_true, focal_px=f_true,
+                                                          fps=FPS).camera,
+    }
+    res = {"exact": []} | {k: [] for k in variants}
+    for i in range(args.n):
+        shot, params = sample_shot(args.seed * 1000 + i, "random")
+        uv = track_pixels(shot, params, Scene(physics=params, camera=true).camera, np.random.default_rng(i),
+                          args.track_px)
+        row = {"exact": through(shot, params, true, *uv)} | {k: through(shot, params, c, *uv)
+                                                             for k, c in variants.items()}
+        if all(r is not None for r in row.values()):     # paired: shots every camera answers
+            for k, r in row.items():
+                res[k].append(r[0])
+    ex = np.array(res["exact"])
+    print(f"{len(ex)} of {args.n} shots answered through every camera")
+    for k, v in res.items():
+        d = np.array(v)
+        print(f"{k:36s} v0 RMS {np.sqrt(np.mean(d**2)):.2e} m/s, ratio {np.sqrt(np.mean(d**2) / np.mean(ex**2)):.2f}, "
+              f"RMS difference from the exact camera's {np.sqrt(np.mean((d - ex)**2)):.2e}")
 
 
 def main():
@@ -147,11 +216,19 @@ def main():
     ap.add_argument("--auto", action="store_true", help="automatic calibration on drawn frames instead")
     ap.add_argument("--cushion", type=float, default=0.05,
                     help="--auto: cushions this wide (m) in a darker felt, and pockets (0: bare felt)")
+    ap.add_argument("--true-focal", action="store_true",
+                    help="--auto: give the true focal length (as --focal-px would)")
+    ap.add_argument("--overhead", action="store_true", help="--auto: the overhead cameras only")
     ap.add_argument("--propagate", action="store_true",
                     help="add the calibration's error (8 perturbed cameras) to the stated errors")
+    ap.add_argument("--k1", type=float, default=-0.25, help="--diagnose: the lens's k1")
+    ap.add_argument("--diagnose", action="store_true",
+                    help="where the automatic camera's v0 error comes from (--height, --tilt, --k1)")
     args = ap.parse_args()
     if args.auto:
         return auto(args)
+    if args.diagnose:
+        return diagnose(args)
     true = pinhole_camera(height_m=args.height, tilt_deg=args.tilt, size=SIZE, fps=FPS)
     exact = true.project(table_corners(Table()))
     print(f"camera: {args.height} m, tilt {args.tilt} deg, f {true.K[0, 0]:.0f} px, {SIZE[0]}x{SIZE[1]}; "

@@ -47,11 +47,14 @@ def main(argv=None):
             else:
                 z[j].append(np.full(4, np.nan))
             print(i, j, m["status"], z[j][-1].round(2), flush=True)
+    both = np.all([np.isfinite(np.array(rows)).all(axis=1) for rows in z.values()], axis=0)
     for j, rows in z.items():
         r = np.array(rows)
         ok = np.isfinite(r).all(axis=1)
         print(f"jitter {j}: {ok.sum()}/{len(r)} ok; RMS error / stated error, v0 {np.sqrt(np.mean(r[ok, :2]**2)):.2f}, "
-              f"w0 {np.sqrt(np.mean(r[ok, 2:]**2)):.2f}")
+              f"w0 {np.sqrt(np.mean(r[ok, 2:]**2)):.2f}; coverage of 95% intervals {np.mean(np.abs(r[ok]) < 1.96):.1%}; "
+              f"the {both.sum()} shots ok at both rates: v0 {np.sqrt(np.mean(r[both, :2]**2)):.2f}, "
+              f"w0 {np.sqrt(np.mean(r[both, 2:]**2)):.2f}")
 
 
 if __name__ == "__main__":

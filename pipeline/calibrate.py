@@ -51,6 +51,18 @@ MAX_CORNER_RMS_PX = 4.0
 FOCAL_RANGE = (0.2, 5.0)
 # A phone's main camera: 26 mm equivalent, 69 degrees across the larger side.
 NOMINAL_FOCAL = 0.73
+# Relative 1-sigma error stated for that nominal focal length (assumed, not
+# measured on phones): main cameras span 23-28 mm equivalent (+/- 10%) and
+# video modes crop by up to 10-20% more.  The overhead camera that needs it
+# cannot fix f from its corners, and f sets the camera's height D, hence the
+# ball plane's scale (1 + R / D): its share of v0's error is R / D times this
+# (docs/calibration.md, section 6), carried by one more perturbed camera.
+NOMINAL_FOCAL_SIGMA = 0.15
+# Default error of a measured --camera-height (m): a tape from the cloth to
+# a phone's lens, whose entrance pupil sits a few mm inside it (assumed).
+# 2% (4 cm) at 2 m moved the ball-centre conversion by up to 3.9e-4 m
+# (docs/calibration.md, section 6).
+CAMERA_HEIGHT_SIGMA_M = 0.02
 # Tilt of the optical axis from straight down beyond which the table is too
 # foreshortened to track a ball on (deg).
 MAX_TILT_DEG = 70.0
@@ -398,8 +410,14 @@ def _homography_calibration(obj, img, size, intrinsics, distortion, kappa, fps, 
                        notes=notes, corner_sigma_px=float(sigma))
 
 
-def perturbed_cameras(corners_px, sigma_px: float, size, table: Table = Table(), **kw) -> list:
-    """The cameras of the 8 corner coordinates each moved by ``sigma_px``, one at a time.
+def perturbed_cameras(corners_px, sigma_px: float, size, table: Table = Table(), *,
+                      height_sigma_m: float = 0.0, **kw) -> list:
+    """The cameras of the 8 corner coordinates each moved by ``sigma_px``, one at a
+    time, and, when the focal length is the nominal one (an overhead camera
+    without a lens calibration or height), a ninth with it
+    ``1 + NOMINAL_FOCAL_SIGMA`` times longer; when it comes from
+    ``camera_height_m`` and ``height_sigma_m`` > 0, a ninth with the camera
+    that much higher (the tape's error).
 
     For propagating a calibration's error to anything computed through the
     camera (v0, w0): with ``q`` the quantity through the calibrated camera and
@@ -417,6 +435,29 @@ def perturbed_cameras(corners_px, sigma_px: float, size, table: Table = Table(),
             cams.append(calibrate_corners(c, size, table, **kw).camera)
         except CalibrationError:
             continue
+    if kw.get("camera_height_m") and height_sigma_m > 0 and not (
+            kw.get("homography") or kw.get("intrinsics") is not None or kw.get("focal_px")):
+        # The measured height's own error: f re-solved for a camera that much higher.
+        try:
+            cams.append(calibrate_corners(base, size, table,
+                                          **dict(kw, camera_height_m=kw["camera_height_m"] + height_sigma_m)).camera)
+        except CalibrationError:
+            pass
+    if not (kw.get("homography") or kw.get("intrinsics") is not None or kw.get("focal_px")
+            or kw.get("camera_height_m")):
+        try:
+            cal = calibrate_corners(base, size, table, **kw)
+        except CalibrationError:
+            return cams
+        if cal.focal_source == "nominal":
+            # The assumed focal length's own error (NOMINAL_FOCAL_SIGMA): the
+            # same corners through a lens that much longer (the same bow in
+            # pixels: kappa is k1 / f^2), its pose re-solved.
+            f = float(cal.camera.K[0, 0]) * (1.0 + NOMINAL_FOCAL_SIGMA)
+            try:
+                cams.append(calibrate_corners(base, size, table, **dict(kw, focal_px=f)).camera)
+            except CalibrationError:
+                pass
     return cams
 
 
@@ -852,7 +893,7 @@ AUTO_CORNER_SIGMA_FLOOR_PX = 0.2
 
 def calibrate_video(path, table: Table = Table(), corners=None, *, intrinsics=None, distortion=None,
                     felt_margin_m: float = 0.0, felt_height_m: float = 0.0, nose_height_m: float = 0.0,
-                    **kw) -> Calibration:
+                    camera_height_sigma_m: float = 0.0, **kw) -> Calibration:
     """A video's camera: from given corners, or from the table found in its median frame.
 
     Automatic: the cushions' noses when they show (the playing surface's edge,
@@ -874,7 +915,8 @@ def calibrate_video(path, table: Table = Table(), corners=None, *, intrinsics=No
     dist = None if distortion is None else np.asarray(distortion, dtype=float).ravel()
     if corners is not None:
         cal = calibrate_corners(corners, size, table, intrinsics=K, distortion=dist, fps=fps, **kw)
-        return _with_perturbed(cal, size, table, intrinsics=K, distortion=dist, fps=fps, **kw)
+        return _with_perturbed(cal, size, table, intrinsics=K, distortion=dist, fps=fps,
+                               height_sigma_m=camera_height_sigma_m, **kw)
     frame = reference_frame(path)
     det = detect_corners(frame, K, dist)
     quad, edge_rms, kappa = det.corners, det.edge_rms, det.kappa
@@ -890,7 +932,7 @@ def calibrate_video(path, table: Table = Table(), corners=None, *, intrinsics=No
     cal = Calibration(camera=cal.camera, corners_px=cal.corners_px, residual_px=cal.residual_px,
                       focal_source=cal.focal_source, notes=cal.notes, edge_rms_px=edge_rms,
                       edge=det.edge, corner_sigma_px=cal.corner_sigma_px)
-    return _with_perturbed(cal, size, table, **same)
+    return _with_perturbed(cal, size, table, height_sigma_m=camera_height_sigma_m, **same)
 
 
 def _with_perturbed(cal: Calibration, size, table: Table, **kw) -> Calibration:
@@ -902,10 +944,12 @@ def _with_perturbed(cal: Calibration, size, table: Table, **kw) -> Calibration:
     cams = perturbed_cameras(cal.corners_px, cal.corner_sigma_px, size, table,
                              corner_sigma_px=cal.corner_sigma_px, **kw)
     notes = list(cal.notes)
-    if len(cams) < 8:
+    want = 8 + (cal.focal_source == "nominal") + (cal.focal_source == "camera-height"
+                                                   and kw.get("height_sigma_m", 0.0) > 0)
+    if len(cams) < want:
         # A corner whose move leaves no plausible camera drops its term: the
         # calibration's share of the errors is then understated.
-        notes.append(f"only {len(cams)} of the 8 corner-moved cameras could be solved; the calibration's "
+        notes.append(f"only {len(cams)} of the {want} perturbed cameras could be solved; the calibration's "
                      f"share of the recovery's errors is understated (click the corners again)")
     return replace(cal, perturbed=tuple(cams), notes=notes)
 
@@ -1048,8 +1092,13 @@ def cmd_calibrate(args) -> int:
         kw["R_nominal"] = args.R
     if args.homography:
         kw["homography"] = True
+    if args.camera_height_error is not None and not (math.isfinite(args.camera_height_error)
+                                                     and args.camera_height_error >= 0):
+        raise InputError("--camera-height-error: must be a number >= 0")
     cal = calibrate_video(video, table, corners, intrinsics=K, distortion=dist, focal_px=args.focal_px,
                           camera_height_m=args.camera_height, felt_margin_m=args.felt_margin,
+                          camera_height_sigma_m=(CAMERA_HEIGHT_SIGMA_M if args.camera_height_error is None
+                                                 else args.camera_height_error),
                           felt_height_m=args.felt_height, nose_height_m=args.nose_height, **kw)
     cam = cal.camera
     physics = {k: v for k, v in (("R", args.R), ("mu_s", args.mu_s), ("mu_r", args.mu_r)) if v is not None}
@@ -1108,6 +1157,9 @@ def add_parser(sub) -> None:
     c.add_argument("--focal-px", type=float, default=None, help="focal length (px), without --intrinsics")
     c.add_argument("--camera-height", type=float, default=None, metavar="M",
                    help="the lens's height above the cloth (m), to fix the focal length without --intrinsics")
+    c.add_argument("--camera-height-error", type=float, default=None, metavar="M",
+                   help=f"error of --camera-height (m; default {CAMERA_HEIGHT_SIGMA_M:g}), carried into "
+                        "v0's and w0's errors")
     c.add_argument("--corner-error", type=float, default=None, metavar="PX",
                    help="error of each clicked corner coordinate (px; default 1)")
     c.add_argument("--table", default=None, metavar="LENGTH,WIDTH",

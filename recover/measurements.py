@@ -13,8 +13,11 @@ so all of them weight, leave out and count the same measurements.
   streaking for the rest, which no tracker model describes.
 - With a lossy codec, the frames of a resting ball share one compression
   error (the same image, compressed the same way): their mean is one
-  measurement, with one frame's covariance.  With a lossless codec every
-  frame is its own measurement.
+  measurement, with one frame's covariance.  With a lossless codec a rest
+  of 10 frames or more is one measurement too, its covariance from its
+  frames' scatter: the part of the stated error they do not show is
+  shared (at low noise the same 8-bit rounding of the same image); other
+  frames are their own measurements.
 - Degrees of freedom are counted from the measurements: 2 per measurement.
 - A codec's own error lives in the image: it is one variance in px^2 for
   every frame, carried to metres like the tracker's through the camera's
@@ -30,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import brentq
+from scipy.stats import chi2
 
 from cuespin.fit.segment import noise_from_track
 
@@ -42,6 +46,25 @@ STRIKE_MARGIN_FRAMES = 0.25
 # tracker's stated errors 1.2-1.4 times the real ones (README), so 0.5 is
 # far outside what was seen and only guards against a wild estimate.
 MIN_NOISE_FRACTION = 0.5
+# A resting ball's frames share what is the same in every one of them: a
+# lossy codec's compression of the same image, and, at low noise, the 8-bit
+# rounding of the same image (sensor noise under about 0.3 grey levels no
+# longer dithers it).  On a lossless codec their scatter about their mean
+# shows their independent part, and what of one frame's stated error it
+# does not show is shared (group_covariance).  Measured against the truth
+# (benchmarks/accuracy.py's kept FFV1 tracks, seed 0, 31 ok shots, frames
+# before the strike, as independent frames): the rest's mean was off by
+# 1.47 of its stated errors in RMS, one shot at noise 0.03 grey levels by
+# 7.  On MJPG the scatter does not separate the codec's share: a rest kept
+# as independent frames unless the scatter is significantly short
+# (REST_SHARED_LEVEL) cut the 60 seed-0 shots' coverage from 97.3% to
+# 91.5% (RMS error in stated errors 0.91 -> 1.14), so a lossy codec's rest
+# keeps one frame's covariance.  A scatter needs this many frames.
+MIN_REST_SCATTER_FRAMES = 10
+# A shared part is claimed where the rest's scatter falls short of the
+# stated error by more than independent frames' scatter does at this level
+# (one-sided): independent frames keep ``C / n`` 99 times in 100.
+REST_SHARED_LEVEL = 0.01
 # Frames needed with a finite stated error before the stated errors are
 # used; otherwise the spread of the track itself (the moments refinement
 # states no error).
@@ -122,6 +145,10 @@ class Measurements:
     px_to_m : ndarray, shape (n, 2, 2), or None
         Metres per pixel at each frame (:func:`pixel_to_table`): a codec's
         variance is in px^2 and goes to metres through it; None: in m^2.
+    rest_scatter : bool
+        A rest's frames' scatter measures their independent part (a
+        lossless codec: :func:`group_covariance`); False: a lossy codec's
+        rest shares one frame's error.
     """
 
     t: np.ndarray
@@ -130,6 +157,7 @@ class Measurements:
     group: np.ndarray
     W: np.ndarray
     px_to_m: np.ndarray | None = None
+    rest_scatter: bool = False
 
     @property
     def used(self) -> np.ndarray:
@@ -246,22 +274,62 @@ class Measurements:
         with the floor inside the equation)."""
         c = np.maximum(float(codec_var), self.codec_floor())
         cov = self.cov + c[:, None, None] * self.codec_shape()
-        return _make(self.t, self.xy, cov, self.group, self.px_to_m)
+        return _make(self.t, self.xy, cov, self.group, self.px_to_m, self.rest_scatter)
 
 
-def _make(t, xy, cov, group, px_to_m=None) -> Measurements:
-    """Measurements with their whiteners: one frame's covariance for each
-    (the mean of a group's frames': they share one error; a single frame's
-    own), inverted through its Cholesky factor."""
+def group_scatter(xy, group, measured: bool = True) -> np.ndarray:
+    """Per measurement, shape (m, 2, 2), the scatter (sample covariance,
+    m^2) of its frames' centres about their mean; NaN for a measurement of
+    fewer than :data:`MIN_REST_SCATTER_FRAMES` frames, or for every one when
+    not ``measured`` (a lossy codec's rest: one shared error)."""
+    used = group >= 0
+    g, p = group[used], np.asarray(xy, dtype=float)[used]
+    m = int(g.max()) + 1 if len(g) else 0
+    cnt = np.bincount(g, minlength=m)
+    mean = np.stack([np.bincount(g, weights=p[:, d], minlength=m) for d in (0, 1)], 1) / np.maximum(cnt, 1)[:, None]
+    d = p - mean[g]
+    S = np.zeros((m, 2, 2))
+    np.add.at(S, g, d[:, :, None] * d[:, None, :])
+    S /= np.maximum(cnt - 1, 1)[:, None, None]
+    S[(cnt < MIN_REST_SCATTER_FRAMES) | (not measured)] = np.nan
+    return S
+
+
+def group_covariance(frame_cov_used, g, m: int, scatter) -> np.ndarray:
+    """Each measurement's covariance, shape (m, 2, 2), from its frames'
+    (``frame_cov_used``, the used frames', group ``g``): a single frame's
+    own; a rest's mean ``(1 - f) C / n + f C`` with ``C`` its frames' mean
+    stated covariance and ``f`` the share of it they have in common: with
+    ``l`` the frames' ``scatter`` (:func:`group_scatter`) in units of ``C``
+    (half the trace of ``C^-1 S``, distributed as ``chi^2(2(n - 1)) / (2(n -
+    1))`` for independent frames), ``f = (1 - kappa l)+`` with ``kappa`` its
+    upper :data:`REST_SHARED_LEVEL` point: a shared part is claimed only
+    where the scatter falls significantly short of the stated error
+    (independent frames: ``C / n`` 99 times in 100; identical frames:
+    ``C``).  Where the scatter is not measured, ``C`` (one shared error)."""
+    cnt = np.bincount(g, minlength=m)
+    c = np.zeros((m, 2, 2))
+    np.add.at(c, g, frame_cov_used)
+    c /= np.maximum(cnt, 1)[:, None, None]
+    rest = (cnt > 1) & np.all(np.isfinite(scatter.reshape(m, -1)), axis=1)
+    if rest.any():
+        n = cnt[rest].astype(float)
+        lam = 0.5 * np.trace(np.linalg.solve(c[rest], scatter[rest]), axis1=1, axis2=2)
+        nu = 2.0 * (n - 1.0)
+        f = np.clip(1.0 - chi2.ppf(1.0 - REST_SHARED_LEVEL, nu) / nu * lam, 0.0, 1.0)
+        c[rest] = c[rest] * ((1.0 - f) / n + f)[:, None, None]
+    return c
+
+
+def _make(t, xy, cov, group, px_to_m=None, rest_scatter: bool = False) -> Measurements:
+    """Measurements with their whiteners: each measurement's covariance
+    (:func:`group_covariance`) inverted through its Cholesky factor."""
     used = group >= 0
     g = group[used]
     m = int(g.max()) + 1 if len(g) else 0
-    cnt = np.bincount(g, minlength=m)
-    c = np.zeros((m, 2, 2))
-    np.add.at(c, g, cov[used])
-    c /= np.maximum(cnt, 1)[:, None, None]
+    c = group_covariance(cov[used], g, m, group_scatter(xy, group, rest_scatter))
     W = np.linalg.inv(np.linalg.cholesky(c)) if m else np.zeros((0, 2, 2))
-    return Measurements(t=t, xy=xy, cov=cov, group=group, W=W, px_to_m=px_to_m)
+    return Measurements(t=t, xy=xy, cov=cov, group=group, W=W, px_to_m=px_to_m, rest_scatter=rest_scatter)
 
 
 def strike_window(t, t0: float, exposure_s: float, frame_dt: float) -> np.ndarray:
@@ -321,19 +389,21 @@ def build_measurements(t, xy, cov, *, t0: float | None = None, t_rest: float | N
         frame_dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
     use = ~strike_window(t, t0, exposure_s, frame_dt) if t0 is not None else np.ones(len(t), bool)
     key = np.arange(len(t), dtype=float)
-    if shared_rest:
-        if t0 is not None and np.isfinite(t0):
-            before = use & (t < t0 - 0.5 * exposure_s - 0.5 * frame_dt)
-            if before.sum() > 1:
-                key[before] = key[before][0]
-        if t_rest is not None and np.isfinite(t_rest):
-            after = use & (t > t_rest + 0.5 * exposure_s + 0.5 * frame_dt)
-            if after.sum() > 1:
-                key[after] = key[after][0]
+    # A rest is one measurement (group_covariance): with a lossy codec
+    # always, with a lossless one when its frames' scatter is measured.
+    least = 2 if shared_rest else MIN_REST_SCATTER_FRAMES
+    rests = []
+    if t0 is not None and np.isfinite(t0):
+        rests.append(use & (t < t0 - 0.5 * exposure_s - 0.5 * frame_dt))
+    if t_rest is not None and np.isfinite(t_rest):
+        rests.append(use & (t > t_rest + 0.5 * exposure_s + 0.5 * frame_dt))
+    for rest in rests:
+        if rest.sum() >= least:
+            key[rest] = key[rest][0]
     group = np.full(len(t), -1)
     _, inv = np.unique(key[use], return_inverse=True)
     group[use] = inv
-    return _make(t, xy, cov, group, px_to_m)
+    return _make(t, xy, cov, group, px_to_m, rest_scatter=not shared_rest)
 
 
 def codec_excess(meas: Measurements, whitened_residuals, n_par: int) -> float:
@@ -368,15 +438,13 @@ def codec_excess(meas: Measurements, whitened_residuals, n_par: int) -> float:
     raw = np.einsum("mij,mj->mi", np.linalg.inv(meas.W), r)      # (m, 2), m
     used = meas.used
     g = meas.group[used]
-    cnt = np.bincount(g, minlength=m)[:, None, None]
     cov, K, floor = meas.cov[used], meas.codec_shape()[used], meas.codec_floor()[used]
+    scatter = group_scatter(meas.xy, meas.group, meas.rest_scatter)
 
     def excess_chi2(c):
-        # As with_codec(c).whiten, without building the Measurements: each
-        # measurement's covariance the mean of its frames'.
-        C = np.zeros((m, 2, 2))
-        np.add.at(C, g, cov + np.maximum(c, floor)[:, None, None] * K)
-        w = np.linalg.solve(np.linalg.cholesky(C / cnt), raw[:, :, None])[:, :, 0]
+        # As with_codec(c).whiten, without building the Measurements.
+        C = group_covariance(cov + np.maximum(c, floor)[:, None, None] * K, g, m, scatter)
+        w = np.linalg.solve(np.linalg.cholesky(C), raw[:, :, None])[:, :, 0]
         return float(np.sum(w * w)) - dof
 
     s2 = np.diagonal(cov, axis1=1, axis2=2)                          # stated per-axis variances

@@ -79,7 +79,7 @@ LOOK_DEFAULTS = {
     "ball_colour": [228, 232, 235],  # BGR albedo of the tracked ball
     "felt_colour": [60, 130, 35],    # BGR of the cloth
     "rail_colour": [25, 55, 95],     # BGR of the wooden rail
-    "noise_sigma": 2.0,              # Gaussian sensor noise per channel (levels)
+    "noise_sigma": 2.0,              # sensor noise per channel (levels): draw.ByteNoise, a rounded Gaussian
     "ambient": 0.35,                 # share of light that does not depend on the normal
     "light_azimuth": 0.6,            # direction of the light in the table frame (rad)
     "light_elevation": 1.1,          # above the cloth (rad); pi/2 is straight overhead

@@ -178,6 +178,9 @@ def test_cli_calibrate_automatic_and_with_corners(tmp_path, capsys):
     assert code == 2 and "--corners: expected 8 numbers" in err_txt
     code, _, err_txt = run_main(capsys, "calibrate", tmp_path / "none.avi", "-o", out)
     assert code == 2 and "not found" in err_txt
+    code, _, err_txt = run_main(capsys, "calibrate", video, "-o", out, "--camera-height", "2",
+                                "--camera-height-error", "-1")
+    assert code == 2 and "--camera-height-error" in err_txt and err_txt.strip().count("\n") == 0
 
 
 @pytest.mark.slow
@@ -210,6 +213,40 @@ def test_perturbed_cameras_move_one_corner_each():
              for cam in cams]
     # half a pixel at one corner moves the table's middle by a fraction of a mm, never zero
     assert all(1e-6 < m < 2e-3 for m in moves), moves
+
+
+def test_a_nominal_focal_length_carries_its_error_in_a_ninth_camera():
+    # Overhead, a distorting lens, no focal length given: the corners (and
+    # the edges' bow, k1 / f^2) cannot fix f, which sets the camera's height
+    # and so the ball plane's scale (1 + R / D).  The ninth perturbed camera
+    # has f NOMINAL_FOCAL_SIGMA longer, the same bow in pixels, the same
+    # corners; it moves the table's middle by about R / D times that share of
+    # the distance from the optical axis, and no corner.
+    from cuespin.pipeline.calibrate import NOMINAL_FOCAL_SIGMA, perturbed_cameras
+
+    true = pinhole_camera(height_m=2.0, tilt_deg=0.0, k1=-0.25, R=R, size=SIZE)
+    c = true_corners(true)
+    kappa = -0.25 / true.K[0, 0] ** 2
+    cal = calibrate_corners(c, SIZE, kappa=kappa)
+    assert cal.focal_source == "nominal"
+    cams = perturbed_cameras(c, 0.2, SIZE, kappa=kappa)
+    assert len(cams) == 9
+    f0, f9 = cal.camera.K[0, 0], cams[8].K[0, 0]
+    assert f9 / f0 == pytest.approx(1 + NOMINAL_FOCAL_SIGMA, rel=1e-9)
+    assert cams[8].dist[0] / f9**2 == pytest.approx(kappa, rel=1e-9)        # the same bow in pixels
+    on = Scene(physics=BallParams(R=R), camera=cams[8]).camera.with_centre_height(0.0)
+    assert np.abs(on.project(table_corners(TABLE)) - cal.corners_px).max() < 0.01
+    xy = np.array([[0.3, 0.2]])
+    move = np.abs(scene_camera(cal).to_pixels(xy) - Scene(physics=BallParams(R=R),
+                                                          camera=cams[8]).camera.to_pixels(xy)).max()
+    # px: R / D ~ 1.4%, 13% of it (D grows about as f), over the ~530 px from
+    # the optical axis: 0.97 px, less the lens's pull at the edge (measured 0.76)
+    assert 0.4 < move < 1.2, move
+    # a focal length that was given or solved keeps the 8 corner cameras only
+    assert len(perturbed_cameras(c, 0.2, SIZE, kappa=kappa, camera_height_m=2.0)) == 8
+    # a measured height with its error: the ninth camera that much higher
+    cams = perturbed_cameras(c, 0.2, SIZE, kappa=kappa, camera_height_m=2.0, height_sigma_m=0.02)
+    assert len(cams) == 9 and cams[8].centre[2] == pytest.approx(2.02, abs=1e-6)
 
 
 @pytest.mark.slow

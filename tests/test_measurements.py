@@ -32,8 +32,37 @@ def test_rests_are_one_measurement_each_and_strike_frames_masked():
     assert len(before) == 1 and len(after) == 1               # each rest one measurement
     in_rest = np.isin(m.group, np.r_[before, after])
     assert m.n == int(np.sum(m.used & ~in_rest)) + 2 and m.dof(7) == 2 * m.n - 7
+    # Lossless: a rest of 10 frames or more is one measurement too (its
+    # covariance from its scatter); here the 20 frames before the strike.
     lossless = build_measurements(t, xy, np.full(100, SIGMA), t0=0.2, exposure_s=0.005, frame_dt=0.01)
-    assert lossless.n == 99 and lossless.dof(7) == 2 * 99 - 7
+    assert lossless.n == 99 - 20 + 1 and lossless.dof(7) == 2 * 80 - 7
+    short = build_measurements(t[15:], xy[15:], np.full(85, SIGMA), t0=0.2, exposure_s=0.005, frame_dt=0.01)
+    assert short.n == 84                                      # 4 still frames: each its own
+
+
+def _rest_variance(xy_rest):
+    """Per-axis variance of a lossless rest's mean (its measurement's), in SIGMA^2."""
+    n = len(xy_rest)
+    t = np.arange(n + 30) / 100.0
+    xy = np.vstack([xy_rest, np.c_[np.linspace(0.01, 0.3, 30), np.zeros(30)]])
+    m = build_measurements(t, xy, np.full(len(t), SIGMA), t0=(n + 0.5) / 100.0, exposure_s=0.005, frame_dt=0.01)
+    c = np.linalg.inv(m.W[0] @ m.W[0].T) / SIGMA**2
+    return np.diag(c)
+
+
+def test_lossless_rest_shares_what_its_scatter_does_not_show():
+    # Identical frames (a still image at no noise: the same 8-bit rounding
+    # in each) share their whole error: the mean is no better than a frame.
+    assert _rest_variance(np.full((40, 2), 1e-5)) == pytest.approx([1.0, 1.0])
+    # Independent frames at the stated error: the mean's error is 1/n of a
+    # frame's (kept 99 times in 100 at REST_SHARED_LEVEL; these seeds do).
+    for seed in range(5):
+        xy = SIGMA * np.random.default_rng(seed).standard_normal((40, 2))
+        assert _rest_variance(xy) == pytest.approx([1 / 40, 1 / 40])
+    # Frames showing a quarter of the stated error: 15/16 of it is shared.
+    xy = 0.25 * SIGMA * np.random.default_rng(9).standard_normal((400, 2))
+    v = _rest_variance(xy)
+    assert np.all((v > 0.85) & (v < 0.95)), v
 
 
 def test_chi2_per_dof_near_one_with_shared_rest_errors():

@@ -17,12 +17,14 @@ from cuespin.track.misfit import look_misfit
 PX_PER_M = 470.0  # the realistic look's framing of a 9-ft table in 1280 px
 
 
-def simulated(rng, fps, seconds, se, excess=0.0, rho=0.0, t0=0.1, t1=0.3):
+def simulated(rng, fps, seconds, se, excess=0.0, rho=0.0, t0=0.1, t1=0.3, t=None):
     """A struck ball's centres (px), stated covariances and ok flags: at
     rest until ``t0``, sliding (2.9 m/s^2) until ``t1``, then rolling; each
     centre with independent errors ``se`` (px), plus an AR(1) error of
-    variance ``excess`` se^2 and lag-1 correlation ``rho``."""
-    t = np.arange(int(seconds * fps)) / fps
+    variance ``excess`` se^2 and lag-1 correlation ``rho``; frames at ``t``
+    (s; default ``k / fps``)."""
+    if t is None:
+        t = np.arange(int(seconds * fps)) / fps
     v0, a_s, a_r = np.array([1.5, 0.4]), np.array([-2.5, 1.5]), np.array([-0.07, -0.02])
     d = np.clip(t - t0, 0, t1 - t0)[:, None]
     x = v0 * d + 0.5 * a_s * d * d
@@ -88,3 +90,106 @@ def test_realistic_renders_state_honest_errors(tmp_path):
     z, zr = np.concatenate(zs), np.concatenate(raw)
     assert 0.8 <= np.sqrt(np.mean(z**2)) <= 1.25, np.sqrt(np.mean(z**2))
     assert np.sqrt(np.mean(zr**2)) > 1.5  # the per-frame fits alone understate it
+
+
+@pytest.mark.parametrize("fps", [60, 120, 240])
+def test_a_variable_frame_rate_is_not_a_misfit(fps):
+    # Intervals jittered by up to 3% (render.vfr_jitter 0.03): a ball at
+    # 1.5 m/s moves 0.07-0.3 px more or less between frames than at k / fps,
+    # 1.4-6 times the 0.05-px errors.  With the frame times the third
+    # differences are divided differences, free of the motion again: the
+    # constant rate's rate of inflated factors (0-2%, above; at most 0.1 of
+    # tracks here), while with k / fps's weights every track is inflated
+    # (measured: by 2.8-11, median 3.6 at 240 fps to 11 at 60).
+    from cuespin.track.misfit import third_difference_weights
+
+    rng = np.random.default_rng(fps + 7)
+    n = fps
+    t = np.r_[0.0, np.cumsum((1 + 0.03 * rng.uniform(-1, 1, n - 1)) / fps)]
+    assert np.allclose(third_difference_weights(np.arange(n) / fps, np.arange(3, 10), 3), [-1, 3, -3, 1])
+    k = np.arange(2, n - 4)
+    quad = 1.0 + 2.0 * t - 5.0 * t**2
+    idx = np.stack([k - 2, k, k + 2, k + 4], axis=1)
+    assert np.abs(np.sum(third_difference_weights(t, k, 2) * quad[idx], axis=1)).max() < 1e-12
+    with_t = [look_misfit(*simulated(rng, fps, 1.0, 0.05, t=t), t=t).factor for _ in range(20)]
+    without = [look_misfit(*simulated(rng, fps, 1.0, 0.05, t=t)).factor for _ in range(20)]
+    assert np.mean(np.array(with_t) > 1) <= 0.1 and max(with_t) < 2.5, with_t
+    assert min(without) > 2.0, without
+
+
+@pytest.mark.slow
+def test_a_variable_rate_h264_track_keeps_the_constant_rates_factor(tmp_path):
+    """benchmarks/vfr.py's shot 6 (H.264 CRF 20, 120 fps, noise 3, 250 px/m;
+    its fits take the shaded look on the lossy codec, so the misfit runs):
+    rendered at a constant rate and with intervals jittered by 3%, the same
+    noise.  Measured: factor 3.50 (lag-1 0.26) at the constant rate; at the
+    variable one 11.3 (0.77) with k / fps's weights, 4.01 (0.35) with the
+    frame times; the per-frame errors against the truth 0.048 and 0.049 px
+    RMS, stated honestly (err/se 1.26, 1.30)."""
+    import dataclasses
+
+    from cuespin.data_gen.sampler import sample_scene
+    from cuespin.render import render_video
+    from cuespin.track.video import track_video
+
+    scene = sample_scene(161576974, "case3", fps=120.0, px_per_m=250.0, noise=3.0, blur=False, codec="H264")
+    factors, z = {}, {}
+    for j in (0.0, 0.03):
+        sc = dataclasses.replace(scene, render={**scene.render, "max_duration": 3.0, "vfr_jitter": j})
+        path = tmp_path / f"v{j}.mp4"
+        render_video(sc, path)
+        tr = track_video(path, sc)
+        truth = pd.read_csv(path.with_suffix(".truth.csv"))
+        n = min(tr.n_frames, len(truth))
+        assert np.abs(tr.t[:n] - truth.t.values[:n]).max() < 1e-12        # the file's times, read back
+        tuv = np.c_[truth.uc_px, truth.vc_px][:n]
+        moving = tr.ok[:n] & (np.r_[0, np.hypot(*np.diff(tuv, axis=0).T)] > 0.3)
+        z[j] = np.sqrt(np.mean(((tr.uv[:n] - tuv)[moving] / tr.stderr_px[:n][moving]) ** 2))
+        factors[j] = tr.look_factor
+    assert factors[0.03] / factors[0.0] < 1.6, factors          # measured 1.15; 3.2 before
+    assert 0.8 < z[0.03] < 1.5 and abs(z[0.03] / z[0.0] - 1) < 0.2, z
+
+
+def _null_false_positives(tracks, px_per_m=500.0):
+    """How many of ``tracks`` (recover.simulate.SimTrack: independent errors
+    stated right) the look misfit inflates, fed as track.video feeds it
+    (centres and covariances at a px scale, every frame ok), and the count."""
+    fired = n = 0
+    for tr in tracks:
+        se = tr.sigma * px_per_m
+        cov = np.broadcast_to(np.eye(2) * se * se, (len(tr.t), 2, 2))
+        fired += look_misfit(tr.xy * px_per_m, cov, np.ones(len(tr.t), bool)).factor > 1
+        n += 1
+    return fired, n
+
+
+def _allowed(n, rate=0.001):
+    """The nominal rate plus two binomial standard errors, as a count."""
+    return int(np.floor(n * (rate + 2 * np.sqrt(rate * (1 - rate) / n))))
+
+
+def test_excess_z_false_positive_rate_on_rolling_null_tracks():
+    # EXCESS_Z's nominal rate (one-sided 0.1%) on 400 tracks rolling from the
+    # strike (recover.simulate, 60-480 fps, 0.01-0.3 px at 500 px/m,
+    # exposures 0.3-1 frame half the time): no kink but the stop.  Measured
+    # (2026-11-30, seeds 1 and 2 of mixed_tracks): 4 of 6000, 0.07%.
+    from cuespin.recover.simulate import null_rolling_tracks
+
+    fired, n = _null_false_positives(null_rolling_tracks(400, 11))
+    assert n == 400 and fired <= _allowed(n), fired
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="kinks of sliding tracks pass for a misfit: 4.5% of them "
+                   "inflated (2026-11-30, 6000 tracks), 45 times the nominal 0.1%")
+def test_excess_z_false_positive_rate_on_sliding_null_tracks():
+    # Measured (seeds 1 and 2, 6000 sliding tracks): 267 inflated (4.45%;
+    # 60-240 fps 1-10%, 480 fps 0-0.4%), factors p10/50/90 1.9/2.7/6.0, up
+    # to 12: the longest spacing, with 5-6 blocks, two of them straddling
+    # the end of sliding, rises 2-10 times (a median of 5 with 2 spoiled is
+    # the largest of the 3 clean ones).  Raising EXCESS_Z to the per-cell
+    # 99.9th percentile (37) would also miss excesses of 3-5 (z 10-35).
+    from cuespin.recover.simulate import sliding_tracks
+
+    fired, n = _null_false_positives(sliding_tracks(400, 12))
+    assert fired <= _allowed(n), fired

@@ -60,6 +60,17 @@ BLOCK_MIN = 4
 MIN_BLOCKS = 5
 # The excess is kept only beyond this many of its standard errors (one-sided
 # 0.1%), so that a ball whose look the model holds keeps its errors as stated.
+# Measured by simulation (benchmarks/calibrate_tests.py --which misfit;
+# 2026-11-30, mixed_tracks seeds 1 and 2, 12,000 tracks with independent
+# errors stated right, 60-480 fps, 0.01-0.3 px, 1,000 per cell): on tracks
+# rolling from the strike 4 of 6,000 inflated (0.07%: nominal), on sliding
+# ones 267 of 6,000 (4.5%; 1-10% per cell at 60-240 fps, 0-0.4% at 480),
+# by factors 1.9/2.7/6.0 (p10/50/90), up to 12: the end of sliding spoils
+# two of the longest spacing's 5-6 blocks, whose median is then the largest
+# clean one (tests/test_track_misfit.py).  Not raised: the per-cell 99.9th
+# percentile is 37, and simulated excesses of 3-5 (the realistic looks')
+# reach z 10-35; MIN_BLOCKS 7 (9) cut the rate to 0.4% (0.17%) but lost
+# half of a 60-fps excess of 5 at rho 0.8 (median factor 1.8 (1.0), not 6).
 EXCESS_Z = 3.09
 # A correlation is considered only where the longest spacing's third
 # differences reach this share of the error's full variance: beyond, the
@@ -94,11 +105,15 @@ class LookMisfit:
     ratios : dict
         Per spacing (frames), the third differences' variance over what the
         stated errors give, and how many entered it (diagnostics).
+    z : float
+        The fitted excess over its standard error, the statistic the factor
+        is kept on (beyond ``EXCESS_Z``; 0 when no spacing counts).
     """
 
     factor: float = 1.0
     rho: float = 0.0
     ratios: dict | None = None
+    z: float = 0.0
 
 
 def _shape(rho, s):
@@ -107,7 +122,30 @@ def _shape(rho, s):
     return (20.0 - 30.0 * p + 12.0 * p * p - 2.0 * p ** 3) / 20.0
 
 
-def variance_ratios(uv, cov, ok, spacings=SPACINGS) -> dict:
+def third_difference_weights(t, k, s) -> np.ndarray:
+    """Weights of the third difference over frames ``k - s, k, k + s, k + 2s``
+    taken at times ``t``: the third divided difference (zero on any quadratic
+    in time) times ``6 h^3``, ``h`` the mean step, so that at a constant rate
+    they are ``(-1, 3, -3, 1)`` exactly.  Shape (len(k), 4).
+
+    At a variable frame rate (a phone's file) the plain ``(-1, 3, -3, 1)`` is
+    not free of the motion: a ball moving at v leaves ``v`` times the
+    intervals' own third difference in it (1 m/s, intervals jittered by 3% at
+    120 fps: 0.06 px at 250 px/m, 2-10 times the tracker's error), which the
+    variogram took for the look's misfit (H.264, 120 fps, jitter 0.03:
+    factor 11.3 with lag-1 correlation 0.77 against 3.5 and 0.26 at a
+    constant rate on the same shot).
+    """
+    t = np.asarray(t, float)
+    pts = np.stack([t[k - s], t[k], t[k + s], t[k + 2 * s]], axis=1)      # (m, 4)
+    diff = pts[:, :, None] - pts[:, None, :]
+    diff[:, np.arange(4), np.arange(4)] = 1.0
+    w = 1.0 / np.prod(diff, axis=2)
+    h = (pts[:, 3] - pts[:, 0]) / 3.0
+    return w * (6.0 * h**3)[:, None]
+
+
+def variance_ratios(uv, cov, ok, spacings=SPACINGS, t=None) -> dict:
     """Per spacing ``s``: the variance of the moving frames' third
     differences (a median over blocks of frames, so that the few blocks a
     kink of the motion spoils do not count; the spacings stop where a ratio
@@ -123,6 +161,9 @@ def variance_ratios(uv, cov, ok, spacings=SPACINGS) -> dict:
     cov : ndarray, shape (n, 2, 2)
         Their stated covariances (px^2).
     ok : ndarray of bool, shape (n,)
+    t : ndarray, shape (n,), optional
+        Frame times (s); None: a constant rate.  At a variable rate the
+        differences are weighted by :func:`third_difference_weights`.
     """
     uv = np.asarray(uv, float)
     var = np.diagonal(np.asarray(cov, float), axis1=1, axis2=2)
@@ -139,8 +180,14 @@ def variance_ratios(uv, cov, ok, spacings=SPACINGS) -> dict:
         k = np.arange(s, n - 2 * s)
         if len(k) < MIN_SAMPLES // 2:
             break
-        d3 = x[k + 2 * s] - 3 * x[k + s] + 3 * x[k] - x[k - s]
-        v3 = var[k + 2 * s] + 9 * var[k + s] + 9 * var[k] + var[k - s]
+        if t is None:
+            d3 = x[k + 2 * s] - 3 * x[k + s] + 3 * x[k] - x[k - s]
+            v3 = var[k + 2 * s] + 9 * var[k + s] + 9 * var[k] + var[k - s]
+        else:
+            c = third_difference_weights(t, k, s)[:, :, None]          # (m, 4, 1)
+            idx = np.stack([k - s, k, k + s, k + 2 * s], axis=1)
+            d3 = np.sum(c * x[idx], axis=1)
+            v3 = np.sum(c * c * var[idx], axis=1)
         use = moving[k - s] & moving[k] & moving[k + s] & moving[k + 2 * s]
         with np.errstate(invalid="ignore"):
             z2 = (d3 * d3 / v3).sum(axis=1)          # both axes: 2 degrees of freedom
@@ -162,7 +209,7 @@ def variance_ratios(uv, cov, ok, spacings=SPACINGS) -> dict:
     return out
 
 
-def look_misfit(uv, cov, ok) -> LookMisfit:
+def look_misfit(uv, cov, ok, t=None) -> LookMisfit:
     """Scale factor for the stated covariances of a track, and the lag-1
     correlation of the error it adds (see the module's docstring).
 
@@ -172,9 +219,10 @@ def look_misfit(uv, cov, ok) -> LookMisfit:
     sampling variance (``2 / n_s``; overlapping differences at one spacing
     are counted as independent, see below); ``rho`` on a
     grid, ``excess`` in closed form.  The factor is ``1 + excess`` when the
-    excess passes ``EXCESS_Z`` of its standard error, else 1.
+    excess passes ``EXCESS_Z`` of its standard error, else 1.  ``t``: the
+    frame times (s) at a variable rate (:func:`variance_ratios`).
     """
-    ratios = variance_ratios(uv, cov, ok)
+    ratios = variance_ratios(uv, cov, ok, t=t)
     if not ratios:
         return LookMisfit(ratios=ratios)
     s = np.array(list(ratios), float)
@@ -202,12 +250,13 @@ def look_misfit(uv, cov, ok) -> LookMisfit:
     # spacing's terms are the least dependent, so its standard error,
     # scaled, is the one to beat.
     se_c *= np.sqrt(float(s.max()))
-    if not c > EXCESS_Z * se_c:
-        return LookMisfit(ratios=ratios)
-    return LookMisfit(factor=1.0 + c, rho=float(rho), ratios=ratios)
+    z = c / se_c
+    if not z > EXCESS_Z:
+        return LookMisfit(ratios=ratios, z=z)
+    return LookMisfit(factor=1.0 + c, rho=float(rho), ratios=ratios, z=z)
 
 
-__all__ = ["LookMisfit", "look_misfit", "variance_ratios"]
+__all__ = ["LookMisfit", "look_misfit", "third_difference_weights", "variance_ratios"]
 
 
 

@@ -469,14 +469,18 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     # metres at the image centre's scale, so that the misfit's thresholds
     # stay in px (a similarity camera: the same numbers as in px).
     misfit = LookMisfit()
+    t = frame_times(path, info, k, cam.fps)
     if bg.polarity and tracker.shade is not False and ok.any():
         s = cam.px_per_m(center)
         cov_t = np.full_like(cov, np.nan)
         cov_t[ok] = cam.cov_to_table(xy[ok], cov[ok]) * s**2
-        misfit = look_misfit(xy * s, cov_t, ok)
+        # frame times only at a variable rate: at k / fps the weights are
+        # (-1, 3, -3, 1) and the constant-rate path is kept bit for bit
+        variable = len(t) > 1 and np.ptp(np.diff(t)) > 1e-9 * np.mean(np.diff(t))
+        misfit = look_misfit(xy * s, cov_t, ok, t=t if variable else None)
     cov[ok] *= misfit.factor
     se = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0, None))
-    return TrackResult(t=frame_times(path, info, k, cam.fps), uv=uv, xy=xy, ok=ok, status=status,
+    return TrackResult(t=t, uv=uv, xy=xy, ok=ok, status=status,
                        stderr_px=se, radius_px=radius_px, background=bg, error=error,
                        seconds={"background": t_bg, "track": t_track}, lossless=info.lossless,
                        inter_frame=info.inter_frame, cov_px=cov, projection=proj, camera=cam,
