@@ -30,6 +30,9 @@ CONDITION_FLOOR = 0.05
 # A sample differs from its pixel's median by more than this many whitened
 # noise sigmas: the ball (or something else moving) covers it.
 BALL_SIGMAS = 6.0
+# A box position votes on the ball's colour when its departure is at least
+# this fraction of the largest in its sample (the ball's whole box).
+PEAK_FRACTION = 0.5
 # Pixels the noise covariance is estimated from: its variances' relative
 # error is sqrt(2 / n), 0.4%, and the medians over a whole 1280 x 720 frame
 # cost ~1.5 s, more than tracking a short shot.
@@ -133,14 +136,55 @@ def ball_direction(samples: np.ndarray, ys: np.ndarray, xs: np.ndarray, radius_p
     v0, v1, u0, u1 = vs.min(), vs.max() + 1, us.min(), us.max() + 1
     X = samples[:, v0:v1, u0:u1].astype(np.float32)
     D = (X - np.median(X, axis=0)) * on[v0:v1, u0:u1, None]
-    Db = np.stack([cv2.blur(d, (k, k)) for d in D])[:, ys - v0, xs - u0].reshape(-1, 3).astype(np.float64)
-    Z = np.linalg.solve(L, Db.T).T * k                       # whitened: a box mean's noise is S / k^2
-    norm2 = np.einsum("ij,ij->i", Z, Z)
-    big = norm2 > BALL_SIGMAS**2
+    Db = np.stack([cv2.blur(d, (k, k)) for d in D])[:, ys - v0, xs - u0].astype(np.float64)
+    Z = np.linalg.solve(L, Db.reshape(-1, 3).T).T.reshape(Db.shape) * k  # whitened: a box mean's noise is S / k^2
+    norm2 = np.einsum("sij,sij->si", Z, Z)
+    # Only departures near the sample's largest: a ball fills the box, while
+    # a lossy codec's error (MJPG's blocks, correlated over the box, so not
+    # averaged away) departs by a fraction of it but over the whole moving
+    # region (blue on blue, MJPG: 2600-3800 such box positions per sample
+    # against the ball's 430, and the direction was the codec's).
+    peak2 = norm2.max(axis=1, keepdims=True)
+    big = (norm2 > BALL_SIGMAS**2) & (norm2 > PEAK_FRACTION**2 * peak2)
     if big.sum() < 10:
         return None
-    U = Z[big] / np.sqrt(norm2[big])[:, None]
-    return np.linalg.eigh(U.T @ U)[1][:, -1]
+    # One vote per sample (its unit vectors' mean outer product): the ball
+    # departs from the median in every sample, the cue in the few it
+    # crosses, but a long cue covers more box positions than the ball
+    # (sample_scenes(6, 6, realistic, FFV1)[0], blue on blue: 1400-1600 of
+    # the cue's against ~420 of the ball's in three of nine samples, and the
+    # direction lay between theirs).
+    M = np.zeros((3, 3))
+    for z, b in zip(Z, big):
+        if b.any():
+            U = z[b] / np.sqrt(np.einsum("ij,ij->i", z[b], z[b]))[:, None]
+            M += U.T @ U / len(U)
+    return np.linalg.eigh(M)[1][:, -1]
+
+
+def moved_boxes(samples: np.ndarray, radius_px, sd: np.ndarray) -> np.ndarray:
+    """Where something as wide as a ball moved (bool, h x w): pixels whose
+    mean over a box the ball fills spans, over the samples, more than the
+    box mean's noise allows in some channel (:func:`spread_threshold`:
+    7.5 of its sigmas, ``sd / k``, plus a level for rounding and a lossy
+    codec's, or the spans' own 90th percentile's multiple where larger).
+
+    Box means, not pixels: a ball close to the felt's colour departs from it
+    by less than the per-pixel threshold in every channel (blue on blue,
+    noise 6.4: 13-30 levels against 52; sample_scenes(6, 6, realistic,
+    FFV1)[0]), nothing "moved", the luma weights were taken, in which that
+    ball's contrast is 2.5 levels, and every found centre was 2-10 radii
+    off.  The box mean's noise is ``k`` times smaller; a ball fills the box.
+    """
+    k = box_size(as_radius_map(radius_px, samples.shape[1:3]).r_min)
+    lo = hi = None
+    for s in samples:  # running extremes: no stack of blurred float frames
+        b = cv2.blur(s.astype(np.float32), (k, k))
+        lo = b if lo is None else np.minimum(lo, b)
+        hi = b if hi is None else np.maximum(hi, b)
+    span = hi - lo
+    noise_thr = 7.5 * np.maximum(sd, 0.5) / k + 1.0
+    return np.any(span > [spread_threshold(span[..., i], noise_thr[i]) for i in range(3)], axis=-1)
 
 
 def learn_projection(samples: np.ndarray, radius_px) -> Projection:
@@ -169,12 +213,7 @@ def learn_projection(samples: np.ndarray, radius_px) -> Projection:
     S = noise_covariance(samples[0], samples[n // 2]) if n > 1 else np.eye(3) * ROUNDING_VAR
     L = np.linalg.cholesky(S)
     sd = np.sqrt(np.diag(S))
-    lo = samples.min(axis=0).astype(np.int16)
-    hi = samples.max(axis=0).astype(np.int16)
-    span = (hi - lo).astype(np.float32)
-    noise_thr = 7.5 * np.maximum(sd, 0.5) + 2
-    spread = np.any(span > [spread_threshold(span[..., i], noise_thr[i]) for i in range(3)], axis=-1)
-    ys, xs = np.nonzero(ball_wide(spread, radius_px))
+    ys, xs = np.nonzero(ball_wide(moved_boxes(samples, radius_px, sd), radius_px))
     luma = np.array([0.114, 0.587, 0.299])
     w = None
     if len(ys):

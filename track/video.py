@@ -31,8 +31,8 @@ from cuespin.track.misfit import LookMisfit, error_ar1, look_misfit
 from cuespin.track.radius import RadiusMap
 from cuespin.track.model import refit_shift, warm_up
 from cuespin.track.reader import FrameSource, ThreadedFrames, TrackError, frame_times, probe
-from cuespin.track.tracker import (OK, STATUS_TEXT, BallTracker, TrackerConfig, beyond_ball, foreign_pixels,
-                                   foreign_threshold)
+from cuespin.track.tracker import (OK, PULLED, STATUS_TEXT, BallTracker, TrackerConfig, beyond_ball,
+                                   foreign_pixels, foreign_threshold, pulled_fits)
 
 # Bytes of decoded frames held before the background is learnt: 437 grey or
 # 145 BGR frames at 1280 x 720 (at 240 fps, 1.8 s or 0.6 s of video; the
@@ -119,6 +119,10 @@ class TrackResult:
         the video; ``w`` None for grey video).
     camera : Camera or None
         The scene's camera, its size filled from the video where absent.
+    fit_rms : ndarray, shape (n,), or None
+        Each frame's fit residual RMS (projected levels; NaN where no fit
+        converged), including the frames dropped as pulled
+        (:func:`cuespin.track.tracker.pulled_fits`).
     """
 
     t: np.ndarray
@@ -139,6 +143,7 @@ class TrackResult:
     look_factor: float = 1.0
     look_rho: float = 0.0
     look_shaded: bool = False
+    fit_rms: np.ndarray | None = None
 
     def __post_init__(self):
         if self.cov_px is None:
@@ -348,7 +353,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         k_read += 1
         return img
 
-    uv, cov, status = [], [], []
+    uv, cov, status, rms = [], [], [], []
     t_start = time.perf_counter()
     try:
         first = pull()
@@ -401,6 +406,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
                     uv.append(np.full(2, np.nan))
                     cov.append(np.full((2, 2), np.nan))
                     status.append(1)  # NO_BALL
+                    rms.append(np.nan)
                     k += 1
                     continue
             else:
@@ -422,6 +428,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
             uv.append(obs.uv)
             cov.append(obs.cov)
             status.append(obs.status)
+            rms.append(obs.rms)
             k += 1
             if progress is not None and k % 64 == 0:
                 progress(64)
@@ -458,6 +465,13 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         bg = replace(bg, image=better)
     t_track = time.perf_counter() - t_start
     status = np.array(status, np.int8)
+    rms = np.array(rms, float)
+    # A false centre is worse than a missing one: fits that explain their
+    # window much worse than the track's typical fit are dropped.
+    pulled = pulled_fits(rms, status == OK)
+    status[pulled] = PULLED
+    uv[pulled] = np.nan
+    cov[pulled] = np.nan
     ok = status == OK
     if not ok.any():
         why = (" (the ball never moved, or is not in view; do physics.R and the camera "
@@ -495,7 +509,8 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
                        stderr_px=se, radius_px=radius_px, background=bg, error=error,
                        seconds={"background": t_bg, "track": t_track}, lossless=info.lossless,
                        inter_frame=info.inter_frame, cov_px=cov, projection=proj, camera=cam,
-                       look_factor=misfit.factor, look_rho=misfit.rho, look_shaded=tracker.shade is not False)
+                       look_factor=misfit.factor, look_rho=misfit.rho, look_shaded=tracker.shade is not False,
+                       fit_rms=rms)
 
 
 def write_track_csv(path, result: TrackResult) -> None:
