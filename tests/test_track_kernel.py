@@ -131,3 +131,28 @@ def test_tracks_are_the_references(tmp_path, monkeypatch, kind):
     video = tmp_path / f"{kind}.avi"
     render_video(scene, video)
     assert_same_track(_track(video, scene, False, monkeypatch), _track(video, scene, True, monkeypatch))
+
+
+def test_kernel_compiles_where_no_cache_can_be_written(tmp_path):
+    # A read-only install (no folder numba may cache in): numba refuses
+    # cache=True there, and the kernel must compile without it, not raise.
+    import subprocess
+    import sys
+    script = tmp_path / "ro.py"
+    script.write_text(
+        "import numba.core.caching as c\n"
+        "for name in ('InTreeCacheLocator', 'InTreeCacheLocatorFsAgnostic', 'UserWideCacheLocator',\n"
+        "             'UserProvidedCacheLocator', 'IPythonCacheLocator', 'ZipCacheLocator'):\n"
+        "    if hasattr(c, name):\n"
+        "        getattr(c, name).from_function = classmethod(lambda cls, *a, **k: None)\n"
+        "from numba import njit\n"
+        "try:\n"
+        "    njit(cache=True)(lambda x: x)\n"
+        "    raise SystemExit('numba still found a cache folder: the test does not test')\n"
+        "except RuntimeError:\n"
+        "    pass\n"
+        "from cuespin.track import kernel\n"
+        "print(kernel._disc_arc(0.1, 1.0, 1.0))\n")
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert abs(float(out.stdout) - 0.8852312458335592) < 1e-12

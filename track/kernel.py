@@ -36,16 +36,28 @@ FIT_OK, FIT_SINGULAR, FIT_DIVERGED, FIT_NO_CONVERGENCE, FIT_LEFT_PATCH = 0, 1, 2
 (MAX_ITER, STEP_TOL_PX, STEP_TOL_SE, AITKEN_COS, AITKEN_RHO_LO, AITKEN_RHO_HI, DAMP_AFTER,
  NO_CONVERGENCE_SE, CLUSTER_PX, BLUR_NODES_PER_PX, MAX_BLUR_NODES) = range(11)
 
-_CACHE = True
 
 
-@njit(cache=_CACHE)
+def _jit(**options):
+    """``numba.njit`` with its on-disk cache where a cache folder can be
+    written (beside this file, the user's cache, or ``NUMBA_CACHE_DIR``);
+    else without it (a read-only install: numba refuses ``cache=True``
+    there with a RuntimeError), compiled once per process."""
+    def wrap(f):
+        try:
+            return njit(cache=True, **options)(f)
+        except RuntimeError:
+            return njit(**options)(f)
+    return wrap
+
+
+@_jit()
 def _disc_arc(z, r2, r):
     """``quadrant_area``'s A(z): half the disc's area left of ``z``, plus a constant."""
     return 0.5 * (z * math.sqrt(max(r2 - z * z, 0.0)) + r2 * math.asin(z / r)) + 0.25 * math.pi * r2
 
 
-@njit(cache=_CACHE)
+@_jit()
 def _disc_corners(xe, ye, r, G):
     """:func:`cuespin.render.draw.quadrant_area` on the grid ``ye[i], xe[j]`` into ``G``."""
     nx, ny = xe.shape[0], ye.shape[0]
@@ -68,19 +80,19 @@ def _disc_corners(xe, ye, r, G):
             G[i, j] = Ax[j] + m if y >= 0 else Ax[j] - m
 
 
-@njit(cache=_CACHE)
+@_jit()
 def _seg(z, hv, wv):
     """``ellipse_corner_area``'s seg(z)."""
     xi = min(max(z / wv, -1.0), 1.0)
     return 0.5 * hv * wv * (xi * math.sqrt(max(1.0 - xi * xi, 0.0)) + math.asin(xi))
 
 
-@njit(cache=_CACHE)
+@_jit()
 def _poly(z, y, n):
     return (0.5 * n * z - y) * z
 
 
-@njit(cache=_CACHE)
+@_jit()
 def _part(xc, Sx, a, b, Sa, Sb, pa, y, n, k):
     """``ellipse_corner_area``'s part(a, b, k), with seg(a), seg(b), poly(a) given."""
     u = min(max(xc, a), b)
@@ -88,7 +100,7 @@ def _part(xc, Sx, a, b, Sa, Sb, pa, y, n, k):
     return _poly(u, y, n) - pa + k * (Su - Sa)
 
 
-@njit(cache=_CACHE)
+@_jit()
 def _ellipse_corners(xe, ye, geo, G):
     """:func:`cuespin.track.outline.ellipse_corner_area` on the grid ``ye[i], xe[j]`` into ``G``."""
     n, hv, wv, m, wh, hh = geo[0], geo[1], geo[2], geo[3], geo[4], geo[5]
@@ -122,7 +134,7 @@ def _ellipse_corners(xe, ye, geo, G):
                        - _part(xc[j], Sx[j], a3, b3, Sa3, Sb3, pa3, y, n, -1.0))
 
 
-@njit(cache=_CACHE)
+@_jit()
 def coverage(cu, cv, kind, geo, u0, v0, w, h, cov, du, dv):
     """Exact pixel coverage of the ball's image centred at ``(cu, cv)`` over
     the ``h x w`` window at ``(u0, v0)``, and its derivatives in the centre,
@@ -169,7 +181,7 @@ def coverage(cu, cv, kind, geo, u0, v0, w, h, cov, du, dv):
             dv[i, j] = h_t - h_b
 
 
-@njit(cache=_CACHE)
+@_jit()
 def model_rows(c0, c1, b0, b1, G, felt, r, kind, geo, u0, v0, taus, shade, has_shade, blur_rows, m, JT):
     """:func:`cuespin.track.reference.model_rows` into ``m`` (h*w) and ``JT``
     (k, h*w): the model and its Jacobian's rows, centre, blur (when
@@ -266,7 +278,7 @@ def model_rows(c0, c1, b0, b1, G, felt, r, kind, geo, u0, v0, taus, shade, has_s
             M[i, j] = s_m / n_t
 
 
-@njit(cache=_CACHE)
+@_jit()
 def blur_nodes(blur_px, consts):
     """:func:`cuespin.track.model.blur_nodes`."""
     if blur_px < 0.25:
@@ -275,7 +287,7 @@ def blur_nodes(blur_px, consts):
     return (np.arange(n) + 0.5) / n - 0.5
 
 
-@njit(cache=_CACHE, fastmath={"reassoc", "contract"})
+@_jit(fastmath={"reassoc", "contract"})
 def _dot(x, y):
     """Sum of ``x * y`` (vectorised: the order of the sum is free, as in BLAS)."""
     s = 0.0
@@ -284,7 +296,7 @@ def _dot(x, y):
     return s
 
 
-@njit(cache=_CACHE, fastmath={"reassoc", "contract"})
+@_jit(fastmath={"reassoc", "contract"})
 def _gram(X, wt, weighted):
     """``X @ X.T``, or ``(X * wt) @ X.T`` when ``weighted``."""
     k, n = X.shape
@@ -303,7 +315,7 @@ def _gram(X, wt, weighted):
     return out
 
 
-@njit(cache=_CACHE)
+@_jit()
 def _matvec(A, x):
     out = np.empty(A.shape[0])
     for a in range(A.shape[0]):
@@ -311,7 +323,7 @@ def _matvec(A, x):
     return out
 
 
-@njit(cache=_CACHE)
+@_jit()
 def _inverse(M):
     """``np.linalg.inv`` for the normal equations' few parameters: Gauss-Jordan
     with partial pivoting (LAPACK's getrf pivots alike); None when a pivot is
@@ -343,7 +355,7 @@ def _inverse(M):
     return True, inv
 
 
-@njit(cache=_CACHE)
+@_jit()
 def _centre_cov(A, meat):
     """The first 2 x 2 block of ``A @ meat @ A`` (A symmetric)."""
     k = A.shape[0]
@@ -358,7 +370,7 @@ def _centre_cov(A, meat):
     return V
 
 
-@njit(cache=_CACHE)
+@_jit()
 def fit(y, felt, use, has_valid, c, b, G, r, kind, geo, u0, v0, has_shade, fit_blur, consts):
     """:func:`cuespin.track.reference.fit_disc`'s Gauss-Newton loop and
     sandwich, in place on ``c`` (2), ``b`` (2); ``y`` is the frame less the
