@@ -157,7 +157,7 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
     out, est = recover_track(tr.t[:n], tr.xy[:n], tr.ok[:n], cov_m[:n], scene.physics, cam.exposure_s,
                              method, fit_friction, lossless=tr.independent_errors, ar1_floor=tr.error_ar1,
                              inter_frame=tr.inter_frame, px_to_m=pixel_to_table(cam, tr.xy[:n]),
-                             return_estimate=True)
+                             touched=None if tr.touched is None else tr.touched[:n], return_estimate=True)
     if scene.calibration:
         # Each refit keeps this fit's decisions: the share measures the camera alone.
         add_calibration_error(out["methods"],

@@ -29,7 +29,7 @@ def _num(x):
 def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0.0,
                   method: str = "all", fit_friction: bool = False, lossless: bool = True,
                   return_estimate: bool = False, inter_frame: bool = False, px_to_m=None, keep=None,
-                  ar1_floor: float = 0.0):
+                  ar1_floor: float = 0.0, touched=None):
     """v0 and w0 from a track, by the paper's method and/or maximum likelihood.
 
     Parameters
@@ -69,6 +69,11 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
         Lag-1 correlation of the AR(1) error model the track states (the
         tracker's ``TrackResult.error_ar1``; 0: independent): the fit is then under
         AR(1) errors of at least this correlation (recover.estimate.estimate).
+    touched : ndarray of bool, shape (n,), optional
+        Frames where the tracker found something beside the ball
+        (``TrackResult.touched``): the cue's first frames after the strike
+        are left out only when such frames lie at the strike
+        (recover.estimate.estimate); without it none are.
     return_estimate : bool
         Also return the :class:`~cuespin.recover.estimate.Estimate` (its
         measurements give the bound: pipeline.measure.mle_bound).
@@ -89,7 +94,7 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
     est = estimate(t[ok], xy[ok], cov, params, exposure_s, lossless, fit_friction,
                    run_paper=method in ("paper", "all"), inter_frame=inter_frame,
                    px_to_m=None if px_to_m is None else np.asarray(px_to_m, dtype=float)[ok], keep=keep,
-                   ar1_floor=ar1_floor)
+                   ar1_floor=ar1_floor, touched=None if touched is None else np.asarray(touched, bool)[ok])
     methods = {}
     if method in ("paper", "all"):
         methods["paper"] = paper_dict(est, params)

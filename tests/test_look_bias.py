@@ -48,8 +48,11 @@ def _tracks():
 def test_look_biases_no_longer_pass_for_slip(monkeypatch):
     for tr in _tracks():
         xy = _biased(tr)
+        # The tracker saw the cue beside the ball at the strike.
+        cue = np.abs(tr.t - tr.shot.t0) < 2.0 / tr.fps
         est = estimate(tr.t, xy, np.full(len(tr.t), tr.sigma), tr.params, tr.exposure_s, lossless=False,
-                       run_paper=False)
+                       run_paper=False, touched=cue)
+        assert est.decided.clear_s > 0
         m = est.mle
         assert m.status == "ok" and m.model == "rolling", (m.status, m.model, m.slip_lr, m.reason)
         err = np.abs(m.v0 - tr.shot.v0) / m.stderr["v0"]
@@ -63,6 +66,18 @@ def test_look_biases_no_longer_pass_for_slip(monkeypatch):
                        run_paper=False)
         slips += est.mle.model == "full"
     assert slips >= 3, slips
+
+
+def test_no_cue_seen_no_frames_left_out():
+    # A shot whose track shows nothing beside the ball at the strike (a
+    # simulated one; a video with no cue in view) keeps every frame.
+    tr = _tracks()[0]
+    est = estimate(tr.t, tr.xy, np.full(len(tr.t), tr.sigma), tr.params, tr.exposure_s, run_paper=False)
+    assert est.decided.clear_s == 0.0
+    far = np.abs(tr.t - tr.shot.t0) > 0.5
+    est = estimate(tr.t, tr.xy, np.full(len(tr.t), tr.sigma), tr.params, tr.exposure_s, run_paper=False,
+                   touched=far)
+    assert est.decided.clear_s == 0.0
 
 
 def test_a_shaded_look_shares_the_rest_error():
@@ -99,7 +114,8 @@ def test_realistic_rolling_renders_come_out_rolling(tmp_path):
         cam = scene.camera
         out = recover_track(tr.t, tr.xy, tr.ok, table_covariance(cam, tr.xy, tr.cov_px), scene.physics,
                             cam.exposure_s, "mle", lossless=tr.independent_errors, inter_frame=tr.inter_frame,
-                            px_to_m=pixel_to_table(cam, tr.xy), ar1_floor=tr.error_ar1)
+                            px_to_m=pixel_to_table(cam, tr.xy), ar1_floor=tr.error_ar1,
+                            touched=tr.touched)
         m = out["methods"]["mle"]
         assert m["status"] == "ok", (i, m["reason"])
         if m["model"] != "rolling":

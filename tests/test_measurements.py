@@ -54,11 +54,13 @@ def test_lossless_rest_shares_what_its_scatter_does_not_show():
     # Identical frames (a still image at no noise: the same 8-bit rounding
     # in each) share their whole error: the mean is no better than a frame.
     assert _rest_variance(np.full((40, 2), 1e-5)) == pytest.approx([1.0, 1.0])
-    # Independent frames at the stated error: the mean's error is 1/n of a
-    # frame's (kept 99 times in 100 at REST_SHARED_LEVEL; these seeds do).
-    for seed in range(5):
-        xy = SIGMA * np.random.default_rng(seed).standard_normal((40, 2))
-        assert _rest_variance(xy) == pytest.approx([1 / 40, 1 / 40])
+    # Independent frames at the stated error: the mean's error is at least
+    # 1/n of a frame's, and more where the scatter falls short by chance
+    # (f = (1 - l)+).  Over 400 seeds, n = 40: 3.67 / n on average (sd 3.50
+    # / n); the mean over 40 seeds is held within 3 of its standard errors.
+    v = np.array([_rest_variance(SIGMA * np.random.default_rng(seed).standard_normal((40, 2)))[0]
+                  for seed in range(40)]) * 40
+    assert v.min() >= 1 - 1e-9 and 3.67 - 3 * 0.55 < v.mean() < 3.67 + 3 * 0.55, v.mean()
     # Frames showing a quarter of the stated error: 15/16 of it is shared.
     xy = 0.25 * SIGMA * np.random.default_rng(9).standard_normal((400, 2))
     v = _rest_variance(xy)
@@ -106,14 +108,9 @@ def test_per_position_covariance_is_what_the_fit_weights_by():
     rng = np.random.default_rng(0)
     xy = clean + np.einsum("nij,nj->ni", np.linalg.cholesky(cov), rng.standard_normal((len(t), 2)))
     m = recover_track(t, xy, np.ones(len(t), bool), cov, p)["methods"]["mle"]
-    assert m["chi2_per_dof"] == pytest.approx(1.0, abs=0.08)
-    # This shot (0.23 m/s) slides 6 frames, 2 of them left out as the cue's
-    # (recover.measurements.CUE_CLEAR_FRAMES): the slip is then not
-    # determined (degenerate; ok with 1 frame left out, v0 0.9 errors off).
-    assert m["status"] == "ok" or (m["status"] == "degenerate" and "determine" in m["reason"]), m["reason"]
-    if m["status"] == "ok":
-        z = (np.array(m["v0"]) - shot.v0) / np.array(m["stderr"]["v0"])
-        assert np.abs(z).max() < 4
+    assert m["status"] == "ok" and m["chi2_per_dof"] == pytest.approx(1.0, abs=0.08)
+    z = (np.array(m["v0"]) - shot.v0) / np.array(m["stderr"]["v0"])
+    assert np.abs(z).max() < 4
 
 
 def test_autocorrelated_errors_widen_the_errors():

@@ -123,6 +123,11 @@ class TrackResult:
         Each frame's fit residual RMS (projected levels; NaN where no fit
         converged), including the frames dropped as pulled
         (:func:`cuespin.track.tracker.pulled_fits`).
+    touched : ndarray of bool, shape (n,), or None
+        Frames whose fit found something other than the felt beside the ball
+        (the cue at the strike, another ball) and left it out; the recovery
+        leaves out the cue's first frames after the strike only where these
+        show it (``recover_track(touched=...)``).
     """
 
     t: np.ndarray
@@ -144,6 +149,7 @@ class TrackResult:
     look_rho: float = 0.0
     look_shaded: bool = False
     fit_rms: np.ndarray | None = None
+    touched: np.ndarray | None = None
 
     def __post_init__(self):
         if self.cov_px is None:
@@ -468,6 +474,13 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     rms = np.array(rms, float)
     # A false centre is worse than a missing one: fits that explain their
     # window much worse than the track's typical fit are dropped.
+    # Frames whose fit found something other than the felt beside the ball
+    # (the cue at the strike, another ball) and left those pixels out: the
+    # recovery leaves out the strike's first frames only where the track
+    # shows the cue there (recover.estimate, cue_clear_s).
+    touched = np.zeros(len(status), bool)
+    for kk, lf in fits:
+        touched[kk] = lf[10] is not None
     pulled = pulled_fits(rms, status == OK)
     status[pulled] = PULLED
     uv[pulled] = np.nan
@@ -510,7 +523,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
                        seconds={"background": t_bg, "track": t_track}, lossless=info.lossless,
                        inter_frame=info.inter_frame, cov_px=cov, projection=proj, camera=cam,
                        look_factor=misfit.factor, look_rho=misfit.rho, look_shaded=tracker.shade is not False,
-                       fit_rms=rms)
+                       fit_rms=rms, touched=touched)
 
 
 def write_track_csv(path, result: TrackResult) -> None:
