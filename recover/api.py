@@ -70,9 +70,9 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
         tracker's ``TrackResult.error_ar1``; 0: independent): the fit is then under
         AR(1) errors of at least this correlation (recover.estimate.estimate).
     touched : ndarray of bool, shape (n,), optional
-        Frames where the tracker found something beside the ball
-        (``TrackResult.touched``): the cue's first frames after the strike
-        are left out only when such frames lie at the strike
+        Frames the tracker flags (``TrackResult.touched``: something beside
+        the ball, or the ball leaving its rest): the first frames after the
+        strike are left out only when such frames lie at the strike
         (recover.estimate.estimate); without it none are.
     return_estimate : bool
         Also return the :class:`~cuespin.recover.estimate.Estimate` (its

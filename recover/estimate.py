@@ -159,10 +159,11 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         ``Estimate.decided``), kept instead of made again: the refits of the
         calibration's share (recover.calibration) change the camera only.
     touched : ndarray of bool, shape (n,), optional
-        Frames where the tracker found something beside the ball (the cue):
-        the frames after the strike whose ball the cue's tip may still touch
-        are left out only when a frame within ``CUE_CLEAR_FRAMES`` of the
-        strike is touched.  Without it (simulated tracks, a shot with no cue
+        Frames the tracker flags (``TrackResult.touched``: something beside
+        the ball, the cue; or the ball leaving the spot it rested on): the
+        first frames after the strike (recover.measurements.cue_clear_s) are
+        left out only when a frame within ``CUE_CLEAR_FRAMES`` of the strike
+        is flagged.  Without it (simulated tracks, a shot with no cue
         in view) none are: leaving them out of a cue-less shot cost free-slip
         answers their coverage (short_slide.py, seeds 8-9: 91.9% -> 83.9%).
     ar1_floor : float

@@ -121,3 +121,14 @@ def test_realistic_rolling_renders_come_out_rolling(tmp_path):
         if m["model"] != "rolling":
             err = np.abs(np.array(m["v0"]) - scene.truth.v0) / np.array(m["stderr"]["v0"])
             assert np.all(err < 3.0), (i, err)
+
+
+def test_frames_leaving_the_rest_are_flagged():
+    from cuespin.track.video import leaving_rest
+    # Still for 5 frames, then 4 px a frame: flagged while within two radii (8 px).
+    uv = np.r_[np.zeros((5, 2)), np.c_[4.0 * np.arange(1, 8) + 0.5, np.zeros(7)]]
+    ok = np.ones(len(uv), bool)
+    assert np.flatnonzero(leaving_rest(uv, ok, 4.0)).tolist() == [5]
+    assert np.flatnonzero(leaving_rest(uv, ok, 8.0)).tolist() == [5, 6, 7]
+    # Moving from the first frame (no rest in view): nothing flagged.
+    assert not leaving_rest(uv[5:], ok[5:], 8.0).any()

@@ -31,7 +31,7 @@ from cuespin.track.misfit import LookMisfit, error_ar1, look_misfit
 from cuespin.track.radius import RadiusMap
 from cuespin.track.model import refit_shift, warm_up
 from cuespin.track.reader import FrameSource, ThreadedFrames, TrackError, frame_times, probe
-from cuespin.track.tracker import (OK, PULLED, STATUS_TEXT, BallTracker, TrackerConfig, beyond_ball,
+from cuespin.track.tracker import (OK, PULLED, STATUS_TEXT, STILL_PX, BallTracker, TrackerConfig, beyond_ball,
                                    foreign_pixels, foreign_threshold, pulled_fits)
 
 # Bytes of decoded frames held before the background is learnt: 437 grey or
@@ -125,9 +125,10 @@ class TrackResult:
         (:func:`cuespin.track.tracker.pulled_fits`).
     touched : ndarray of bool, shape (n,), or None
         Frames whose fit found something other than the felt beside the ball
-        (the cue at the strike, another ball) and left it out; the recovery
-        leaves out the cue's first frames after the strike only where these
-        show it (``recover_track(touched=...)``).
+        (the cue at the strike, another ball) and left it out, or whose
+        window still holds the spot the ball rested on (:func:`leaving_rest`);
+        the recovery leaves out the first frames after the strike only where
+        these show it (``recover_track(touched=...)``).
     """
 
     t: np.ndarray
@@ -486,6 +487,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     uv[pulled] = np.nan
     cov[pulled] = np.nan
     ok = status == OK
+    touched |= leaving_rest(uv, ok, radius_px)
     if not ok.any():
         why = (" (the ball never moved, or is not in view; do physics.R and the camera "
                "match the video?)")
@@ -524,6 +526,28 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
                        inter_frame=info.inter_frame, cov_px=cov, projection=proj, camera=cam,
                        look_factor=misfit.factor, look_rho=misfit.rho, look_shaded=tracker.shade is not False,
                        fit_rms=rms, touched=touched)
+
+
+def leaving_rest(uv, ok, radius_px: float) -> np.ndarray:
+    """Frames, shape (n,), of a ball leaving the spot where the track's first
+    frames show it still (within ``STILL_PX``), while it is within two radii
+    ``radius_px`` of it: its window still holds that spot, where the felt
+    was learnt around the resting ball.  On realistic renders with no cue
+    in view (sample_scenes(22, 4, case4, realistic) shots 4, 19), the first
+    two such frames were 1.5-3.2 stated errors off along the path, and free
+    slip took them; the recovery leaves them out (``recover_track(touched=)``)."""
+    out = np.zeros(len(ok), bool)
+    first = np.flatnonzero(ok)[:3]
+    if len(first) < 3:
+        return out
+    rest = np.median(uv[first], axis=0)
+    d = np.hypot(*(uv - rest).T)
+    if not np.all(d[first] < STILL_PX):
+        return out
+    moved = np.flatnonzero(ok & (d > STILL_PX))
+    if len(moved):
+        out[moved[0]:] = ok[moved[0]:] & (d[moved[0]:] < 2.0 * radius_px)
+    return out
 
 
 def write_track_csv(path, result: TrackResult) -> None:
