@@ -202,9 +202,10 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
     # The frames after the strike whose ball the cue's tip still touches are
     # left out too, for the time the ball takes to clear it at the speed the
     # segmentation and then the first fit give (recover.measurements.CUE_CLEAR_R).
-    def measure(t0, clear_s):
+    def measure(t0, clear_s, group_rest=True):
         return build_measurements(t, xy, cov, t0=t0, t_rest=seg.t2, exposure_s=exposure_s,
-                                  frame_dt=frame_dt, shared_rest=not lossless, px_to_m=px_to_m, clear_s=clear_s)
+                                  frame_dt=frame_dt, shared_rest=not lossless, px_to_m=px_to_m, clear_s=clear_s,
+                                  group_rest=group_rest)
 
     if keep is not None:
         codec = CodecCorrelation(keep.codec_var, frame_dt) if inter_frame and not lossless else None
@@ -251,6 +252,8 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
             rho, z = lag1_autocorrelation(meas, full.residuals)
             decisions["autocorrelated"] = autocorrelated(rho, z, stated=ar1_floor > 0)
             if decisions["autocorrelated"]:
+                # The AR(1) model carries the rest's correlation itself.
+                meas = measure(t0, clear_s, group_rest=False).with_codec(codec_var)
                 full, roll = fit_models(meas, params, (full.shot.x0, full.shot.t0, full.shot.v0, full.shot.w0),
                                         exposure_s, fit_friction,
                                         (roll.shot.x0, roll.shot.t0, roll.shot.v0, roll.shot.w0),
@@ -314,7 +317,7 @@ def _refit(keep: Decided, seg, t, xy, params, exposure_s, fit_friction, run_pape
     path shape and root for the paper's method."""
     nan = float("nan")
     chosen = kept_segments(seg, keep)
-    meas = measure(keep.t0, keep.clear_s).with_codec(keep.codec_var)
+    meas = measure(keep.t0, keep.clear_s, group_rest=not keep.ar1).with_codec(keep.codec_var)
     decisions = {"sliding_ended": Decision(keep.sliding_ended, nan, nan)}
     mle = None
     if keep.sliding_seen is None or keep.start is None:
