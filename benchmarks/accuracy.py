@@ -99,6 +99,14 @@ def one_shot(args):
                              independent_errors=independent and not shaded,
                              look_factor=float(z["look_factor"]) if "look_factor" in z else 1.0,
                              look_rho=float(z["look_rho"]) if "look_rho" in z else 0.0)
+        if "touched" in z:
+            tr.touched = z["touched"]
+        else:  # kept before the tracker flagged frames: those leaving the rest, from the centres
+            from cuespin.track.video import leaving_rest
+            uv = np.full_like(tr.xy, np.nan)
+            good = tr.ok & np.all(np.isfinite(tr.xy), axis=1)
+            uv[good] = cam.to_pixels(tr.xy[good])
+            tr.touched = leaving_rest(uv, good, scene.physics.R * cam.px_per_m(scene.truth.x0))
         n, t_decode = int(z["frames"]), float(z["t_decode"])
     else:
         video = Path(tmp) / f"shot_{i}.avi"
@@ -111,12 +119,16 @@ def one_shot(args):
                      inter_frame=tr.inter_frame, frames=n, t_decode=t_decode,
                      independent=getattr(tr, "independent_errors", tr.lossless),
                      shaded=getattr(tr, "look_shaded", False),
-                     look_factor=getattr(tr, "look_factor", 1.0), look_rho=getattr(tr, "look_rho", 0.0))
+                     look_factor=getattr(tr, "look_factor", 1.0), look_rho=getattr(tr, "look_rho", 0.0),
+                     touched=getattr(tr, "touched", None) if getattr(tr, "touched", None) is not None
+                     else np.zeros(len(tr.t), bool))
     # As pipeline.run.run_recover does, keeping the fit's own measurements
     # for the bound.
     kw = {"px_to_m": pixel_to_table(cam, tr.xy)}
     if "ar1_floor" in inspect.signature(recover_track).parameters:
         kw["ar1_floor"] = error_ar1(getattr(tr, "look_factor", 1.0), getattr(tr, "look_rho", 0.0))
+    if "touched" in inspect.signature(recover_track).parameters:
+        kw["touched"] = getattr(tr, "touched", None)
     if "px_to_m" not in inspect.signature(recover_track).parameters:  # an older recover/, for before/after tables
         kw = {}
     out, est = recover_track(tr.t, tr.xy, tr.ok, table_covariance(cam, tr.xy, tr.cov_px), scene.physics,
