@@ -8,6 +8,7 @@ frame gets a status: ``OK`` or the reason it was flagged rather than guessed.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -76,6 +77,26 @@ LOOK_FRAMES = 12
 # 1.30 of its stated errors), and on a realistic FFV1 render the resting
 # ball's shift was under one error while the moving ball's was three.
 LOOK_P = 1e-3
+
+
+class LastFit(NamedTuple):
+    """What a converged fit needs to be corrected for a better felt
+    (track.video's felt correction, ``refit_shift``): the window's corner
+    ``pu, pv`` (px) and size ``ph, pw``, the centre ``c`` and blur ``b`` (px),
+    the ball's level ``G``, whether the blur was fitted, the look's shade
+    parameters, the outline (None: the radius map's disc) and the foreign
+    pixels left out (None: none)."""
+    pu: int
+    pv: int
+    ph: int
+    pw: int
+    c: np.ndarray
+    b: np.ndarray
+    G: float
+    fit_blur: bool
+    shade: object
+    outline: object
+    foreign: np.ndarray | None
 
 
 @dataclass(frozen=True)
@@ -281,7 +302,7 @@ class BallTracker:
         self.last_patch: tuple | None = None
         self.history: list[tuple[int, np.ndarray]] = []
         # What each converged disc fit needs to be corrected for a better felt.
-        self.last_fit: tuple | None = None
+        self.last_fit: LastFit | None = None
         self.gone = False
         self.was_partial_edge = False
         self.shade = {"disc": False, "shaded": True}.get(config.look)  # None: learning
@@ -571,8 +592,8 @@ class BallTracker:
             if self.shade is None:
                 self._learn_look(patch, felt, u0, v0, f, r, G0, blur, fit_blur)
             c, se, cov, rms = f.c, f.stderr, f.cov, f.rms
-            self.last_fit = (u0, v0, v1 - v0, u1 - u0, f.c.copy(), f.b.copy(), f.G, bool(fit_blur),
-                             f.shade, ol, foreign)
+            self.last_fit = LastFit(u0, v0, v1 - v0, u1 - u0, f.c.copy(), f.b.copy(), f.G, bool(fit_blur),
+                                    f.shade, ol, foreign)
             self.last_patch = (patch, u0, v0)
         # The whole ball must lie inside the frame for the centre to be trusted.
         eu, ev = (r, r) if ol is None else ol.half_extent

@@ -423,11 +423,11 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
             # With nothing moving there is no ball to separate from the felt.
             obs = tracker.step(k, item) if bg.polarity else tracker.nothing()
             if obs.status == OK and tracker.last_patch is not None:
-                blur_len = np.hypot(*tracker.last_fit[5])
+                blur_len = np.hypot(*tracker.last_fit.b)
                 patch, pu, pv = tracker.last_patch
                 # The ball's own size there, under perspective.
-                mask_r = tracker.radius_with(tracker.last_fit[9]) + 0.5 * blur_len + 1.5
-                felt.add(patch, pu, pv, obs.uv, mask_r, tracker.last_fit[10], bg.image, foreign_level)
+                mask_r = tracker.radius_with(tracker.last_fit.outline) + 0.5 * blur_len + 1.5
+                felt.add(patch, pu, pv, obs.uv, mask_r, tracker.last_fit.foreign, bg.image, foreign_level)
                 if k % FULL_FELT_EVERY == 0:
                     felt.add_frame(item, obs.uv, mask_r, bg.image, proj if proj.w is not None else None,
                                    foreign_level, FOREIGN_REACH_RADII * radius_px)
@@ -481,7 +481,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     # shows the cue there (recover.estimate, cue_clear_s).
     touched = np.zeros(len(status), bool)
     for kk, lf in fits:
-        touched[kk] = lf[10] is not None
+        touched[kk] = lf.foreign is not None
     pulled = pulled_fits(rms, status == OK)
     status[pulled] = PULLED
     uv[pulled] = np.nan
