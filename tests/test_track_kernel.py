@@ -20,8 +20,13 @@ H = W = 37
 U0, V0, R_PX = 500, 283, 14.3
 ELLIPSE = Ellipse(((1 / 13.0**2, 0.0008), (0.0008, 1 / 15.0**2)))
 MODEL_RTOL = 1e-11   # of the largest value of the model or row
-CENTRE_TOL_PX = 1e-9
-STDERR_RTOL = 1e-9
+# The compiled and numpy forms sum in different orders (fastmath's
+# reassociation): measured, centres within 2e-11 px and stated errors 5e-12
+# relative on five tracks, but 6e-10 px and 3.4e-9 on sample_scenes(1, 6,
+# realistic, FFV1)'s track after its noise became the byte law (a frame
+# whose fit is less well conditioned); held to 30-100 times the largest.
+CENTRE_TOL_PX = 2e-8
+STDERR_RTOL = 1e-7
 
 
 @pytest.mark.parametrize("blur", [0.0, 7.0])
