@@ -106,7 +106,9 @@ def one_shot(args):
             uv = np.full_like(tr.xy, np.nan)
             good = tr.ok & np.all(np.isfinite(tr.xy), axis=1)
             uv[good] = cam.to_pixels(tr.xy[good])
-            tr.touched = leaving_rest(uv, good, scene.physics.R * cam.px_per_m(scene.truth.x0))
+            # the ball's radius at the image centre's scale, as track_video takes it
+            centre = cam.to_table([[cam.width / 2, cam.height / 2]])[0]
+            tr.touched = leaving_rest(uv, good, scene.physics.R * cam.px_per_m(centre))
         n, t_decode = int(z["frames"]), float(z["t_decode"])
     else:
         video = Path(tmp) / f"shot_{i}.avi"

@@ -252,8 +252,8 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
             rho, z = lag1_autocorrelation(meas, full.residuals)
             decisions["autocorrelated"] = autocorrelated(rho, z, stated=ar1_floor > 0)
             if decisions["autocorrelated"]:
-                # The AR(1) model carries the rest's correlation itself.
-                meas = measure(t0, clear_s, group_rest=False).with_codec(codec_var)
+                if lossless:  # the AR(1) model carries a lossless rest's correlation itself
+                    meas = measure(t0, clear_s, group_rest=False).with_codec(codec_var)
                 full, roll = fit_models(meas, params, (full.shot.x0, full.shot.t0, full.shot.v0, full.shot.w0),
                                         exposure_s, fit_friction,
                                         (roll.shot.x0, roll.shot.t0, roll.shot.v0, roll.shot.w0),

@@ -44,11 +44,15 @@ from cuespin.fit.segment import noise_from_track
 STRIKE_MARGIN_FRAMES = 0.25
 # The cue follows the departing ball through the strike (on the realistic
 # look at half its speed, render.draw.cue_tip; a real cue's follow-through
-# trails the ball too), so the first frames after it show the cue's tip
+# trails the ball too), so the first frames after it can show the cue's tip
 # inside the ball's blurred outline, where the tracker cannot keep it out
 # (its foreign-pixel mask starts track.tracker.FOREIGN_GAP_PX beyond the
-# outline): frames whose exposure starts before the ball has moved this many
-# radii from where it was struck are left out as well.  Measured against the
+# outline); and the tracker's first frames off the rest are off along the
+# path without any cue in view (sample_scenes(22, 4, case4, realistic)
+# shots 4, 19: 1.5-3.2 stated errors; track.video.leaving_rest): frames
+# whose exposure starts before the ball has moved this many radii from
+# where it was struck are left out where the track flags them
+# (recover.estimate, ``touched``).  Measured against the
 # truth on 38 realistic rolling-from-the-strike renders (benchmarks/
 # accuracy.py --look realistic --preset case4 --codec FFV1, seeds 3-5, two
 # tracks lost at the strike left out): the error along the path, in stated

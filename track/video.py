@@ -475,19 +475,18 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     rms = np.array(rms, float)
     # A false centre is worse than a missing one: fits that explain their
     # window much worse than the track's typical fit are dropped.
-    # Frames whose fit found something other than the felt beside the ball
-    # (the cue at the strike, another ball) and left those pixels out: the
-    # recovery leaves out the strike's first frames only where the track
-    # shows the cue there (recover.estimate, cue_clear_s).
-    touched = np.zeros(len(status), bool)
-    for kk, lf in fits:
-        touched[kk] = lf.foreign is not None
     pulled = pulled_fits(rms, status == OK)
     status[pulled] = PULLED
     uv[pulled] = np.nan
     cov[pulled] = np.nan
     ok = status == OK
-    touched |= leaving_rest(uv, ok, radius_px)
+    # Frames whose fit found something other than the felt beside the ball
+    # (the cue at the strike, another ball) and left those pixels out, and
+    # those leaving the rest: the recovery leaves out the strike's first
+    # frames only where the track flags them (recover.estimate, cue_clear_s).
+    touched = leaving_rest(uv, ok, radius_px)
+    for kk, lf in fits:
+        touched[kk] |= lf.foreign is not None
     if not ok.any():
         why = (" (the ball never moved, or is not in view; do physics.R and the camera "
                "match the video?)")
