@@ -115,6 +115,8 @@ def mle_bound(scene: Scene, track, mle: dict | None = None, independent: bool = 
                                       exposure_s=cam.exposure_s, frame_dt=1.0 / cam.fps,
                                       shared_rest=not getattr(track, "independent_errors", track.lossless),
                                       px_to_m=pixel_to_table(cam, xy) if in_px else None,
-                                      clear_s=mle.get("cue_clear_s") or 0.0
+                                      clear_s=mle.get("cue_clear_s") or 0.0,
+                                      # under the AR(1) model the fit kept a lossless rest frame by frame
+                                      group_rest=not mle.get("ar1")
                                       ).with_codec(np.sign(c) * c * c)
     return crb_covariance(truth, p, meas, cam.exposure_s, rolling=rolling), rolling
