@@ -19,10 +19,11 @@ from cuespin.track.model import blur_nodes, fit_disc, moments, streak_from_momen
 from cuespin.track.outline import OUTLINE_REFIT_PX, OutlineCache, is_similarity
 from cuespin.track.radius import RadiusMap
 
-OK, NO_BALL, PARTIAL, TWO_BLOBS, GONE, FIT_FAILED, PULLED = 0, 1, 2, 3, 4, 5, 6
+OK, NO_BALL, PARTIAL, TWO_BLOBS, GONE, FIT_FAILED, PULLED, OFF_PATH = 0, 1, 2, 3, 4, 5, 6, 7
 STATUS_TEXT = {OK: "ok", NO_BALL: "no ball", PARTIAL: "ball partly out of the frame",
                TWO_BLOBS: "two ball-like blobs", GONE: "ball has left the frame",
-               FIT_FAILED: "refinement failed", PULLED: "fit pulled off the ball"}
+               FIT_FAILED: "refinement failed", PULLED: "fit pulled off the ball",
+               OFF_PATH: "centre off the ball's path"}
 REFINERS = ("fit", "moments")
 # Blur shorter than this (px over the exposure) is modelled at its predicted
 # length, not fitted: a symmetric smear moves no centroid, and its image

@@ -28,11 +28,12 @@ from cuespin.track.background import Background, FeltAccumulator, learn_backgrou
 from cuespin.track.colour import GREY, Projection, learn_projection
 from cuespin.track.projection import projected_centres
 from cuespin.track.misfit import LookMisfit, error_ar1, look_misfit
+from cuespin.track.path import off_path
 from cuespin.track.radius import RadiusMap
 from cuespin.track.model import refit_shift, warm_up
 from cuespin.track.reader import FrameSource, ThreadedFrames, TrackError, frame_times, probe
-from cuespin.track.tracker import (OK, PULLED, STATUS_TEXT, STILL_PX, BallTracker, TrackerConfig, beyond_ball,
-                                   foreign_pixels, foreign_threshold, pulled_fits)
+from cuespin.track.tracker import (OFF_PATH, OK, PULLED, STATUS_TEXT, STILL_PX, BallTracker, TrackerConfig,
+                                   beyond_ball, foreign_pixels, foreign_threshold, pulled_fits)
 
 # Bytes of decoded frames held before the background is learnt: 437 grey or
 # 145 BGR frames at 1280 x 720 (at 240 fps, 1.8 s or 0.6 s of video; the
@@ -479,6 +480,12 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     status[pulled] = PULLED
     uv[pulled] = np.nan
     cov[pulled] = np.nan
+    # Nor is a centre none of its neighbours can account for (the cue's tip
+    # at the strike, a shaded ball's rim): the path decides (track.path).
+    jumped = off_path(uv, status == OK, radius_px)
+    status[jumped] = OFF_PATH
+    uv[jumped] = np.nan
+    cov[jumped] = np.nan
     ok = status == OK
     # Frames whose fit found something other than the felt beside the ball
     # (the cue at the strike, another ball) and left those pixels out, and
