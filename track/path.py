@@ -26,6 +26,9 @@ PATH_TOL_RADII = 0.5
 # longer gap the path's curvature (the deceleration, 2 m/s^2 while sliding)
 # and a cushion make the prediction itself uncertain.
 PATH_GAP_FRAMES = 4
+# Passes of the check, each without the frames flagged before (a run of
+# false frames is peeled from its ends); few are ever needed.
+PATH_PASSES = 5
 
 
 def off_path(uv: np.ndarray, ok: np.ndarray, radius_px: float, tol_radii: float = PATH_TOL_RADII,
@@ -41,10 +44,23 @@ def off_path(uv: np.ndarray, ok: np.ndarray, radius_px: float, tol_radii: float 
     one) miss it by more than ``tol_radii`` radii ``radius_px`` is flagged.
     A true frame beside a false one keeps the prediction from its other
     side; a frame at the strike keeps the rest's (before) or the departure's
-    (after).
+    (after).  Passes repeat without the frames flagged so far, until none is
+    added: a false frame's prediction through its false neighbour (two in a
+    row beside a lost frame) could otherwise pass it.
     """
-    uv = np.asarray(uv, float)
     ok = np.asarray(ok, bool)
+    out = np.zeros(len(ok), bool)
+    for _ in range(PATH_PASSES):
+        more = _off_path_once(uv, ok & ~out, radius_px, tol_radii, max_gap)
+        if not more.any():
+            break
+        out |= more
+    return out
+
+
+def _off_path_once(uv, ok, radius_px, tol_radii, max_gap) -> np.ndarray:
+    """One pass of :func:`off_path`."""
+    uv = np.asarray(uv, float)
     n = len(ok)
     out = np.zeros(n, bool)
     idx = np.flatnonzero(ok)
