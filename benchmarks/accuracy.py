@@ -179,7 +179,9 @@ def one_shot(args):
             # The bound for the fit's own measurements (recover.measurements),
             # and for reference the one with every frame independent.
             for key, indep in (("mle_crb_z_indep", True), ("mle_crb_z", False)):
-                cov, rolling = mle_bound(scene, est.meas, independent=indep)
+                kw_ar1 = {"ar1": float(getattr(est.mle, "ar1", 0.0) or 0.0)} \
+                    if "ar1" in inspect.signature(mle_bound).parameters else {}
+                cov, rolling = mle_bound(scene, est.meas, independent=indep, **kw_ar1)
                 idx = [3, 4] if rolling else [3, 4, 5, 6]
                 e = err[:2] if rolling else err
                 row[key] = float(np.sqrt(np.mean((e / np.sqrt(np.diag(cov)[idx])) ** 2)))
