@@ -131,10 +131,13 @@ def one_shot(args):
         kw["ar1_floor"] = error_ar1(getattr(tr, "look_factor", 1.0), getattr(tr, "look_rho", 0.0))
     if "touched" in inspect.signature(recover_track).parameters:
         kw["touched"] = getattr(tr, "touched", None)
+    lossless = getattr(tr, "independent_errors", tr.lossless)
+    if "independent" in inspect.signature(recover_track).parameters:  # the codec apart from the errors' sharing
+        kw["independent"], lossless = lossless, bool(tr.lossless)
     if "px_to_m" not in inspect.signature(recover_track).parameters:  # an older recover/, for before/after tables
         kw = {}
     out, est = recover_track(tr.t, tr.xy, tr.ok, table_covariance(cam, tr.xy, tr.cov_px), scene.physics,
-                             cam.exposure_s, "all", False, lossless=getattr(tr, "independent_errors", tr.lossless),
+                             cam.exposure_s, "all", False, lossless=lossless,
                              return_estimate=True,
                              inter_frame=tr.inter_frame, **kw)
     truth, p = scene.truth, scene.physics
