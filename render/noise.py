@@ -1,0 +1,254 @@
+"""Sensor noise added to an 8-bit frame in one pass: random bytes, a law's tables, saturation.
+
+A frame's noise takes its randomness from one 64-bit seed (a word of the
+frame's generator): the SplitMix64 stream ``z_k = mix(seed + (k + 1) G)``
+(Steele, Lea & Flood 2014; Java's ``SplittableRandom``; passes BigCrush),
+whose words, read as little-endian bytes, give byte ``j`` of the frame.
+Each output is a function of its index alone, so the stream is computed 64
+bytes at a time.  A law is given by byte tables: the noise of a pixel is
+``n = A[b] + (c >= T[b]) D[b]`` (int8) from its byte ``b`` (and, for a
+two-byte law, a second byte ``c``), added with saturation as
+``clip(img + n, 0, 255)``.  One byte: :class:`~cuespin.render.draw.ByteNoise`
+(``T = 0``, ``D = 0``); two bytes: Walker's alias tables of
+:class:`~cuespin.render.draw.AliasNoise`.
+
+Two implementations of the same arithmetic, bit for bit:
+
+* :func:`add_noise_reference`, numpy: the definition, and the fallback;
+* a compiled kernel (LLVM IR through llvmlite, a dependency of numba) on
+  CPUs with AVX-512 VBMI: table look-ups with ``vpermi2b`` (a 128-byte
+  table per instruction), 64 pixels a step, no temporaries: about 0.2 ms of
+  CPU a 1280 x 720 colour frame where the numpy reference takes ~8 ms and
+  the former OpenCV path (random bytes, ``cv2.LUT``, ``cv2.addWeighted``)
+  ~2.5 ms.  Compiled once per process (~20 ms), on first use.
+
+For a two-byte law, chunk ``i`` of 64 pixels takes its first bytes from
+words ``16 i .. 16 i + 7`` and its second from ``16 i + 8 .. 16 i + 15``;
+for a one-byte law, from words ``8 i .. 8 i + 7``.  A frame whose size is
+not a multiple of 64 pads its last chunk (the stream is the same).
+"""
+
+from __future__ import annotations
+
+import ctypes
+
+import numpy as np
+
+GOLDEN = 0x9E3779B97F4A7C15
+MIX1 = 0xBF58476D1CE4E5B9
+MIX2 = 0x94D049BB133111EB
+CHUNK = 64          # pixels per step of the kernel (one 512-bit register of bytes)
+
+
+def splitmix_words(seed: int, start: int, count: int) -> np.ndarray:
+    """Words ``start .. start + count - 1`` of the SplitMix64 stream from ``seed`` (uint64)."""
+    with np.errstate(over="ignore"):
+        z = np.uint64(seed) + (np.arange(start + 1, start + count + 1, dtype=np.uint64)
+                               * np.uint64(GOLDEN))
+        z = (z ^ (z >> np.uint64(30))) * np.uint64(MIX1)
+        z = (z ^ (z >> np.uint64(27))) * np.uint64(MIX2)
+        return z ^ (z >> np.uint64(31))
+
+
+def noise_bytes(seed: int, n: int, two: bool) -> tuple[np.ndarray, np.ndarray | None]:
+    """The first (and, ``two``, second) random byte of each of ``n`` pixels, as the kernel reads them."""
+    chunks = -(-n // CHUNK)
+    per = 16 if two else 8
+    w = splitmix_words(seed, 0, chunks * per).reshape(chunks, per)
+    first = w[:, :8].copy().view(np.uint8).ravel()[:n]
+    second = w[:, 8:].copy().view(np.uint8).ravel()[:n] if two else None
+    return first, second
+
+
+def noise_values(tables: np.ndarray, b: np.ndarray, c: np.ndarray | None) -> np.ndarray:
+    """Integer noise (int16) of bytes ``b`` (and ``c``) under a law's ``tables`` (3, 256): A, T, D."""
+    A = tables[0].view(np.int8).astype(np.int16)
+    n = A[b]
+    if c is not None:
+        n = n + (c >= tables[1][b]) * tables[2][b].astype(np.int16)
+    return n
+
+
+def add_noise_reference(img: np.ndarray, tables: np.ndarray, seed: int, two: bool) -> np.ndarray:
+    """``clip(img + n, 0, 255)`` (uint8, img's shape), numpy: the kernel's definition."""
+    b, c = noise_bytes(seed, img.size, two)
+    n = noise_values(tables, b, c).reshape(img.shape)
+    return np.clip(img + n, 0, 255).astype(np.uint8)
+
+
+def _kernel_ir(two: bool) -> str:
+    """LLVM IR of ``void f(ptr img, ptr out, i64 chunks, ptr tables, i64 seed)``."""
+    per = 16 if two else 8
+
+    def splat(v):
+        return "<" + ", ".join([f"i64 {v}"] * 8) + ">"
+
+    def s64(v):          # an unsigned 64-bit constant as LLVM's signed literal
+        return v - (1 << 64) if v >= 1 << 63 else v
+
+    def lookup(name, t, idx, neg):
+        return (f"  %{name}.l = call <64 x i8> @llvm.x86.avx512.vpermi2var.qi.512("
+                f"<64 x i8> %{t}0, <64 x i8> {idx}, <64 x i8> %{t}1)\n"
+                f"  %{name}.h = call <64 x i8> @llvm.x86.avx512.vpermi2var.qi.512("
+                f"<64 x i8> %{t}2, <64 x i8> {idx}, <64 x i8> %{t}3)\n"
+                f"  %{name} = select <64 x i1> {neg}, <64 x i8> %{name}.h, <64 x i8> %{name}.l\n")
+
+    def words(name, first):
+        # SplitMix64 words first + 1 .. first + 8 of the stream (1-based counter).
+        lanes = "<" + ", ".join(f"i64 {j + 1}" for j in range(8)) + ">"
+        return (f"  %{name}.k0 = insertelement <8 x i64> poison, i64 {first}, i64 0\n"
+                f"  %{name}.k1 = shufflevector <8 x i64> %{name}.k0, <8 x i64> poison, <8 x i32> zeroinitializer\n"
+                f"  %{name}.k = add <8 x i64> %{name}.k1, {lanes}\n"
+                f"  %{name}.g = mul <8 x i64> %{name}.k, {splat(s64(GOLDEN))}\n"
+                f"  %{name}.z0 = add <8 x i64> %{name}.g, %seedv\n"
+                f"  %{name}.a1 = lshr <8 x i64> %{name}.z0, {splat(30)}\n"
+                f"  %{name}.a2 = xor <8 x i64> %{name}.z0, %{name}.a1\n"
+                f"  %{name}.a3 = mul <8 x i64> %{name}.a2, {splat(s64(MIX1))}\n"
+                f"  %{name}.b1 = lshr <8 x i64> %{name}.a3, {splat(27)}\n"
+                f"  %{name}.b2 = xor <8 x i64> %{name}.a3, %{name}.b1\n"
+                f"  %{name}.b3 = mul <8 x i64> %{name}.b2, {splat(s64(MIX2))}\n"
+                f"  %{name}.c1 = lshr <8 x i64> %{name}.b3, {splat(31)}\n"
+                f"  %{name}.z = xor <8 x i64> %{name}.b3, %{name}.c1\n"
+                f"  %{name} = bitcast <8 x i64> %{name}.z to <64 x i8>\n")
+
+    loads = ""
+    names = ("A", "T", "D") if two else ("A",)
+    for ti, t in enumerate(names):
+        for q in range(4):
+            loads += (f"  %{t}{q}.p = getelementptr i8, ptr %tab, i64 {256 * ti + 64 * q}\n"
+                      f"  %{t}{q} = load <64 x i8>, ptr %{t}{q}.p, align 1\n")
+    body = f"  %w0 = mul i64 %i, {per}\n" + words("b", "%w0")
+    body += "  %bneg = icmp slt <64 x i8> %b, zeroinitializer\n" + lookup("a", "A", "%b", "%bneg")
+    if two:
+        body += "  %w1 = add i64 %w0, 8\n" + words("c", "%w1")
+        body += lookup("t", "T", "%b", "%bneg") + lookup("d", "D", "%b", "%bneg")
+        body += ("  %up = icmp uge <64 x i8> %c, %t\n"
+                 "  %dd = select <64 x i1> %up, <64 x i8> %d, <64 x i8> zeroinitializer\n"
+                 "  %n = add <64 x i8> %a, %dd\n")
+    else:
+        body += "  %n = add <64 x i8> %a, zeroinitializer\n"
+    return f"""
+declare <64 x i8> @llvm.x86.avx512.vpermi2var.qi.512(<64 x i8>, <64 x i8>, <64 x i8>)
+declare <64 x i8> @llvm.smax.v64i8(<64 x i8>, <64 x i8>)
+declare <64 x i8> @llvm.uadd.sat.v64i8(<64 x i8>, <64 x i8>)
+declare <64 x i8> @llvm.usub.sat.v64i8(<64 x i8>, <64 x i8>)
+
+define void @add_noise(ptr noalias %img, ptr noalias %out, i64 %chunks, ptr noalias %tab, i64 %seed) {{
+entry:
+{loads}  %seed0 = insertelement <8 x i64> poison, i64 %seed, i64 0
+  %seedv = shufflevector <8 x i64> %seed0, <8 x i64> poison, <8 x i32> zeroinitializer
+  %none = icmp eq i64 %chunks, 0
+  br i1 %none, label %exit, label %loop
+loop:
+  %i = phi i64 [0, %entry], [%inext, %loop]
+{body}  %pos = call <64 x i8> @llvm.smax.v64i8(<64 x i8> %n, <64 x i8> zeroinitializer)
+  %negn = sub <64 x i8> zeroinitializer, %n
+  %neg = call <64 x i8> @llvm.smax.v64i8(<64 x i8> %negn, <64 x i8> zeroinitializer)
+  %off = mul i64 %i, 64
+  %gp = getelementptr i8, ptr %img, i64 %off
+  %g = load <64 x i8>, ptr %gp, align 1
+  %s1 = call <64 x i8> @llvm.uadd.sat.v64i8(<64 x i8> %g, <64 x i8> %pos)
+  %s2 = call <64 x i8> @llvm.usub.sat.v64i8(<64 x i8> %s1, <64 x i8> %neg)
+  %op = getelementptr i8, ptr %out, i64 %off
+  store <64 x i8> %s2, ptr %op, align 1
+  %inext = add i64 %i, 1
+  %done = icmp eq i64 %inext, %chunks
+  br i1 %done, label %exit, label %loop
+exit:
+  ret void
+}}
+"""
+
+
+_KERNELS: dict = {}
+_ENGINES: list = []      # kept alive: the kernels' machine code lives in them
+
+
+def _compile(two: bool):
+    """The compiled kernel as a ctypes function, or None where it cannot run
+    (no AVX-512 VBMI, not x86, llvmlite missing or refusing)."""
+    try:
+        import llvmlite.binding as llvm
+
+        if not llvm.get_host_cpu_features().get("avx512vbmi", False):
+            return None
+        try:
+            llvm.initialize_native_target()
+            llvm.initialize_native_asmprinter()
+        except RuntimeError:   # initialised already (numba, another kernel)
+            pass
+        mod = llvm.parse_assembly(_kernel_ir(two))
+        mod.verify()
+        target = llvm.Target.from_default_triple()
+        tm = target.create_target_machine(cpu=llvm.get_host_cpu_name(),
+                                          features=llvm.get_host_cpu_features().flatten(), opt=3)
+        engine = llvm.create_mcjit_compiler(mod, tm)
+        engine.finalize_object()
+        _ENGINES.append(engine)
+        addr = engine.get_function_address("add_noise")
+    except Exception:   # any failure: the numpy reference draws the same frames
+        return None
+    proto = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int64, ctypes.c_void_p,
+                             ctypes.c_uint64)
+    return proto(addr)
+
+
+def kernel(two: bool):
+    """The compiled kernel for a one- or two-byte law (None if unavailable), compiled once per process."""
+    if two not in _KERNELS:
+        _KERNELS[two] = _compile(two)
+    return _KERNELS[two]
+
+
+def add_noise(img: np.ndarray, tables: np.ndarray, seed: int, two: bool,
+              out: np.ndarray | None = None, compiled: bool = True) -> np.ndarray:
+    """``clip(img + n, 0, 255)`` with fresh noise ``n`` per pixel and channel from ``seed``.
+
+    Parameters
+    ----------
+    img : ndarray of uint8
+        Any shape; read only.
+    tables : ndarray of uint8, shape (3, 256)
+        The law: ``A`` (int8 values as bytes), ``T``, ``D``.
+    seed : int
+        64-bit seed of the frame's stream.
+    two : bool
+        Two bytes per pixel (``n = A[b] + (c >= T[b]) D[b]``) or one (``A[b]``).
+    out : ndarray of uint8, optional
+        Written in place (img's shape, C-contiguous; may not be ``img``).
+    compiled : bool
+        Use the compiled kernel where it runs (False: always the numpy reference).
+
+    Returns
+    -------
+    ndarray of uint8
+        ``out``, or a new array.
+    """
+    fn = kernel(two) if compiled else None
+    if fn is None:
+        res = add_noise_reference(img, tables, seed, two)
+        if out is None:
+            return res
+        out[...] = res
+        return out
+    src = np.ascontiguousarray(img, dtype=np.uint8)
+    if out is None:
+        out = np.empty_like(src)
+    tab = np.ascontiguousarray(tables, dtype=np.uint8)
+    n = src.size
+    full = n // CHUNK
+    seed = int(seed) & 0xFFFFFFFFFFFFFFFF
+    fn(src.ctypes.data, out.ctypes.data, full, tab.ctypes.data, seed)
+    rest = n - full * CHUNK
+    if rest:
+        # The last chunk through a padded copy: the stream continues at its words.
+        per = 16 if two else 8
+        pad = np.zeros(CHUNK, np.uint8)
+        pad[:rest] = src.reshape(-1)[full * CHUNK:]
+        res = np.empty(CHUNK, np.uint8)
+        # Shift the stream so that the padded chunk reads words full * per ...: the
+        # counter is seed + (k + 1) G, so starting at word full * per is seed + full * per * G.
+        fn(pad.ctypes.data, res.ctypes.data, 1, tab.ctypes.data,
+           (seed + full * per * GOLDEN) & 0xFFFFFFFFFFFFFFFF)
+        out.reshape(-1)[full * CHUNK:] = res[:rest]
+    return out
