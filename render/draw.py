@@ -13,6 +13,7 @@ rest of the frame is a cached 8-bit background plus integer noise.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -309,8 +310,14 @@ def sensor_noise(sigma: float, law: str | None = None):
     :data:`ALIAS_MAX_SIGMA`."""
     law = NOISE_LAW if law is None else law
     if law == "byte" and BYTE_NOISE_SIGMA[0] <= sigma <= BYTE_NOISE_SIGMA[1]:
-        return ByteNoise(sigma)
-    return AliasNoise(sigma) if sigma <= ALIAS_MAX_SIGMA else NoiseSampler(sigma)
+        return _noise_drawer(ByteNoise, float(sigma))
+    return _noise_drawer(AliasNoise, float(sigma)) if sigma <= ALIAS_MAX_SIGMA else NoiseSampler(sigma)
+
+
+@functools.lru_cache(maxsize=16)
+def _noise_drawer(kind, sigma: float):
+    """One drawer (its tables: ~12 ms to build ByteNoise's) per law and sigma in a process."""
+    return kind(sigma)
 
 
 def make_background(scene: Scene, settings: dict) -> np.ndarray:
@@ -486,7 +493,8 @@ class FrameRenderer:
             self.background = make_background(scene, self.settings)
             # The 16-bit table's law through Walker's alias tables, in one pass;
             # past ALIAS_MAX_SIGMA (values beyond int8) the table itself.
-            self._plain_noise = AliasNoise(self.sigma) if 0 < self.sigma <= ALIAS_MAX_SIGMA else None
+            self._plain_noise = (_noise_drawer(AliasNoise, self.sigma) if 0 < self.sigma <= ALIAS_MAX_SIGMA
+                                 else None)
             self.felt = float(self.settings["felt_grey"])
             self.ball = float(self.settings["ball_grey"])
 
@@ -666,6 +674,20 @@ class FrameRenderer:
         return np.stack([(Hi[0, 0] * u + Hi[0, 1] * v + Hi[0, 2]) / den,
                          (Hi[1, 0] * u + Hi[1, 1] * v + Hi[1, 2]) / den], -1)
 
+    def _cloth_grid(self, h: int, w: int) -> np.ndarray:
+        """:meth:`_cloth_points` of every pixel of an ``h x w`` frame, (h, w, 2)."""
+        if self.cam.has_lens:
+            vv, uu = np.mgrid[0:h, 0:w].astype(np.float64)
+            return self._cloth_points(np.stack([uu, vv], -1))
+        # The same elementwise homography, its pixel coordinates broadcast
+        # (a row of u, a column of v) rather than two full grids.
+        Hi = np.linalg.inv(self.H)
+        u = np.arange(w, dtype=np.float64)[None, :]
+        v = np.arange(h, dtype=np.float64)[:, None]
+        den = Hi[2, 0] * u + Hi[2, 1] * v + Hi[2, 2]
+        return np.stack([(Hi[0, 0] * u + Hi[0, 1] * v + Hi[0, 2]) / den,
+                         (Hi[1, 0] * u + Hi[1, 1] * v + Hi[1, 2]) / den], -1)
+
     def _static_scene(self) -> np.ndarray:
         """The static scene before lens blur, float32 (h, w, 3): cloth with its
         texture, cushions, rails, pockets and sights (2x2 supersampled),
@@ -682,8 +704,7 @@ class FrameRenderer:
             if cam.is_pinhole:
                 xy = self._plane_points(0, h, 0, w, 0.0)        # the cloth, z = 0
             else:
-                vv, uu = np.mgrid[0:h, 0:w].astype(np.float64)
-                xy = self._cloth_points(np.stack([uu, vv], -1))
+                xy = self._cloth_grid(h, w)
             tb_lw = (tb.length, tb.width)
 
             def labels(pts):
@@ -708,8 +729,8 @@ class FrameRenderer:
                 off = (np.arange(ss) + 0.5) / ss - 0.5
                 ou, ov = np.meshgrid(off, off)
                 ou, ov = ou.ravel(), ov.ravel()
-                dxy_du = np.gradient(xy, axis=1)[ev, eu]
-                dxy_dv = np.gradient(xy, axis=0)[ev, eu]
+                dxy_du = gradient_at(xy, ev, eu, axis=1)
+                dxy_dv = gradient_at(xy, ev, eu, axis=0)
                 pts = (xy[ev, eu][:, None, :] + ou[None, :, None] * dxy_du[:, None, :]
                        + ov[None, :, None] * dxy_dv[:, None, :])
                 sub = labels(pts)                                   # (n_edge, 16)
@@ -1125,6 +1146,21 @@ def gaussian(img: np.ndarray, sigma: float, constant: bool = False) -> np.ndarra
         return img
     border = cv2.BORDER_CONSTANT if constant else cv2.BORDER_REFLECT
     return cv2.GaussianBlur(img, (0, 0), sigma, borderType=border)
+
+
+def gradient_at(a: np.ndarray, rows: np.ndarray, cols: np.ndarray, axis: int) -> np.ndarray:
+    """``np.gradient(a, axis=axis)[rows, cols]`` computed at those pixels only:
+    central differences inside, one-sided at the borders, the same arithmetic."""
+    n = a.shape[axis]
+    idx = cols if axis == 1 else rows
+    lo, hi = np.maximum(idx - 1, 0), np.minimum(idx + 1, n - 1)
+    if axis == 1:
+        d = a[rows, hi] - a[rows, lo]
+    else:
+        d = a[hi, cols] - a[lo, cols]
+    inner = (idx > 0) & (idx < n - 1)
+    d[inner] = d[inner] / 2.0
+    return d
 
 
 def cv2_copy_border(img: np.ndarray, b: int) -> np.ndarray:
