@@ -14,7 +14,9 @@ two-byte law, a second byte ``c``), added with saturation as
 
 Two implementations of the same arithmetic, bit for bit:
 
-* :func:`add_noise_reference`, numpy: the definition, and the fallback;
+* :func:`add_noise_reference`, numpy: the definition (and
+  :func:`add_noise_opencv`, the same pixels in OpenCV passes: the fallback,
+  ~4 ms a 1280 x 720 colour frame, 2.5 ms before this module);
 * a compiled kernel (LLVM IR through llvmlite, a dependency of numba) on
   CPUs with AVX-512 VBMI: table look-ups with ``vpermi2b`` (a 128-byte
   table per instruction), 64 pixels a step, no temporaries: about 0.2 ms of
@@ -42,12 +44,18 @@ CHUNK = 64          # pixels per step of the kernel (one 512-bit register of byt
 
 def splitmix_words(seed: int, start: int, count: int) -> np.ndarray:
     """Words ``start .. start + count - 1`` of the SplitMix64 stream from ``seed`` (uint64)."""
-    with np.errstate(over="ignore"):
-        z = np.uint64(seed) + (np.arange(start + 1, start + count + 1, dtype=np.uint64)
-                               * np.uint64(GOLDEN))
-        z = (z ^ (z >> np.uint64(30))) * np.uint64(MIX1)
-        z = (z ^ (z >> np.uint64(27))) * np.uint64(MIX2)
-        return z ^ (z >> np.uint64(31))
+    z = np.arange(start + 1, start + count + 1, dtype=np.uint64)
+    t = np.empty_like(z)
+    with np.errstate(over="ignore"):     # in place: modular uint64 arithmetic throughout
+        z *= np.uint64(GOLDEN)
+        z += np.uint64(seed)
+        for shift, mult in ((30, MIX1), (27, MIX2)):
+            np.right_shift(z, np.uint64(shift), out=t)
+            z ^= t
+            z *= np.uint64(mult)
+        np.right_shift(z, np.uint64(31), out=t)
+        z ^= t
+    return z
 
 
 def noise_bytes(seed: int, n: int, two: bool) -> tuple[np.ndarray, np.ndarray | None]:
@@ -74,6 +82,29 @@ def add_noise_reference(img: np.ndarray, tables: np.ndarray, seed: int, two: boo
     b, c = noise_bytes(seed, img.size, two)
     n = noise_values(tables, b, c).reshape(img.shape)
     return np.clip(img + n, 0, 255).astype(np.uint8)
+
+
+def add_noise_opencv(img: np.ndarray, tables: np.ndarray, seed: int, two: bool) -> np.ndarray:
+    """:func:`add_noise_reference`'s pixels through 8-bit OpenCV passes (the
+    fallback where the kernel does not run: about 3 times faster than numpy's)."""
+    import cv2
+
+    b, c = noise_bytes(seed, img.size, two)
+    b = b.reshape(-1, 1)
+    A = tables[0].view(np.int8).astype(np.int16)
+    if c is None:
+        # n = P - Q with P, Q >= 0 and one of them 0: two saturating 8-bit steps.
+        P = np.maximum(A, 0).astype(np.uint8).reshape(256, 1)
+        Q = np.maximum(-A, 0).astype(np.uint8).reshape(256, 1)
+        flat = np.ascontiguousarray(img).reshape(-1, 1)
+        out = cv2.subtract(cv2.add(flat, cv2.LUT(b, P)), cv2.LUT(b, Q))
+        return out.reshape(img.shape)
+    # n + 128 in uint8, then one exact integer add (as AliasNoise drew it with OpenCV).
+    a = (A + 128).astype(np.uint8).reshape(256, 1)
+    above = cv2.compare(c.reshape(-1, 1), cv2.LUT(b, tables[1].reshape(256, 1)), cv2.CMP_GE)
+    n8 = cv2.add(cv2.LUT(b, a), cv2.bitwise_and(above, cv2.LUT(b, tables[2].reshape(256, 1))))
+    flat = np.ascontiguousarray(img).reshape(-1, 1)
+    return cv2.addWeighted(flat, 1.0, n8, 1.0, -128.0, dtype=cv2.CV_8U).reshape(img.shape)
 
 
 def _kernel_ir(two: bool) -> str:
@@ -217,7 +248,7 @@ def add_noise(img: np.ndarray, tables: np.ndarray, seed: int, two: bool,
     out : ndarray of uint8, optional
         Written in place (img's shape, C-contiguous; may not be ``img``).
     compiled : bool
-        Use the compiled kernel where it runs (False: always the numpy reference).
+        Use the compiled kernel where it runs, else OpenCV (False: the numpy reference).
 
     Returns
     -------
@@ -226,7 +257,7 @@ def add_noise(img: np.ndarray, tables: np.ndarray, seed: int, two: bool,
     """
     fn = kernel(two) if compiled else None
     if fn is None:
-        res = add_noise_reference(img, tables, seed, two)
+        res = (add_noise_opencv if compiled else add_noise_reference)(img, tables, seed, two)
         if out is None:
             return res
         out[...] = res
