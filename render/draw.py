@@ -42,6 +42,9 @@ RAY_GRID_PX = 8
 # Exposure nodes whose rotations are evaluated in one call (a block of frames):
 # 4096 nodes hold 0.3 MB of matrices.
 ROTATION_BLOCK_NODES = 4096
+# Exposure nodes whose ball windows are computed in one call (a block of
+# frames; at most ~1.3 MB of colour on a 14-px ball).
+WINDOW_BLOCK_NODES = 64
 
 RENDER_DEFAULTS = {
     "felt_grey": 90.0,        # grey level of the felt
@@ -623,6 +626,7 @@ class FrameRenderer:
             t0 = min(0.0, float(self._t_nodes.min()))
             self._orient = lk.Orientation(lambda t: self.motion(t).w, t0, float(self._t_nodes.max()))
         self._rot_block = (0, np.empty((0,)))
+        self._win_block = (0, [])
         self._last_delta = None
 
     def _ray_map(self) -> np.ndarray:
@@ -855,9 +859,50 @@ class FrameRenderer:
         key = self._uv_nodes[k].tobytes() + (b"" if rots is None else rots.tobytes())
         if self._last_delta is not None and self._last_delta[0] == key:
             return self._last_delta[1]
-        out = self._delta_of(self._uv_nodes[k], self._xy_nodes[k], self._albedo, rots)
+        win = self._windows(k)
+        if win is None:
+            out = None, 0, 0
+        else:
+            out = self._accumulate(*win, self._uv_nodes.shape[1])
         self._last_delta = (key, out)
         return out
+
+    def _visible(self, uv: np.ndarray) -> np.ndarray:
+        """Which nodes imaged at ``uv`` (K, 2) px have their window in the frame."""
+        half, h, w = self._half, self.cam.height, self.cam.width
+        return ((uv[:, 0] + half >= 0) & (uv[:, 0] - half <= w - 1)
+                & (uv[:, 1] + half >= 0) & (uv[:, 1] - half <= h - 1))
+
+    def _windows(self, k: int):
+        """The tracked ball's :meth:`_ball_windows` at frame ``k``'s visible nodes,
+        ``(uv, cov, colour, iu, iv)`` (None out of view), computed for a block
+        of frames in one vectorised call: a frame's few nodes spent most of
+        their time in numpy's per-call overhead.  Each pixel's arithmetic is
+        the same whatever the batch."""
+        start, block = self._win_block
+        if not start <= k < start + len(block):
+            K = self._uv_nodes.shape[1]
+            frames = range(k, min(k + max(1, WINDOW_BLOCK_NODES // K), self.n_frames))
+            parts = []
+            for f in frames:
+                uv = self._uv_nodes[f]
+                vis = self._visible(uv)
+                rots = self._rotations(f)
+                parts.append((uv[vis], self._xy_nodes[f][vis], None if rots is None else rots[vis]))
+            counts = [len(p[0]) for p in parts]
+            block = [None] * len(parts)
+            if sum(counts):
+                uv = np.concatenate([p[0] for p in parts])
+                rots = None if self._orient is None else np.concatenate([p[2] for p in parts])
+                cov, colour, iu, iv = self._ball_windows(uv, np.concatenate([p[1] for p in parts]),
+                                                         self._albedo, rots)
+                ends = np.cumsum(counts)
+                for j, (c, e) in enumerate(zip(counts, ends)):
+                    if c:
+                        sl = slice(e - c, e)
+                        block[j] = (uv[sl], cov[sl], colour[sl], iu[sl], iv[sl])
+            self._win_block = start, block = k, block
+        return block[k - start]
 
     def _rotations(self, k: int):
         """Body-to-table rotations (K, 3, 3) of the tracked ball at frame ``k``'s
@@ -877,16 +922,19 @@ class FrameRenderer:
         """:meth:`_ball_delta` for any ball: nodes imaged at ``uv`` (K, 2) px,
         centred at ``xy`` (K, 2) m, its albedo and the nodes' rotations (K, 3, 3)
         (None: no markings)."""
-        B, half, pad = self._border, self._half, self._pad
-        h, w = self.cam.height, self.cam.width
         K = len(uv)
-        vis = ((uv[:, 0] + half >= 0) & (uv[:, 0] - half <= w - 1)
-               & (uv[:, 1] + half >= 0) & (uv[:, 1] - half <= h - 1))
+        vis = self._visible(uv)
         if not vis.any():
             return None, 0, 0
         uv = uv[vis]
         rots = rots[vis] if rots is not None else None
-        cov, colour, iu, iv = self._ball_windows(uv, xy[vis], albedo, rots)
+        return self._accumulate(uv, *self._ball_windows(uv, xy[vis], albedo, rots), K)
+
+    def _accumulate(self, uv, cov, colour, iu, iv, K: int):
+        """The blurred change of a ball's windows (:meth:`_ball_windows` at its
+        visible nodes ``uv``) averaged over all ``K`` nodes, cropped to the frame."""
+        B, pad = self._border, self._pad
+        h, w = self.cam.height, self.cam.width
         n = cov.shape[1]
         pu0, pv0 = int(iu.min()) - pad, int(iv.min()) - pad       # frame coords of the patch
         pw, ph = int(iu.max()) + n + pad - pu0, int(iv.max()) + n + pad - pv0
