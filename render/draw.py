@@ -13,6 +13,7 @@ rest of the frame is a cached 8-bit background plus integer noise.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -22,6 +23,7 @@ from scipy.special import ndtr
 from cuespin.physics.contact import scene_trajectory
 from cuespin.physics.scene import Scene, motion_end
 from cuespin.render import look as lk
+from cuespin.render.noise import add_noise
 from cuespin.render.timing import frame_times
 
 # Blur nodes are spaced at most this far apart (px) along the path, so the
@@ -37,6 +39,12 @@ SIMILARITY_RTOL = 1e-6
 OUTLINE_VERTICES = 128
 # Spacing (px) of the grid on which the lens is inverted for the ray map.
 RAY_GRID_PX = 8
+# Exposure nodes whose rotations are evaluated in one call (a block of frames):
+# 4096 nodes hold 0.3 MB of matrices.
+ROTATION_BLOCK_NODES = 4096
+# Exposure nodes whose ball windows are computed in one call (a block of
+# frames; at most ~1.3 MB of colour on a 14-px ball).
+WINDOW_BLOCK_NODES = 64
 
 RENDER_DEFAULTS = {
     "felt_grey": 90.0,        # grey level of the felt
@@ -189,8 +197,9 @@ class NoiseSampler:
 
 class AliasNoise:
     """Rounded Gaussian noise added to an 8-bit image, drawn from the law of
-    :func:`noise_lut` with two random bytes per pixel and only 8-bit OpenCV
-    passes (no index lists, no 16-bit temporaries).
+    :func:`noise_lut` with two random bytes per pixel, in one pass
+    (:func:`cuespin.render.noise.add_noise`): the plain look's noise and the
+    realistic look's exact law.
 
     Walker's alias method over the 16-bit table's exact counts: 256 bins of
     256 units, each holding at most two values; the first byte picks the bin
@@ -198,8 +207,9 @@ class AliasNoise:
     value's probability is its count / 2^16, exactly the table's law.  Each
     bin keeps its smaller value below the threshold, so the noise is
     ``a[hi] + (lo >= thr[hi]) d[hi]`` with ``d >= 0``, stored offset by 128
-    in uint8.  About 25% less CPU than :class:`NoiseSampler` (measured at
-    sigma 5 on a 1280 x 720 x 3 frame, one thread: 9.5 vs 12.8 ms).
+    in uint8 (``tables``: the kernel's, unshifted).  About 0.7 ms of CPU a
+    1280 x 720 x 3 frame with the compiled kernel (sigma 5; 9.5 ms through
+    OpenCV before it, 12.8 with :class:`NoiseSampler`).
     Needs every value in -128..127: ``sigma`` up to :data:`ALIAS_MAX_SIGMA`.
     """
 
@@ -230,19 +240,13 @@ class AliasNoise:
         self.a = (lo_v + 128).astype(np.uint8).reshape(256, 1)
         self.d = (hi_v - lo_v).astype(np.uint8).reshape(256, 1)
         self.thr = thr.astype(np.uint8).reshape(256, 1)
+        # The kernel's tables (cuespin.render.noise): A as int8 bytes, T, D.
+        self.tables = np.stack([lo_v.astype(np.int8).view(np.uint8), self.thr[:, 0], self.d[:, 0]])
 
-    def add_to(self, img: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """``clip(img + n, 0, 255)`` (uint8) with fresh noise ``n`` per pixel and channel."""
-        import cv2
-
-        n = img.size
-        # Raw 64-bit words viewed as bytes: Generator.bytes copies its draw
-        # three times (about 3x the CPU at 1280 x 720 x 3, measured).
-        raw = rng.bit_generator.random_raw((2 * n + 7) // 8).view(np.uint8)
-        hi, lo = raw[:n].reshape(img.shape), raw[n:2 * n].reshape(img.shape)
-        above = cv2.compare(lo, cv2.LUT(hi, self.thr), cv2.CMP_GE)
-        n8 = cv2.add(cv2.LUT(hi, self.a), cv2.bitwise_and(above, cv2.LUT(hi, self.d)))
-        return cv2.addWeighted(img, 1.0, n8, 1.0, -128.0, dtype=cv2.CV_8U)   # exact integers
+    def add_to(self, img: np.ndarray, rng: np.random.Generator, out: np.ndarray | None = None) -> np.ndarray:
+        """``clip(img + n, 0, 255)`` (uint8) with fresh noise ``n`` per pixel and channel,
+        from one 64-bit word of ``rng`` (:func:`cuespin.render.noise.add_noise`)."""
+        return add_noise(img, self.tables, int(rng.bit_generator.random_raw()), True, out)
 
 
 # Largest sigma whose rounded noise (to 8 sigma) fits AliasNoise's -128..127.
@@ -262,11 +266,12 @@ class ByteNoise:
     mean 0, kurtosis 2.8-3.0 (3 for a Gaussian).  A least-squares fit's error and its sandwich errors
     depend on the noise's variance only, so the tracker sees the same noise
     level: on the same realistic FFV1 shots drawn with either law the
-    tracker's err/se came out alike (README, Known limits).  Each byte comes fresh
-    from the caller's generator (raw 64-bit words viewed as bytes), so
-    pixels, channels and frames are independent and the frames reproducible
-    from the seed.  One ``cv2.LUT`` and one add: about a fifth of
-    :class:`AliasNoise`'s CPU (two bytes, seven passes).  Values must fit
+    tracker's err/se came out alike (README, Known limits).  Each frame's
+    bytes come from a SplitMix64 stream seeded with one word of the caller's
+    generator (:mod:`cuespin.render.noise`), so pixels, channels and frames
+    are independent and the frames reproducible from the seed.  One compiled
+    pass: about 0.3 ms of CPU a 1280 x 720 x 3 frame (2.5 ms through OpenCV
+    before it), half :class:`AliasNoise`'s (two bytes a pixel).  Values must fit
     -128..127: sigma from :data:`BYTE_NOISE_SIGMA` [0] to [1].
     """
 
@@ -284,14 +289,13 @@ class ByteNoise:
         self.table = table
         self.var_ratio = float(var[i] / target)
         self.lut = (table + 128).astype(np.uint8).reshape(256, 1)
+        self.tables = np.zeros((3, 256), np.uint8)       # the kernel's: A = table, T = D = 0
+        self.tables[0] = table.astype(np.int8).view(np.uint8)
 
-    def add_to(self, img: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """``clip(img + n, 0, 255)`` (uint8) with fresh noise ``n`` per pixel and channel."""
-        import cv2
-
-        n = img.size
-        b = rng.bit_generator.random_raw((n + 7) // 8).view(np.uint8)[:n].reshape(img.shape)
-        return cv2.addWeighted(img, 1.0, cv2.LUT(b, self.lut), 1.0, -128.0, dtype=cv2.CV_8U)
+    def add_to(self, img: np.ndarray, rng: np.random.Generator, out: np.ndarray | None = None) -> np.ndarray:
+        """``clip(img + n, 0, 255)`` (uint8) with fresh noise ``n`` per pixel and channel,
+        from one 64-bit word of ``rng`` (:func:`cuespin.render.noise.add_noise`)."""
+        return add_noise(img, self.tables, int(rng.bit_generator.random_raw()), False, out)
 
 
 # Noise levels drawn as ByteNoise: below 0.5 its 256 atoms match the exact
@@ -309,8 +313,14 @@ def sensor_noise(sigma: float, law: str | None = None):
     :data:`ALIAS_MAX_SIGMA`."""
     law = NOISE_LAW if law is None else law
     if law == "byte" and BYTE_NOISE_SIGMA[0] <= sigma <= BYTE_NOISE_SIGMA[1]:
-        return ByteNoise(sigma)
-    return AliasNoise(sigma) if sigma <= ALIAS_MAX_SIGMA else NoiseSampler(sigma)
+        return _noise_drawer(ByteNoise, float(sigma))
+    return _noise_drawer(AliasNoise, float(sigma)) if sigma <= ALIAS_MAX_SIGMA else NoiseSampler(sigma)
+
+
+@functools.lru_cache(maxsize=16)
+def _noise_drawer(kind, sigma: float):
+    """One drawer (its tables: ~12 ms to build ByteNoise's) per law and sigma in a process."""
+    return kind(sigma)
 
 
 def make_background(scene: Scene, settings: dict) -> np.ndarray:
@@ -484,6 +494,10 @@ class FrameRenderer:
             self._init_realistic()
         else:
             self.background = make_background(scene, self.settings)
+            # The 16-bit table's law through Walker's alias tables, in one pass;
+            # past ALIAS_MAX_SIGMA (values beyond int8) the table itself.
+            self._plain_noise = (_noise_drawer(AliasNoise, self.sigma) if 0 < self.sigma <= ALIAS_MAX_SIGMA
+                                 else None)
             self.felt = float(self.settings["felt_grey"])
             self.ball = float(self.settings["ball_grey"])
 
@@ -611,6 +625,9 @@ class FrameRenderer:
         if s["markings"] != "none":
             t0 = min(0.0, float(self._t_nodes.min()))
             self._orient = lk.Orientation(lambda t: self.motion(t).w, t0, float(self._t_nodes.max()))
+        self._rot_block = (0, np.empty((0,)))
+        self._win_block = (0, [])
+        self._last_delta = None
 
     def _ray_map(self) -> np.ndarray:
         """Unit directions (table frame) of the rays through every pixel of the
@@ -661,6 +678,20 @@ class FrameRenderer:
         return np.stack([(Hi[0, 0] * u + Hi[0, 1] * v + Hi[0, 2]) / den,
                          (Hi[1, 0] * u + Hi[1, 1] * v + Hi[1, 2]) / den], -1)
 
+    def _cloth_grid(self, h: int, w: int) -> np.ndarray:
+        """:meth:`_cloth_points` of every pixel of an ``h x w`` frame, (h, w, 2)."""
+        if self.cam.has_lens:
+            vv, uu = np.mgrid[0:h, 0:w].astype(np.float64)
+            return self._cloth_points(np.stack([uu, vv], -1))
+        # The same elementwise homography, its pixel coordinates broadcast
+        # (a row of u, a column of v) rather than two full grids.
+        Hi = np.linalg.inv(self.H)
+        u = np.arange(w, dtype=np.float64)[None, :]
+        v = np.arange(h, dtype=np.float64)[:, None]
+        den = Hi[2, 0] * u + Hi[2, 1] * v + Hi[2, 2]
+        return np.stack([(Hi[0, 0] * u + Hi[0, 1] * v + Hi[0, 2]) / den,
+                         (Hi[1, 0] * u + Hi[1, 1] * v + Hi[1, 2]) / den], -1)
+
     def _static_scene(self) -> np.ndarray:
         """The static scene before lens blur, float32 (h, w, 3): cloth with its
         texture, cushions, rails, pockets and sights (2x2 supersampled),
@@ -677,8 +708,7 @@ class FrameRenderer:
             if cam.is_pinhole:
                 xy = self._plane_points(0, h, 0, w, 0.0)        # the cloth, z = 0
             else:
-                vv, uu = np.mgrid[0:h, 0:w].astype(np.float64)
-                xy = self._cloth_points(np.stack([uu, vv], -1))
+                xy = self._cloth_grid(h, w)
             tb_lw = (tb.length, tb.width)
 
             def labels(pts):
@@ -703,8 +733,8 @@ class FrameRenderer:
                 off = (np.arange(ss) + 0.5) / ss - 0.5
                 ou, ov = np.meshgrid(off, off)
                 ou, ov = ou.ravel(), ov.ravel()
-                dxy_du = np.gradient(xy, axis=1)[ev, eu]
-                dxy_dv = np.gradient(xy, axis=0)[ev, eu]
+                dxy_du = gradient_at(xy, ev, eu, axis=1)
+                dxy_dv = gradient_at(xy, ev, eu, axis=0)
                 pts = (xy[ev, eu][:, None, :] + ou[None, :, None] * dxy_du[:, None, :]
                        + ov[None, :, None] * dxy_dv[:, None, :])
                 sub = labels(pts)                                   # (n_edge, 16)
@@ -823,23 +853,88 @@ class FrameRenderer:
         Returns ``(delta (h, w, 3) float32, u0, v0)`` in frame pixels, or
         ``(None, 0, 0)`` when the ball is out of view.
         """
-        return self._delta_of(self._uv_nodes[k], self._xy_nodes[k], self._t_nodes[k],
-                              self._albedo, self._orient)
+        rots = self._rotations(k)
+        # A ball at rest (before the strike, after it stops) looks the same
+        # in every frame: its last change is reused while nodes and turn agree.
+        key = self._uv_nodes[k].tobytes() + (b"" if rots is None else rots.tobytes())
+        if self._last_delta is not None and self._last_delta[0] == key:
+            return self._last_delta[1]
+        win = self._windows(k)
+        if win is None:
+            out = None, 0, 0
+        else:
+            out = self._accumulate(*win, self._uv_nodes.shape[1])
+        self._last_delta = (key, out)
+        return out
 
-    def _delta_of(self, uv, xy, t, albedo, orient):
+    def _visible(self, uv: np.ndarray) -> np.ndarray:
+        """Which nodes imaged at ``uv`` (K, 2) px have their window in the frame."""
+        half, h, w = self._half, self.cam.height, self.cam.width
+        return ((uv[:, 0] + half >= 0) & (uv[:, 0] - half <= w - 1)
+                & (uv[:, 1] + half >= 0) & (uv[:, 1] - half <= h - 1))
+
+    def _windows(self, k: int):
+        """The tracked ball's :meth:`_ball_windows` at frame ``k``'s visible nodes,
+        ``(uv, cov, colour, iu, iv)`` (None out of view), computed for a block
+        of frames in one vectorised call: a frame's few nodes spent most of
+        their time in numpy's per-call overhead.  Each pixel's arithmetic is
+        the same whatever the batch."""
+        start, block = self._win_block
+        if not start <= k < start + len(block):
+            K = self._uv_nodes.shape[1]
+            frames = range(k, min(k + max(1, WINDOW_BLOCK_NODES // K), self.n_frames))
+            parts = []
+            for f in frames:
+                uv = self._uv_nodes[f]
+                vis = self._visible(uv)
+                rots = self._rotations(f)
+                parts.append((uv[vis], self._xy_nodes[f][vis], None if rots is None else rots[vis]))
+            counts = [len(p[0]) for p in parts]
+            block = [None] * len(parts)
+            if sum(counts):
+                uv = np.concatenate([p[0] for p in parts])
+                rots = None if self._orient is None else np.concatenate([p[2] for p in parts])
+                cov, colour, iu, iv = self._ball_windows(uv, np.concatenate([p[1] for p in parts]),
+                                                         self._albedo, rots)
+                ends = np.cumsum(counts)
+                for j, (c, e) in enumerate(zip(counts, ends)):
+                    if c:
+                        sl = slice(e - c, e)
+                        block[j] = (uv[sl], cov[sl], colour[sl], iu[sl], iv[sl])
+            self._win_block = start, block = k, block
+        return block[k - start]
+
+    def _rotations(self, k: int):
+        """Body-to-table rotations (K, 3, 3) of the tracked ball at frame ``k``'s
+        nodes (None without markings), evaluated for blocks of frames in one
+        vectorised call (per frame, the call's overhead was a third of the ball's cost)."""
+        if self._orient is None:
+            return None
+        start, block = self._rot_block
+        if not start <= k < start + len(block):
+            K = self._t_nodes.shape[1]
+            n = max(1, ROTATION_BLOCK_NODES // K)
+            block = self._orient(self._t_nodes[k:k + n])
+            self._rot_block = start, block = k, block
+        return block[k - start]
+
+    def _delta_of(self, uv, xy, albedo, rots):
         """:meth:`_ball_delta` for any ball: nodes imaged at ``uv`` (K, 2) px,
-        centred at ``xy`` (K, 2) m at times ``t`` (K,), its albedo and its
-        :class:`~cuespin.render.look.Orientation` (None: no markings)."""
-        B, half, pad = self._border, self._half, self._pad
-        h, w = self.cam.height, self.cam.width
+        centred at ``xy`` (K, 2) m, its albedo and the nodes' rotations (K, 3, 3)
+        (None: no markings)."""
         K = len(uv)
-        vis = ((uv[:, 0] + half >= 0) & (uv[:, 0] - half <= w - 1)
-               & (uv[:, 1] + half >= 0) & (uv[:, 1] - half <= h - 1))
+        vis = self._visible(uv)
         if not vis.any():
             return None, 0, 0
         uv = uv[vis]
-        rots = orient(t[vis]) if orient is not None else None
-        cov, colour, iu, iv = self._ball_windows(uv, xy[vis], albedo, rots)
+        rots = rots[vis] if rots is not None else None
+        return self._accumulate(uv, *self._ball_windows(uv, xy[vis], albedo, rots), K)
+
+    def _accumulate(self, uv, cov, colour, iu, iv, K: int):
+        """The blurred change of a ball's windows (:meth:`_ball_windows` at its
+        visible nodes ``uv``) averaged over all ``K`` nodes, cropped to the frame."""
+        B, pad = self._border, self._pad
+        h, w = self.cam.height, self.cam.width
         n = cov.shape[1]
         pu0, pv0 = int(iu.min()) - pad, int(iv.min()) - pad       # frame coords of the patch
         pw, ph = int(iu.max()) + n + pad - pu0, int(iv.max()) + n + pad - pv0
@@ -974,18 +1069,18 @@ class FrameRenderer:
         import cv2
 
         if self.sigma > 0:
-            # SFC64 writes random bytes about a third faster than PCG64; seeded
-            # from the caller's generator, so frames stay reproducible.
-            fast = np.random.Generator(np.random.SFC64(int(rng.integers(0, 2**63))))
             if not isinstance(self._noise, NoiseSampler):
-                frame = self._noise.add_to(self.background, fast)
+                frame = self._noise.add_to(self.background, rng)    # one word of rng seeds the frame
             else:
+                # SFC64 writes random bytes about a third faster than PCG64; seeded
+                # from the caller's generator, so frames stay reproducible.
+                fast = np.random.Generator(np.random.SFC64(int(rng.integers(0, 2**63))))
                 frame = cv2.add(self._noise.draw(fast, self._bg16.shape), self._bg16, dtype=cv2.CV_8U)
         else:
             frame = self.background.copy()
         tiles = dict(self._cue_tiles(k))
         for xy, uv, albedo in self._struck.values():
-            delta, u0, v0 = self._delta_of(uv[k], xy[k], self._t_nodes[k], albedo, None)
+            delta, u0, v0 = self._delta_of(uv[k], xy[k], albedo, None)
             if delta is not None:
                 add_to_tiles(tiles, delta, u0, v0)
         delta, u0, v0 = self._ball_delta(k)
@@ -993,12 +1088,15 @@ class FrameRenderer:
             add_to_tiles(tiles, delta, u0, v0)
         # The frame is round(blur + n) with integer noise n: adding the
         # change to the unrounded value keeps it round(blur + delta + n).
+        # OpenCV's float32 sums in numpy's order ((f + frac) + acc) and its
+        # saturating conversion (round half to even, as np.rint, then clip):
+        # the same pixels as numpy's five passes in two calls a tile.
         T = TILE_PX
         for (ty, tx), acc in tiles.items():
             sl = (slice(ty * T, ty * T + T), slice(tx * T, tx * T + T))
             f = frame[sl]
-            clean = f + self._frac[sl] + acc[:f.shape[0], :f.shape[1]]
-            frame[sl] = np.clip(np.rint(clean), 0, 255).astype(np.uint8)
+            clean = cv2.add(f, self._frac[sl], dtype=cv2.CV_32F)
+            frame[sl] = cv2.add(clean, acc[:f.shape[0], :f.shape[1]], dtype=cv2.CV_8U)
         return frame
 
     def render(self, k: int, rng: np.random.Generator) -> np.ndarray:
@@ -1016,7 +1114,9 @@ class FrameRenderer:
         if self.realistic:
             return self._render_realistic(k, rng)
         bg = self.background
-        if self.sigma > 0:
+        if self._plain_noise is not None:
+            frame = self._plain_noise.add_to(bg, rng)     # the law of self.lut, exactly
+        elif self.sigma > 0:
             u = np.frombuffer(rng.bytes(2 * bg.size), dtype=np.uint16).reshape(bg.shape)
             frame = np.take(self.lut, u)
             frame += bg
@@ -1094,6 +1194,21 @@ def gaussian(img: np.ndarray, sigma: float, constant: bool = False) -> np.ndarra
         return img
     border = cv2.BORDER_CONSTANT if constant else cv2.BORDER_REFLECT
     return cv2.GaussianBlur(img, (0, 0), sigma, borderType=border)
+
+
+def gradient_at(a: np.ndarray, rows: np.ndarray, cols: np.ndarray, axis: int) -> np.ndarray:
+    """``np.gradient(a, axis=axis)[rows, cols]`` computed at those pixels only:
+    central differences inside, one-sided at the borders, the same arithmetic."""
+    n = a.shape[axis]
+    idx = cols if axis == 1 else rows
+    lo, hi = np.maximum(idx - 1, 0), np.minimum(idx + 1, n - 1)
+    if axis == 1:
+        d = a[rows, hi] - a[rows, lo]
+    else:
+        d = a[hi, cols] - a[lo, cols]
+    inner = (idx > 0) & (idx < n - 1)
+    d[inner] = d[inner] / 2.0
+    return d
 
 
 def cv2_copy_border(img: np.ndarray, b: int) -> np.ndarray:

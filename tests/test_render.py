@@ -7,7 +7,9 @@ import pytest
 from cuespin.data_gen.sampler import make_scene, sample_scene, sample_shot
 from cuespin.physics import positions
 from cuespin.render import FrameRenderer, disc_coverage, read_truth_csv, render_video, truth_path
+from cuespin.render import noise as nz
 from cuespin.render.draw import ALIAS_MAX_SIGMA, BYTE_NOISE_SIGMA, AliasNoise, ByteNoise, noise_lut
+from cuespin.render.noise import noise_bytes, noise_values
 
 # The issue's requirement for the drawn disc; measured max over 2000 random
 # placements, radii 8-20 px: 1.4e-3 px, RMS 4.5e-4 (pixel integration, as on a sensor).
@@ -210,21 +212,28 @@ def test_realistic_noise_is_independent_per_channel():
 @pytest.mark.parametrize("sigma", [0.5, 2.0, 5.0, 8.0, ALIAS_MAX_SIGMA])
 def test_alias_noise_draws_the_tables_exact_law(sigma):
     # Every (first byte, second byte) pair once: the drawn values' counts
-    # are the 16-bit table's counts exactly, clipped at 0 and 255.
+    # are the 16-bit table's counts exactly.
     an = AliasNoise(sigma)
     hi, lo = np.meshgrid(np.arange(256), np.arange(256), indexing="ij")
-    n = an.a[hi, 0].astype(int) - 128 + (lo >= an.thr[hi, 0]) * an.d[hi, 0].astype(int)
-    assert np.array_equal(np.sort(n.ravel()), np.sort(noise_lut(sigma)))
+    n = noise_values(an.tables, hi.ravel(), lo.ravel())
+    assert np.array_equal(np.sort(n), np.sort(noise_lut(sigma)))
+    # A frame is clip(img + n) of its stream's bytes, saturating like the sensor's 8 bits.
+    for level in (2, 128, 250):
+        img = np.full((256, 256), level, np.uint8)
+        b, c = noise_bytes(77, img.size, True)
+        want = np.clip(level + noise_values(an.tables, b, c).reshape(img.shape), 0, 255)
+        assert np.array_equal(an.add_to(img, Word(77)), want)
 
-    class Raw:  # hands add_to the enumeration above as its two bytes per pixel
+
+class Word:
+    """A generator stand-in whose one raw word (a frame's seed) is ``w``."""
+
+    def __init__(self, w):
         class bit_generator:
             @staticmethod
-            def random_raw(size):
-                return np.r_[hi.ravel(), lo.ravel()].astype(np.uint8).view(np.uint64)[:size]
-
-    for level in (2, 128, 250):   # saturates like the sensor's 8 bits
-        img = np.full((256, 256), level, np.uint8)
-        assert np.array_equal(add_to := an.add_to(img, Raw()), np.clip(level + n, 0, 255)), add_to
+            def random_raw():
+                return np.uint64(w)
+        self.bit_generator = bit_generator
 
 
 @pytest.mark.parametrize("sigma", [BYTE_NOISE_SIGMA[0], 1.0, 1.5, 2.0, 3.0, 5.0, 8.0, 15.0, BYTE_NOISE_SIGMA[1]])
@@ -240,29 +249,74 @@ def test_byte_noise_law_has_the_exact_laws_mean_and_variance(sigma):
     assert abs(v.var() / exact.var() - 1) < (0.015 if sigma < 3 else 0.005)
     assert 2.7 < ((v - v.mean()) ** 4).mean() / v.var() ** 2 < 3.1
     assert np.abs(v).max() <= 127
-
-    class Raw:  # every byte once, as add_to's one byte per pixel
-        class bit_generator:
-            @staticmethod
-            def random_raw(size):
-                return np.arange(256, dtype=np.uint8).view(np.uint64)[:size]
-
+    # The kernel's tables draw the table: byte b -> table[b].
+    assert np.array_equal(noise_values(bn.tables, np.arange(256), None), bn.table)
     for level in (2, 128, 250):
-        img = np.full((16, 16), level, np.uint8)
-        assert np.array_equal(bn.add_to(img, Raw()), np.clip(level + bn.table.reshape(16, 16), 0, 255))
+        img = np.full((48, 64, 3), level, np.uint8)
+        b, _ = noise_bytes(5, img.size, False)
+        want = np.clip(level + bn.table[b].reshape(img.shape), 0, 255)
+        assert np.array_equal(bn.add_to(img, Word(5)), want)
+
+
+@pytest.mark.parametrize("two", [False, True])
+def test_compiled_noise_is_the_reference_bit_for_bit(two):
+    # The compiled kernel (AVX-512 VBMI) and the OpenCV fallback against the
+    # numpy definition: every grey level, saturation at both ends, a size
+    # that is no multiple of 64 (the padded last chunk), several seeds.
+    tables = AliasNoise(6.0).tables if two else ByteNoise(6.0).tables
+    rng = np.random.default_rng(0)
+    img = rng.integers(0, 256, (123, 77, 3)).astype(np.uint8)
+    img.reshape(-1)[:512] = np.repeat(np.arange(256), 2)
+    for seed in (0, 1, 2**63 + 12345, 2**64 - 1):
+        ref = nz.add_noise(img, tables, seed, two, compiled=False)
+        assert np.array_equal(nz.add_noise_opencv(img, tables, seed, two), ref)
+        out = np.empty_like(img)
+        assert nz.add_noise(img, tables, seed, two, out=out) is out and np.array_equal(out, ref)
+    if not two:
+        # The portable kernel (any vector ISA) of a one-byte law, where it compiles.
+        for sigma in (0.5, 2.0, 6.0):
+            t = ByteNoise(sigma).tables
+            fn = nz.count_kernel(t)
+            if fn is not None:
+                for seed in (3, 2**64 - 1):
+                    assert np.array_equal(nz.run_kernel(fn, img, t, seed, False),
+                                          nz.add_noise_reference(img, t, seed, False))
+    if nz.kernel(two) is None:
+        pytest.skip("no AVX-512 VBMI noise kernel on this CPU (other kernels draw the same frames)")
+
+
+def test_noise_stream_bytes_are_uniform_and_independent():
+    # The SplitMix64 bytes a frame reads: uniform, and the pairs of
+    # neighbouring bytes (within a word, across words, 8 words apart: the
+    # same byte of the next word) independent: chi-square on 16 x 16 cells
+    # of the high nibbles, 255 degrees of freedom, 2.76 M pairs (one frame);
+    # 400 is its 1e-8 quantile, an honest test that a broken stream fails by far.
+    b, _ = noise_bytes(2026, 1280 * 720 * 3, False)
+    b = b.astype(np.int64)
+    counts = np.bincount(b, minlength=256)
+    e = b.size / 256
+    assert ((counts - e) ** 2 / e).sum() < 400
+    for lag in (1, 8, 64, 3840):
+        pair = (b[:-lag] >> 4) * 16 + (b[lag:] >> 4)
+        c = np.bincount(pair, minlength=256)
+        e = pair.size / 256
+        assert ((c - e) ** 2 / e).sum() < 400, lag
 
 
 def test_byte_noise_frames_are_fresh_and_seeded():
     bn = ByteNoise(4.0)
     img = np.full((360, 640, 3), 100, np.uint8)
-    rng = np.random.Generator(np.random.SFC64(5))
+    rng = np.random.default_rng(5)
     a, b = (bn.add_to(img, rng).astype(float) - 100 for _ in range(2))
+    # Standard error of a correlation over 691 200 values: 0.0012.
     assert abs(np.corrcoef(a.ravel(), b.ravel())[0, 1]) < 0.01              # frames independent
     c = a.reshape(-1, 3)
     assert np.abs(np.corrcoef(c.T)[np.triu_indices(3, 1)]).max() < 0.01     # channels too
     assert abs(np.corrcoef(a[:, :-1].ravel(), a[:, 1:].ravel())[0, 1]) < 0.01  # neighbours too
+    assert abs(np.corrcoef(a[:-1].ravel(), a[1:].ravel())[0, 1]) < 0.01      # rows too
     assert a.std() == pytest.approx(np.sqrt(bn.table.var()), rel=0.01)
-    again = bn.add_to(img, np.random.Generator(np.random.SFC64(5))).astype(float) - 100
+    assert abs(a.mean()) < 0.03                                              # se 0.005
+    again = bn.add_to(img, np.random.default_rng(5)).astype(float) - 100
     assert np.array_equal(again, a)
 
 
