@@ -88,3 +88,21 @@ def test_departure_box_means_per_part_are_the_whole_boxs():
         D = (X - np.median(X, axis=0)) * near[..., None].astype(bool)
         want = np.stack([cv2.blur(d, (k, k)) for d in D])[:, ys, xs]
         assert np.array_equal(departure_box_means(samples, near, ys, xs, k), want)
+
+
+def test_moved_boxes_from_integer_sums_are_the_float_blurs():
+    """moved_boxes' box means from integer sums: the extremes and span of
+    cv2.blur's float32 means, bit for bit."""
+    from cuespin.track.colour import moved_boxes
+    from cuespin.track.background import box_size, spread_threshold
+
+    rng = np.random.default_rng(6)
+    samples = rng.integers(0, 256, (5, 90, 130, 3), dtype=np.uint8)
+    samples[:, 20:40, 30:60] = rng.integers(0, 40, (5, 1, 1, 3), dtype=np.uint8)  # something moved
+    r, sd = 6.0, np.array([2.0, 3.0, 4.0])
+    k = box_size(r)
+    b = np.stack([cv2.blur(s.astype(np.float32), (k, k)) for s in samples])
+    span = b.max(axis=0) - b.min(axis=0)
+    noise_thr = 7.5 * np.maximum(sd, 0.5) / k + 1.0
+    want = np.any(span > [spread_threshold(span[..., i], noise_thr[i]) for i in range(3)], axis=-1)
+    assert np.array_equal(moved_boxes(samples, r, sd), want)

