@@ -131,10 +131,13 @@ def one_shot(args):
         kw["ar1_floor"] = error_ar1(getattr(tr, "look_factor", 1.0), getattr(tr, "look_rho", 0.0))
     if "touched" in inspect.signature(recover_track).parameters:
         kw["touched"] = getattr(tr, "touched", None)
+    lossless = getattr(tr, "independent_errors", tr.lossless)
+    if "independent" in inspect.signature(recover_track).parameters:  # the codec apart from the errors' sharing
+        kw["independent"], lossless = lossless, bool(tr.lossless)
     if "px_to_m" not in inspect.signature(recover_track).parameters:  # an older recover/, for before/after tables
         kw = {}
     out, est = recover_track(tr.t, tr.xy, tr.ok, table_covariance(cam, tr.xy, tr.cov_px), scene.physics,
-                             cam.exposure_s, "all", False, lossless=getattr(tr, "independent_errors", tr.lossless),
+                             cam.exposure_s, "all", False, lossless=lossless,
                              return_estimate=True,
                              inter_frame=tr.inter_frame, **kw)
     truth, p = scene.truth, scene.physics
@@ -179,7 +182,9 @@ def one_shot(args):
             # The bound for the fit's own measurements (recover.measurements),
             # and for reference the one with every frame independent.
             for key, indep in (("mle_crb_z_indep", True), ("mle_crb_z", False)):
-                cov, rolling = mle_bound(scene, est.meas, independent=indep)
+                kw_ar1 = {"ar1": float(getattr(est.mle, "ar1", 0.0) or 0.0)} \
+                    if "ar1" in inspect.signature(mle_bound).parameters else {}
+                cov, rolling = mle_bound(scene, est.meas, independent=indep, **kw_ar1)
                 idx = [3, 4] if rolling else [3, 4, 5, 6]
                 e = err[:2] if rolling else err
                 row[key] = float(np.sqrt(np.mean((e / np.sqrt(np.diag(cov)[idx])) ** 2)))

@@ -65,7 +65,7 @@ def tracker_accuracy(scene: Scene, video: Path, refine: str = "fit", n_eval: int
                            stated_z=float(np.sqrt(np.mean(z**2))))
 
 
-def mle_bound(scene: Scene, track, mle: dict | None = None, independent: bool = False):
+def mle_bound(scene: Scene, track, mle: dict | None = None, independent: bool = False, ar1: float | None = None):
     """Cramer-Rao covariance of ``(x0, t0, v0[, w0])`` at the scene's truth.
 
     The inverse Fisher information of the maximum-likelihood fit's model
@@ -77,9 +77,11 @@ def mle_bound(scene: Scene, track, mle: dict | None = None, independent: bool = 
     the same way (strike window at its ``t0``, the rest after its ``t2``
     shared for a lossy codec, its ``codec_noise_px`` added through the
     camera, or ``codec_noise_m`` when it has none); nothing is
-    segmented again.  With ``independent``, the tracker's errors with every
-    frame its own measurement, the bound a lossy codec's shared errors put
-    out of reach (a reference).
+    segmented again.  Under the error model the fit used: its AR(1)
+    correlation ``ar1`` (default the JSON's ``mle["ar1"]``; 0 when neither
+    gives one).  With ``independent``, the tracker's errors with every
+    frame its own, independent measurement, the bound a lossy codec's
+    shared errors put out of reach (a reference).
 
     Returns
     -------
@@ -119,4 +121,7 @@ def mle_bound(scene: Scene, track, mle: dict | None = None, independent: bool = 
                                       # under the AR(1) model the fit kept a lossless rest frame by frame
                                       group_rest=not mle.get("ar1")
                                       ).with_codec(np.sign(c) * c * c)
-    return crb_covariance(truth, p, meas, cam.exposure_s, rolling=rolling), rolling
+    if ar1 is None:
+        ar1 = (mle or {}).get("ar1") or 0.0
+    return crb_covariance(truth, p, meas, cam.exposure_s, rolling=rolling,
+                          ar1=0.0 if independent else float(ar1)), rolling

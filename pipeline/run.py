@@ -155,7 +155,8 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
                            scene_balls(scene.render))
     n = analysed_frames(tr.t, contact, cam.exposure_s)
     out, est = recover_track(tr.t[:n], tr.xy[:n], tr.ok[:n], cov_m[:n], scene.physics, cam.exposure_s,
-                             method, fit_friction, lossless=tr.independent_errors, ar1_floor=tr.error_ar1,
+                             method, fit_friction, lossless=tr.lossless, independent=tr.independent_errors,
+                             ar1_floor=tr.error_ar1,
                              inter_frame=tr.inter_frame, px_to_m=pixel_to_table(cam, tr.xy[:n]),
                              touched=None if tr.touched is None else tr.touched[:n], return_estimate=True)
     if scene.calibration:
@@ -199,7 +200,8 @@ def _refit_through(camera, tr, n: int, scene, method: str, fit_friction: bool, k
     xy[good] = camera.to_table(uv[good])
     cov = table_covariance(camera, xy, np.asarray(tr.cov_px)[:n])
     return recover_track(tr.t[:n], xy, np.asarray(tr.ok)[:n], cov, scene.physics, scene.camera.exposure_s,
-                         method, fit_friction, lossless=tr.independent_errors, ar1_floor=tr.error_ar1,
+                         method, fit_friction, lossless=tr.lossless, independent=tr.independent_errors,
+                         ar1_floor=tr.error_ar1,
                          inter_frame=tr.inter_frame,
                          px_to_m=pixel_to_table(camera, xy), keep=keep)["methods"]
 

@@ -29,7 +29,7 @@ def _num(x):
 def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0.0,
                   method: str = "all", fit_friction: bool = False, lossless: bool = True,
                   return_estimate: bool = False, inter_frame: bool = False, px_to_m=None, keep=None,
-                  ar1_floor: float = 0.0, touched=None):
+                  ar1_floor: float = 0.0, touched=None, independent: bool | None = None):
     """v0 and w0 from a track, by the paper's method and/or maximum likelihood.
 
     Parameters
@@ -51,8 +51,13 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
     fit_friction : bool
         Estimate mu_s and mu_r in the maximum-likelihood fit.
     lossless : bool
-        The video's codec is lossless; otherwise a resting ball's frames are
-        one measurement per rest and the codec's error is measured.
+        The video's codec is lossless; otherwise the codec's error is
+        measured from the residuals.
+    independent : bool, optional
+        Each frame's error is its own (``TrackResult.independent_errors``);
+        otherwise a resting ball's frames are one measurement per rest (a
+        lossy codec, or a shaded look the tracker's model misses).  Default
+        ``lossless``.
     inter_frame : bool
         The lossy codec predicts frames from others (H.264): its error is
         shared between neighbouring frames (recover.mle.codec_sandwich).
@@ -94,7 +99,8 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
     est = estimate(t[ok], xy[ok], cov, params, exposure_s, lossless, fit_friction,
                    run_paper=method in ("paper", "all"), inter_frame=inter_frame,
                    px_to_m=None if px_to_m is None else np.asarray(px_to_m, dtype=float)[ok], keep=keep,
-                   ar1_floor=ar1_floor, touched=None if touched is None else np.asarray(touched, bool)[ok])
+                   ar1_floor=ar1_floor, touched=None if touched is None else np.asarray(touched, bool)[ok],
+                   independent=independent)
     methods = {}
     if method in ("paper", "all"):
         methods["paper"] = paper_dict(est, params)

@@ -124,7 +124,7 @@ def _first_fit(meas, params, starts, exposure_s, fit_friction) -> ModelFit | Non
 def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: bool = True,
              fit_friction: bool = False, run_paper: bool = True, inter_frame: bool = False,
              px_to_m=None, keep: Decided | None = None, ar1_floor: float = 0.0,
-             touched=None) -> Estimate:
+             touched=None, independent: bool | None = None) -> Estimate:
     """Segment, decide and fit one track.
 
     Parameters
@@ -140,8 +140,16 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
     exposure_s : float
         Exposure (s).
     lossless : bool
-        The codec is lossless; otherwise a still ball's frames share one
-        error and the codec's own error is measured from the residuals.
+        The codec is lossless; otherwise the codec's own error is measured
+        from the residuals (and, with an intra-frame codec, shared by frames
+        that show the ball at one place: recover.mle.still_codec_sandwich).
+    independent : bool, optional
+        Each frame's error is its own (track.video's
+        ``TrackResult.independent_errors``); otherwise a still ball's frames
+        share one error (one measurement a rest, the paper's rests no better
+        than one frame): a lossy codec's, or a look the tracker's model
+        misses (a shaded ball, on a lossless codec too).  Default
+        ``lossless``.
     fit_friction : bool
         Estimate mu_s and mu_r in the maximum-likelihood fit.
     run_paper : bool
@@ -194,6 +202,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         fail = f"the track could not be segmented: {seg.reason}"
         return Estimate(seg, PaperResult("failed", fail), MLEResult("failed", f"no starting point: {seg.reason}"),
                         timing_s={"fit": t_fit, "recover": time.perf_counter() - clock})
+    independent = lossless if independent is None else bool(independent)
     # First pass (free slip, which nests rolling): place the strike and, for
     # a lossy codec, measure the codec's error from the residuals.  The
     # segmentation's t0 can miss by most of a frame at 60 fps, and the frame
@@ -204,13 +213,13 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
     # segmentation and then the first fit give (recover.measurements.CUE_CLEAR_R).
     def measure(t0, clear_s, group_rest=True):
         return build_measurements(t, xy, cov, t0=t0, t_rest=seg.t2, exposure_s=exposure_s,
-                                  frame_dt=frame_dt, shared_rest=not lossless, px_to_m=px_to_m, clear_s=clear_s,
+                                  frame_dt=frame_dt, shared_rest=not independent, px_to_m=px_to_m, clear_s=clear_s,
                                   group_rest=group_rest)
 
     if keep is not None:
         codec = CodecCorrelation(keep.codec_var, frame_dt) if inter_frame and not lossless else None
         return _refit(keep, seg, t, xy, params, exposure_s, fit_friction, run_paper, lossless, sigma,
-                      frame_dt, measure, codec, t_fit, clock)
+                      frame_dt, measure, codec, t_fit, clock, independent)
     starts = [initial_guess(s, params) for s in (seg, seg.unended, seg.rolling) if s is not None]
 
     def cue_window(speed, t0):
@@ -252,7 +261,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
             rho, z = lag1_autocorrelation(meas, full.residuals)
             decisions["autocorrelated"] = autocorrelated(rho, z, stated=ar1_floor > 0)
             if decisions["autocorrelated"]:
-                if lossless:  # the AR(1) model carries a lossless rest's correlation itself
+                if independent:  # the AR(1) model carries a lossless rest's correlation itself
                     meas = measure(t0, clear_s, group_rest=False).with_codec(codec_var)
                 full, roll = fit_models(meas, params, (full.shot.x0, full.shot.t0, full.shot.v0, full.shot.w0),
                                         exposure_s, fit_friction,
@@ -292,7 +301,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         # The paper's errors are propagated from the same per-frame noise the
         # fit weights by: the tracker's, with the codec's measured share.
         paper_sigma = math.sqrt(sigma**2 + max(meas.codec_m2(codec_var), 0.0))
-        paper = paper_from_segments(chosen, t, xy, params, paper_sigma, frame_dt, strike_seen, lossless)
+        paper = paper_from_segments(chosen, t, xy, params, paper_sigma, frame_dt, strike_seen, independent)
         shape = paper.trajectory == "parabola" if paper.trajectory else None
     seen = decisions.get("sliding_seen")
     fit = None if seen is None else (full if seen else roll)
@@ -311,7 +320,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
 
 
 def _refit(keep: Decided, seg, t, xy, params, exposure_s, fit_friction, run_paper, lossless, sigma,
-           frame_dt, measure, codec, t_fit, clock) -> Estimate:
+           frame_dt, measure, codec, t_fit, clock, independent=None) -> Estimate:
     """:func:`estimate` keeping an earlier recovery's decisions (``keep``):
     the same model fitted from the earlier answer, the same segmentation,
     path shape and root for the paper's method."""
@@ -337,7 +346,8 @@ def _refit(keep: Decided, seg, t, xy, params, exposure_s, fit_friction, run_pape
                             "found through this camera")
     elif run_paper and seg:
         paper_sigma = math.sqrt(sigma**2 + max(meas.codec_m2(keep.codec_var), 0.0))
-        paper = paper_from_segments(chosen, t, xy, params, paper_sigma, frame_dt, keep.strike_seen, lossless,
+        paper = paper_from_segments(chosen, t, xy, params, paper_sigma, frame_dt, keep.strike_seen,
+                                    lossless if independent is None else independent,
                                     curved=keep.curved, near=keep.paper, apart=keep.stop_apart)
     return Estimate(chosen or seg, paper, mle, meas, keep.codec_var, decisions,
                     {"fit": t_fit, "recover": time.perf_counter() - clock}, keep)

@@ -168,8 +168,9 @@ class TrackResult:
         disc describes (not ``look_shaded``, ``look_factor`` 1).  Otherwise
         the error is a function of the image (a lossy codec's, a look the
         model misses), shared by a resting ball's frames: what the recovery
-        passes as ``lossless`` (a rest one measurement, the unstated share
-        measured from the fit's residuals).
+        passes as ``independent`` (a rest one measurement; the codec's
+        unstated share is measured from the fit's residuals only on a lossy
+        codec, ``lossless``).
 
         A shaded look counts even when the track shows no misfit (look
         factor 1): what the model misses of a still ball is the same in
