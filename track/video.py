@@ -33,7 +33,7 @@ from cuespin.track.radius import RadiusMap
 from cuespin.track.model import refit_shift, warm_up
 from cuespin.track.reader import FrameSource, ThreadedFrames, TrackError, frame_times, probe
 from cuespin.track.tracker import (OFF_PATH, OK, PULLED, STATUS_TEXT, STILL_PX, BallTracker, TrackerConfig,
-                                   beyond_ball, foreign_pixels, foreign_threshold, pulled_fits)
+                                   beyond_ball, foreign_near, foreign_threshold, pulled_fits)
 
 # Bytes of decoded frames held before the background is learnt: 437 grey or
 # 145 BGR frames at 1280 x 720 (at 240 fps, 1.8 s or 0.6 s of video; the
@@ -258,6 +258,17 @@ def search_mask(cam, table, R: float, shape, grow_px: float | None = None) -> np
     return mask.astype(bool)
 
 
+def _warm_up() -> None:
+    """The compiled fit's and window kernels' warm-up (:func:`cuespin.track.model.warm_up`,
+    :func:`cuespin.track.window.warm_up`); a failure is left for the tracker's own call."""
+    warm_up()
+    try:
+        from cuespin.track import window
+        window.warm_up()
+    except Exception:  # the tracker's own call reports it
+        pass
+
+
 def learn_model(frames: list, radius_px, n_samples: int,
                 where: np.ndarray | None = None) -> tuple[Projection, Background]:
     """The projection and the background from ``n_samples`` frames spread over
@@ -336,7 +347,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         # The compiled fit loads (numba: ~0.7 s of CPU a process; after an
         # install it compiles, ~13 s once) on a helper thread while the
         # look-ahead fills, when this thread only waits for frames.
-        threading.Thread(target=warm_up, daemon=True).start()
+        threading.Thread(target=_warm_up, daemon=True).start()
     frames = iter(feed)
     error = ""
     ended = False
@@ -465,10 +476,10 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
             # those pixels were left out as foreign): where the averaged felt
             # departs from it as much, it holds something the frame does not
             # (a cue resting there in many frames), and the old felt stays.
-            beyond = beyond_ball(old.shape, pu, pv, c, b, tracker.radius_with(outline))
-            changed = foreign_pixels(bg.polarity * (new - old), beyond, bg.sigma, bg.contrast)
+            r_out = tracker.radius_with(outline)
+            changed = foreign_near(bg.polarity * (new - old), pu, pv, c, b, r_out, bg.sigma, bg.contrast)
             if changed is not None:
-                new = np.where(changed & beyond, old, new)
+                new = np.where(changed & beyond_ball(old.shape, pu, pv, c, b, r_out), old, new)
             uv[kk] = c + refit_shift(old, new, pu, pv, c, b, G, radius_px, fb, shade, outline,
                                      None if foreign is None else ~foreign)
         bg = replace(bg, image=better)

@@ -1,0 +1,108 @@
+"""The tracker's compiled window arithmetic (track/window.py) against its numpy forms.
+
+Each kernel keeps numpy's arithmetic, sums included (numpy's pairwise
+summation, float32 sums in float32), so the agreement asked for is exact:
+the fit starts from the centroid, and its stopping rule turned a start
+moved by 1e-5 px (a float64 sum of the weights in place of numpy's float32
+one) into fits moved by up to 0.1 px in ill-conditioned frames.
+"""
+
+import cv2
+import numpy as np
+import pytest
+
+from cuespin.track import window
+from cuespin.track.colour import departure_box_means
+from cuespin.track.model import moments
+from cuespin.track.tracker import FOREIGN_GAP_PX, OUTLIER_SIGMAS, beyond_ball
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_pairwise_sum_is_numpys_bit_for_bit(dtype):
+    rng = np.random.default_rng(1)
+    # Lengths across numpy's cases: under 8, one block (<= 128), halved blocks.
+    for n in list(range(1, 140)) + [1369, 3969, 8191, 8193, 20000]:
+        a = (rng.normal(0, 100, n) * (rng.random(n) < 0.7)).astype(dtype)
+        assert window.pairwise_sum(a) == a.sum(), n
+
+
+def random_window(rng, dtype=np.float32):
+    h, w = rng.integers(5, 90, 2)
+    D = rng.normal(5, 50, (h, w)).astype(dtype)
+    u0, v0 = (int(x) for x in rng.integers(0, 1000, 2))
+    c0 = (u0 + w / 2 + rng.normal(0, 3), v0 + h / 2 + rng.normal(0, 3))
+    return D, u0, v0, c0, float(rng.uniform(3, min(h, w) / 2 + 3))
+
+
+def test_centroid_is_moments_bit_for_bit():
+    rng = np.random.default_rng(2)
+    for i in range(300):
+        D, u0, v0, c0, r = random_window(rng, np.float32 if i % 2 else np.float64)
+        n_iter = int(rng.integers(1, 6))
+        got = window.centroid(D, u0, v0, float(c0[0]), float(c0[1]), r, n_iter)
+        assert np.array_equal(got, moments(D, u0, v0, c0, r, n_iter))
+    # A window without signal leaves the start as it was.
+    assert window.centroid(-np.ones((9, 9), np.float32), 0, 0, 4.2, 3.9, 3.0, 3) == (4.2, 3.9)
+
+
+def test_departure_centroid_is_the_numpy_form():
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        P, u0, v0, c0, r = random_window(rng)
+        felt = np.ascontiguousarray(rng.normal(0, 40, (P.shape[0] + 4, P.shape[1] + 2)).astype(np.float32))
+        felt = felt[2:-2, 1:-1]  # cut from a larger image, as the tracker's felt is
+        thr = OUTLIER_SIGMAS * float(rng.uniform(0.5, 6))
+        A = np.clip(np.abs(P - felt) - thr, 0, None)
+        got = window.departure_centroid(P, felt, thr, u0, v0, float(c0[0]), float(c0[1]), r, 5)
+        assert np.array_equal(got, moments(A, u0, v0, c0, r, n_iter=5))
+
+
+def test_foreign_count_is_beyond_ball_and_the_threshold():
+    rng = np.random.default_rng(4)
+    for i in range(300):
+        D, u0, v0, c0, _ = random_window(rng)
+        b = rng.normal(0, 6, 2) if i % 3 else np.zeros(2)
+        r_out, thr = float(rng.uniform(5, 20)), float(rng.uniform(5, 80))
+        want = int((beyond_ball(D.shape, u0, v0, c0, b, r_out) & (np.abs(D) > thr)).sum())
+        got = window.foreign_count(D, u0, v0, float(c0[0]), float(c0[1]), float(b[0]), float(b[1]),
+                                   r_out + FOREIGN_GAP_PX, thr)
+        assert got == want
+
+
+def test_departure_box_means_per_part_are_the_whole_boxs():
+    """Two moving regions far apart, one at the image's edge: the box means
+    per connected part equal those over the bounding box of both, bit for
+    bit (whole-level departures; an even count of samples gives halves)."""
+    rng = np.random.default_rng(5)
+    H, W, k = 120, 200, 7
+    on = np.zeros((H, W), np.uint8)
+    on[5:30, 10:40] = 1
+    on[80:120, 150:200] = 1  # touches the bottom and right edges
+    ys, xs = np.nonzero(cv2.erode(on, np.ones((k, k), np.uint8), borderValue=1))
+    near = np.zeros((H, W), np.uint8)
+    near[ys, xs] = 1
+    near = cv2.dilate(near, np.ones((k, k), np.uint8))  # as colour.ball_direction makes it
+    for n in (9, 8):
+        samples = rng.integers(0, 256, (n, H, W, 3), dtype=np.uint8)
+        X = samples.astype(np.float32)
+        D = (X - np.median(X, axis=0)) * near[..., None].astype(bool)
+        want = np.stack([cv2.blur(d, (k, k)) for d in D])[:, ys, xs]
+        assert np.array_equal(departure_box_means(samples, near, ys, xs, k), want)
+
+
+def test_moved_boxes_from_integer_sums_are_the_float_blurs():
+    """moved_boxes' box means from integer sums: the extremes and span of
+    cv2.blur's float32 means, bit for bit."""
+    from cuespin.track.colour import moved_boxes
+    from cuespin.track.background import box_size, spread_threshold
+
+    rng = np.random.default_rng(6)
+    samples = rng.integers(0, 256, (5, 90, 130, 3), dtype=np.uint8)
+    samples[:, 20:40, 30:60] = rng.integers(0, 40, (5, 1, 1, 3), dtype=np.uint8)  # something moved
+    r, sd = 6.0, np.array([2.0, 3.0, 4.0])
+    k = box_size(r)
+    b = np.stack([cv2.blur(s.astype(np.float32), (k, k)) for s in samples])
+    span = b.max(axis=0) - b.min(axis=0)
+    noise_thr = 7.5 * np.maximum(sd, 0.5) / k + 1.0
+    want = np.any(span > [spread_threshold(span[..., i], noise_thr[i]) for i in range(3)], axis=-1)
+    assert np.array_equal(moved_boxes(samples, r, sd), want)

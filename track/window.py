@@ -1,0 +1,174 @@
+"""The tracker's per-frame arithmetic on the ball's window, compiled (numba).
+
+Around the compiled fit (:mod:`cuespin.track.kernel`) each frame's search
+and refinement spent most of their time in numpy's per-call overhead on
+small windows: the iterated centroid (:func:`cuespin.track.model.moments`,
+3 and 5 passes of ten numpy calls each, 0.5 ms a frame), the search's
+ball-likeness score over its window and the count of foreign pixels beside
+the ball.  Here each is one call, pixel by pixel, with the same arithmetic
+as its numpy form (``model.moments``, the tracker's window code): the same
+float32 values where numpy computes in float32, and numpy's own pairwise
+sums, so the tracks are the same bit for bit (``tests/test_track_window.py``).
+
+Imported by the tracker on first use (numba's import costs ~0.5 s, which
+only tracking should pay); compiled on first use and cached on disk as
+:mod:`cuespin.track.kernel` is.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from cuespin.track.kernel import _jit
+
+
+@_jit()
+def _block_sum(a, lo, n):
+    """numpy's pairwise sum of a block of at most 128 elements."""
+    if n < 8:
+        res = np.zeros(1, a.dtype)[0]
+        for i in range(n):
+            res += a[lo + i]
+        return res
+    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+    i = 8
+    while i < n - n % 8:
+        r0 += a[lo + i]
+        r1 += a[lo + i + 1]
+        r2 += a[lo + i + 2]
+        r3 += a[lo + i + 3]
+        r4 += a[lo + i + 4]
+        r5 += a[lo + i + 5]
+        r6 += a[lo + i + 6]
+        r7 += a[lo + i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
+
+
+@_jit()
+def pairwise_sum(a):
+    """numpy's ``a.sum()`` of a 1-D array, bit for bit: its pairwise
+    summation (blocks of up to 128 in eight accumulators; above that, halves
+    cut at a multiple of 8, each summed so and added), in ``a``'s type
+    (float32 sums in float32, as numpy's).  The halving is walked with an
+    explicit stack: numba's on-disk cache of a recursive function crashed."""
+    n = a.shape[0]
+    if n <= 128:
+        return _block_sum(a, 0, n)
+    # Post-order over the halving tree: nodes (lo, n, children pushed?).
+    nodes = np.empty((128, 3), np.int64)
+    vals = np.empty(128, a.dtype)
+    top, nv = 1, 0
+    nodes[0, 0], nodes[0, 1], nodes[0, 2] = 0, n, 0
+    while top > 0:
+        top -= 1
+        lo, m, expanded = nodes[top, 0], nodes[top, 1], nodes[top, 2]
+        if m <= 128:
+            vals[nv] = _block_sum(a, lo, m)
+            nv += 1
+        elif expanded:
+            nv -= 1
+            vals[nv - 1] = vals[nv - 1] + vals[nv]
+        else:
+            m2 = m // 2
+            m2 -= m2 % 8
+            nodes[top, 2] = 1
+            nodes[top + 1, 0], nodes[top + 1, 1], nodes[top + 1, 2] = lo + m2, m - m2, 0
+            nodes[top + 2, 0], nodes[top + 2, 1], nodes[top + 2, 2] = lo, m2, 0
+            top += 3
+    return vals[0]
+
+
+@_jit()
+def centroid(D, u0, v0, cu, cv, radius, n_iter):
+    """:func:`cuespin.track.model.moments`, bit for bit: the ``D``-weighted
+    centroid (px) of the pixels within ``radius`` of the centre, iterated
+    ``n_iter`` times from ``(cu, cv)``; unchanged when a window holds no
+    signal.  numpy's sums are kept (the weights' in ``D``'s type, the
+    moments' in float64, each pairwise over the whole window): the fit
+    starts here, and its stopping rule (a step under 1e-3 px) turns a start
+    changed by 1e-5 px into fits changed by up to 0.1 px in a frame whose
+    fit is ill-conditioned (a cue touching the ball)."""
+    h, w = D.shape
+    r2 = radius * radius
+    wgt = np.zeros(h * w, D.dtype)
+    mu = np.empty(h * w)
+    mv = np.empty(h * w)
+    zero = wgt[0]
+    for _ in range(n_iter):
+        for i in range(h):
+            v = float(v0 + i)
+            dv2 = (v - cv) ** 2
+            for j in range(w):
+                u = float(u0 + j)
+                p = i * w + j
+                d = D[i, j] if (u - cu) ** 2 + dv2 <= r2 else zero
+                wgt[p] = d
+                mu[p] = d * u
+                mv[p] = d * v
+        tot = pairwise_sum(wgt)
+        if tot <= 0:
+            break
+        cu, cv = pairwise_sum(mu) / tot, pairwise_sum(mv) / tot
+    return cu, cv
+
+
+@_jit()
+def departure_centroid(P, felt, thr, u0, v0, cu, cv, radius, n_iter):
+    """:func:`centroid` of ``max(|P - felt| - thr, 0)`` (the departure from
+    the felt beyond the noise, in either direction), each in float32 as
+    numpy computes it for float32 windows ``P`` and ``felt``."""
+    h, w = P.shape
+    t = np.float32(thr)
+    A = np.empty((h, w), np.float32)
+    for i in range(h):
+        for j in range(w):
+            a = np.float32(abs(np.float32(P[i, j]) - np.float32(felt[i, j])) - t)
+            A[i, j] = a if a > 0 else np.float32(0.0)
+    return centroid(A, u0, v0, cu, cv, radius, n_iter)
+
+
+@_jit()
+def foreign_count(D, u0, v0, cu, cv, bu, bv, reach, thr):
+    """How many pixels of ``D`` lie farther than ``reach`` (px) from the
+    blur segment (centre ``(cu, cv)``, blur ``(bu, bv)``) and depart from the
+    felt by more than ``thr`` (compared in float32, as numpy compares a
+    float32 window with a Python float): the pixels
+    :func:`cuespin.track.tracker.foreign_pixels` groups, with
+    :func:`cuespin.track.tracker.beyond_ball`'s distance."""
+    h, w = D.shape
+    L2 = bu * bu + bv * bv
+    t = np.float32(thr)
+    n = 0
+    for i in range(h):
+        py = float(v0 + i) - cv
+        for j in range(w):
+            if not abs(np.float32(D[i, j])) > t:
+                continue
+            px = float(u0 + j) - cu
+            s = 0.0
+            if L2 > 0:
+                s = min(max((px * bu + py * bv) / L2, -0.5), 0.5)
+            if math.hypot(px - s * bu, py - s * bv) > reach:
+                n += 1
+    return n
+
+
+def warm_up() -> None:
+    """Load (after an install, compile) each kernel for the arrays the
+    tracker passes: float32 windows, contiguous or cut from the felt."""
+    D = np.ones((9, 9), np.float32)
+    felt = np.zeros((12, 12), np.float32)[1:10, 1:10]
+    centroid(D, 0, 0, 4.0, 4.0, 3.0, 3)
+    departure_centroid(D, felt, 1.0, 0, 0, 4.0, 4.0, 3.0, 5)
+    foreign_count(D, 0, 0, 4.0, 4.0, 0.0, 0.0, 3.0, 1.0)
+
+
+__all__ = ["centroid", "departure_centroid", "foreign_count", "warm_up"]
