@@ -26,13 +26,18 @@ PATH_TOL_RADII = 0.5
 # longer gap the path's curvature (the deceleration, 2 m/s^2 while sliding)
 # and a cushion make the prediction itself uncertain.
 PATH_GAP_FRAMES = 4
+# Standard errors of a prediction's miss (its frames' and the centre's
+# stated errors) added to the tolerance: beyond 4 a true centre misses with
+# probability exp(-8) = 3e-4 per prediction (two axes, Gaussian errors).
+PATH_SIGMAS = 4.0
 # Passes of the check, each without the frames flagged before (a run of
 # false frames is peeled from its ends); few are ever needed.
 PATH_PASSES = 5
 
 
 def off_path(uv: np.ndarray, ok: np.ndarray, radius_px: float, t: np.ndarray | None = None,
-             tol_radii: float = PATH_TOL_RADII, max_gap: int = PATH_GAP_FRAMES) -> np.ndarray:
+             cov: np.ndarray | None = None, tol_radii: float = PATH_TOL_RADII,
+             max_gap: int = PATH_GAP_FRAMES) -> np.ndarray:
     """Frames (bool, shape (n,)) whose centre ``uv`` (px, shape (n, 2)) is off
     the path its ``ok`` neighbours trace.
 
@@ -44,9 +49,14 @@ def off_path(uv: np.ndarray, ok: np.ndarray, radius_px: float, t: np.ndarray | N
     skipping its nearest neighbour on each side.  Each pair's frames lie
     within ``max_gap`` frames of each other and of it.  A prediction misses
     when it is farther than ``tol_radii`` radii ``radius_px`` plus half the
-    pair's own travel over the interval it is carried (a velocity that
-    changes by up to half within it: the frame whose exposure spans the
-    strike, at any speed).  A frame is flagged when every prediction of the
+    pair's own travel over the interval it is carried, up to one frame's
+    (the frame whose exposure spans the strike lies up to half a frame's
+    travel off the line; more would pass a false centre a frame's travel
+    ahead on a fast ball: the red ball's crescent at 60 fps, 1.3 radii
+    ahead at one radius a frame), plus ``PATH_SIGMAS`` standard errors of
+    the miss from the track's typical stated covariance ``cov`` (px^2,
+    (n, 2, 2); None: none), which matters only on a noisy track (a prediction carried two
+    frames from two centres has sqrt(13) times their error).  A frame is flagged when every prediction of the
     near kind misses, or every one of the far kind does (at least one
     made): a pair of false centres side by side vouches for each other
     through the near predictions, never through the far ones.  A true frame
@@ -56,19 +66,28 @@ def off_path(uv: np.ndarray, ok: np.ndarray, radius_px: float, t: np.ndarray | N
     """
     ok = np.asarray(ok, bool)
     t = np.arange(len(ok), dtype=float) if t is None else np.asarray(t, float)
+    # One per-axis variance for every centre: the median over the ok frames
+    # of half their covariance's trace.  Not each frame's own: a false centre
+    # fitted badly states a large error and would excuse itself.
+    var = np.zeros(len(ok))
+    if cov is not None and ok.any():
+        v = np.trace(np.asarray(cov, float)[ok], axis1=1, axis2=2) / 2
+        var[:] = np.median(v[np.isfinite(v)]) if np.isfinite(v).any() else 0.0
     out = np.zeros(len(ok), bool)
     for _ in range(PATH_PASSES):
-        more = _off_path_once(uv, ok & ~out, t, radius_px, tol_radii, max_gap)
+        more = _off_path_once(uv, ok & ~out, t, var, radius_px, tol_radii, max_gap)
         if not more.any():
             break
         out |= more
     return out
 
 
-def _misses(P, T, a: int, b: int, x: float, y: float, tk: float, tol: float) -> bool:
+def _misses(P, T, V, a: int, b: int, x: float, y: float, tk: float, vk: float, tol: float, frame: float) -> bool:
     """Whether the centre (x, y) at time tk lies off the line through ok
     frames a and b (indices into P, T), by more than tol plus half the
-    pair's travel over the interval carried."""
+    pair's travel over the interval carried, at most over one ``frame``,
+    plus PATH_SIGMAS standard errors of the miss (per-axis variances V of
+    the pair, vk of the centre)."""
     dt = T[b] - T[a]
     f = (tk - T[a]) / dt
     px, py = P[a][0] + f * (P[b][0] - P[a][0]), P[a][1] + f * (P[b][1] - P[a][1])
@@ -77,10 +96,11 @@ def _misses(P, T, a: int, b: int, x: float, y: float, tk: float, tol: float) -> 
     else:
         carried = min(abs(tk - T[a]), abs(tk - T[b]))
     step = ((P[b][0] - P[a][0]) ** 2 + (P[b][1] - P[a][1]) ** 2) ** 0.5
-    return ((x - px) ** 2 + (y - py) ** 2) ** 0.5 > tol + 0.5 * step * carried / dt
+    sd = (vk + (1 - f) ** 2 * V[a] + f * f * V[b]) ** 0.5
+    return ((x - px) ** 2 + (y - py) ** 2) ** 0.5 > tol + 0.5 * step * min(carried, frame) / dt + PATH_SIGMAS * sd
 
 
-def _off_path_once(uv, ok, t, radius_px, tol_radii, max_gap) -> np.ndarray:
+def _off_path_once(uv, ok, t, var, radius_px, tol_radii, max_gap) -> np.ndarray:
     """One pass of :func:`off_path`."""
     n = len(ok)
     out = np.zeros(n, bool)
@@ -91,25 +111,27 @@ def _off_path_once(uv, ok, t, radius_px, tol_radii, max_gap) -> np.ndarray:
     tol = tol_radii * radius_px
     P = np.asarray(uv, float)[idx].tolist()
     T = t[idx].tolist()
+    V = var[idx].tolist()
     K = idx.tolist()
+    frame = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
 
     def near(i, j):  # ok frames i, j (indices into K) close enough to predict
         return 0 <= i < m and 0 <= j < m and abs(K[j] - K[i]) <= max_gap
 
     for j in range(m):
         x, y = P[j]
-        tk = T[j]
+        tk, vk = T[j], V[j]
         verdicts = {1: [], 2: []}
         for s in (1, 2):  # s = 1: the nearest neighbours; 2: one step farther out
             if near(j - s - 1, j - s) and near(j - s, j):
-                verdicts[s].append(_misses(P, T, j - s - 1, j - s, x, y, tk, tol))
+                verdicts[s].append(_misses(P, T, V, j - s - 1, j - s, x, y, tk, vk, tol, frame))
             if near(j + s, j + s + 1) and near(j, j + s):
-                verdicts[s].append(_misses(P, T, j + s, j + s + 1, x, y, tk, tol))
+                verdicts[s].append(_misses(P, T, V, j + s, j + s + 1, x, y, tk, vk, tol, frame))
             if near(j - s, j) and near(j, j + s):
-                verdicts[s].append(_misses(P, T, j - s, j + s, x, y, tk, tol))
+                verdicts[s].append(_misses(P, T, V, j - s, j + s, x, y, tk, vk, tol, frame))
         if any(v and all(v) for v in verdicts.values()):
             out[K[j]] = True
     return out
 
 
-__all__ = ["PATH_GAP_FRAMES", "PATH_TOL_RADII", "off_path"]
+__all__ = ["PATH_GAP_FRAMES", "PATH_SIGMAS", "PATH_TOL_RADII", "off_path"]

@@ -495,7 +495,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     # Nor is a centre none of its neighbours can account for (the cue's tip
     # at the strike, a shaded ball's rim): the path decides (track.path).
     t = frame_times(path, info, k, cam.fps)
-    jumped = off_path(uv, status == OK, radius_px, t=t)
+    jumped = off_path(uv, status == OK, radius_px, t=t, cov=cov)
     status[jumped] = OFF_PATH
     uv[jumped] = np.nan
     cov[jumped] = np.nan
