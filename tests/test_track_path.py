@@ -36,6 +36,32 @@ def test_isolated_and_paired_jumps_are_caught_and_their_neighbours_kept():
     assert set(np.flatnonzero(flagged)) == set(bad)
 
 
+def test_a_false_pair_at_the_start_does_not_vouch_for_itself():
+    # Review of fp4: the red ball's crescent in the first two ok frames
+    # (1.37 and 1.32 radii off, the same way) passed, each through the other.
+    uv, ok = path_with_noise(3)
+    ok[:11] = False
+    uv[11:13] += [[1.37 * R_PX, 0.2], [1.32 * R_PX, 0.0]]
+    assert set(np.flatnonzero(off_path(uv, ok, R_PX))) == {11, 12}
+
+
+def test_fast_strike_and_variable_frame_times_keep_true_centres():
+    # 60 fps, a frame-long exposure, struck at 4.7 radii a frame (8 m/s): the
+    # frame whose exposure spans the strike lies between the rest and the
+    # departure; frame intervals jittered by up to 40% (vfr_jitter), each
+    # centre at its own time.
+    rng = np.random.default_rng(4)
+    n = 80
+    t = np.cumsum(rng.uniform(0.6, 1.4, n))
+    t0 = t[30] - 0.5                      # the strike inside frame 30's exposure
+    v = 4.7 * R_PX
+    # the exposure-averaged centre over [t - 1, t]: the mean of max(0, s - t0)
+    lo, hi = np.maximum(t - 1 - t0, 0), np.maximum(t - t0, 0)
+    s = v * (hi**2 - lo**2) / 2
+    uv = np.c_[100 + 0.8 * s, 200 + 0.6 * s] + rng.normal(0, 0.05 * R_PX, (n, 2))
+    assert not off_path(uv, np.ones(n, bool), R_PX, t=t).any()
+
+
 def test_a_centre_within_the_tolerance_is_kept():
     uv, ok = path_with_noise(2, noise=0.0)
     uv[60] += [0.8 * PATH_TOL_RADII * R_PX, 0]

@@ -270,7 +270,7 @@ def realistic_image_jacobian(renderer, k: int, fit_blur: bool = False):
             r = copy.copy(renderer)
             r.settings = settings
             r._psf = float(settings["psf_sigma"])
-        delta, a0, b0 = r._delta_of(nodes_uv, nodes_xy, t, albedo, rot)
+        delta, a0, b0 = r._delta_of(nodes_uv, nodes_xy, albedo, None if rot is None else rot(t))
         out = np.zeros((Hh, W, 3))
         if delta is None:
             return out

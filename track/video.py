@@ -494,7 +494,8 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     cov[pulled] = np.nan
     # Nor is a centre none of its neighbours can account for (the cue's tip
     # at the strike, a shaded ball's rim): the path decides (track.path).
-    jumped = off_path(uv, status == OK, radius_px)
+    t = frame_times(path, info, k, cam.fps)
+    jumped = off_path(uv, status == OK, radius_px, t=t)
     status[jumped] = OFF_PATH
     uv[jumped] = np.nan
     cov[jumped] = np.nan
@@ -527,7 +528,6 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     # metres at the image centre's scale, so that the misfit's thresholds
     # stay in px (a similarity camera: the same numbers as in px).
     misfit = LookMisfit()
-    t = frame_times(path, info, k, cam.fps)
     if bg.polarity and tracker.shade is not False and ok.any():
         s = cam.px_per_m(center)
         cov_t = np.full_like(cov, np.nan)
