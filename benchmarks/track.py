@@ -10,7 +10,9 @@ speed:    per codec (MJPG, FFV1, mp4v, H.264 written with PyAV's libx264) a
           time on a shared machine, and what a fully loaded one gives).
           With --threads, each run's CPU split by thread (Linux: sampled
           from /proc/self/task): the main thread, the decoder thread, FFmpeg's
-          and OpenCV's worker threads, with the minor page faults of each.
+          and other libraries' worker threads, with the minor page faults of each
+          (the sampler's own CPU, its row, 0.05-0.15 s a run, is in the
+          process times then: take the ratios from a run without it).
 memory:   peak RSS of the tracker (in a fresh process) on a 1000-frame video
           and on a 10000-frame one (target: within 20 MB).
 accuracy: centroid RMSE against the truth sidecar and the Cramer-Rao bound
@@ -121,8 +123,10 @@ def _task_cpu() -> dict:
 class ThreadCPU:
     """Each thread's CPU between construction and :meth:`done`, sampled every
     20 ms (a thread that ends loses at most its last 20 ms).  Python threads
-    are named by their target's thread name; OpenCV's pool workers have no
-    name of their own (the process's, "python"), FFmpeg's are "av:...".
+    are named by their thread name, FFmpeg's decoder threads "av:...";
+    threads a library starts unnamed show the process's name, "python"
+    (OpenCV's pool, and one started at the first frame decoded that keeps
+    its ~0.2 s a 1000-frame run, in decoding alone too, at cv2.setNumThreads(1)).
     """
 
     def __init__(self):
