@@ -8,6 +8,11 @@ speed:    per codec (MJPG, FFV1, mp4v, H.264 written with PyAV's libx264) a
           median of the ratios (target >= 0.8), and the median ratio of
           their CPU times (process-wide, both threads: less noisy than wall
           time on a shared machine, and what a fully loaded one gives).
+          With --threads, each run's CPU split by thread (Linux: sampled
+          from /proc/self/task): the main thread, the decoder thread, FFmpeg's
+          and other libraries' worker threads, with the minor page faults of each
+          (the sampler's own CPU, its row, 0.05-0.15 s a run, is in the
+          process times then: take the ratios from a run without it).
 memory:   peak RSS of the tracker (in a fresh process) on a 1000-frame video
           and on a 10000-frame one (target: within 20 MB).
 accuracy: centroid RMSE against the truth sidecar and the Cramer-Rao bound
@@ -33,16 +38,20 @@ realistic: per look of the realistic renderer (uniform, shaded, highlight,
           absorbs), the same for MJPG, and grey-only against the luma bound.
 
 Usage: python benchmarks/track.py [speed] [memory] [colour] [accuracy] [realistic] [--quick] [--frames 1000 10000]
+                                  [--repeat 3] [--threads]
                                   [--n 60] [--seed 0] [--workers 2] [--seconds 0.6] [--csv out.csv]
        python benchmarks/track.py realistic --summarize out.csv
 """
 
 import argparse
+import collections
 import json
+import os
 import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -94,20 +103,87 @@ def decode_only(path) -> float:
     return n / seconds
 
 
-def speed(tmp, repeat, lengths):
+def _task_cpu() -> dict:
+    """{native thread id: (name, CPU s, of it in the kernel s, minor faults)} of this process."""
+    tick = os.sysconf("SC_CLK_TCK")
+    out = {}
+    for tid in os.listdir("/proc/self/task"):
+        try:
+            with open(f"/proc/self/task/{tid}/stat") as f:
+                stat = f.read()
+            with open(f"/proc/self/task/{tid}/comm") as f:
+                name = f.read().strip()
+        except OSError:  # the thread ended
+            continue
+        rest = stat[stat.rindex(")") + 2:].split()  # proc(5): minflt, utime, stime are fields 10, 14, 15
+        out[int(tid)] = (name, (int(rest[11]) + int(rest[12])) / tick, int(rest[12]) / tick, int(rest[7]))
+    return out
+
+
+class ThreadCPU:
+    """Each thread's CPU between construction and :meth:`done`, sampled every
+    20 ms (a thread that ends loses at most its last 20 ms).  Python threads
+    are named by their thread name, FFmpeg's decoder threads "av:...";
+    threads a library starts unnamed show the process's name, "python"
+    (OpenCV's pool, and one started at the first frame decoded that keeps
+    its ~0.2 s a 1000-frame run, in decoding alone too, at cv2.setNumThreads(1)).
+    """
+
+    def __init__(self):
+        self.first = _task_cpu()
+        self.last = dict(self.first)
+        self.names = {threading.main_thread().native_id: "main"}
+        self._stop = threading.Event()
+        self._t = threading.Thread(target=self._run, name="sampler", daemon=True)
+        self._t.start()
+
+    def _run(self):
+        while not self._stop.wait(0.02):
+            self.last.update(_task_cpu())
+            for t in threading.enumerate():
+                if t.native_id is not None and t.native_id not in self.names:
+                    self.names[t.native_id] = "py:" + t.name.split(" ")[0]
+
+    def done(self) -> dict:
+        """{thread name: [CPU s, kernel s, minor faults]}, threads of one name summed."""
+        self._stop.set()
+        self._t.join()
+        self.last.update(_task_cpu())
+        out = collections.defaultdict(lambda: [0.0, 0.0, 0])
+        for tid, (name, cpu, sys_, flt) in self.last.items():
+            _, cpu0, sys0, flt0 = self.first.get(tid, (name, 0.0, 0.0, 0))
+            row = out[self.names.get(tid, name)]
+            row[0] += cpu - cpu0
+            row[1] += sys_ - sys0
+            row[2] += flt - flt0
+        return dict(out)
+
+
+def _thread_line(label, split):
+    parts = [f"{k} {v[0]:.2f}" + (f" (sys {v[1]:.2f}, {v[2] // 1000}k faults)" if v[2] >= 1000 else "")
+             for k, v in sorted(split.items(), key=lambda kv: -kv[1][0]) if v[0] >= 0.005]
+    print(f"    {label:8} " + ", ".join(parts))
+
+
+def speed(tmp, repeat, lengths, threads=False):
     print("\nspeed: 1280x640 colour, 240 fps (median of alternating runs)")
     print(f"{'codec':6} {'frames':>6} {'decode fps':>11} {'track fps':>10} {'ratio':>6} {'cpu':>5}  ok")
     for n in lengths:
         for codec in CODECS:
             video, scene = colour_video(tmp, codec, n)
             decs, trks, ratios, cpus = [], [], [], []
+            splits = []
             for _ in range(repeat):  # interleaved: the machine is shared
+                per = ThreadCPU() if threads else None
                 c = time.process_time()
                 d = decode_only(video)
                 c_dec = time.process_time() - c
+                splits.append(per.done() if per else None)
+                per = ThreadCPU() if threads else None
                 t, c = time.perf_counter(), time.process_time()
                 res = track_video(video, scene)
                 k = res.n_frames / (time.perf_counter() - t)
+                splits.append(per.done() if per else None)
                 cpus.append(c_dec / (time.process_time() - c))
                 decs.append(d)
                 trks.append(k)
@@ -115,6 +191,9 @@ def speed(tmp, repeat, lengths):
             print(f"{codec:6} {res.n_frames:6d} {statistics.median(decs):11.1f} "
                   f"{statistics.median(trks):10.1f} {statistics.median(ratios):6.2f} {statistics.median(cpus):5.2f}  "
                   f"{res.ok.sum()}/{res.n_frames}", flush=True)
+            if threads:  # the last run's split, by thread (CPU s)
+                _thread_line("decode", splits[-2])
+                _thread_line("track", splits[-1])
             if n >= 5000:
                 video.unlink()
 
@@ -403,6 +482,7 @@ def main():
     ap.add_argument("--csv", default=None, help="realistic: write every shot's row here")
     ap.add_argument("--summarize", default=None, help="realistic: only print the table of a CSV written before")
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--threads", action="store_true", help="speed: each run's CPU by thread (Linux)")
     ap.add_argument("--quick", action="store_true", help="one radius in the accuracy table")
     ap.add_argument("--frames", type=int, nargs="+", default=[1000, 10000])
     args = ap.parse_args()
@@ -415,7 +495,7 @@ def main():
         realistic(args)
     with tempfile.TemporaryDirectory() as tmp:
         if "speed" in args.parts:
-            speed(tmp, args.repeat, args.frames)
+            speed(tmp, args.repeat, args.frames, args.threads)
         if "memory" in args.parts:
             memory(tmp, args.frames)
         if "colour" in args.parts:
