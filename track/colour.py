@@ -273,20 +273,22 @@ def learn_projection(samples: np.ndarray, radius_px) -> Projection:
     sd = np.sqrt(np.diag(S))
     ys, xs = np.nonzero(ball_wide(moved_boxes(samples, radius_px, sd), radius_px))
     luma = np.array([0.114, 0.587, 0.299])
-    w = None
+    w = blind = None
     if len(ys):
         e = ball_direction(samples, ys, xs, radius_px, L)
         if e is not None:
             w = np.linalg.solve(L.T, e)                       # w . d = e . z
             blind = white_free(L @ e, S)
             if blind is not None:
-                w = blind
+                # the ball bright in it; its weights sum to 0, so the sign
+                # rule below would follow rounding (review: -2.2e-16)
+                w = blind if blind @ (L @ e) > 0 else -blind
     if w is None:
         w = luma / np.sqrt(luma @ S @ luma)
     # Projected noise variance w^T S w = 1 here; give it the channels' mean
     # variance, so the projected image's noise reads like a channel's.
     w = w / np.sqrt(w @ S @ w) * np.sqrt(np.trace(S) / 3.0)
-    if w.sum() < 0:  # keep bright things bright where it costs nothing (grey-like w)
+    if blind is None and w.sum() < 0:  # keep bright things bright where it costs nothing (grey-like w)
         w = -w
     felt = np.median(samples[0].reshape(-1, 3), axis=0)
     return Projection(w=w.astype(np.float32), offset=float(FELT_LEVEL - felt @ w), noise_cov=S)
