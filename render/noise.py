@@ -41,6 +41,7 @@ not a multiple of 64 pads its last chunk (the stream is the same).
 from __future__ import annotations
 
 import ctypes
+import os
 
 import numpy as np
 
@@ -52,6 +53,7 @@ CHUNK = 64          # pixels per step of the kernel (one 512-bit register of byt
 
 def splitmix_words(seed: int, start: int, count: int) -> np.ndarray:
     """Words ``start .. start + count - 1`` of the SplitMix64 stream from ``seed`` (uint64)."""
+    seed = int(seed) & 0xFFFFFFFFFFFFFFFF   # as the kernels read it (a negative seed too)
     z = np.arange(start + 1, start + count + 1, dtype=np.uint64)
     t = np.empty_like(z)
     with np.errstate(over="ignore"):     # in place: modular uint64 arithmetic throughout
@@ -218,6 +220,8 @@ def count_thresholds(table: np.ndarray):
     if np.any(np.diff(t) < 0):
         return None
     up = [int(np.argmax(t >= level)) for level in range(1, max(int(t.max()), 0) + 1)]
+    if int(t.min()) < 0 and int(t.max()) == int(t.min()):
+        return None   # a constant negative law: its down thresholds lie past the last byte
     down = [int(np.argmax(t > -level)) for level in range(1, max(-int(t.min()), 0) + 1)]
     return up, down
 
@@ -257,7 +261,12 @@ def _compile(two: bool, counts=None):
     try:
         import llvmlite.binding as llvm
 
-        if counts is None and not llvm.get_host_cpu_features().get("avx512vbmi", False):
+        feats = llvm.get_host_cpu_features()
+        flat = feats.flatten()
+        # The VBMI IR aborts the interpreter (an LLVM error, not an
+        # exception) on a target without it: the same feature string the
+        # target machine gets must carry it.
+        if counts is None and ("+avx512vbmi" not in flat.split(",") or not feats.get("avx512vbmi", False)):
             return None
         try:
             llvm.initialize_native_target()
@@ -267,19 +276,21 @@ def _compile(two: bool, counts=None):
         mod = llvm.parse_assembly(_kernel_ir(two) if counts is None else _count_ir(*counts))
         mod.verify()
         target = llvm.Target.from_default_triple()
-        tm = target.create_target_machine(cpu=llvm.get_host_cpu_name(),
-                                          features=llvm.get_host_cpu_features().flatten(), opt=3)
+        tm = target.create_target_machine(cpu=llvm.get_host_cpu_name(), features=flat, opt=3)
         engine = llvm.create_mcjit_compiler(mod, tm)
         engine.finalize_object()
         _ENGINES.append(engine)
         addr = engine.get_function_address("add_noise")
-    except Exception:   # any failure: the numpy reference draws the same frames
+    except Exception:   # any failure: OpenCV's passes over the same stream draw the same frames
         return None
     proto = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int64, ctypes.c_void_p,
                              ctypes.c_uint64)
     return proto(addr)
 
 
+# Environment override of the implementation (the frames are the same):
+# "auto" (compiled kernels where they run), "opencv", "reference" (numpy).
+NOISE_ENV = "CUESPIN_NOISE"
 # A law with more thresholds than this (sigma above ~12) is left to OpenCV:
 # the portable kernel's cost grows with their number.
 MAX_COUNT_THRESHOLDS = 64
@@ -327,8 +338,10 @@ def add_noise(img: np.ndarray, tables: np.ndarray, seed: int, two: bool,
     ndarray of uint8
         ``out``, or a new array.
     """
-    fn = kernel(two) if compiled else None
-    if fn is None and compiled and not two:
+    choice = os.environ.get(NOISE_ENV, "auto")
+    compiled = compiled and choice != "reference"
+    fn = kernel(two) if compiled and choice == "auto" else None
+    if fn is None and compiled and choice == "auto" and not two:
         fn = count_kernel(np.ascontiguousarray(tables, dtype=np.uint8))
     if fn is None:
         res = (add_noise_opencv if compiled else add_noise_reference)(img, tables, seed, two)

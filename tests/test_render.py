@@ -564,3 +564,30 @@ def test_tracker_states_honest_errors_on_byte_noise(tmp_path):
         moving = tr.ok[:n] & (tr.t[:n] > scene.truth.t0 + 0.02)
         z[law] = np.sqrt(np.mean(((tr.uv[:n] - tuv)[moving] / tr.stderr_px[:n][moving]) ** 2))
     assert 0.8 <= z["byte"] <= 1.35 and abs(z["byte"] / z["alias"] - 1) < 0.2, z
+
+
+def test_noise_edge_cases_review():
+    """A constant negative law is not countable (its thresholds lie past the
+    last byte), a negative seed draws what its 64-bit mask draws, and the
+    environment override picks an implementation without changing a pixel."""
+    import os
+
+    from cuespin.render.noise import NOISE_ENV, add_noise, add_noise_reference, count_thresholds
+
+    assert count_thresholds(np.full(256, -1)) is None
+    img = np.full((7, 13, 3), 100, np.uint8)
+    tab = np.zeros((3, 256), np.uint8)
+    tab[0] = (np.arange(256) % 5 - 2).astype(np.int8).view(np.uint8)
+    ref = add_noise_reference(img, tab, -5, False)
+    assert np.array_equal(ref, add_noise_reference(img, tab, 2**64 - 5, False))
+    assert np.array_equal(ref, add_noise(img, tab, -5, False))
+    old = os.environ.get(NOISE_ENV)
+    try:
+        for choice in ("opencv", "reference", "auto"):
+            os.environ[NOISE_ENV] = choice
+            assert np.array_equal(ref, add_noise(img, tab, -5, False)), choice
+    finally:
+        if old is None:
+            os.environ.pop(NOISE_ENV, None)
+        else:
+            os.environ[NOISE_ENV] = old
