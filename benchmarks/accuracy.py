@@ -47,6 +47,22 @@ MAX_SECONDS = 6.0
 COMPONENTS = ("v0x", "v0y", "w0x", "w0y")
 
 
+def code_version() -> str:
+    """A hash of the sources that make a track (track/ and render/): a cached
+    track made by other code is stale for tracking questions (it still serves
+    fit/ and recover/ ones) and is counted as such in the summary."""
+    import hashlib
+
+    import cuespin.render
+    import cuespin.track
+
+    h = hashlib.sha1()
+    for pkg in (cuespin.render, cuespin.track):
+        for f in sorted(Path(pkg.__file__).parent.glob("*.py")):
+            h.update(f.name.encode() + f.read_bytes())
+    return h.hexdigest()[:12]
+
+
 def one_shot(args):
     i, seed, tmp, codec, tracks, only_cached, noise_max, camera, disc, look, preset = args
     from cuespin.data_gen.sampler import sample_scenes
@@ -110,15 +126,17 @@ def one_shot(args):
             centre = cam.to_table([[cam.width / 2, cam.height / 2]])[0]
             tr.touched = leaving_rest(uv, good, scene.physics.R * cam.px_per_m(centre))
         n, t_decode = int(z["frames"]), float(z["t_decode"])
+        stale = str(z["code"]) != code_version() if "code" in z else True
     else:
         video = Path(tmp) / f"shot_{i}.avi"
         render_video(scene, video)
         t_decode, n = decode_seconds(video)
         tr = track_video(video, scene, TrackerConfig())
         video.unlink()
+        stale = False
         if cached is not None:
             np.savez(cached, t=tr.t, xy=tr.xy, ok=tr.ok, cov_px=tr.cov_px, lossless=tr.lossless,
-                     inter_frame=tr.inter_frame, frames=n, t_decode=t_decode,
+                     inter_frame=tr.inter_frame, frames=n, t_decode=t_decode, code=code_version(),
                      independent=getattr(tr, "independent_errors", tr.lossless),
                      shaded=getattr(tr, "look_shaded", False),
                      look_factor=getattr(tr, "look_factor", 1.0), look_rho=getattr(tr, "look_rho", 0.0),
@@ -143,7 +161,8 @@ def one_shot(args):
     truth, p = scene.truth, scene.physics
     v0, w0 = np.array(truth.v0), np.array(truth.w0)
     speed = np.hypot(*v0)
-    row = {"i": i, "preset": scene.render.get("preset"), "look_factor": float(getattr(tr, "look_factor", 1.0)),
+    row = {"i": i, "stale": stale, "preset": scene.render.get("preset"),
+           "look_factor": float(getattr(tr, "look_factor", 1.0)),
            "fps": cam.fps, "codec": scene.render.get("codec"),
            "camera": camera, "height_m": float(cam.centre[2]) if cam.is_pinhole else np.nan,
            "noise": scene.render.get("noise_sigma"), "frames": n, "t_decode": t_decode,
@@ -304,6 +323,10 @@ def summarize(rows, seed=0):
     rows = sorted(rows, key=lambda r: r["i"])
     n = len(rows)
     print(f"\n{n} shots (seed {seed}); errors over shots answered ok")
+    stale = sum(str(r.get("stale", "")) in ("True", "1", "1.0") for r in rows)
+    if stale:
+        print(f"{stale} of {n} tracks were kept by other tracker/renderer code (track/, render/): "
+              "their tracking is not this code's; the fits and recoveries are")
     print(f"{'method':6} {'ok':>5} {'v0 med':>9} {'v0 p95':>9} {'Rw0 med':>9} {'Rw0 p95':>9}  other statuses")
     for m in ("paper", "mle"):
         ok = [r for r in rows if r[f"{m}_status"] == "ok"]
