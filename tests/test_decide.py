@@ -182,7 +182,8 @@ def test_false_stop_apart_rate_small():
 
 @pytest.mark.slow
 def test_false_stop_apart_rate_400():
-    hits, total = false_stop_apart(420, 22)
+    # seed 31: fresh (CASE2_FACTOR was chosen after a failure on seed 22)
+    hits, total = false_stop_apart(420, 31)
     assert total >= 400 and hits <= allowed(total), (hits, total)
 
 
