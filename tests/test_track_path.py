@@ -1,5 +1,6 @@
 """Found centres checked against the ball's path (track.path), and the
-colour channel blind to white (track.colour.white_free): pure functions."""
+colour channel blind to white (track.colour.white_free), the pulled-fit rule by
+phase (track.tracker.pulled_fits): pure functions."""
 
 import numpy as np
 
@@ -92,3 +93,18 @@ def test_white_free_weights_see_no_white_and_keep_the_hue():
     assert WHITE_FREE_MIN <= kept < 1
     # A white ball on grey felt differs in brightness only: no such channel.
     assert white_free(np.array([120.0, 118.0, 121.0]), S) is None
+
+
+def test_a_rest_is_held_to_its_own_typical_fit():
+    # A logo fitted at rest explains its window ~3.5 times worse than the
+    # blurred ball in motion: against the pooled typical fit every rest frame
+    # was dropped; each phase against its own, only a fit pulled within it.
+    from cuespin.track.tracker import PULLED_RMS_FACTOR, pulled_fits
+
+    rng = np.random.default_rng(5)
+    still = np.r_[np.ones(60, bool), np.zeros(100, bool)]
+    rms = np.where(still, 3.5, 1.0) * rng.uniform(0.9, 1.1, len(still))
+    rms[[10, 100]] *= 1.2 * PULLED_RMS_FACTOR     # one pulled fit in each phase
+    ok = np.ones(len(rms), bool)
+    assert pulled_fits(rms, ok)[still].sum() > 50  # the pooled rule: the rest dropped
+    assert set(np.flatnonzero(pulled_fits(rms, ok, still=still))) == {10, 100}

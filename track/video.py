@@ -488,7 +488,13 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     rms = np.array(rms, float)
     # A false centre is worse than a missing one: fits that explain their
     # window much worse than the track's typical fit are dropped.
-    pulled = pulled_fits(rms, status == OK)
+    found = status == OK
+    step = np.full(len(uv), np.inf)  # the distance to the nearer found neighbour (px)
+    d = np.hypot(*(uv[1:] - uv[:-1]).T)
+    d = np.where(found[1:] & found[:-1], d, np.inf)
+    step[1:] = d
+    step[:-1] = np.minimum(step[:-1], d)
+    pulled = pulled_fits(rms, found, still=step < STILL_PX)
     status[pulled] = PULLED
     uv[pulled] = np.nan
     cov[pulled] = np.nan
