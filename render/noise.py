@@ -232,21 +232,17 @@ def _count_ir(up, down) -> str:
     def splat8(v):
         return "<" + ", ".join([f"i8 {v}"] * 64) + ">"
 
+    def count(tag, cmp, thresholds, out):  # %out = how many thresholds the byte passes
+        acc, ir = "zeroinitializer", ""
+        for j, v in enumerate(thresholds):
+            ir += (f"  %{tag}u{j} = icmp {cmp} <64 x i8> %b, {splat8(v)}\n"
+                   f"  %{tag}z{j} = zext <64 x i1> %{tag}u{j} to <64 x i8>\n"
+                   f"  %{tag}a{j} = add <64 x i8> {acc}, %{tag}z{j}\n")
+            acc = f"%{tag}a{j}"
+        return ir + f"  %{out} = add <64 x i8> {acc}, zeroinitializer\n"
+
     body = "  %w0 = mul i64 %i, 8\n" + _words_ir("b", "%w0")
-    acc = "zeroinitializer"
-    for j, p in enumerate(up):
-        body += (f"  %pu{j} = icmp uge <64 x i8> %b, {splat8(p)}\n"
-                 f"  %pz{j} = zext <64 x i1> %pu{j} to <64 x i8>\n"
-                 f"  %pa{j} = add <64 x i8> {acc}, %pz{j}\n")
-        acc = f"%pa{j}"
-    body += f"  %pos = add <64 x i8> {acc}, zeroinitializer\n"
-    acc = "zeroinitializer"
-    for j, q in enumerate(down):
-        body += (f"  %qu{j} = icmp ult <64 x i8> %b, {splat8(q)}\n"
-                 f"  %qz{j} = zext <64 x i1> %qu{j} to <64 x i8>\n"
-                 f"  %qa{j} = add <64 x i8> {acc}, %qz{j}\n")
-        acc = f"%qa{j}"
-    body += f"  %neg = add <64 x i8> {acc}, zeroinitializer\n"
+    body += count("p", "uge", up, "pos") + count("q", "ult", down, "neg")
     return _function_ir("", body)
 
 
