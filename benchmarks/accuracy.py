@@ -32,6 +32,7 @@ Usage: python benchmarks/accuracy.py [--n 200] [--seed 0] [--workers 2] [--csv o
 
 import argparse
 import csv
+import functools
 import inspect
 import tempfile
 from multiprocessing import Pool
@@ -47,6 +48,7 @@ MAX_SECONDS = 6.0
 COMPONENTS = ("v0x", "v0y", "w0x", "w0y")
 
 
+@functools.lru_cache(maxsize=1)
 def code_version() -> str:
     """A hash of the sources that make a track (track/ and render/): a cached
     track made by other code is stale for tracking questions (it still serves

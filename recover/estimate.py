@@ -320,7 +320,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
 
 
 def _refit(keep: Decided, seg, t, xy, params, exposure_s, fit_friction, run_paper, lossless, sigma,
-           frame_dt, measure, codec, t_fit, clock, independent=None) -> Estimate:
+           frame_dt, measure, codec, t_fit, clock, independent: bool) -> Estimate:
     """:func:`estimate` keeping an earlier recovery's decisions (``keep``):
     the same model fitted from the earlier answer, the same segmentation,
     path shape and root for the paper's method."""
@@ -346,8 +346,7 @@ def _refit(keep: Decided, seg, t, xy, params, exposure_s, fit_friction, run_pape
                             "found through this camera")
     elif run_paper and seg:
         paper_sigma = math.sqrt(sigma**2 + max(meas.codec_m2(keep.codec_var), 0.0))
-        paper = paper_from_segments(chosen, t, xy, params, paper_sigma, frame_dt, keep.strike_seen,
-                                    lossless if independent is None else independent,
+        paper = paper_from_segments(chosen, t, xy, params, paper_sigma, frame_dt, keep.strike_seen, independent,
                                     curved=keep.curved, near=keep.paper, apart=keep.stop_apart)
     return Estimate(chosen or seg, paper, mle, meas, keep.codec_var, decisions,
                     {"fit": t_fit, "recover": time.perf_counter() - clock}, keep)
