@@ -248,3 +248,37 @@ def test_no_ball_anywhere(tmp_path):
     write_scene(sf, scene)
     render_video(scene, tmp_path / "v.avi")
     one_line(cli("track", tmp_path / "v.avi", "--scene", sf, "-o", tmp_path / "t.csv"), "no ball found")
+
+
+def test_felt_accumulator_sums_whole_frames_exactly():
+    """The whole frames' 16-bit sums, carried into float32 every FULL_CARRY
+    frames, give the float32 running sum's felt bit for bit (cv2.accumulate,
+    the ball's pixels taken back out), across two carries."""
+    import cv2
+
+    from cuespin.track.background import FULL_CARRY, FeltAccumulator
+    from cuespin.track.colour import Projection
+
+    rng = np.random.default_rng(3)
+    n, shape = 2 * FULL_CARRY + 9, (48, 64, 3)
+    felt = FeltAccumulator(shape)
+    ref = np.zeros(shape, np.float32)
+    hidden = np.zeros(shape[:2], np.int32)
+    for k in range(n):
+        frame = rng.integers(0, 256, shape, dtype=np.uint8)
+        if k % 3 == 0:
+            frame[:] = 255  # the sum's worst case
+        centre = rng.uniform(0, 64, 2)
+        felt.add_frame(frame, centre, 6.0)
+        cv2.accumulate(frame, ref)
+        out = FeltAccumulator._disc(0, 0, 48, 64, centre, 6.0)
+        ref[out] -= frame[out]
+        hidden += out
+    assert felt.n_full == n
+    fallback = np.zeros(shape[:2], np.float32)
+    green = Projection(w=np.array([0.0, 1.0, 0.0], np.float32))
+    grey = felt.felt(fallback, green)
+    full_count = n - hidden
+    want = np.where(full_count >= 20, ref[..., 1] / np.maximum(full_count, 1), fallback)
+    assert np.array_equal(felt.full, ref)
+    assert np.array_equal(grey, want.astype(np.float32))
