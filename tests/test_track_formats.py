@@ -158,36 +158,3 @@ def test_realistic_look_found_without_false_positives(tmp_path, seed):
     # frames a slid-off look-ahead gave up before the strike not counted).
     after = truth.t > scene.truth.t0 + 0.02
     assert res.ok[after].mean() > 0.95, res.status_counts()
-
-
-def test_recycled_frame_buffers_are_never_written_over(tmp_path):
-    """The reader decodes into buffers released by its consumer: frames kept
-    (every third, and views of others) still hold their own pixels after the
-    rest of the video has been decoded, and every frame equals OpenCV's own."""
-    import cv2
-
-    from cuespin.track.reader import FrameSource, ThreadedFrames, probe
-
-    rng = np.random.default_rng(5)
-    path = tmp_path / "v.avi"
-    out = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"FFV1"), 30.0, (64, 48))
-    frames = [rng.integers(0, 256, (48, 64, 3), dtype=np.uint8) for _ in range(60)]
-    for f in frames:
-        out.write(f)
-    out.release()
-    for threaded in (False, True):
-        src = FrameSource(path, probe(path))
-        feed = ThreadedFrames(src, 4) if threaded else src
-        kept, views, n = {}, {}, 0
-        for k, img in enumerate(feed):
-            np.testing.assert_array_equal(img, frames[k])
-            if k % 3 == 0:
-                kept[k] = img
-            elif k % 5 == 0:
-                views[k] = img[10:20]
-            n += 1
-        assert n == len(frames)
-        for k, img in kept.items():
-            np.testing.assert_array_equal(img, frames[k])
-        for k, v in views.items():
-            np.testing.assert_array_equal(v, frames[k][10:20])

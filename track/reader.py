@@ -10,9 +10,7 @@ pass over the packets (no decoding: a few ms per thousand frames).
 
 from __future__ import annotations
 
-import collections
 import queue
-import sys
 import threading
 from dataclasses import dataclass
 from fractions import Fraction
@@ -177,48 +175,6 @@ def frame_times(path, info: VideoInfo, n: int, fps: float) -> np.ndarray:
     return t
 
 
-# Bytes of decoded frames a pool tracks for reuse, at most: more than the
-# tracker's look-ahead and queue hold (track.video: 480 MiB).  A frame still
-# held when the pool is full is forgotten (freed by its holder), so the
-# pool never holds more than this beyond what its consumer does.
-POOL_BYTES = 512 * 2**20
-
-
-class BufferPool:
-    """Frame buffers recycled once nothing but the pool refers to them.
-
-    Decoding each frame into a fresh array let the allocator hand memory
-    back to the kernel and fault it in again, page by page (H.264 tracking:
-    ~125k minor faults a 1,000-frame 1280 x 640 run after the first, where
-    decoding alone had none; ``benchmarks/track.py speed --threads``).
-    A buffer is reused only when its reference count shows that no frame,
-    view (a view refers to its base) or queue holds it any longer, so a
-    consumer keeping a frame is never written over.  Only the oldest is
-    checked: the tracker releases frames in the order they were decoded.
-    """
-
-    def __init__(self, max_bytes: int = POOL_BYTES):
-        self._held: collections.deque = collections.deque()
-        self._bytes = 0
-        self._max = max_bytes
-
-    def take(self):
-        """The oldest buffer if released, else None: decode into a new one."""
-        # The deque's reference and getrefcount's argument: nothing else.
-        if self._held and sys.getrefcount(self._held[0]) <= 2:
-            buf = self._held.popleft()
-            self._bytes -= buf.nbytes
-            return buf
-        return None
-
-    def give(self, buf) -> None:
-        """Track a buffer handed out, to reuse once released."""
-        self._held.append(buf)
-        self._bytes += buf.nbytes
-        while self._bytes > self._max and len(self._held) > 1:
-            self._bytes -= self._held.popleft().nbytes
-
-
 class FrameSource:
     """Frames of a video in order: 8-bit BGR (h, w, 3), or (h, w) when the video is grey.
 
@@ -257,19 +213,13 @@ class FrameSource:
         cap = _open_cv2(self.path)
         if cap is None:
             raise TrackError(f"{self.path}: OpenCV cannot open the video")
-        pool = BufferPool()
         try:
             while True:
-                buf = pool.take()
                 with quiet_native_stderr():
-                    ok, img = cap.read(buf) if buf is not None else cap.read()
+                    ok, img = cap.read()
                 if not ok or img is None:
                     return
-                out = self._emit(img)
-                if out is img:  # handed out as decoded: recycled once released
-                    pool.give(img)
-                del buf, img
-                yield out
+                yield self._emit(img)
         finally:
             cap.release()
 
