@@ -104,8 +104,7 @@ def through(shot, params, camera, t, uv, track_px):
 
 def auto(args):
     """Automatic calibration on drawn frames: corners, metres, v0 against the exact camera."""
-    from cuespin.pipeline.calibrate import (AUTO_CORNER_SIGMA_FLOOR_PX, assign_corners, detect_corners,
-                                            synthetic_table_frame)
+    from cuespin.pipeline.calibrate import calibrate_frame, synthetic_table_frame
 
     print(f"cushions {args.cushion} m; {args.n} shots per camera; tracker error {args.track_px} px")
     print("height tilt    k1 | corner_rms_px edge_rms_px k1_est focal_from | max_m_err | "
@@ -120,15 +119,15 @@ def auto(args):
             height_m=height, tilt_deg=tilt, k1=k1, size=SIZE, fps=FPS, roll_deg=ROLL_DEG)).camera
         img = synthetic_table_frame(true, seed=int(10 * tilt + 100 * abs(k1)), cushion_m=args.cushion,
                                     pockets=args.cushion > 0)
-        det = detect_corners(img)
-        quad, edge_rms, kappa = det.corners, det.edge_rms, det.kappa
-        # the corner error calibrate_video states (edges' scatter, floored)
-        sigma = max(edge_rms * np.sqrt(4.0 / ((SIZE[0] + SIZE[1]) / 4.0)), AUTO_CORNER_SIGMA_FLOOR_PX)
         # --true-focal: the true focal length given (--focal-px), to tell its share from the rest
         fk = {"focal_px": float(true.K[0, 0])} if args.true_focal else {}
-        cal = assign_corners(quad, SIZE, Table(), kappa=kappa, fps=FPS, corner_sigma_px=sigma, **fk)
-        pert = perturbed_cameras(cal.corners_px, sigma, SIZE, Table(), kappa=kappa, fps=FPS,
-                                 corner_sigma_px=sigma, **fk)
+        # what calibrate_video writes for this frame (corners, lens, f, perturbed cameras);
+        # --no-balls: the nominal f overhead, as before the balls' f existed
+        cal = calibrate_frame(img, Table(), fps=FPS, use_balls=not args.no_balls, **fk)
+        if args.no_kappa_camera:  # the perturbed cameras as before k1's error was in them
+            cal = cal.__class__(**{**cal.__dict__, "perturbed": cal.perturbed[:8 + (cal.focal_source == "nominal")]})
+        pert, sigma, edge_rms = cal.perturbed, cal.corner_sigma_px, cal.edge_rms_px
+        kappa = float(cal.camera.dist[0]) / float(cal.camera.K[0, 0]) ** 2
         truth = true.project(table_corners(Table()))
         c_rms = float(np.sqrt(np.mean(np.sum((cal.corners_px - truth) ** 2, axis=1))))
         cam = Scene(physics=sample_shot(0)[1], camera=cal.camera).camera
@@ -156,7 +155,8 @@ def auto(args):
                  for k, v in res.items()}
         zv = {k: np.sqrt(np.mean([np.sum((r[0] / r[2]) ** 2) / 2 for r in v])) for k, v in res.items()}
         print(f"{height:6.1f} {tilt:4.0f} {k1:+.2f} | {c_rms:13.3f} {edge_rms:11.3f} "
-              f"{kappa * cal.camera.K[0, 0] ** 2:+.3f} {cal.focal_source:10s} {det.edge:6s} | {m_err:9.1e} | "
+              f"{kappa * cal.camera.K[0, 0] ** 2:+.3f} {cal.focal_source:10s} "
+              f"f {cal.camera.K[0, 0] / true.K[0, 0] - 1:+.2%} | {m_err:9.1e} | "
               f"{rv['exact']:.2e} / {rv['auto']:.2e} ({rv['auto'] / rv['exact']:.2f}x), "
               f"{rw['exact']:.2e} / {rw['auto']:.2e} | {len(res['auto'])} {sigma:.2f} {len(pert)} | "
               f"{cover['exact']:.0%} / {cover['auto']:.0%}, {zv['exact']:.2f} / {zv['auto']:.2f}", flush=True)
@@ -219,6 +219,10 @@ def main():
     ap.add_argument("--true-focal", action="store_true",
                     help="--auto: give the true focal length (as --focal-px would)")
     ap.add_argument("--overhead", action="store_true", help="--auto: the overhead cameras only")
+    ap.add_argument("--no-balls", action="store_true",
+                    help="--auto: without the focal length from the balls' shapes (the nominal one overhead)")
+    ap.add_argument("--no-kappa-camera", action="store_true",
+                    help="--auto: without the perturbed camera for k1's error")
     ap.add_argument("--propagate", action="store_true",
                     help="add the calibration's error (8 perturbed cameras) to the stated errors")
     ap.add_argument("--k1", type=float, default=-0.25, help="--diagnose: the lens's k1")
