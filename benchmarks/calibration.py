@@ -165,7 +165,7 @@ def auto(args):
 def diagnose(args):
     """Where an automatic camera's v0 error comes from: the same shots through
     cameras built from the true and the found corners, k1 and focal length."""
-    from cuespin.pipeline.calibrate import assign_corners, detect_corners, synthetic_table_frame
+    from cuespin.pipeline.calibrate import assign_corners, calibrate_frame, detect_corners, synthetic_table_frame
 
     P = sample_shot(0)[1]
     true = Scene(physics=P, camera=pinhole_camera(height_m=args.height, tilt_deg=args.tilt, k1=args.k1,
@@ -179,8 +179,12 @@ def diagnose(args):
     print(f"{args.height} m, tilt {args.tilt}, k1 {args.k1}: corner error (px) {np.round(cal.corners_px - tc, 3).tolist()}; "
           f"k1 found {det.kappa * f_true**2:+.4f} at the true f {f_true:.1f} px; f written {cal.camera.K[0, 0]:.1f} px "
           f"({cal.focal_source})")
+    balls = calibrate_frame(img, Table(), fps=FPS)
+    print(f"with the balls' shapes: f {balls.camera.K[0, 0]:.1f} px ({balls.focal_source}, "
+          f"{balls.camera.K[0, 0] / f_true - 1:+.2%} off)")
     variants = {
-        "found (calibrate)": cal.camera,
+        "found (calibrate, balls' f)": balls.camera,
+        "found, f nominal (no balls)": cal.camera,
         "true corners and k1, f as found": calibrate_corners(tc, SIZE, kappa=k_true, fps=FPS).camera,
         "corners and k1 found, true f": calibrate_corners(cal.corners_px, SIZE, kappa=det.kappa, focal_px=f_true,
                                                           fps=FPS).camera,

@@ -932,21 +932,26 @@ def assign_corners(quad: np.ndarray, size, table: Table, **kw) -> Calibration:
 
 
 # --------------------------------------------------------------------------- f from the balls
-# The moments of a ball's image are taken in a disc of this many of its radii
-# about it (the edge's coverage all inside, little noise outside); the ring
-# between BALL_RING[0] and [1] radii gives the felt's colour and the noise.
-BALL_WINDOW_R = 1.35
+# The ring between BALL_RING[0] and [1] of a ball's radii about it gives the
+# felt's colour and the noise (and must be all felt).
 BALL_RING = (1.2, 1.6)
+# A ball's outline is where its colour distance from the felt falls halfway
+# from its level this far (px) inside the steepest fall: close enough to the
+# edge that a shaded ball's limb is still the level (2.5 px put the renderer's
+# shaded balls' f 5-7% low, 1.5 px 2-5%; drawn flat balls alike, 0.2-1.2%).
+LIMB_INNER_PX = 1.5
 # A still ball's blob on the felt: its area within this range of the disc
 # the table's scale predicts (rough: the scale varies over a tilted view).
 BALL_AREA_RANGE = (0.4, 2.5)
 # Least ball-minus-felt colour difference (grey levels) to measure a shape on.
 BALL_MIN_CONTRAST = 20.0
-# Error of a ball's measured shape beyond the pixels' noise (dimensionless,
-# per component): on drawn frames (4x supersampled edges) the shapes came
-# 0.0001-0.0056 from the exact outline's, 1.4-6 times the noise's 0.0009
-# (docs/calibration.md, section 6); added in quadrature.
-BALL_SHAPE_FLOOR = 0.003
+# Error of a ball's measured shape beyond the edge points' scatter
+# (dimensionless, per component), added in quadrature: on drawn flat balls the
+# shapes came within 0.001-0.004 of the exact outline's, but the renderer's
+# shaded balls (realistic look: lit from one side, a highlight, lens blur) put
+# f 2-5% low, which this floor states (f's error then 3.2-5%, real 2-5%;
+# docs/calibration.md, section 6).
+BALL_SHAPE_FLOOR = 0.01
 
 
 @dataclass(frozen=True)
@@ -956,9 +961,9 @@ class BallImage:
     Attributes
     ----------
     centre : ndarray, shape (2,)
-        Coverage centroid (px).
+        Centre of the ellipse fitted to the outline (px).
     shape : ndarray, shape (2,)
-        The moments' traceless part over half their trace,
+        That ellipse's second moments' traceless part over half their trace,
         ``((Mxx - Myy) / 2, Mxy) / ((Mxx + Myy) / 2)``: 0 for a circle; a
         sphere's silhouette off the optical axis is elongated towards it by
         about ``1 / cos`` of the angle from the axis, which the focal length
@@ -981,13 +986,13 @@ def ball_images(img: np.ndarray, quad: np.ndarray, r_px: float) -> list:
 
     A blob of non-felt colour of about a ball's area (radius ``r_px``) whose
     surroundings out to ``BALL_RING[1]`` radii are felt (not a pocket, a
-    cushion or another ball); its coverage per pixel is the pixel's colour
-    between the felt's (the ring's median) and the ball's (the middle's
-    median), and its moments are those of that coverage in a disc of
-    ``BALL_WINDOW_R`` radii.  The frame's values are taken as linear in
-    coverage (the drawn frames are; a camera's gamma bends the edge
-    profile symmetrically, which leaves the shape's traceless part nearly
-    alone).
+    cushion or another ball); its outline is found along 90 rays from it
+    (:func:`_limb_points`: the colour distance from the felt, linear in the
+    pixel's coverage for a locally even ball colour, halfway down at the
+    edge) and an ellipse fitted to it (:func:`_fit_ellipse`); the shape is
+    that ellipse's.  The frame's values are taken as linear in coverage (the
+    renderer's and the drawn frames are; a camera's gamma moves the halfway
+    point by the limb's brightness).
     """
     D, thr = _felt_distance(img)
     h, w = D.shape
@@ -1020,30 +1025,78 @@ def ball_images(img: np.ndarray, quad: np.ndarray, r_px: float) -> list:
             continue                        # something else within the ring: a cushion, pocket, ball
         ring = (rr >= BALL_RING[0] * rc) & (rr <= BALL_RING[1] * rc)
         felt = np.median(col[sl][ring], axis=0)
-        ball = np.median(col[sl][rr <= 0.5 * rc], axis=0)
-        d = ball - felt
-        if np.linalg.norm(d) < BALL_MIN_CONTRAST:
+        # |colour - felt| is linear in the pixel's coverage for a locally even
+        # ball colour, whatever the shading elsewhere on the ball
+        dmap = np.linalg.norm(col[sl] - felt, axis=2).astype(np.float32)
+        noise = 1.4826 * float(np.median(np.abs(dmap[ring] - np.median(dmap[ring]))))
+        pts = _limb_points(dmap, cu - u0, cv_ - v0, rc, noise)
+        if pts is None:
             continue
-        c = (col[sl] - felt) @ d / (d @ d)
-        noise = 1.4826 * float(np.median(np.abs(c[ring] - np.median(c[ring]))))
-        for _ in range(3):                 # the window recentred on the coverage's centroid
-            win = rr <= BALL_WINDOW_R * rc
-            A = float(c[win].sum())
-            cu += float((c[win] * du[win]).sum()) / A
-            cv_ += float((c[win] * dv[win]).sum()) / A
-            du, dv = uu[sl] - cu, vv[sl] - cv_
-            rr = np.hypot(du, dv)
-        win = rr <= BALL_WINDOW_R * rc
-        x, y, cw = du[win], dv[win], c[win]
-        A = float(cw.sum())
-        # Coverage weights at pixel centres miss each pixel's own spread (1/12 px^2).
-        M = np.array([[(cw * x * x).sum(), (cw * x * y).sum()], [(cw * x * y).sum(), (cw * y * y).sum()]]) / A
-        M += np.eye(2) / 12.0
-        half = (M[0, 0] + M[1, 1]) / 2.0
-        g = np.sqrt((np.sum(((x * x - y * y) / 2.0) ** 2) + np.sum((x * y) ** 2)) / 2.0)
-        sigma = math.hypot(noise * g / A / half, BALL_SHAPE_FLOOR)
-        out.append(BallImage(centre=np.array([cu, cv_]), shape=_shape(M), sigma=float(sigma)))
+        ell = _fit_ellipse(pts)
+        if ell is None:
+            continue
+        centre, M, resid = ell
+        sigma = math.hypot(2.0 * math.sqrt(2.0 / len(pts)) * resid / math.sqrt(2.0 * np.trace(M)),
+                           BALL_SHAPE_FLOOR)
+        out.append(BallImage(centre=centre + [u0, v0], shape=_shape(M), sigma=float(sigma)))
     return out
+
+
+def _limb_points(dmap, cu, cv_, rc, noise, n_rays: int = 90):
+    """Sub-pixel points of a ball's outline along rays from ``(cu, cv_)``: where
+    the colour distance from the felt falls halfway from its level just inside
+    the edge (``LIMB_INNER_PX`` in from the steepest fall) to the felt's (0), by linear
+    interpolation along the ray (bilinear samples every 0.1 px).  A ray whose
+    edge is weaker than ``BALL_MIN_CONTRAST`` or 5 noise levels is skipped."""
+    step = 0.1
+    s = np.arange(0.5 * rc, BALL_RING[1] * rc, step)
+    th = 2.0 * np.pi * np.arange(n_rays) / n_rays
+    mx = (cu + np.cos(th)[:, None] * s[None, :]).astype(np.float32)
+    my = (cv_ + np.sin(th)[:, None] * s[None, :]).astype(np.float32)
+    prof = cv2.remap(dmap, mx, my, cv2.INTER_LINEAR)
+    pts = []
+    inner = int(round(LIMB_INNER_PX / step))
+    for k in range(n_rays):
+        p = prof[k]
+        j = int(np.argmin(np.diff(p)))              # steepest fall
+        if j - inner < 0:
+            continue
+        level = float(p[j - inner])
+        if level < max(BALL_MIN_CONTRAST, 5.0 * noise):
+            continue
+        half = level / 2.0
+        below = np.nonzero(p[j - inner:] < half)[0]
+        if not below.size:
+            continue
+        m = j - inner + int(below[0])
+        sm = s[m - 1] + step * (p[m - 1] - half) / (p[m - 1] - p[m])
+        pts.append((cu + np.cos(th[k]) * sm, cv_ + np.sin(th[k]) * sm))
+    return np.array(pts) if len(pts) >= n_rays // 2 else None
+
+
+def _fit_ellipse(pts):
+    """Centre, second moments (``Q^-1 / 4`` of the ellipse ``d^T Q d <= 1``) and
+    RMS radial residual (px) of the ellipse through outline points
+    (``cv2.fitEllipseDirect``), refitted without points more than 3 robust
+    sigmas off (a marking or a highlight at the edge)."""
+    keep = np.ones(len(pts), bool)
+    for _ in range(3):
+        if keep.sum() < 6:
+            return None
+        (cx, cy), (w_, h_), ang = cv2.fitEllipseDirect(pts[keep].astype(np.float32))
+        a, b = w_ / 2.0, h_ / 2.0
+        c, s_ = math.cos(math.radians(ang)), math.sin(math.radians(ang))
+        Rm = np.array([[c, -s_], [s_, c]])
+        d = (pts - [cx, cy]) @ Rm                    # in the ellipse's axes
+        rho = np.hypot(d[:, 0] / a, d[:, 1] / b)     # 1 on the ellipse
+        res = (rho - 1.0) * np.hypot(d[:, 0], d[:, 1]) / np.maximum(rho, 1e-9)
+        scale = 1.4826 * float(np.median(np.abs(res[keep]))) + 1e-3
+        new = np.abs(res) < 3.0 * scale
+        if np.array_equal(new, keep):
+            break
+        keep = new
+    M = Rm @ np.diag([a * a, b * b]) @ Rm.T / 4.0
+    return np.array([cx, cy]), M, float(np.sqrt(np.mean(res[keep] ** 2)))
 
 
 def focal_from_balls(balls, corners_px, size, table: Table = Table(), *, R: float = 0.028575, **kw):
@@ -1054,7 +1107,7 @@ def focal_from_balls(balls, corners_px, size, table: Table = Table(), *, R: floa
     by the focal length: for each trial f the camera is re-solved from the
     same corners (``kw`` as for :func:`calibrate_corners`), each ball's
     outline predicted at the table point its centre images to
-    (:meth:`Camera.ball_outline`, by its area moments) and compared with the
+    (:meth:`Camera.ball_outline`, the same ellipse fitted to it) and compared with the
     measured ``shape`` (chi^2 over the balls); the error is where chi^2 rises
     by 1, widened by ``sqrt(chi2 / dof)`` when the fit is worse than the
     pixels' noise.  A ball near the axis shows nothing; one near the table's
@@ -1067,8 +1120,6 @@ def focal_from_balls(balls, corners_px, size, table: Table = Table(), *, R: floa
         None when no ball was measured or chi^2 has no minimum inside
         ``FOCAL_RANGE``.
     """
-    from cuespin.track.outline import OUTLINE_VERTICES, moment_ellipse
-
     if not balls:
         return None
     big = max(size)
@@ -1082,8 +1133,8 @@ def focal_from_balls(balls, corners_px, size, table: Table = Table(), *, R: floa
         total = 0.0
         for b in balls:
             xy = cam.to_table(b.centre[None])[0]
-            _, ell = moment_ellipse(cam.ball_outline(xy, R, n=OUTLINE_VERTICES))
-            total += float(np.sum((b.shape - _shape(np.linalg.inv(ell.Qm) / 4.0)) ** 2)) / b.sigma**2
+            fit = _fit_ellipse(cam.ball_outline(xy, R, n=90))      # as the measured outline is fitted
+            total += float(np.sum((b.shape - _shape(fit[1])) ** 2)) / b.sigma**2
         return total
 
     grid = big * np.exp(np.linspace(np.log(0.3), np.log(3.0), 41))

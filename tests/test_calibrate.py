@@ -284,8 +284,9 @@ def test_overhead_focal_length_from_the_balls_shapes(k1):
     # Straight overhead the corners cannot fix f (a near wide lens or a far
     # long one); a still ball's image is a sphere's silhouette, stretched away
     # from the optical axis by about 1 / cos of its angle from it, which f
-    # sets.  The drawn frame's ball near the corner fixes f to under 1%
-    # (measured: 0.2-0.8% off, stated 0.7%), where the nominal one is 5% off.
+    # sets.  The drawn frame's ball near the corner fixes f to about 1%
+    # (measured: 0.2-1.2% off; stated 3.2%, the floor the renderer's shaded
+    # balls set), where the nominal one is 2-5% off (up to 15% on a phone).
     from cuespin.pipeline.calibrate import NOMINAL_FOCAL, calibrate_frame
 
     true = pinhole_camera(height_m=2.0, tilt_deg=0.0, k1=k1, R=R, size=SIZE, fps=240.0, roll_deg=1.0)
@@ -294,9 +295,9 @@ def test_overhead_focal_length_from_the_balls_shapes(k1):
     assert cal.focal_source == "balls" and "still balls" in cal.notes[0]
     f_true, f = true.K[0, 0], cal.camera.K[0, 0]
     sigma = cal.perturbed[8].K[0, 0] / f - 1.0            # the ninth camera: f one error longer
-    assert 0.0 < sigma < 0.03
+    assert 0.0 < sigma < 0.05
     assert abs(f / f_true - 1.0) < 2.0 * sigma, (f / f_true - 1.0, sigma)
-    assert abs(f / f_true - 1.0) < abs(NOMINAL_FOCAL * SIZE[0] / f_true - 1.0)
+    assert abs(f / f_true - 1.0) < 0.5 * abs(NOMINAL_FOCAL * SIZE[0] / f_true - 1.0)
     # k1 follows f (the bow fixes k1 / f^2), and the ball plane with it
     assert cal.camera.dist[0] == pytest.approx(k1, abs=0.01)
     assert metre_error(cal, true) < 3e-4
@@ -340,3 +341,30 @@ def test_the_lens_bows_error_is_a_perturbed_camera_and_moves_the_stated_error():
     # it moves v0 by a measurable share of the fit's own error at the tracker's
     # 0.03 px (about 1e-3 m/s RMS; docs/calibration.md, section 6)
     assert 1e-6 < shift.max() < 1e-3, shift
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("k1", [-0.25, 0.0])
+def test_overhead_focal_length_from_a_rendered_shaded_ball(k1):
+    # The renderer's realistic look: a shaded ball (lit from one side, a
+    # highlight, lens blur) at rest near a corner before the strike, straight
+    # overhead.  Its outline puts f 2.9-5.3% low (measured), within 2 of the
+    # errors stated (3.2-3.5%: BALL_SHAPE_FLOOR is set from these balls).
+    from dataclasses import replace
+
+    from cuespin.data_gen.sampler import make_scene, sample_shot
+    from cuespin.physics.motion import Shot
+    from cuespin.pipeline.calibrate import calibrate_frame
+    from cuespin.render.draw import FrameRenderer
+
+    shot, params = sample_shot(100, "random")
+    scene = make_scene(Shot(np.array([2.40, 1.15]), shot.v0, shot.w0, t0=0.1), params,
+                       render={"look": "realistic", "noise_sigma": 2.0, "seed": 1})
+    true = pinhole_camera(height_m=2.0, tilt_deg=0.0, k1=k1, size=SIZE, fps=240.0, roll_deg=1.0, margin_m=0.15,
+                          R=params.R)
+    img = next(iter(FrameRenderer(replace(scene, camera=true), n_frames=1).frames()))
+    cal = calibrate_frame(img, TABLE, fps=240.0, R_nominal=params.R)
+    assert cal.focal_source == "balls"
+    f = cal.camera.K[0, 0]
+    sigma = cal.perturbed[8].K[0, 0] / f - 1.0
+    assert abs(f / true.K[0, 0] - 1.0) < 2.0 * sigma, (f / true.K[0, 0] - 1.0, sigma)
