@@ -25,6 +25,12 @@ With ``--diagnose`` (``--height 2 --tilt 0 --k1 -0.25``): the automatic
 camera's v0 error split into its parts (corners, k1, focal length), each
 camera built from the true values but one.
 
+With ``--auto``, the camera is what ``calibrate_video`` writes for the frame
+(:func:`calibrate_frame`: overhead, the focal length from the still balls'
+shapes; ``--no-balls`` for the nominal one) and so are the perturbed cameras
+(``--no-kappa-camera`` leaves out the one for k1's error; ``--corner-sigma``
+states the corners' error instead of calibrate's floored one).
+
 Usage: python benchmarks/calibration.py [--n 40] [--seed 0] [--track-px 0.03] [--auto] [--diagnose]
 """
 
@@ -123,11 +129,13 @@ def auto(args):
         fk = {"focal_px": float(true.K[0, 0])} if args.true_focal else {}
         # what calibrate_video writes for this frame (corners, lens, f, perturbed cameras);
         # --no-balls: the nominal f overhead, as before the balls' f existed
+        if args.corner_sigma is not None:
+            fk["corner_sigma_px"] = args.corner_sigma
         cal = calibrate_frame(img, Table(), fps=FPS, use_balls=not args.no_balls, **fk)
-        if args.no_kappa_camera:  # the perturbed cameras as before k1's error was in them
-            cal = cal.__class__(**{**cal.__dict__, "perturbed": cal.perturbed[:8 + (cal.focal_source == "nominal")]})
         pert, sigma, edge_rms = cal.perturbed, cal.corner_sigma_px, cal.edge_rms_px
         kappa = float(cal.camera.dist[0]) / float(cal.camera.K[0, 0]) ** 2
+        if args.no_kappa_camera:  # the perturbed cameras as before k1's error was in them
+            pert = [c for c in pert if abs(c.dist[0] / c.K[0, 0] ** 2 - kappa) <= 1e-9 * abs(kappa)]
         truth = true.project(table_corners(Table()))
         c_rms = float(np.sqrt(np.mean(np.sum((cal.corners_px - truth) ** 2, axis=1))))
         cam = Scene(physics=sample_shot(0)[1], camera=cal.camera).camera
@@ -225,6 +233,8 @@ def main():
     ap.add_argument("--overhead", action="store_true", help="--auto: the overhead cameras only")
     ap.add_argument("--no-balls", action="store_true",
                     help="--auto: without the focal length from the balls' shapes (the nominal one overhead)")
+    ap.add_argument("--corner-sigma", type=float, default=None, metavar="PX",
+                    help="--auto: the corners' stated error (default: calibrate's, floored at 0.2 px)")
     ap.add_argument("--no-kappa-camera", action="store_true",
                     help="--auto: without the perturbed camera for k1's error")
     ap.add_argument("--propagate", action="store_true",
