@@ -956,7 +956,7 @@ BALL_SHAPE_FLOOR = 0.01
 
 @dataclass(frozen=True)
 class BallImage:
-    """A still ball's image on the felt, by its second moments.
+    """A still ball's image on the felt, by the ellipse fitted to its outline.
 
     Attributes
     ----------
@@ -965,11 +965,12 @@ class BallImage:
     shape : ndarray, shape (2,)
         That ellipse's second moments' traceless part over half their trace,
         ``((Mxx - Myy) / 2, Mxy) / ((Mxx + Myy) / 2)``: 0 for a circle; a
-        sphere's silhouette off the optical axis is elongated towards it by
+        sphere's silhouette off the optical axis is elongated along the line to it by
         about ``1 / cos`` of the angle from the axis, which the focal length
         sets (:func:`focal_from_balls`).
     sigma : float
-        1-sigma error of each ``shape`` component from the pixels' noise.
+        1-sigma error of each ``shape`` component: the outline points' scatter
+        and ``BALL_SHAPE_FLOOR``.
     """
 
     centre: np.ndarray
@@ -1006,7 +1007,6 @@ def ball_images(img: np.ndarray, quad: np.ndarray, r_px: float) -> list:
         col = col[..., None]
     area0 = math.pi * r_px**2
     out = []
-    vv, uu = np.mgrid[0:h, 0:w]
     for i in range(1, n):
         if not (BALL_AREA_RANGE[0] * area0 <= stats[i, cv2.CC_STAT_AREA] <= BALL_AREA_RANGE[1] * area0):
             continue
@@ -1018,7 +1018,8 @@ def ball_images(img: np.ndarray, quad: np.ndarray, r_px: float) -> list:
         if u0 < 0 or v0 < 0 or u1 > w or v1 > h:
             continue
         sl = np.s_[v0:v1, u0:u1]
-        du, dv = uu[sl] - cu, vv[sl] - cv_
+        vv, uu = np.mgrid[v0:v1, u0:u1]
+        du, dv = uu - cu, vv - cv_
         rr = np.hypot(du, dv)
         own = cv2.dilate((lab[sl] == i).astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
         if np.mean((D[sl] >= thr)[(rr <= BALL_RING[1] * rc) & ~own]) > 0.01:
