@@ -101,9 +101,6 @@ NOT_YET = {
                  "the set 97.98% of its frames on open cloth",
     (7, "FFV1"): "issue 10: shot 5 (red on red in a low light): 29 of 81 frames found, the set 97.59% of its "
                  "frames on open cloth",
-    # passed on branch fp4's renders; on the compiled noise stream (main):
-    (6, "MJPG"): "issue 10: shot 0 (a blue ball with dots and a highlight on blue felt, 120 fps): moving "
-                 "centres 0.20-0.26 radii off, median 0.08 (the dots pull the disc fit; not a detection)",
 }
 
 
