@@ -12,7 +12,6 @@ whatever the video's length; the cost per frame is the tracker's.
 
 from __future__ import annotations
 
-import collections
 import csv
 import os
 import threading
@@ -416,12 +415,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         fits = []  # (frame index, the fit's state) for the final background correction
         t_start = time.perf_counter()
         k = len(status)
-        # The oldest first, each dropped once tracked; each frame tracked from
-        # the look-ahead pulls the next decoded one into it, so the decoder
-        # keeps going while the look-ahead is tracked (a full queue stalled it
-        # through the whole look-ahead, ~0.25 s of 163 MJPG frames) and the
-        # frames' memory is reused as it is freed, at the look-ahead's size.
-        buf = collections.deque(buf)
+        buf.reverse()  # pop() from the end: the oldest first, each dropped once tracked
         # The frames slid past (a long rest before the strike) from a second
         # pass over the video's start: they are tracked like any other.
         again = iter(FrameSource(path, info)) if n_dropped else None
@@ -435,12 +429,8 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
                     rms.append(np.nan)
                     k += 1
                     continue
-            elif buf:
-                item = buf.popleft()
-                if (img := pull()) is not None:
-                    buf.append(img)
             else:
-                item = pull()
+                item = buf.pop() if buf else pull()
             if item is None:
                 break
             # With nothing moving there is no ball to separate from the felt.
