@@ -438,6 +438,45 @@ def _ar1_cov_times(meas: Measurements, X, rho: float) -> np.ndarray:
     return out.reshape(2 * m, -1)
 
 
+def _ar1_lag1_terms(meas: Measurements, jac):
+    """What :func:`ar1_expected_lag1` needs of a fit that does not depend on
+    ``rho``, made once for a root search: ``g(rho)`` for that fit."""
+    Js = np.asarray(jac, dtype=float)
+    Js = Js / _column_norms(Js)
+    # An orthonormal basis of the fit's column space (P = Q Q^T) from the
+    # small Gram matrix: a thin SVD of a long Jacobian took 0.14 s here.
+    lam, V = np.linalg.eigh(Js.T @ Js)
+    keep = lam > lam[-1] * 1e-20
+    Q = Js @ (V[:, keep] / np.sqrt(lam[keep]))
+    idx = np.flatnonzero(meas.single)
+    # Rows of each axis of consecutive single measurements (as lag1_autocorrelation pairs them).
+    a = np.r_[2 * idx[:-1], 2 * idx[:-1] + 1]
+    b = np.r_[2 * idx[1:], 2 * idx[1:] + 1]
+    d = np.r_[2 * idx, 2 * idx + 1]
+    BQ = np.zeros_like(Q)
+    BQ[a] += 0.5 * Q[b]
+    BQ[b] += 0.5 * Q[a]
+    DQ = np.zeros_like(Q)
+    DQ[d] = Q[d]
+    QBQ, QDQ = Q.T @ BQ, Q.T @ DQ
+    k = np.zeros(0)
+    if len(idx) > 1:
+        ts = meas.t_means[idx]
+        dt = float(np.median(np.diff(ts)))
+        k = np.maximum(np.rint(np.diff(ts) / dt), 1.0) if dt > 0 else np.ones(len(ts) - 1)
+
+    def g(rho: float) -> float:
+        SQ = _ar1_cov_times(meas, Q, rho)
+        QSQ = Q.T @ SQ
+        # tr(B S): the errors' covariance between consecutive single
+        # measurements, both axes; tr(D S): their variances.
+        tr_BS, tr_DS = 2.0 * float(np.sum(rho ** k)), 2.0 * len(idx)
+        num = tr_BS - 2.0 * float(np.sum(BQ * SQ)) + float(np.sum(QBQ * QSQ))
+        den = tr_DS - 2.0 * float(np.sum(DQ * SQ)) + float(np.sum(QDQ * QSQ))
+        return num / den if den > 0 else 0.0
+    return g
+
+
 def ar1_expected_lag1(meas: Measurements, jac, rho: float) -> float:
     """The lag-1 autocorrelation :func:`lag1_autocorrelation` is expected to
     measure on a fit's residuals (whitened Jacobian ``jac``, (2m, p)) when
@@ -448,33 +487,7 @@ def ar1_expected_lag1(meas: Measurements, jac, rho: float) -> float:
     tr(B P S P)`` (``S`` the errors' covariance).  The fit takes up the
     slowly varying part of a correlated error, so this lies below ``rho``
     by about ``(1 + rho) p / n`` for ``n`` frames."""
-    J = np.asarray(jac, dtype=float)
-    s = _column_norms(J)
-    U, sv, _ = np.linalg.svd(J / s, full_matrices=False)
-    Q = U[:, sv > sv[0] * 1e-10]                       # the fit's column space: P = Q Q^T
-    idx = np.flatnonzero(meas.single)
-    # Rows of each axis of consecutive single measurements (as lag1_autocorrelation pairs them).
-    a = np.r_[2 * idx[:-1], 2 * idx[:-1] + 1]
-    b = np.r_[2 * idx[1:], 2 * idx[1:] + 1]
-    d = np.r_[2 * idx, 2 * idx + 1]
-    SQ = _ar1_cov_times(meas, Q, rho)
-    BQ = np.zeros_like(Q)
-    BQ[a] += 0.5 * Q[b]
-    BQ[b] += 0.5 * Q[a]
-    DQ = np.zeros_like(Q)
-    DQ[d] = Q[d]
-    # tr(B S): the errors' covariance between consecutive single
-    # measurements, both axes; tr(D S): their variances.
-    tr_BS, tr_DS = 0.0, 2.0 * len(idx)
-    if len(idx) > 1:
-        ts = meas.t_means[idx]
-        dt = float(np.median(np.diff(ts)))
-        k = np.maximum(np.rint(np.diff(ts) / dt), 1.0) if dt > 0 else np.ones(len(ts) - 1)
-        tr_BS = 2.0 * float(np.sum(rho ** k))
-    QSQ = Q.T @ SQ
-    num = tr_BS - 2.0 * float(np.sum(BQ * SQ)) + float(np.sum((Q.T @ BQ) * QSQ))
-    den = tr_DS - 2.0 * float(np.sum(DQ * SQ)) + float(np.sum((Q.T @ DQ) * QSQ))
-    return num / den if den > 0 else 0.0
+    return _ar1_lag1_terms(meas, jac)(rho)
 
 
 def ar1_from_residuals(meas: Measurements, fit: ModelFit, rho1: float) -> float:
@@ -485,16 +498,15 @@ def ar1_from_residuals(meas: Measurements, fit: ModelFit, rho1: float) -> float:
     MAX_AR1]``.  ``rho1`` itself is biased low: the fit absorbs the slowly
     varying part of a correlated error (the lower, the shorter the track;
     benchmarks/calibrate_tests.py --which ar1rho)."""
-    J = fit.jac
-    if not np.isfinite(rho1) or rho1 <= 0.0 or J is None:
+    if not np.isfinite(rho1) or rho1 <= 0.0 or fit.jac is None:
         return 0.0
     try:
-        g0 = ar1_expected_lag1(meas, J, 0.0)
-        if rho1 <= g0:
+        g = _ar1_lag1_terms(meas, fit.jac)
+        if rho1 <= g(0.0):
             return 0.0
-        if ar1_expected_lag1(meas, J, MAX_AR1) <= rho1:
+        if g(MAX_AR1) <= rho1:
             return MAX_AR1
-        return float(brentq(lambda r: ar1_expected_lag1(meas, J, r) - rho1, 0.0, MAX_AR1, xtol=1e-4))
+        return float(brentq(lambda r: g(r) - rho1, 0.0, MAX_AR1, xtol=1e-4))
     except (np.linalg.LinAlgError, ValueError):
         return float(np.clip(rho1, 0.0, MAX_AR1))
 
