@@ -99,12 +99,12 @@ MIN_REST_SCATTER_FRAMES = 10
 # A lossy codec's rest (shared errors) gets the scatter rule below, with at
 # least this share of one frame's error shared.  Measured against the truth
 # (the strike position, benchmarks/accuracy.py's fresh MJPG tracks of seed 0
-# and seed 1 --noise-max 0.5, the rest before the strike, 52-55 frames in
+# and seed 1 --noise-max 0.5, the rest before the strike, 50-55 frames in
 # median), the rest's mean's squared error in one frame's variance: noise
-# < 0.5, 1.06 (25 rests: the whole error shared, as the scatter rule says,
-# l = 0.09); noise 0.5-3, 0.45 (11 rests; the scatter rule's variance
-# 0.92 of it); noise 3-11, 0.079 (42 rests; the scatter rule alone, l =
-# 0.97, stated 1/2.55 of it): a shared share of 0.061 +- 0.012 beyond the
+# < 0.5, 0.85 (44 rests: nearly the whole error shared, as the scatter
+# rule says, l = 0.09; its variance 0.93 of it); noise 0.5-3, 0.45 (11
+# rests; the scatter rule's variance 0.92 of it); noise 3-11, 0.079 (42
+# rests; the scatter rule alone, l = 0.97, stated 1/2.55 of it): a shared share of 0.061 +- 0.012 beyond the
 # frames' own scatter (the same still image on the pixel grid, compressed
 # alike).  One frame's covariance for every lossy rest (before) stated the
 # noise 3-11 rests 13 times their error, so the strike position, and v0
