@@ -51,7 +51,7 @@ def _jit(**options):
     return wrap
 
 
-@_jit()
+@_jit(inline="always")
 def look_at(X, Y, shade):
     """The ball's look at ``(X, Y)`` (ball radii from its centre) less its
     level: value, its derivatives in ``X`` and ``Y``, and the three basis
@@ -70,7 +70,7 @@ def look_at(X, Y, shade):
     return (a * D + s * S + q * Q, a * dDx + s * dSx + 2 * q * X, a * dDy + s * dSy + 2 * q * Y, D, S, Q)
 
 
-@_jit()
+@_jit(inline="always")
 def sphere_at(X, Y, g):
     """:func:`cuespin.track.model.sphere_basis` at one point: ``max(n.L, 0)``,
     ``max(n.H, 0)^p`` and their derivatives in ``X``, ``Y`` (``g[3:11]`` =
