@@ -343,6 +343,11 @@ class DiscFit:
         Residual RMS (grey levels).
     n_iter : int
         Gauss-Newton iterations taken.
+    shade : ndarray or None
+        The look's fitted coefficients when it was fitted: shape (3,) for
+        the quadratic look, (11,) for a :class:`SphereLook` (its three
+        coefficients, then its geometry): either passes back to
+        :func:`streak_model` and :func:`refit_shift` as their ``shade``.
     """
 
     ok: bool
