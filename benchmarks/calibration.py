@@ -25,6 +25,12 @@ With ``--diagnose`` (``--height 2 --tilt 0 --k1 -0.25``): the automatic
 camera's v0 error split into its parts (corners, k1, focal length), each
 camera built from the true values but one.
 
+With ``--auto``, the camera is what ``calibrate_video`` writes for the frame
+(:func:`calibrate_frame`: overhead, the focal length from the still balls'
+shapes; ``--no-balls`` for the nominal one) and so are the perturbed cameras
+(``--no-kappa-camera`` leaves out the one for k1's error; ``--corner-sigma``
+states the corners' error instead of calibrate's floored one).
+
 Usage: python benchmarks/calibration.py [--n 40] [--seed 0] [--track-px 0.03] [--auto] [--diagnose]
 """
 
@@ -104,8 +110,7 @@ def through(shot, params, camera, t, uv, track_px):
 
 def auto(args):
     """Automatic calibration on drawn frames: corners, metres, v0 against the exact camera."""
-    from cuespin.pipeline.calibrate import (AUTO_CORNER_SIGMA_FLOOR_PX, assign_corners, detect_corners,
-                                            synthetic_table_frame)
+    from cuespin.pipeline.calibrate import calibrate_frame, synthetic_table_frame
 
     print(f"cushions {args.cushion} m; {args.n} shots per camera; tracker error {args.track_px} px")
     print("height tilt    k1 | corner_rms_px edge_rms_px k1_est focal_from | max_m_err | "
@@ -120,15 +125,17 @@ def auto(args):
             height_m=height, tilt_deg=tilt, k1=k1, size=SIZE, fps=FPS, roll_deg=ROLL_DEG)).camera
         img = synthetic_table_frame(true, seed=int(10 * tilt + 100 * abs(k1)), cushion_m=args.cushion,
                                     pockets=args.cushion > 0)
-        det = detect_corners(img)
-        quad, edge_rms, kappa = det.corners, det.edge_rms, det.kappa
-        # the corner error calibrate_video states (edges' scatter, floored)
-        sigma = max(edge_rms * np.sqrt(4.0 / ((SIZE[0] + SIZE[1]) / 4.0)), AUTO_CORNER_SIGMA_FLOOR_PX)
         # --true-focal: the true focal length given (--focal-px), to tell its share from the rest
         fk = {"focal_px": float(true.K[0, 0])} if args.true_focal else {}
-        cal = assign_corners(quad, SIZE, Table(), kappa=kappa, fps=FPS, corner_sigma_px=sigma, **fk)
-        pert = perturbed_cameras(cal.corners_px, sigma, SIZE, Table(), kappa=kappa, fps=FPS,
-                                 corner_sigma_px=sigma, **fk)
+        # what calibrate_video writes for this frame (corners, lens, f, perturbed cameras);
+        # --no-balls: the nominal f overhead, as before the balls' f existed
+        if args.corner_sigma is not None:
+            fk["corner_sigma_px"] = args.corner_sigma
+        cal = calibrate_frame(img, Table(), fps=FPS, use_balls=not args.no_balls, **fk)
+        pert, sigma, edge_rms = cal.perturbed, cal.corner_sigma_px, cal.edge_rms_px
+        kappa = float(cal.camera.dist[0]) / float(cal.camera.K[0, 0]) ** 2
+        if args.no_kappa_camera:  # the perturbed cameras as before k1's error was in them
+            pert = [c for c in pert if abs(c.dist[0] / c.K[0, 0] ** 2 - kappa) <= 1e-9 * abs(kappa)]
         truth = true.project(table_corners(Table()))
         c_rms = float(np.sqrt(np.mean(np.sum((cal.corners_px - truth) ** 2, axis=1))))
         cam = Scene(physics=sample_shot(0)[1], camera=cal.camera).camera
@@ -156,7 +163,8 @@ def auto(args):
                  for k, v in res.items()}
         zv = {k: np.sqrt(np.mean([np.sum((r[0] / r[2]) ** 2) / 2 for r in v])) for k, v in res.items()}
         print(f"{height:6.1f} {tilt:4.0f} {k1:+.2f} | {c_rms:13.3f} {edge_rms:11.3f} "
-              f"{kappa * cal.camera.K[0, 0] ** 2:+.3f} {cal.focal_source:10s} {det.edge:6s} | {m_err:9.1e} | "
+              f"{kappa * cal.camera.K[0, 0] ** 2:+.3f} {cal.focal_source:10s} "
+              f"f {cal.camera.K[0, 0] / true.K[0, 0] - 1:+.2%} | {m_err:9.1e} | "
               f"{rv['exact']:.2e} / {rv['auto']:.2e} ({rv['auto'] / rv['exact']:.2f}x), "
               f"{rw['exact']:.2e} / {rw['auto']:.2e} | {len(res['auto'])} {sigma:.2f} {len(pert)} | "
               f"{cover['exact']:.0%} / {cover['auto']:.0%}, {zv['exact']:.2f} / {zv['auto']:.2f}", flush=True)
@@ -165,7 +173,7 @@ def auto(args):
 def diagnose(args):
     """Where an automatic camera's v0 error comes from: the same shots through
     cameras built from the true and the found corners, k1 and focal length."""
-    from cuespin.pipeline.calibrate import assign_corners, detect_corners, synthetic_table_frame
+    from cuespin.pipeline.calibrate import assign_corners, calibrate_frame, detect_corners, synthetic_table_frame
 
     P = sample_shot(0)[1]
     true = Scene(physics=P, camera=pinhole_camera(height_m=args.height, tilt_deg=args.tilt, k1=args.k1,
@@ -179,8 +187,12 @@ def diagnose(args):
     print(f"{args.height} m, tilt {args.tilt}, k1 {args.k1}: corner error (px) {np.round(cal.corners_px - tc, 3).tolist()}; "
           f"k1 found {det.kappa * f_true**2:+.4f} at the true f {f_true:.1f} px; f written {cal.camera.K[0, 0]:.1f} px "
           f"({cal.focal_source})")
+    balls = calibrate_frame(img, Table(), fps=FPS)
+    print(f"with the balls' shapes: f {balls.camera.K[0, 0]:.1f} px ({balls.focal_source}, "
+          f"{balls.camera.K[0, 0] / f_true - 1:+.2%} off)")
     variants = {
-        "found (calibrate)": cal.camera,
+        "found (calibrate, balls' f)": balls.camera,
+        "found, f nominal (no balls)": cal.camera,
         "true corners and k1, f as found": calibrate_corners(tc, SIZE, kappa=k_true, fps=FPS).camera,
         "corners and k1 found, true f": calibrate_corners(cal.corners_px, SIZE, kappa=det.kappa, focal_px=f_true,
                                                           fps=FPS).camera,
@@ -219,6 +231,12 @@ def main():
     ap.add_argument("--true-focal", action="store_true",
                     help="--auto: give the true focal length (as --focal-px would)")
     ap.add_argument("--overhead", action="store_true", help="--auto: the overhead cameras only")
+    ap.add_argument("--no-balls", action="store_true",
+                    help="--auto: without the focal length from the balls' shapes (the nominal one overhead)")
+    ap.add_argument("--corner-sigma", type=float, default=None, metavar="PX",
+                    help="--auto: the corners' stated error (default: calibrate's, floored at 0.2 px)")
+    ap.add_argument("--no-kappa-camera", action="store_true",
+                    help="--auto: without the perturbed camera for k1's error")
     ap.add_argument("--propagate", action="store_true",
                     help="add the calibration's error (8 perturbed cameras) to the stated errors")
     ap.add_argument("--k1", type=float, default=-0.25, help="--diagnose: the lens's k1")

@@ -89,7 +89,8 @@ class Calibration:
         Measured minus reprojected corners (px).
     focal_source : str
         Where the focal length came from: ``intrinsics``, ``focal``,
-        ``camera-height``, ``corners`` or ``nominal``.
+        ``camera-height``, ``corners``, ``balls`` (the still balls' shapes,
+        :func:`focal_from_balls`) or ``nominal``.
     notes : list of str
         Assumptions worth telling the user.
     edge_rms_px : float or None
@@ -411,13 +412,19 @@ def _homography_calibration(obj, img, size, intrinsics, distortion, kappa, fps, 
 
 
 def perturbed_cameras(corners_px, sigma_px: float, size, table: Table = Table(), *,
-                      height_sigma_m: float = 0.0, **kw) -> list:
+                      height_sigma_m: float = 0.0, focal_sigma: float = 0.0, kappa_sigma: float = 0.0,
+                      kappa_corners=None, **kw) -> list:
     """The cameras of the 8 corner coordinates each moved by ``sigma_px``, one at a
     time, and, when the focal length is the nominal one (an overhead camera
     without a lens calibration or height), a ninth with it
     ``1 + NOMINAL_FOCAL_SIGMA`` times longer; when it comes from
     ``camera_height_m`` and ``height_sigma_m`` > 0, a ninth with the camera
-    that much higher (the tape's error).
+    that much higher (the tape's error); when ``focal_px`` is given with a
+    relative error ``focal_sigma`` > 0 (the balls' f), a ninth with it that
+    much longer.  With the lens's bow estimated (``kappa``, no intrinsics)
+    and its standard error ``kappa_sigma`` > 0, one more: ``kappa`` that much
+    larger, with the corners the edges give then (``kappa_corners``; default
+    the same corners).
 
     For propagating a calibration's error to anything computed through the
     camera (v0, w0): with ``q`` the quantity through the calibrated camera and
@@ -435,6 +442,20 @@ def perturbed_cameras(corners_px, sigma_px: float, size, table: Table = Table(),
             cams.append(calibrate_corners(c, size, table, **kw).camera)
         except CalibrationError:
             continue
+    if focal_sigma > 0 and kw.get("focal_px") and kw.get("intrinsics") is None and not kw.get("homography"):
+        try:
+            cams.append(calibrate_corners(base, size, table,
+                                          **dict(kw, focal_px=kw["focal_px"] * (1.0 + focal_sigma))).camera)
+        except CalibrationError:
+            pass
+    if kappa_sigma > 0 and kw.get("kappa") and kw.get("intrinsics") is None and not kw.get("homography"):
+        # The bow's own error: the edges straightened by a kappa one standard
+        # error larger meet at slightly different corners (mostly at the frame's edge).
+        kc = base if kappa_corners is None else np.asarray(kappa_corners, dtype=float).reshape(4, 2)
+        try:
+            cams.append(calibrate_corners(kc, size, table, **dict(kw, kappa=kw["kappa"] + kappa_sigma)).camera)
+        except CalibrationError:
+            pass
     if kw.get("camera_height_m") and height_sigma_m > 0 and not (
             kw.get("homography") or kw.get("intrinsics") is not None or kw.get("focal_px")):
         # The measured height's own error: f re-solved for a camera that much higher.
@@ -766,6 +787,21 @@ def fit_sides(sides, K=None, dist=None, kappa: float = 0.0, centre=None):
     return corners, float(np.sqrt(np.mean(allres**2)))
 
 
+def radial_sigma(sides, centre, kappa: float, size) -> float:
+    """Standard error of ``kappa`` (px^-2) from the edges' own fit: the curvature
+    of the edge points' sum of squared distances from their lines about the
+    best ``kappa``, each point's error taken as their RMS there
+    (``se = sqrt(2 / chi2'')``, chi2 = SSR / rms^2)."""
+    n = sum(len(s) for s in sides)
+    h = 0.002 / (0.5 * float(max(size))) ** 2      # 0.002 in k1 for f of half the frame
+
+    def ssr(k):
+        return n * fit_sides(sides, kappa=k, centre=centre)[1] ** 2
+    s0 = ssr(kappa)
+    curv = (ssr(kappa + h) - 2.0 * s0 + ssr(kappa - h)) / (h * h) / (s0 / n)
+    return float(math.sqrt(2.0 / curv)) if curv > 0 else 0.0
+
+
 def radial_from_edges(sides, centre, size) -> float:
     """The radial distortion (``kappa``, px^-2) that makes the felt's four sides
     straightest: a phone's wide lens bows them by several pixels; one
@@ -815,12 +851,20 @@ class Detection:
         ``noses`` (the cushions' noses: the playing surface itself) or
         ``felt`` (the felt-coloured outline: the playing surface unless the
         cushions are cloth-coloured, see ``--felt-margin``).
+    kappa_sigma : float
+        Standard error of ``kappa`` from the edges' fit (:func:`radial_sigma`;
+        0 with a known lens).
+    corners_kappa : ndarray, shape (4, 2), or None
+        The corners fitted with ``kappa + kappa_sigma`` (same order as
+        ``corners``): the lens's error carried into the perturbed cameras.
     """
 
     corners: np.ndarray
     edge_rms: float
     kappa: float
     edge: str
+    kappa_sigma: float = 0.0
+    corners_kappa: np.ndarray | None = None
 
 
 def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = True,
@@ -848,11 +892,15 @@ def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = Tru
             sides, edge = inner, "noses"
     h, w = D.shape
     centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
-    kappa = 0.0
+    kappa = kappa_sigma = 0.0
+    corners_kappa = None
     if K is None and estimate_lens:
         kappa = radial_from_edges(sides, centre, (w, h))
+        kappa_sigma = radial_sigma(sides, centre, kappa, (w, h))
+        corners_kappa = fit_sides(sides, kappa=kappa + kappa_sigma, centre=centre)[0]
     corners, edge_rms = fit_sides(sides, K, dist, kappa, centre)
-    return Detection(corners=corners, edge_rms=edge_rms, kappa=kappa, edge=edge)
+    return Detection(corners=corners, edge_rms=edge_rms, kappa=kappa, edge=edge, kappa_sigma=kappa_sigma,
+                     corners_kappa=corners_kappa)
 
 
 def assign_corners(quad: np.ndarray, size, table: Table, **kw) -> Calibration:
@@ -881,6 +929,240 @@ def assign_corners(quad: np.ndarray, size, table: Table, **kw) -> Calibration:
                                f"{table.length:g} x {table.width:g} m table; give --corners")
     tries.sort(key=lambda x: (x[0], x[1]))
     return tries[0][2]
+
+
+# --------------------------------------------------------------------------- f from the balls
+# The ring between BALL_RING[0] and [1] of a ball's radii about it gives the
+# felt's colour and the noise (and must be all felt).
+BALL_RING = (1.2, 1.6)
+# A ball's outline is where its colour distance from the felt falls halfway
+# from its level this far (px) inside the steepest fall: close enough to the
+# edge that a shaded ball's limb is still the level (2.5 px put the renderer's
+# shaded balls' f 5-7% low, 1.5 px 2-5%; drawn flat balls alike, 0.2-1.2%).
+LIMB_INNER_PX = 1.5
+# A still ball's blob on the felt: its area within this range of the disc
+# the table's scale predicts (rough: the scale varies over a tilted view).
+BALL_AREA_RANGE = (0.4, 2.5)
+# Least ball-minus-felt colour difference (grey levels) to measure a shape on.
+BALL_MIN_CONTRAST = 20.0
+# Error of a ball's measured shape beyond the edge points' scatter
+# (dimensionless, per component), added in quadrature: on drawn flat balls the
+# shapes came within 0.001-0.004 of the exact outline's, but the renderer's
+# shaded balls (realistic look: lit from one side, a highlight, lens blur) put
+# f 2-5% low, which this floor states (f's error then 3.2-5%, real 2-5%;
+# docs/calibration.md, section 6).
+BALL_SHAPE_FLOOR = 0.01
+
+
+@dataclass(frozen=True)
+class BallImage:
+    """A still ball's image on the felt, by the ellipse fitted to its outline.
+
+    Attributes
+    ----------
+    centre : ndarray, shape (2,)
+        Centre of the ellipse fitted to the outline (px).
+    shape : ndarray, shape (2,)
+        That ellipse's second moments' traceless part over half their trace,
+        ``((Mxx - Myy) / 2, Mxy) / ((Mxx + Myy) / 2)``: 0 for a circle; a
+        sphere's silhouette off the optical axis is elongated along the line to it by
+        about ``1 / cos`` of the angle from the axis, which the focal length
+        sets (:func:`focal_from_balls`).
+    sigma : float
+        1-sigma error of each ``shape`` component: the outline points' scatter
+        and ``BALL_SHAPE_FLOOR``.
+    """
+
+    centre: np.ndarray
+    shape: np.ndarray
+    sigma: float
+
+
+def _shape(M) -> np.ndarray:
+    return np.array([(M[0, 0] - M[1, 1]) / 2.0, M[0, 1]]) / ((M[0, 0] + M[1, 1]) / 2.0)
+
+
+def ball_images(img: np.ndarray, quad: np.ndarray, r_px: float) -> list:
+    """The still balls' images inside the playing surface (:class:`BallImage`).
+
+    A blob of non-felt colour of about a ball's area (radius ``r_px``) whose
+    surroundings out to ``BALL_RING[1]`` radii are felt (not a pocket, a
+    cushion or another ball); its outline is found along 90 rays from it
+    (:func:`_limb_points`: the colour distance from the felt, linear in the
+    pixel's coverage for a locally even ball colour, halfway down at the
+    edge) and an ellipse fitted to it (:func:`_fit_ellipse`); the shape is
+    that ellipse's.  The frame's values are taken as linear in coverage (the
+    renderer's and the drawn frames are; a camera's gamma moves the halfway
+    point by the limb's brightness).
+    """
+    D, thr = _felt_distance(img)
+    h, w = D.shape
+    surface = np.zeros((h, w), np.uint8)
+    cv2.fillConvexPoly(surface, np.round(quad).astype(np.int32), 1)
+    surface = cv2.erode(surface, np.ones((5, 5), np.uint8))
+    blob = ((D >= thr) & (surface > 0)).astype(np.uint8)
+    n, lab, stats, cent = cv2.connectedComponentsWithStats(blob, connectivity=8)
+    col = np.asarray(img, dtype=np.float64)
+    if col.ndim == 2:
+        col = col[..., None]
+    area0 = math.pi * r_px**2
+    out = []
+    for i in range(1, n):
+        if not (BALL_AREA_RANGE[0] * area0 <= stats[i, cv2.CC_STAT_AREA] <= BALL_AREA_RANGE[1] * area0):
+            continue
+        rc = math.sqrt(stats[i, cv2.CC_STAT_AREA] / math.pi)
+        cu, cv_ = cent[i]
+        reach = BALL_RING[1] * rc + 2.0
+        u0, u1 = int(cu - reach), int(cu + reach) + 2
+        v0, v1 = int(cv_ - reach), int(cv_ + reach) + 2
+        if u0 < 0 or v0 < 0 or u1 > w or v1 > h:
+            continue
+        sl = np.s_[v0:v1, u0:u1]
+        vv, uu = np.mgrid[v0:v1, u0:u1]
+        du, dv = uu - cu, vv - cv_
+        rr = np.hypot(du, dv)
+        own = cv2.dilate((lab[sl] == i).astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+        if np.mean((D[sl] >= thr)[(rr <= BALL_RING[1] * rc) & ~own]) > 0.01:
+            continue                        # something else within the ring: a cushion, pocket, ball
+        ring = (rr >= BALL_RING[0] * rc) & (rr <= BALL_RING[1] * rc)
+        felt = np.median(col[sl][ring], axis=0)
+        # |colour - felt| is linear in the pixel's coverage for a locally even
+        # ball colour, whatever the shading elsewhere on the ball
+        dmap = np.linalg.norm(col[sl] - felt, axis=2).astype(np.float32)
+        noise = 1.4826 * float(np.median(np.abs(dmap[ring] - np.median(dmap[ring]))))
+        pts = _limb_points(dmap, cu - u0, cv_ - v0, rc, noise)
+        if pts is None:
+            continue
+        ell = _fit_ellipse(pts)
+        if ell is None:
+            continue
+        centre, M, resid = ell
+        sigma = math.hypot(2.0 * math.sqrt(2.0 / len(pts)) * resid / math.sqrt(2.0 * np.trace(M)),
+                           BALL_SHAPE_FLOOR)
+        out.append(BallImage(centre=centre + [u0, v0], shape=_shape(M), sigma=float(sigma)))
+    return out
+
+
+def _limb_points(dmap, cu, cv_, rc, noise, n_rays: int = 90):
+    """Sub-pixel points of a ball's outline along rays from ``(cu, cv_)``: where
+    the colour distance from the felt falls halfway from its level just inside
+    the edge (``LIMB_INNER_PX`` in from the steepest fall) to the felt's (0), by linear
+    interpolation along the ray (bilinear samples every 0.1 px).  A ray whose
+    edge is weaker than ``BALL_MIN_CONTRAST`` or 5 noise levels is skipped."""
+    step = 0.1
+    s = np.arange(0.5 * rc, BALL_RING[1] * rc, step)
+    th = 2.0 * np.pi * np.arange(n_rays) / n_rays
+    mx = (cu + np.cos(th)[:, None] * s[None, :]).astype(np.float32)
+    my = (cv_ + np.sin(th)[:, None] * s[None, :]).astype(np.float32)
+    prof = cv2.remap(dmap, mx, my, cv2.INTER_LINEAR)
+    pts = []
+    inner = int(round(LIMB_INNER_PX / step))
+    for k in range(n_rays):
+        p = prof[k]
+        j = int(np.argmin(np.diff(p)))              # steepest fall
+        if j - inner < 0:
+            continue
+        level = float(p[j - inner])
+        if level < max(BALL_MIN_CONTRAST, 5.0 * noise):
+            continue
+        half = level / 2.0
+        below = np.nonzero(p[j - inner:] < half)[0]
+        if not below.size:
+            continue
+        m = j - inner + int(below[0])
+        sm = s[m - 1] + step * (p[m - 1] - half) / (p[m - 1] - p[m])
+        pts.append((cu + np.cos(th[k]) * sm, cv_ + np.sin(th[k]) * sm))
+    return np.array(pts) if len(pts) >= n_rays // 2 else None
+
+
+def _fit_ellipse(pts):
+    """Centre, second moments (``Q^-1 / 4`` of the ellipse ``d^T Q d <= 1``) and
+    RMS radial residual (px) of the ellipse through outline points
+    (``cv2.fitEllipseDirect``), refitted without points more than 3 robust
+    sigmas off (a marking or a highlight at the edge)."""
+    keep = np.ones(len(pts), bool)
+    for _ in range(3):
+        if keep.sum() < 6:
+            return None
+        (cx, cy), (w_, h_), ang = cv2.fitEllipseDirect(pts[keep].astype(np.float32))
+        a, b = w_ / 2.0, h_ / 2.0
+        c, s_ = math.cos(math.radians(ang)), math.sin(math.radians(ang))
+        Rm = np.array([[c, -s_], [s_, c]])
+        d = (pts - [cx, cy]) @ Rm                    # in the ellipse's axes
+        rho = np.hypot(d[:, 0] / a, d[:, 1] / b)     # 1 on the ellipse
+        res = (rho - 1.0) * np.hypot(d[:, 0], d[:, 1]) / np.maximum(rho, 1e-9)
+        scale = 1.4826 * float(np.median(np.abs(res[keep]))) + 1e-3
+        new = np.abs(res) < 3.0 * scale
+        if np.array_equal(new, keep):
+            break
+        keep = new
+    M = Rm @ np.diag([a * a, b * b]) @ Rm.T / 4.0
+    return np.array([cx, cy]), M, float(np.sqrt(np.mean(res[keep] ** 2)))
+
+
+def focal_from_balls(balls, corners_px, size, table: Table = Table(), *, R: float = 0.028575, **kw):
+    """Focal length (px) from the still balls' shapes, and its standard error.
+
+    A sphere's silhouette is elongated towards the optical axis by about
+    ``1 / cos`` of its angle from it, and that angle for a given pixel is set
+    by the focal length: for each trial f the camera is re-solved from the
+    same corners (``kw`` as for :func:`calibrate_corners`), each ball's
+    outline predicted at the table point its centre images to
+    (:meth:`Camera.ball_outline`, the same ellipse fitted to it) and compared with the
+    measured ``shape`` (chi^2 over the balls); the error is where chi^2 rises
+    by 1, widened by ``sqrt(chi2 / dof)`` when the fit is worse than the
+    pixels' noise.  A ball near the axis shows nothing; one near the table's
+    corner straight overhead fixes f to a few percent (measured,
+    docs/calibration.md, section 6).
+
+    Returns
+    -------
+    (f, sigma) : tuple of float, or None
+        None when no ball was measured or chi^2 has no minimum inside
+        ``FOCAL_RANGE``.
+    """
+    if not balls:
+        return None
+    big = max(size)
+    kw = {k: v for k, v in kw.items() if k not in ("focal_px", "camera_height_m", "intrinsics", "distortion")}
+
+    def chi2(f):
+        try:
+            cam = calibrate_corners(corners_px, size, table, focal_px=f, **kw).camera.with_centre_height(R)
+        except CalibrationError:
+            return math.inf
+        total = 0.0
+        for b in balls:
+            xy = cam.to_table(b.centre[None])[0]
+            fit = _fit_ellipse(cam.ball_outline(xy, R, n=90))      # as the measured outline is fitted
+            total += float(np.sum((b.shape - _shape(fit[1])) ** 2)) / b.sigma**2
+        return total
+
+    grid = big * np.exp(np.linspace(np.log(0.3), np.log(3.0), 41))
+    chi = np.array([chi2(f) for f in grid])
+    i = int(np.argmin(chi))
+    if not np.isfinite(chi[i]) or i in (0, len(grid) - 1):
+        return None
+    f = math.exp(_golden(lambda lf: chi2(math.exp(lf)), math.log(grid[i - 1]), math.log(grid[i + 1]), 1e-5))
+    c0 = chi2(f)
+    dof = 2 * len(balls) - 1
+    rise = max(1.0, c0 / dof) if dof > 0 else 1.0
+
+    def edge(step):
+        # where chi^2 first rises by ``rise`` going from f by factors of ``step``
+        g, prev = f, f
+        for _ in range(400):
+            g *= step
+            if not (FOCAL_RANGE[0] * big <= g <= FOCAL_RANGE[1] * big):
+                return None
+            if chi2(g) > c0 + rise:
+                return math.sqrt(g * prev)
+            prev = g
+        return None
+    lo, hi = edge(1.0 / 1.005), edge(1.005)
+    if lo is None or hi is None:
+        return None
+    return f, (hi - lo) / 2.0
 
 
 # The automatic corners' error is at least this (px): the edges' scatter
@@ -917,7 +1199,28 @@ def calibrate_video(path, table: Table = Table(), corners=None, *, intrinsics=No
         cal = calibrate_corners(corners, size, table, intrinsics=K, distortion=dist, fps=fps, **kw)
         return _with_perturbed(cal, size, table, intrinsics=K, distortion=dist, fps=fps,
                                height_sigma_m=camera_height_sigma_m, **kw)
-    frame = reference_frame(path)
+    return calibrate_frame(reference_frame(path), table, intrinsics=K, distortion=dist, fps=fps,
+                           felt_margin_m=felt_margin_m, felt_height_m=felt_height_m,
+                           nose_height_m=nose_height_m, camera_height_sigma_m=camera_height_sigma_m, **kw)
+
+
+def calibrate_frame(frame: np.ndarray, table: Table = Table(), *, intrinsics=None, distortion=None,
+                    felt_margin_m: float = 0.0, felt_height_m: float = 0.0, nose_height_m: float = 0.0,
+                    camera_height_sigma_m: float = 0.0, use_balls: bool = True, **kw) -> Calibration:
+    """The camera found in one frame of the table (``calibrate_video``'s automatic
+    path): the corners and the lens's bow from :func:`detect_corners`, the
+    corners' order from :func:`assign_corners`, and, where the corners cannot
+    fix the focal length (straight overhead, no lens, height or focal length
+    given), the focal length from the still balls' shapes
+    (:func:`focal_from_balls`) when that is surer than the nominal one's
+    ``NOMINAL_FOCAL_SIGMA`` (``use_balls``); then the perturbed cameras, with one for the
+    lens's bow (``kappa`` one standard error larger) and one for a focal
+    length from the balls (one standard error longer).  ``kw`` as for
+    :func:`calibrate_corners`."""
+    h, w = frame.shape[:2]
+    size = (int(w), int(h))
+    K = None if intrinsics is None else np.asarray(intrinsics, dtype=float)
+    dist = None if distortion is None else np.asarray(distortion, dtype=float).ravel()
     det = detect_corners(frame, K, dist)
     quad, edge_rms, kappa = det.corners, det.edge_rms, det.kappa
     if det.edge == "noses":
@@ -926,13 +1229,29 @@ def calibrate_video(path, table: Table = Table(), corners=None, *, intrinsics=No
     # about the points' scatter times sqrt(4 / points per side).
     per_side = (size[0] + size[1]) / 2.0 / 2.0
     kw.setdefault("corner_sigma_px", max(edge_rms * math.sqrt(4.0 / per_side), AUTO_CORNER_SIGMA_FLOOR_PX))
-    same = dict(intrinsics=K, distortion=dist, fps=fps, kappa=kappa, margin_m=felt_margin_m,
+    same = dict(intrinsics=K, distortion=dist, fps=kw.pop("fps", 30.0), kappa=kappa, margin_m=felt_margin_m,
                 corner_height_m=felt_height_m, **kw)
     cal = assign_corners(quad, size, table, **same)
-    cal = Calibration(camera=cal.camera, corners_px=cal.corners_px, residual_px=cal.residual_px,
-                      focal_source=cal.focal_source, notes=cal.notes, edge_rms_px=edge_rms,
-                      edge=det.edge, corner_sigma_px=cal.corner_sigma_px)
-    return _with_perturbed(cal, size, table, height_sigma_m=camera_height_sigma_m, **same)
+    notes = list(cal.notes)
+    focal_sigma = 0.0
+    if cal.focal_source == "nominal" and use_balls:
+        R = float(kw.get("R_nominal", 0.028575))
+        scale = math.sqrt(abs(signed_area(quad)) / (table.length * table.width))   # px per m, roughly
+        fb = focal_from_balls(ball_images(frame, quad, R * scale), cal.corners_px, size, table, R=R, **same)
+        if fb is not None and fb[1] / fb[0] < NOMINAL_FOCAL_SIGMA:
+            same["focal_px"] = fb[0]
+            focal_sigma = fb[1] / fb[0]
+            cal = assign_corners(quad, size, table, **same)
+            notes = [f"the corners do not fix the focal length (camera nearly overhead); f = {fb[0]:.0f} px "
+                     f"+/- {100 * focal_sigma:.1f}% from the still balls' shapes (a sphere's image "
+                     f"stretches away from the optical axis), camera {cal.height_m:.2f} m above the cloth"]
+            cal = replace(cal, focal_source="balls")
+    # the corners refitted with kappa one standard error larger, in the order assigned
+    s = int(np.argmin([np.abs(np.roll(quad, -k, axis=0) - cal.corners_px).max() for k in range(4)]))
+    kappa_corners = None if det.corners_kappa is None else np.roll(det.corners_kappa, -s, axis=0)
+    cal = replace(cal, notes=notes, edge_rms_px=edge_rms, edge=det.edge)
+    return _with_perturbed(cal, size, table, height_sigma_m=camera_height_sigma_m, focal_sigma=focal_sigma,
+                           kappa_sigma=det.kappa_sigma, kappa_corners=kappa_corners, **same)
 
 
 def _with_perturbed(cal: Calibration, size, table: Table, **kw) -> Calibration:
@@ -946,6 +1265,9 @@ def _with_perturbed(cal: Calibration, size, table: Table, **kw) -> Calibration:
     notes = list(cal.notes)
     want = 8 + (cal.focal_source == "nominal") + (cal.focal_source == "camera-height"
                                                    and kw.get("height_sigma_m", 0.0) > 0)
+    want += (kw.get("focal_sigma", 0.0) > 0 and bool(kw.get("focal_px"))) + (
+        kw.get("kappa_sigma", 0.0) > 0 and bool(kw.get("kappa")) and not kw.get("homography")
+        and kw.get("intrinsics") is None)
     if len(cams) < want:
         # A corner whose move leaves no plausible camera drops its term: the
         # calibration's share of the errors is then understated.
