@@ -7,7 +7,7 @@ frame gets a status: ``OK`` or the reason it was flagged rather than guessed.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import cv2
@@ -15,9 +15,10 @@ import numpy as np
 
 from cuespin.track.background import DETECT_SIGMAS, Background, box_size
 from cuespin.track.colour import GREY, Projection
-from cuespin.track.model import blur_nodes, fit_disc, streak_from_moments, streak_model
+from cuespin.track.model import SphereLook, blur_nodes, fit_disc, streak_from_moments, streak_model
 from cuespin.track.outline import OUTLINE_REFIT_PX, OutlineCache, is_similarity
 from cuespin.track.radius import RadiusMap
+from cuespin.track.sphere import Sample, learn_sphere
 
 OK, NO_BALL, PARTIAL, TWO_BLOBS, GONE, FIT_FAILED, PULLED, OFF_PATH = 0, 1, 2, 3, 4, 5, 6, 7
 STATUS_TEXT = {OK: "ok", NO_BALL: "no ball", PARTIAL: "ball partly out of the frame",
@@ -64,6 +65,32 @@ SCORE_CAP = 1.0
 # (red on red in a low light, sample_scenes(6, 7, realistic, MJPG)[5]: the
 # dark rim's crescent was fitted, 1.3 radii off, in 43 of 81 frames).
 RESTART_RADII = 0.25
+# Markings on the ball (dots, a logo turning with its spin) are something the
+# shaded model cannot hold: they pull its centre (a white ball with dots,
+# 0.27-0.30 radii) or stop it converging (a blue ball with a logo at rest:
+# 41 of 112 fits failed), and a fit with them in view explains its window 3-4
+# times worse than one without (the pulled-fit rule then drops it).  Inside
+# the ball (farther than MARK_RIM_PX within its outline: its edge locates
+# it, and the shaded model's misfit is largest there), a pixel departing
+# from the look fitted linearly at the fit's centre by more than
+# MARK_CONTRAST of the ball's contrast and OUTLIER_SIGMAS noise sigmas, in a
+# group of at least MARK_MIN_PX, is a marking: such pixels, grown by one
+# (their antialiased edge), are left out and the centre refitted.  Measured
+# (benchmarks/track.py realistic, seed 0, FFV1): dots and a logo depart by
+# 0.5-0.9 of the contrast; the shaded model's misfit inside the rim of an
+# unmarked ball by at most 0.3 (docs/measurements.md: the decision's
+# false-trigger rate on unmarked balls).
+MARK_CONTRAST = 0.35
+MARK_RIM_PX = 1.5
+MARK_MIN_PX = 3
+# A fit with markings found that lies more than this many radii from the
+# prediction (the last two centres' motion) is done again from there, and
+# the better kept: the shaded fit of a white ball with a logo, 120 fps,
+# stopped 0.36 radii off with the logo half in its window (rms 22.7; without
+# the markings judged there 14.1), and from the prediction found the ball
+# (0.013 radii, rms 6.8; benchmarks/track.py realistic seed 0 shot 8, frame
+# 64).  A moving ball's prediction misses it by a few hundredths of a radius.
+MARK_RETRY_RADII = 0.1
 # Frames whose two fits (disc and shaded) decide the look (config.look "auto").
 LOOK_FRAMES = 12
 # The shaded look is kept when its pooled residual reduction exceeds the
@@ -85,8 +112,9 @@ class LastFit(NamedTuple):
     (track.video's felt correction, ``refit_shift``): the window's corner
     ``pu, pv`` (px) and size ``ph, pw``, the centre ``c`` and blur ``b`` (px),
     the ball's level ``G``, whether the blur was fitted, the look's shade
-    parameters, the outline (None: the radius map's disc) and the foreign
-    pixels left out (None: none)."""
+    parameters, the outline (None: the radius map's disc), the foreign
+    pixels left out (None: none) and the markings' pixels left out
+    (:func:`marking_pixels`; None: none)."""
     pu: int
     pv: int
     ph: int
@@ -98,6 +126,7 @@ class LastFit(NamedTuple):
     shade: object
     outline: object
     foreign: np.ndarray | None
+    marks: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -125,6 +154,10 @@ class TrackerConfig:
         ``auto``: learnt from the video, by fitting both to the first
         ``LOOK_FRAMES`` frames the ball is found in and keeping ``shaded``
         only if it explains them significantly better (chi-square, 0.1%).
+        A shaded ball is then fitted as a lit sphere
+        (:class:`cuespin.track.model.SphereLook`) whose light and
+        shininess are learnt from those frames (``sphere`` True); False
+        keeps the quadratic look.
     """
 
     refine: str = "fit"
@@ -132,6 +165,7 @@ class TrackerConfig:
     search_margin_px: float = 6.0
     threaded: bool = True
     look: str = "auto"
+    sphere: bool = True
 
 
 @dataclass
@@ -174,18 +208,59 @@ def shaded_look(votes: list) -> bool:
     return bool(stat > chdtri(3 * len(rss_d), LOOK_P))
 
 
-def beyond_ball(shape, u0: int, v0: int, c, b, r_out: float) -> np.ndarray:
-    """Pixels of a window (``shape`` (h, w), top-left ``(u0, v0)``) farther
-    than ``r_out + FOREIGN_GAP_PX`` from the ball's blur segment (centre
-    ``c``, blur vector ``b``, px): what they show is felt or something else,
-    never the ball."""
+def segment_distance(shape, u0: int, v0: int, c, b) -> np.ndarray:
+    """Distance (px) of each pixel of a window (``shape`` (h, w), top-left
+    ``(u0, v0)``) from the ball's blur segment (centre ``c``, blur vector
+    ``b``, px)."""
     h, w = shape
     c, b = np.asarray(c, float), np.asarray(b, float)
     L2 = float(b @ b)
     # Along each axis, broadcast (no index grids).
     px, py = (np.arange(u0, u0 + w) - c[0])[None, :], (np.arange(v0, v0 + h) - c[1])[:, None]
     s = np.clip((px * b[0] + py * b[1]) / L2, -0.5, 0.5) if L2 > 0 else 0.0
-    return np.hypot(px - s * b[0], py - s * b[1]) > r_out + FOREIGN_GAP_PX
+    return np.hypot(px - s * b[0], py - s * b[1])
+
+
+def beyond_ball(shape, u0: int, v0: int, c, b, r_out: float) -> np.ndarray:
+    """Pixels of a window (``shape`` (h, w), top-left ``(u0, v0)``) farther
+    than ``r_out + FOREIGN_GAP_PX`` from the ball's blur segment (centre
+    ``c``, blur vector ``b``, px): what they show is felt or something else,
+    never the ball."""
+    return segment_distance(shape, u0, v0, c, b) > r_out + FOREIGN_GAP_PX
+
+
+def marking_pixels(patch, felt, u0: int, v0: int, c, b, r: float, r_in: float, sigma: float,
+                   contrast: float, outline=None, valid=None) -> np.ndarray | None:
+    """Pixels of a window (frame ``patch`` and ``felt``, top-left ``(u0,
+    v0)``) that show markings on the ball (the rule at ``MARK_CONTRAST``):
+    inside the ball of centre ``c``, blur ``b`` (px), radius ``r`` (the
+    model's) and ``r_in`` (its smallest, px), departing from the ball's look
+    (level, lit side, rim: linear at a fixed centre, fitted twice, the
+    second time without the first's markings) by more than the threshold;
+    grown by one pixel.  ``valid``: the pixels that may be used (False: the
+    cue's).  None when there are none."""
+    if not np.all(np.isfinite(c)) or not np.all(np.isfinite(b)):
+        return None
+    inner = segment_distance(felt.shape, u0, v0, c, b) < r_in - MARK_RIM_PX
+    if inner.sum() < 12:
+        return None
+    m0, J = streak_model(c, b, 0.0, felt, r, u0, v0, blur_nodes(np.hypot(*b)), np.zeros(3), False, outline)
+    y = (np.asarray(patch, np.float64) - felt - m0).ravel()
+    A = J[:, 4:8]  # level and the look's three: linear at a fixed centre
+    use = np.ones(len(y), bool) if valid is None else np.asarray(valid, bool).ravel().copy()
+    thresh = max(MARK_CONTRAST * contrast, OUTLIER_SIGMAS * max(sigma, 0.5))
+    bad = np.zeros(len(y), bool)
+    for _ in range(2):
+        theta = np.linalg.lstsq(A[use & ~bad], y[use & ~bad], rcond=1e-9)[0]
+        bad = inner.ravel() & (np.abs(y - A @ theta) > thresh)
+    if bad.sum() < MARK_MIN_PX:
+        return None
+    bad = bad.reshape(felt.shape).astype(np.uint8)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(bad, connectivity=8)
+    big = np.nonzero(stats[1:, cv2.CC_STAT_AREA] >= MARK_MIN_PX)[0] + 1
+    if not len(big):
+        return None
+    return cv2.dilate(np.isin(labels, big).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
 
 
 def foreign_threshold(sigma: float, contrast: float) -> float:
@@ -353,8 +428,11 @@ class BallTracker:
         self.was_partial_edge = False
         self.shade = {"disc": False, "shaded": True}.get(config.look)  # None: learning
         self._look_votes: list[tuple[float, float, int]] = []
+        # The voting frames' fits, refitted with the lit sphere once it is learnt.
+        self._look_fits: list[tuple] = []
         self._candidates: tuple = ()  # the last full search's blobs
         self._bands = None  # the radius map's bands on the search mask (multi-scale search)
+        self._pred = None  # this frame's predicted centre (px), None without history
         # The ball's outline from the camera; None: the disc everywhere.
         self.outline_of = None if is_similarity(camera) or R is None else OutlineCache(camera, R, self.r)
         self.outline = None  # this frame's (Ellipse or None)
@@ -457,6 +535,7 @@ class BallTracker:
         if self.gone:
             return _lost(GONE)
         pred, vel = self._velocity(k)
+        self._pred = pred
         blur = vel * self.exposure_frames
         r_here = self.radii.at(pred) if pred is not None else self.r
         reach = r_here + 0.5 * np.hypot(*blur) + self.cfg.search_margin_px + 0.5 * np.hypot(*vel)
@@ -530,6 +609,29 @@ class BallTracker:
                      outline=self.outline)
         return g if g else f
 
+    def _unmarked(self, patch, felt, u0, v0, f, r, fit_blur, ol, foreign, G0=None, shade=True):
+        """The fit ``f`` (converged or not: from where it stopped, with the
+        level ``G0``, as its own may have run off) again without the
+        markings' pixels (:func:`marking_pixels`) and the ``foreign`` ones:
+        (fit, markings, whether it fitted the blur), or ``(f, None,
+        fit_blur)`` when there are none or the refit fails.  A refit that
+        fails fitting the blur is tried with it held: a blur fitted at rest
+        (from the moments of a shaded, marked ball) has no derivatives.
+        ``shade``: the look the refit uses (:func:`fit_disc`'s; the lit
+        sphere once learnt)."""
+        r_in = r if ol is None else min(r, 1.0 / np.sqrt(np.linalg.eigvalsh(ol.Qm)[1]))
+        marks = marking_pixels(patch, felt, u0, v0, f.c, f.b, r, r_in, self.bg.sigma, self.bg.contrast, ol,
+                               None if foreign is None else ~foreign)
+        if marks is None:
+            return f, None, fit_blur
+        left = marks if foreign is None else marks | foreign
+        G = f.G if G0 is None else G0
+        for fb in (True, False) if fit_blur else (False,):
+            g = fit_disc(patch, felt, u0, v0, f.c, r, G, b0=f.b, fit_blur=fb, shade=shade, valid=~left, outline=ol)
+            if g:
+                return g, marks, fb
+        return f, None, fit_blur
+
     def _learn_look(self, patch, felt, u0, v0, f_shaded, r, G0, blur, fit_blur):
         """One frame's vote on the look: the disc fit's residual sum against
         the shaded one's; decided once ``LOOK_FRAMES`` frames have voted."""
@@ -539,6 +641,35 @@ class BallTracker:
         self._look_votes.append(look_vote(d, f_shaded, patch.size))
         if len(self._look_votes) >= LOOK_FRAMES:
             self.shade = shaded_look(self._look_votes)
+            if self.shade and self.cfg.sphere:
+                self._learn_sphere()
+            self._look_fits = []
+
+    def _keep_for_sphere(self, f, patch, felt, u0, v0, fit_blur, foreign, last_fit) -> None:
+        """Hold a voting frame's fit (and the arrays its Observation and
+        LastFit share) for :meth:`_learn_sphere`."""
+        if self.cfg.sphere and self.shade is None:
+            self._look_fits.append((Sample(patch.copy(), felt.copy(), u0, v0, f.c.copy(), f.b.copy(), f.G, bool(fit_blur),
+                                           f.shade, None if foreign is None else ~foreign), f, last_fit))
+
+    def _learn_sphere(self) -> None:
+        """Learn the lit sphere's geometry from the voting frames and refit
+        them with it: their centres and covariances are updated in place
+        (the arrays their Observations and LastFits hold), so the track
+        reports every frame with the same look."""
+        if not self._look_fits:
+            return
+        look, _ = learn_sphere([s for s, _, _ in self._look_fits], self.r, self.outline)
+        if look is None:
+            return
+        self.shade = look
+        for s, f, lf in self._look_fits:
+            g = fit_disc(s.patch, s.felt, s.u0, s.v0, s.c, self.r, s.G, b0=s.b, fit_blur=s.fit_blur, shade=look,
+                         valid=s.valid, outline=self.outline)
+            if g:
+                f.c[:], f.stderr[:], f.cov[:] = g.c, g.stderr, g.cov
+                if lf is not None:
+                    lf.c[:] = g.c
 
     def _departure_centre(self, frame, c, r_ball: float) -> np.ndarray:
         """Centroid (px) of the departure from the felt in either direction,
@@ -591,23 +722,49 @@ class BallTracker:
         else:
             fit_blur = np.hypot(*blur) > FIT_BLUR_PX
             G0 = float(felt.mean()) + self.pol * max(self.bg.contrast, 1.0)
-            shade = self.shade is not False
-            f = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur, shade=shade, outline=ol)
+            # The lit sphere once learnt; before, the quadratic look (or none).
+            shade = self.shade if isinstance(self.shade, SphereLook) else self.shade is not False
+            f = first = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur, shade=shade, outline=ol)
+            first_blur = fit_blur
             if not f and not fit_blur and self.exposure_frames > 0:
                 # A streak the prediction missed (the strike, a sudden turn).
                 blur = streak_from_moments(D, u0, v0, c, r)
                 fit_blur = np.hypot(*blur) > FIT_BLUR_PX
                 f = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur, shade=shade,
                              outline=ol)
+            if not f and isinstance(shade, SphereLook):
+                # The sphere's fit failed (2 of 37 frames of
+                # sample_scenes(2, 5, realistic, MJPG)[1], at the strike):
+                # the quadratic look, whose basis is smooth, as before.
+                shade = True
+                f = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur, shade=shade, outline=ol)
+            marks = None
+            if not f and shade:
+                # Markings can stop the shaded fit converging (it stops near
+                # the ball's centre): without them, from where the first
+                # fit stopped.
+                f, marks, fit_blur = self._unmarked(patch, felt, u0, v0, first, r, first_blur, ol, None, G0,
+                                                    shade=shade)
             if not f:
                 return _lost(FIT_FAILED)
             foreign = foreign_near(D, u0, v0, f.c, f.b, r_out, self.bg.sigma, self.bg.contrast)
             if foreign is not None:
                 g = fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=shade,
-                             valid=~foreign, outline=ol)
+                             valid=~foreign if marks is None else ~(foreign | marks), outline=ol)
                 if not g:
                     return _lost(FIT_FAILED)
                 f = g
+            if shade and marks is None:
+                f, marks, fit_blur = self._unmarked(patch, felt, u0, v0, f, r, fit_blur, ol, foreign, shade=shade)
+            pred = self._pred
+            if marks is not None and pred is not None and np.hypot(*(f.c - pred)) > MARK_RETRY_RADII * r \
+                    and u0 <= pred[0] <= u1 - 1 and v0 <= pred[1] <= v1 - 1:
+                # Markings' pixels judged from a centre they pulled are not
+                # theirs alone: from the prediction too, the better kept.
+                g, m2, fb2 = self._unmarked(patch, felt, u0, v0, replace(f, c=np.array(pred, float)), r, fit_blur,
+                                            ol, foreign, shade=shade)
+                if m2 is not None and g.rms < f.rms:
+                    f, marks, fit_blur = g, m2, fb2
             if recentre:
                 # The ball's middle may lie on the other side of the felt
                 # than its rim (a shaded ball close to the felt's colour):
@@ -636,11 +793,12 @@ class BallTracker:
                 again = self._refine(frame, f.c, f.b, recentre=False)
                 if again.status == OK:
                     return again
-            if self.shade is None:
-                self._learn_look(patch, felt, u0, v0, f, r, G0, blur, fit_blur)
             c, se, cov, rms = f.c, f.stderr, f.cov, f.rms
             self.last_fit = LastFit(u0, v0, v1 - v0, u1 - u0, f.c.copy(), f.b.copy(), f.G, bool(fit_blur),
-                                    f.shade, ol, foreign)
+                                    f.shade, ol, foreign, marks)
+            if self.shade is None:
+                self._keep_for_sphere(f, patch, felt, u0, v0, fit_blur, foreign, self.last_fit)
+                self._learn_look(patch, felt, u0, v0, f, r, G0, blur, fit_blur)
             self.last_patch = (patch, u0, v0)
         # The whole ball must lie inside the frame for the centre to be trusted.
         eu, ev = (r, r) if ol is None else ol.half_extent

@@ -469,7 +469,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     if fits and felt.n >= 20:
         # The felt averaged over the tracked frames: correct each fit for it.
         better = felt.felt(bg.image, proj)
-        for kk, (pu, pv, ph, pw, c, b, G, fb, shade, outline, foreign) in fits:
+        for kk, (pu, pv, ph, pw, c, b, G, fb, shade, outline, foreign, marks) in fits:
             old = bg.image[pv:pv + ph, pu:pu + pw]
             new = better[pv:pv + ph, pu:pu + pw]
             # Beyond the ball the fit's frame agreed with the old felt (else
@@ -480,8 +480,9 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
             changed = foreign_near(bg.polarity * (new - old), pu, pv, c, b, r_out, bg.sigma, bg.contrast)
             if changed is not None:
                 new = np.where(changed & beyond_ball(old.shape, pu, pv, c, b, r_out), old, new)
+            left = foreign if marks is None else marks if foreign is None else foreign | marks
             uv[kk] = c + refit_shift(old, new, pu, pv, c, b, G, radius_px, fb, shade, outline,
-                                     None if foreign is None else ~foreign)
+                                     None if left is None else ~left)
         bg = replace(bg, image=better)
     t_track = time.perf_counter() - t_start
     status = np.array(status, np.int8)
