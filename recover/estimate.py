@@ -19,7 +19,7 @@ from cuespin.fit.segment import Segments, segment_track
 from cuespin.physics.motion import BallParams, phases
 from cuespin.recover.measurements import (CUE_CLEAR_FRAMES, Measurements, as_covariance, build_measurements,
                                           codec_excess, cue_clear_s, fill_covariance)
-from cuespin.recover.mle import (CodecCorrelation, MLEResult, ModelFit, correlated_codec_var,
+from cuespin.recover.mle import (CodecCorrelation, MLEResult, ModelFit, ar1_from_residuals, correlated_codec_var,
                                  fit_model, fit_models, initial_guess, lag1_autocorrelation, result, slip_lr,
                                  with_profile_interval)
 from cuespin.recover.paper import PaperResult, paper_from_segments, ran_into_rest
@@ -261,6 +261,10 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
             rho, z = lag1_autocorrelation(meas, full.residuals)
             decisions["autocorrelated"] = autocorrelated(rho, z, stated=ar1_floor > 0)
             if decisions["autocorrelated"]:
+                # The residuals' lag-1 autocorrelation lies below the errors'
+                # (the fit takes up their slowly varying part): the errors'
+                # is the one that would show as much in these residuals.
+                rho = ar1_from_residuals(meas, full, rho)
                 if independent:  # the AR(1) model carries a lossless rest's correlation itself
                     meas = measure(t0, clear_s, group_rest=False).with_codec(codec_var)
                 full, roll = fit_models(meas, params, (full.shot.x0, full.shot.t0, full.shot.v0, full.shot.w0),

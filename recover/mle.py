@@ -27,7 +27,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import brentq, least_squares
 
 from cuespin.fit.decide import autocorrelated
 from cuespin.physics.motion import BallParams, Shot, phases, positions, z_cross
@@ -410,6 +410,105 @@ def lag1_autocorrelation(meas: Measurements, residuals) -> tuple[float, float]:
     den = float(np.sum(r * r))
     rho = num / den if den > 0 else 0.0
     return rho, rho * np.sqrt(2 * (len(r) - 1))
+
+
+def _ar1_cov_times(meas: Measurements, X, rho: float) -> np.ndarray:
+    """``Sigma X`` for whitened errors that are AR(1) of lag-1 ``rho`` along
+    the single-frame measurements (the model :func:`ar1_prewhiten` undoes:
+    ``rho^k`` between measurements ``k`` frames apart, each axis on its
+    own, rests independent of everything) and ``X`` of shape (2m, q) in
+    the residuals' order.  On the frame lattice ``rho^|i - j|`` is the sum
+    of a forward and a backward first-order filter less the diagonal."""
+    from scipy.signal import lfilter
+    m = meas.n
+    X = np.asarray(X, dtype=float).reshape(m, 2, -1)
+    out = X.copy()
+    single = np.flatnonzero(meas.single)
+    if len(single) < 2 or not rho:
+        return out.reshape(2 * m, -1)
+    ts = meas.t_means[single]
+    dt = float(np.median(np.diff(ts)))
+    k = np.maximum(np.rint(np.diff(ts) / dt), 1.0) if dt > 0 else np.ones(len(ts) - 1)
+    pos = np.r_[0, np.cumsum(k)].astype(int)
+    lattice = np.zeros((pos[-1] + 1,) + X.shape[1:])
+    lattice[pos] = X[single]
+    fwd = lfilter([1.0], [1.0, -rho], lattice, axis=0)
+    bwd = lfilter([1.0], [1.0, -rho], lattice[::-1], axis=0)[::-1]
+    out[single] = (fwd + bwd - lattice)[pos]
+    return out.reshape(2 * m, -1)
+
+
+def _ar1_lag1_terms(meas: Measurements, jac):
+    """What :func:`ar1_expected_lag1` needs of a fit that does not depend on
+    ``rho``, made once for a root search: ``g(rho)`` for that fit."""
+    Js = np.asarray(jac, dtype=float)
+    Js = Js / _column_norms(Js)
+    # An orthonormal basis of the fit's column space (P = Q Q^T) from the
+    # small Gram matrix: a thin SVD of a long Jacobian took 0.14 s here.
+    lam, V = np.linalg.eigh(Js.T @ Js)
+    keep = lam > lam[-1] * 1e-20
+    Q = Js @ (V[:, keep] / np.sqrt(lam[keep]))
+    idx = np.flatnonzero(meas.single)
+    # Rows of each axis of consecutive single measurements (as lag1_autocorrelation pairs them).
+    a = np.r_[2 * idx[:-1], 2 * idx[:-1] + 1]
+    b = np.r_[2 * idx[1:], 2 * idx[1:] + 1]
+    d = np.r_[2 * idx, 2 * idx + 1]
+    BQ = np.zeros_like(Q)
+    BQ[a] += 0.5 * Q[b]
+    BQ[b] += 0.5 * Q[a]
+    DQ = np.zeros_like(Q)
+    DQ[d] = Q[d]
+    QBQ, QDQ = Q.T @ BQ, Q.T @ DQ
+    k = np.zeros(0)
+    if len(idx) > 1:
+        ts = meas.t_means[idx]
+        dt = float(np.median(np.diff(ts)))
+        k = np.maximum(np.rint(np.diff(ts) / dt), 1.0) if dt > 0 else np.ones(len(ts) - 1)
+
+    def g(rho: float) -> float:
+        SQ = _ar1_cov_times(meas, Q, rho)
+        QSQ = Q.T @ SQ
+        # tr(B S): the errors' covariance between consecutive single
+        # measurements, both axes; tr(D S): their variances.
+        tr_BS, tr_DS = 2.0 * float(np.sum(rho ** k)), 2.0 * len(idx)
+        num = tr_BS - 2.0 * float(np.sum(BQ * SQ)) + float(np.sum(QBQ * QSQ))
+        den = tr_DS - 2.0 * float(np.sum(DQ * SQ)) + float(np.sum(QDQ * QSQ))
+        return num / den if den > 0 else 0.0
+    return g
+
+
+def ar1_expected_lag1(meas: Measurements, jac, rho: float) -> float:
+    """The lag-1 autocorrelation :func:`lag1_autocorrelation` is expected to
+    measure on a fit's residuals (whitened Jacobian ``jac``, (2m, p)) when
+    the whitened errors are AR(1) of lag-1 ``rho`` (:func:`_ar1_cov_times`):
+    ``E[r^T B r] / E[r^T D r]`` with ``r = (I - P) e``, ``P`` the fit's hat
+    matrix, ``B`` the pairs of consecutive single-frame measurements and
+    ``D`` the single-frame ones; ``E[r^T B r] = tr(B S) - 2 tr(B P S) +
+    tr(B P S P)`` (``S`` the errors' covariance).  The fit takes up the
+    slowly varying part of a correlated error, so this lies below ``rho``
+    by about ``(1 + rho) p / n`` for ``n`` frames."""
+    return _ar1_lag1_terms(meas, jac)(rho)
+
+
+def ar1_from_residuals(meas: Measurements, fit: ModelFit, rho1: float) -> float:
+    """The AR(1) errors' lag-1 correlation from a fit's residual lag-1
+    autocorrelation ``rho1`` (:func:`lag1_autocorrelation` of ``fit``'s
+    residuals, fitted as independent): the ``rho`` whose expected residual
+    autocorrelation (:func:`ar1_expected_lag1`) is ``rho1``, in ``[0,
+    MAX_AR1]``.  ``rho1`` itself is biased low: the fit absorbs the slowly
+    varying part of a correlated error (the lower, the shorter the track;
+    benchmarks/calibrate_tests.py --which ar1rho)."""
+    if not np.isfinite(rho1) or rho1 <= 0.0 or fit.jac is None:
+        return 0.0
+    try:
+        g = _ar1_lag1_terms(meas, fit.jac)
+        if rho1 <= g(0.0):
+            return 0.0
+        if g(MAX_AR1) <= rho1:
+            return MAX_AR1
+        return float(brentq(lambda r: g(r) - rho1, 0.0, MAX_AR1, xtol=1e-4))
+    except (np.linalg.LinAlgError, ValueError):
+        return float(np.clip(rho1, 0.0, MAX_AR1))
 
 
 def hac_covariance(jac, residuals, rho: float) -> np.ndarray:

@@ -141,3 +141,26 @@ def test_straight_path_is_a_line():
     shape = classify_path(xy[slide], start)
     assert not shape.curved and shape.p_value >= 0.01
     assert np.std(shape.line.residuals) == pytest.approx(SIGMA_M, rel=0.3)
+
+
+def test_rest_not_ended_by_one_far_frame():
+    # A resting ball's frame lies 5 sigma from the median of the last frames
+    # about once in 10^4; at 480 fps a rest of hundreds of frames then ended
+    # there, and a case-2 slide fitted through the still frames before it put
+    # its stop 6-40 of its errors past the rest (calibrate_tests.py --which
+    # case2: 2 tracks of 1,200).  One far frame no longer ends the rest; two
+    # in a row do.
+    from cuespin.fit.segment import find_rest_end
+    rng = np.random.default_rng(3)
+    sigma = 1e-4
+    n_move, n_rest = 100, 300
+    t = np.arange(n_move + n_rest) / 480.0
+    xy = np.zeros((len(t), 2))
+    xy[:n_move, 0] = -0.5 * 2.0 * (t[n_move] - t[:n_move]) ** 2   # decelerating to a stop at t[n_move]
+    xy += sigma * rng.standard_normal(xy.shape)
+    k = find_rest_end(t, xy, sigma)
+    assert abs(k - n_move) <= 20                                    # within the creep to the stop
+    xy[n_move + 150] = [6 * sigma, 0.0]                             # one far frame in the rest
+    assert find_rest_end(t, xy, sigma) == k
+    xy[n_move + 151] = [6 * sigma, 0.0]                             # two: the rest starts after them
+    assert find_rest_end(t, xy, sigma) == n_move + 152

@@ -369,3 +369,28 @@ def test_stop_shot_w0_error_from_the_profile_likelihood():
         assert m.status == "ok" and m.model == "full"
         z = (m.w0 - shot.w0) / m.stderr["w0"]
         assert np.all(np.abs(z) < 1.96), (seed, z)
+
+
+def test_lossy_rest_shares_at_least_its_floor():
+    # A lossy codec's rest: identical frames share their whole error (one
+    # frame's covariance, as before); frames scattering as much as stated
+    # (high noise) share SHARED_REST_MIN_SHARE of it beyond the scatter rule
+    # (measured against the truth on MJPG rests at noise 3-11: 0.061; one
+    # frame's covariance stated them 13 times their error).
+    from cuespin.recover.measurements import SHARED_REST_MIN_SHARE
+
+    def lossy_rest_variance(xy_rest):
+        n = len(xy_rest)
+        t = np.arange(n + 30) / 100.0
+        xy = np.vstack([xy_rest, np.c_[np.linspace(0.01, 0.3, 30), np.zeros(30)]])
+        m = build_measurements(t, xy, np.full(len(t), SIGMA), t0=(n + 0.5) / 100.0, exposure_s=0.005,
+                               frame_dt=0.01, shared_rest=True)
+        assert np.bincount(m.group[m.used])[0] >= n - 1              # the rest one measurement
+        return np.diag(np.linalg.inv(m.W[0] @ m.W[0].T)) / SIGMA**2
+
+    assert lossy_rest_variance(np.full((40, 2), 1e-5)) == pytest.approx([1.0, 1.0])
+    # Scatter well above the stated error: only the floor is shared.
+    wide = 2.0 * SIGMA * np.random.default_rng(4).standard_normal((40, 2))
+    assert lossy_rest_variance(wide) == pytest.approx([SHARED_REST_MIN_SHARE + (1 - SHARED_REST_MIN_SHARE) / 40] * 2)
+    # Fewer than 10 frames: no scatter measured, one frame's covariance.
+    assert lossy_rest_variance(wide[:6]) == pytest.approx([1.0, 1.0])

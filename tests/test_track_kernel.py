@@ -29,15 +29,20 @@ CENTRE_TOL_PX = 2e-8
 STDERR_RTOL = 1e-7
 
 
+SPHERE = model.SphereLook(0.6, 1.0, 40.0)  # the lit sphere's look, the renderer's defaults (light from +u, +v)
+
+
 @pytest.mark.parametrize("blur", [0.0, 7.0])
-@pytest.mark.parametrize("shade", [False, True])
+@pytest.mark.parametrize("shade", [False, True, "sphere"])
 @pytest.mark.parametrize("ellipse", [False, True])
 def test_model_rows_are_the_references(blur, shade, ellipse):
     rng = np.random.default_rng(3)
     felt = 90.0 + rng.normal(0, 2, (H, W))
     b = blur * np.array([0.8, 0.6])
     taus = model.blur_nodes(np.hypot(*b))
-    look = (12.0, -7.0, -20.0) if shade else None
+    look = (12.0, -7.0, -20.0) if shade is True else None
+    if shade == "sphere":
+        look = np.r_[60.0, 120.0, -5.0, SPHERE.geometry()]
     for blur_rows in (False, True):
         args = ([518.27, 301.64], b, 210.0, felt, R_PX, U0, V0, taus, look, blur_rows, ELLIPSE if ellipse else None)
         m, JT = model._model_rows(*args)
@@ -63,7 +68,7 @@ def test_fits_are_the_references(blur, ellipse):
                                     (10.0, -6.0, -15.0), outline=outline)[0]
     img = img + rng.normal(0, 3.0, img.shape)
     n_ok = 0
-    for shade in (False, True):
+    for shade in (False, True, SPHERE):
         for fit_blur in (False, True):
             for valid in (None, rng.random((H, W)) > 0.1):
                 kw = dict(b0=1.1 * b, fit_blur=fit_blur, shade=shade, valid=valid, outline=outline)
@@ -80,7 +85,7 @@ def test_fits_are_the_references(blur, ellipse):
                     if shade:
                         assert np.allclose(f.shade, g.shade, rtol=1e-9, atol=1e-9)
     # A sharp ball's blur is not fitted (a fit of it fails in both forms).
-    assert n_ok == (8 if blur else 4)
+    assert n_ok == (12 if blur else 6)
 
 
 def test_failed_fits_fail_alike():

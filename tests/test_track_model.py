@@ -9,7 +9,7 @@ an ellipse.
 import numpy as np
 import pytest
 
-from cuespin.track.model import _model_rows, blur_nodes, fit_disc, streak_model
+from cuespin.track.model import SphereLook, _model_rows, blur_nodes, fit_disc, streak_model
 from cuespin.track.outline import Ellipse
 
 H = W = 37
@@ -60,3 +60,39 @@ def test_fit_recovers_a_noise_free_shaded_ball():
     img = felt + streak_model(c, np.zeros(2), 200.0, felt, R_PX, U0, V0, np.zeros(1), (10.0, -6.0, -15.0))[0]
     f = fit_disc(img, felt, U0, V0, c + [0.4, -0.3], R_PX, 170.0, shade=True)
     assert f and np.abs(f.c - c).max() < 1e-6 and np.allclose(f.shade, (10.0, -6.0, -15.0), atol=1e-4)
+
+
+SPHERE = SphereLook(0.6, 1.0, 40.0)
+
+
+@pytest.mark.parametrize("ellipse", [False, True])
+def test_sphere_look_jacobian_matches_finite_differences(ellipse):
+    # A sharp ball: with a streak some node's pixel centre may fall within
+    # the rim's last 0.1% of radius, where the normal's derivative is held
+    # at SPHERE_NZ_MIN on purpose.
+    rng = np.random.default_rng(3)
+    felt = 90.0 + rng.normal(0, 2, (H, W))
+    outline = Ellipse(((1 / 13.0**2, 0.0008), (0.0008, 1 / 15.0**2))) if ellipse else None
+    geo = SPHERE.geometry()
+    p = np.r_[518.27, 301.64, 0.0, 0.0, 150.0, 60.0, 120.0, -5.0]
+    taus = blur_nodes(0.0)
+
+    def at(q):
+        return streak_model(q[:2], q[2:4], q[4], felt, R_PX, U0, V0, taus, np.r_[q[5:], geo], outline=outline)[0]
+
+    _, J = streak_model(p[:2], p[2:4], p[4], felt, R_PX, U0, V0, taus, np.r_[p[5:], geo], outline=outline)
+    for j in (0, 1, 4, 5, 6, 7):
+        d = np.zeros_like(p)
+        d[j] = EPS
+        fd = (at(p + d) - at(p - d)) / (2 * EPS)
+        assert np.abs(fd.ravel() - J[:, j]).max() <= REL_TOL * np.abs(J[:, j]).max(), f"column {j}"
+
+
+def test_fit_recovers_a_noise_free_lit_sphere():
+    rng = np.random.default_rng(5)
+    felt = 90.0 + rng.normal(0, 2, (H, W))
+    c = np.array([518.31, 301.72])
+    look = np.r_[60.0, 120.0, -5.0, SPHERE.geometry()]
+    img = felt + streak_model(c, np.zeros(2), 150.0, felt, R_PX, U0, V0, np.zeros(1), look)[0]
+    f = fit_disc(img, felt, U0, V0, c + [0.4, -0.3], R_PX, 170.0, shade=SPHERE)
+    assert f and np.abs(f.c - c).max() < 1e-5 and np.allclose(f.shade, look, atol=1e-3)

@@ -34,7 +34,7 @@ FIT_OK, FIT_SINGULAR, FIT_DIVERGED, FIT_NO_CONVERGENCE, FIT_LEFT_PATCH = 0, 1, 2
 # (``consts``) in this order: passed, not read as globals, which numba
 # would freeze into its cache unseen by a change of model.py.
 (MAX_ITER, STEP_TOL_PX, STEP_TOL_SE, AITKEN_COS, AITKEN_RHO_LO, AITKEN_RHO_HI, DAMP_AFTER,
- NO_CONVERGENCE_SE, CLUSTER_PX, BLUR_NODES_PER_PX, MAX_BLUR_NODES) = range(11)
+ NO_CONVERGENCE_SE, CLUSTER_PX, BLUR_NODES_PER_PX, MAX_BLUR_NODES, SPHERE_CLUSTER_PX) = range(12)
 
 
 
@@ -49,6 +49,58 @@ def _jit(**options):
         except RuntimeError:
             return njit(**options)(f)
     return wrap
+
+
+@_jit(inline="always")
+def look_at(X, Y, shade):
+    """The ball's look at ``(X, Y)`` (ball radii from its centre) less its
+    level: value, its derivatives in ``X`` and ``Y``, and the three basis
+    functions its coefficients ``shade[:3]`` multiply.  ``shade`` of 3: the
+    quadratic look ``gu X + gv Y + q Q``; of 11: the lit sphere's
+    ``a max(n.L, 0) + s max(n.H, 0)^p + q Q`` with ``shade[3:11] = (L, H, p,
+    nz_min)``
+    (:func:`cuespin.track.model.sphere_basis`, the numpy form).  ``Q = X^2 +
+    Y^2 - 1/2`` in both."""
+    Q = X * X + Y * Y - 0.5
+    if shade.shape[0] < 11:
+        gu, gv, q = shade[0], shade[1], shade[2]
+        return gu * X + gv * Y + q * Q, gu + 2 * q * X, gv + 2 * q * Y, X, Y, Q
+    a, s, q = shade[0], shade[1], shade[2]
+    D, S, dDx, dDy, dSx, dSy = sphere_at(X, Y, shade)
+    return (a * D + s * S + q * Q, a * dDx + s * dSx + 2 * q * X, a * dDy + s * dSy + 2 * q * Y, D, S, Q)
+
+
+@_jit(inline="always")
+def sphere_at(X, Y, g):
+    """:func:`cuespin.track.model.sphere_basis` at one point: ``max(n.L, 0)``,
+    ``max(n.H, 0)^p`` and their derivatives in ``X``, ``Y`` (``g[3:11]`` =
+    L, H, p, nz_min)."""
+    rho2 = X * X + Y * Y
+    if rho2 > 1.0:  # past the rim: the renderer's normal clamped to it
+        s = 1.0 / math.sqrt(rho2)
+        s3 = s * s * s
+        nx, ny, nz = X * s, Y * s, 0.0
+        nxx, nxy, nyx, nyy, nzx, nzy = s - X * X * s3, -X * Y * s3, -X * Y * s3, s - Y * Y * s3, 0.0, 0.0
+    else:
+        nx, ny = X, Y
+        nz = math.sqrt(1.0 - rho2)
+        den = max(nz, g[10])
+        nxx, nxy, nyx, nyy, nzx, nzy = 1.0, 0.0, 0.0, 1.0, -X / den, -Y / den
+    nl = nx * g[3] + ny * g[4] + nz * g[5]
+    D, dDx, dDy = 0.0, 0.0, 0.0
+    if nl > 0.0:
+        D = nl
+        dDx = nxx * g[3] + nyx * g[4] + nzx * g[5]
+        dDy = nxy * g[3] + nyy * g[4] + nzy * g[5]
+    nh = nx * g[6] + ny * g[7] + nz * g[8]
+    S, dSx, dSy = 0.0, 0.0, 0.0
+    if nh > 0.0:
+        p = g[9]
+        S = nh ** p
+        f = p * S / nh  # p nh^(p-1), one power
+        dSx = f * (nxx * g[6] + nyx * g[7] + nzx * g[8])
+        dSy = f * (nxy * g[6] + nyy * g[7] + nzy * g[8])
+    return D, S, dDx, dDy, dSx, dSy
 
 
 @_jit()
@@ -191,7 +243,6 @@ def model_rows(c0, c1, b0, b1, G, felt, r, kind, geo, u0, v0, taus, shade, has_s
     R = JT.reshape(JT.shape[0], h, w)
     M = m.reshape(h, w)
     i0 = 4 if blur_rows else 2
-    gu, gv, q = shade[0], shade[1], shade[2]
     if n_t == 1 and taus[0] == 0.0:
         cov = np.empty((h, w))
         du = np.empty((h, w))
@@ -209,15 +260,22 @@ def model_rows(c0, c1, b0, b1, G, felt, r, kind, geo, u0, v0, taus, shade, has_s
                     R[0, i, j] = du[i, j] * contrast
                     R[1, i, j] = dv[i, j] * contrast
                     M[i, j] = contrast * cov[i, j]
+                elif cov[i, j] == 0.0 and du[i, j] == 0.0 and dv[i, j] == 0.0:
+                    # Off the ball: the look is multiplied by zero (half the window's pixels).
+                    for a in range(4):
+                        R[i0 + a, i, j] = 0.0
+                    R[0, i, j] = 0.0
+                    R[1, i, j] = 0.0
+                    M[i, j] = 0.0
                 else:
                     X = ((u0 + j) - c0) / r
-                    Q = X * X + Y * Y - 0.5
-                    ball = (G - felt[i, j]) + gu * X + gv * Y + q * Q
-                    R[0, i, j] = du[i, j] * ball + cov[i, j] * ((-gu - 2 * q * X) / r)
-                    R[1, i, j] = dv[i, j] * ball + cov[i, j] * ((-gv - 2 * q * Y) / r)
-                    R[i0 + 1, i, j] = cov[i, j] * X
-                    R[i0 + 2, i, j] = cov[i, j] * Y
-                    R[i0 + 3, i, j] = cov[i, j] * Q
+                    val, lx, ly, f1, f2, f3 = look_at(X, Y, shade)
+                    ball = (G - felt[i, j]) + val
+                    R[0, i, j] = du[i, j] * ball - cov[i, j] * (lx / r)
+                    R[1, i, j] = dv[i, j] * ball - cov[i, j] * (ly / r)
+                    R[i0 + 1, i, j] = cov[i, j] * f1
+                    R[i0 + 2, i, j] = cov[i, j] * f2
+                    R[i0 + 3, i, j] = cov[i, j] * f3
                     M[i, j] = cov[i, j] * ball
         return
     covs = np.empty((n_t, h, w))
@@ -250,21 +308,23 @@ def model_rows(c0, c1, b0, b1, G, felt, r, kind, geo, u0, v0, taus, shade, has_s
         for j in range(w):
             s_du, s_dv, t_du, t_dv, s_c, s_x, s_y, s_q, s_m = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
             for t in range(n_t):
+                if covs[t, i, j] == 0.0 and gus[t, i, j] == 0.0 and gvs[t, i, j] == 0.0:
+                    continue  # off the ball at this node: every term is zero
                 X = ((u0 + j) - (c0 + b0 * taus[t])) / r
                 Y = ((v0 + i) - (c1 + b1 * taus[t])) / r
-                Q = X * X + Y * Y - 0.5
-                ball = (G + gu * X + gv * Y + q * Q) - felt[i, j]
+                val, lx, ly, f1, f2, f3 = look_at(X, Y, shade)
+                ball = (G + val) - felt[i, j]
                 cv_ = covs[t, i, j]
-                node_du = gus[t, i, j] * ball + cv_ * ((-gu - 2 * q * X) / r)
-                node_dv = gvs[t, i, j] * ball + cv_ * ((-gv - 2 * q * Y) / r)
+                node_du = gus[t, i, j] * ball - cv_ * (lx / r)
+                node_dv = gvs[t, i, j] * ball - cv_ * (ly / r)
                 s_du += node_du
                 s_dv += node_dv
                 t_du += taus[t] * node_du
                 t_dv += taus[t] * node_dv
                 s_c += cv_
-                s_x += cv_ * X
-                s_y += cv_ * Y
-                s_q += cv_ * Q
+                s_x += cv_ * f1
+                s_y += cv_ * f2
+                s_q += cv_ * f3
                 s_m += cv_ * ball
             R[0, i, j] = s_du / n_t
             R[1, i, j] = s_dv / n_t
@@ -371,18 +431,23 @@ def _centre_cov(A, meat):
 
 
 @_jit()
-def fit(y, felt, use, has_valid, c, b, G, r, kind, geo, u0, v0, has_shade, fit_blur, consts):
+def fit(y, felt, use, has_valid, c, b, G, r, kind, geo, u0, v0, has_shade, look_geo, fit_blur, consts):
     """:func:`cuespin.track.reference.fit_disc`'s Gauss-Newton loop and
     sandwich, in place on ``c`` (2), ``b`` (2); ``y`` is the frame less the
-    felt (h*w), ``use`` the pixels used (0/1, h*w; read when ``has_valid``).
+    felt (h*w), ``use`` the pixels used (0/1, h*w; read when ``has_valid``);
+    ``look_geo`` the lit sphere's geometry (8: L, H, p, nz_min) or empty
+    (the quadratic look, when ``has_shade``).
 
-    Returns (outcome, G, look (3), iterations, stderr (2), cov (2, 2), rms).
+    Returns (outcome, G, look (3, or 11 with the geometry), iterations,
+    stderr (2), cov (2, 2), rms).
     """
     h, w = felt.shape
     npx = h * w
     n_look = 3 if has_shade else 0
     n_par = (5 if fit_blur else 3) + n_look
-    look = np.zeros(3)
+    # The look's coefficients, then (the lit sphere's) its fixed geometry.
+    look = np.zeros(3 + look_geo.shape[0])
+    look[3:] = look_geo
     taus = blur_nodes(math.hypot(b[0], b[1]), consts)
     n_use = 0.0
     for p in range(npx):
@@ -462,9 +527,10 @@ def fit(y, felt, use, has_valid, c, b, G, r, kind, geo, u0, v0, has_shade, fit_b
     inside = (u0 - 0.5 <= c[0] <= u0 + w - 0.5) and (v0 - 0.5 <= c[1] <= v0 + h - 0.5)
     if not inside:
         return FIT_LEFT_PATCH, G, look, it, nan2, nan22, np.nan
-    # The sandwich: clustered in CLUSTER_PX blocks with the look, HC1 without.
-    if has_shade:
-        B = int(consts[CLUSTER_PX])
+    # The sandwich: clustered in blocks of CLUSTER_PX (SPHERE_CLUSTER_PX with
+    # the lit sphere) with the look, HC1 without (or with a block of 0).
+    B = int(consts[SPHERE_CLUSTER_PX] if look_geo.shape[0] > 0 else consts[CLUSTER_PX])
+    if has_shade and B > 0:
         nbh, nbw = (h + B - 1) // B, (w + B - 1) // B
         S = np.zeros((n_par, nbh * nbw))
         for a in range(n_par):

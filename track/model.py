@@ -40,6 +40,12 @@ DAMP_AFTER = 12
 STEP_TOL_SE = 0.1
 # Block size (px) of the cluster-robust sandwich used with the shaded look.
 CLUSTER_PX = 3
+# The same with the lit sphere's look (0: HC1, per pixel).  See SphereLook.
+SPHERE_CLUSTER_PX = 0
+# The sphere's normal's z below this is taken as this in its derivative
+# (d nz / dX = -X / nz grows without bound at the rim, where a pixel's
+# centre is rarely that close; the value itself is exact).
+SPHERE_NZ_MIN = 0.05
 # A fit still stepping after MAX_ITER is kept if its last step is below this
 # fraction of the centre's standard error (it adds at most 4% to its variance).
 NO_CONVERGENCE_SE = 0.2
@@ -53,7 +59,8 @@ MAX_BLUR_NODES = 24
 # The kernel's settings (cuespin.track.kernel's ``consts``, in its order)
 # and the reasons its outcomes 1-4 stand for.
 _CONSTS = np.array([MAX_ITER, STEP_TOL_PX, STEP_TOL_SE, AITKEN_COS, AITKEN_RHO[0], AITKEN_RHO[1], DAMP_AFTER,
-                    NO_CONVERGENCE_SE, CLUSTER_PX, BLUR_NODES_PER_PX, MAX_BLUR_NODES], dtype=np.float64)
+                    NO_CONVERGENCE_SE, CLUSTER_PX, BLUR_NODES_PER_PX, MAX_BLUR_NODES, SPHERE_CLUSTER_PX],
+                   dtype=np.float64)
 FIT_REASONS = ("", "singular normal equations", "diverged", f"no convergence in {MAX_ITER} iterations",
                "centre left the patch")
 
@@ -110,6 +117,110 @@ def coverage_with_gradient(cu, cv, r, u0, v0, w, h, outline=None):
     return ellipse_with_gradient(cu, cv, outline, u0, v0, w, h)
 
 
+@dataclass(frozen=True)
+class SphereLook:
+    """The ball's look as a lit sphere seen from above, fixed for a video.
+
+    A matte or glossy ball under one light has, at the image point ``X``
+    (ball radii from its centre) with the sphere's normal ``n = (X, Y,
+    sqrt(1 - |X|^2))`` (clamped to the rim past it), the level ``G + a
+    max(n.L, 0) + s max(n.H, 0)^p + q (|X|^2 - 1/2)``: an ambient level,
+    Lambert's diffuse term with its terminator, Blinn's highlight (``H`` the
+    half vector between ``L`` and the view, straight up) and a rim term for
+    what the two leave (a lens's blur).  In a combination of colour channels
+    the coefficients stay linear (each channel's albedo scales ``a``, the
+    light's colour ``s``); only the geometry, ``L`` and ``p``, is nonlinear,
+    and as the light is fixed to the table it is the same in every frame:
+    learnt once (:func:`cuespin.track.sphere.learn_sphere`), each frame then
+    fits its centre, blur and the three coefficients.  Unlike a free look
+    (a template, or the quadratic look's lit side ``gu X + gv Y``, which
+    trades against the centre) the basis is tied to the silhouette: the
+    terminator and the highlight sit where the geometry puts them relative
+    to the rim, so they cannot absorb a shift of the centre.
+
+    Attributes
+    ----------
+    azimuth : float
+        Direction of the light in the image (rad, from +u towards +v).
+    elevation : float
+        Its angle above the cloth (rad; pi/2 overhead).
+    shininess : float
+        Blinn's exponent ``p``.
+    """
+
+    azimuth: float
+    elevation: float
+    shininess: float
+
+    def geometry(self) -> np.ndarray:
+        """``(L, H, p, nz_min)``, shape (8,): what the kernel reads after the
+        three coefficients (``L``, ``H`` unit vectors in image axes, z up)."""
+        ce = np.cos(self.elevation)
+        L = np.array([ce * np.cos(self.azimuth), ce * np.sin(self.azimuth), np.sin(self.elevation)])
+        H = L + np.array([0.0, 0.0, 1.0])
+        return np.r_[L, H / np.linalg.norm(H), float(self.shininess), SPHERE_NZ_MIN]
+
+
+def sphere_basis(X, Y, g):
+    """The lit sphere's two basis functions and their derivatives (numpy).
+
+    Parameters
+    ----------
+    X, Y : ndarray
+        Points, in ball radii from the centre (broadcast).
+    g : array_like, shape (11,)
+        The look (``g[3:11]`` = :meth:`SphereLook.geometry`).
+
+    Returns
+    -------
+    D, S, dDx, dDy, dSx, dSy : ndarray
+        ``max(n.L, 0)``, ``max(n.H, 0)^p`` and their derivatives in ``X``
+        and ``Y``; past the rim ``n`` is the rim's normal (the renderer's
+        clamp), whose derivatives are those of ``(X, Y, 0) / |X|``.
+    """
+    g = np.asarray(g, float)
+    X, Y = np.broadcast_arrays(np.asarray(X, float), np.asarray(Y, float))
+    rho2 = X * X + Y * Y
+    out = rho2 > 1.0
+    s = 1.0 / np.sqrt(np.where(out, rho2, 1.0))
+    s3 = s * s * s
+    nz = np.sqrt(np.maximum(1.0 - rho2, 0.0))
+    den = np.maximum(nz, g[10])
+    nx, ny = np.where(out, X * s, X), np.where(out, Y * s, Y)
+    nxx, nyy = np.where(out, s - X * X * s3, 1.0), np.where(out, s - Y * Y * s3, 1.0)
+    nxy = np.where(out, -X * Y * s3, 0.0)
+    nzx, nzy = np.where(out, 0.0, -X / den), np.where(out, 0.0, -Y / den)
+
+    def term(V):
+        nv = nx * V[0] + ny * V[1] + nz * V[2]
+        return nv, nxx * V[0] + nxy * V[1] + nzx * V[2], nxy * V[0] + nyy * V[1] + nzy * V[2]
+
+    nl, lx, ly = term(g[3:6])
+    lit = nl > 0.0
+    D, dDx, dDy = np.where(lit, nl, 0.0), np.where(lit, lx, 0.0), np.where(lit, ly, 0.0)
+    nh, hx, hy = term(g[6:9])
+    p = g[9]
+    on = nh > 0.0
+    nhp = np.where(on, nh, 1.0)
+    S = np.where(on, nhp ** p, 0.0)
+    f = np.where(on, p * S / nhp, 0.0)
+    return D, S, dDx, dDy, f * hx, f * hy
+
+
+def look_value(X, Y, shade):
+    """The look less its level at ``(X, Y)`` (ball radii): value, its
+    derivatives in ``X`` and ``Y``, and the three basis functions
+    ``shade[:3]`` multiplies (:func:`cuespin.track.kernel.look_at`'s numpy
+    form): the quadratic look (``shade`` of 3) or the lit sphere's (11)."""
+    Q = X * X + Y * Y - 0.5
+    if len(shade) < 11:
+        gu, gv, q = shade[:3]
+        return gu * X + gv * Y + q * Q, gu + 2 * q * X, gv + 2 * q * Y, X, Y, Q
+    a, s, q = shade[:3]
+    D, S, dDx, dDy, dSx, dSy = sphere_basis(X, Y, shade)
+    return a * D + s * S + q * Q, a * dDx + s * dSx + 2 * q * X, a * dDy + s * dSy + 2 * q * Y, D, S, Q
+
+
 def blur_nodes(blur_px: float) -> np.ndarray:
     """Fractions of the exposure, centred on 0, at which the streak is sampled."""
     if blur_px < 0.25:
@@ -131,7 +242,11 @@ def streak_model(c, b, G, felt, r, u0, v0, taus, shade=None, blur_cols=True, out
     ``G + (gu X_u + gv X_v) / r + q (|X|^2 / r^2 - 1/2)``, a lit side and a
     rim darker or lighter than the middle (shading, a highlight's mean),
     taken at each pixel's centre within the exact coverage.  Three more
-    Jacobian columns then follow, ``d/dgu, d/dgv, d/dq``.
+    Jacobian columns then follow, ``d/dgu, d/dgv, d/dq``.  ``shade`` of 11,
+    ``(a, s, q)`` and a :class:`SphereLook`'s geometry, is the lit sphere's
+    look ``G + a max(n.L, 0) + s max(n.H, 0)^p + q (|X|^2 / r^2 - 1/2)``
+    instead, its columns ``d/da, d/ds, d/dq``.  Either way the centre's
+    columns move the look with the ball.
 
     ``blur_cols`` False leaves the blur's columns ``d/dbu, d/dbv`` zero (a
     fit that holds the blur fixed never reads them: two tensor products
@@ -163,12 +278,14 @@ def _model_rows(c, b, G, felt, r, u0, v0, taus, shade=None, blur_rows=True, outl
     kind, geo = _geometry(r, outline)
     kernel().model_rows(float(c[0]), float(c[1]), float(b[0]), float(b[1]), float(G), felt, float(r), kind, geo,
                         int(u0), int(v0), np.ascontiguousarray(taus, dtype=np.float64),
-                        _NO_SHADE if shade is None else np.asarray(shade, dtype=np.float64), shade is not None,
+                        _NO_SHADE if shade is None else np.ascontiguousarray(shade, dtype=np.float64),
+                        shade is not None,
                         bool(blur_rows), m, JT)
     return m.reshape(h, w), JT
 
 
 _NO_SHADE = np.zeros(3)
+_NO_GEO = np.zeros(0)
 _KERNEL = None
 
 
@@ -226,6 +343,11 @@ class DiscFit:
         Residual RMS (grey levels).
     n_iter : int
         Gauss-Newton iterations taken.
+    shade : ndarray or None
+        The look's fitted coefficients when it was fitted: shape (3,) for
+        the quadratic look, (11,) for a :class:`SphereLook` (its three
+        coefficients, then its geometry): either passes back to
+        :func:`streak_model` and :func:`refit_shift` as their ``shade``.
     """
 
     ok: bool
@@ -267,10 +389,12 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
         value when ``fit_blur`` is False.
     fit_blur : bool
         Estimate the blur vector too.
-    shade : bool
+    shade : bool or SphereLook
         Fit the ball's look too (:func:`streak_model`'s ``shade``: lit
         side and rim, three linear nuisances), for a shaded ball whose
-        uniform-disc fit is pulled towards its lit side.
+        uniform-disc fit is pulled towards its lit side; a
+        :class:`SphereLook`: the lit sphere's look of that geometry (its
+        three coefficients fitted).
     valid : ndarray of bool, shape (h, w), optional
         Pixels the fit may use (others, e.g. the cue's, are left out).
     outline : Ellipse, optional
@@ -294,9 +418,10 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
     # Gauss-Newton with Aitken's acceleration, then the sandwich, compiled
     # (cuespin.track.kernel.fit; the numpy form, with the reasons for each
     # rule, is cuespin.track.reference.fit_disc).
+    look_geo = shade.geometry() if isinstance(shade, SphereLook) else _NO_GEO
     outcome, G, look, it, se, cov, rms = kernel().fit(
         y, felt, use, valid is not None, c, b, float(G0), float(r), kind, geo, int(u0), int(v0), bool(shade),
-        bool(fit_blur), _CONSTS)
+        look_geo, bool(fit_blur), _CONSTS)
     if outcome:
         return _failed(FIT_REASONS[outcome], c, b, G, it)
     return DiscFit(True, "", c, b, G, se, rms, it, cov, look if shade else None)

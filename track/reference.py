@@ -14,7 +14,8 @@ from __future__ import annotations
 import numpy as np
 
 from cuespin.track.model import (AITKEN_COS, AITKEN_RHO, CLUSTER_PX, DAMP_AFTER, MAX_ITER, NO_CONVERGENCE_SE,
-                                 STEP_TOL_PX, STEP_TOL_SE, DiscFit, _failed, blur_nodes, coverage_with_gradient)
+                                 SPHERE_CLUSTER_PX, STEP_TOL_PX, STEP_TOL_SE, DiscFit, SphereLook, _failed,
+                                 blur_nodes, coverage_with_gradient, look_value)
 
 
 def model_rows(c, b, G, felt, r, u0, v0, taus, shade=None, blur_rows=True, outline=None):
@@ -45,18 +46,17 @@ def model_rows(c, b, G, felt, r, u0, v0, taus, shade=None, blur_rows=True, outli
             np.multiply(dv, contrast, out=R[1])
             R[i] = cov
             return contrast * cov, JT
-        gu, gv, q = shade
         X = (np.arange(u0, u0 + w) - c[0]) / r                     # (w,)
         Y = ((np.arange(v0, v0 + h) - c[1]) / r)[:, None]          # (h, 1)
-        Q = X * X + Y * Y - 0.5
-        ball = (G - felt) + gu * X + gv * Y + q * Q
+        val, lx, ly, f1, f2, f3 = look_value(X, Y, shade)
+        ball = (G - felt) + val
         # d/d(centre): the edge moves (coverage) and the look moves with it.
-        np.add(du * ball, cov * ((-gu - 2 * q * X) / r), out=R[0])
-        np.add(dv * ball, cov * ((-gv - 2 * q * Y) / r), out=R[1])
+        np.subtract(du * ball, cov * (lx / r), out=R[0])
+        np.subtract(dv * ball, cov * (ly / r), out=R[1])
         R[i] = cov
-        np.multiply(cov, X, out=R[i + 1])
-        np.multiply(cov, Y, out=R[i + 2])
-        np.multiply(cov, Q, out=R[i + 3])
+        np.multiply(cov, f1, out=R[i + 1])
+        np.multiply(cov, f2, out=R[i + 2])
+        np.multiply(cov, f3, out=R[i + 3])
         return cov * ball, JT
     cu = c[0] + b[0] * taus
     cv = c[1] + b[1] * taus
@@ -72,23 +72,22 @@ def model_rows(c, b, G, felt, r, u0, v0, taus, shade=None, blur_rows=True, outli
             R[3] = np.tensordot(taus, gvs, axes=1) * contrast
         R[i] = cov
         return (G - felt) * cov, JT
-    gu, gv, q = shade
     X = (np.arange(u0, u0 + w)[None, None, :] - cu[:, None, None]) / r   # (n, 1, w)
     Y = (np.arange(v0, v0 + h)[None, :, None] - cv[:, None, None]) / r   # (n, h, 1)
-    Q = X * X + Y * Y - 0.5
-    ball = (G + gu * X + gv * Y + q * Q) - felt                          # (n, h, w)
+    val, lx, ly, f1, f2, f3 = look_value(X, Y, shade)
+    ball = (G + val) - felt                                              # (n, h, w)
     # d/d(node centre): the edge moves (coverage) and the look moves with it.
-    node_du = gus * ball + covs * ((-gu - 2 * q * X) / r)
-    node_dv = gvs * ball + covs * ((-gv - 2 * q * Y) / r)
+    node_du = gus * ball - covs * (lx / r)
+    node_dv = gvs * ball - covs * (ly / r)
     R[0] = node_du.sum(axis=0) / n
     R[1] = node_dv.sum(axis=0) / n
     if blur_rows:
         R[2] = np.tensordot(taus, node_du, axes=1) / n
         R[3] = np.tensordot(taus, node_dv, axes=1) / n
     R[i] = covs.sum(axis=0) / n
-    R[i + 1] = (covs * X).sum(axis=0) / n
-    R[i + 2] = (covs * Y).sum(axis=0) / n
-    R[i + 3] = (covs * Q).sum(axis=0) / n
+    R[i + 1] = (covs * f1).sum(axis=0) / n
+    R[i + 2] = (covs * f2).sum(axis=0) / n
+    R[i + 3] = (covs * f3).sum(axis=0) / n
     return (covs * ball).sum(axis=0) / n, JT
 
 
@@ -104,7 +103,10 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
     c = np.array(c0, dtype=float)
     b = np.array(b0, dtype=float)
     G = float(G0)
-    look = np.zeros(3) if shade else None
+    look = None
+    if shade:  # the coefficients, then (the lit sphere's) its geometry
+        look = np.r_[np.zeros(3), shade.geometry() if isinstance(shade, SphereLook) else ()]
+    sphere = isinstance(shade, SphereLook)
     n_look = 3 if shade else 0
     n_par = (5 if fit_blur else 3) + n_look
     taus = blur_nodes(np.hypot(*b))
@@ -142,7 +144,7 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
         c += step[:2]
         G += step[n_par - 1 - n_look]
         if shade:
-            look += step[-3:]
+            look[:3] += step[-3:]
         if fit_blur:
             b += step[2:4]
             taus = blur_nodes(np.hypot(*b))
@@ -174,9 +176,10 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
     # neighbouring pixels, which HC1 counts as independent: the residuals
     # are then summed over blocks of CLUSTER_PX x CLUSTER_PX pixels first
     # (the cluster-robust sandwich, CR1).
+    # The lit sphere's look leaves little of that (SPHERE_CLUSTER_PX, 0: HC1).
     try:
-        if shade:
-            B = CLUSTER_PX
+        B = SPHERE_CLUSTER_PX if sphere else CLUSTER_PX
+        if shade and B > 0:
             S = np.zeros((n_par, h + (-h % B), w + (-w % B)))
             S[:, :h, :w] = (JT * res).reshape(n_par, h, w)
             S = S.reshape(n_par, S.shape[1] // B, B, S.shape[2] // B, B).sum(axis=(2, 4)).reshape(n_par, -1)

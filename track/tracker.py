@@ -15,9 +15,10 @@ import numpy as np
 
 from cuespin.track.background import DETECT_SIGMAS, Background, box_size
 from cuespin.track.colour import GREY, Projection
-from cuespin.track.model import blur_nodes, fit_disc, streak_from_moments, streak_model
+from cuespin.track.model import SphereLook, blur_nodes, fit_disc, streak_from_moments, streak_model
 from cuespin.track.outline import OUTLINE_REFIT_PX, OutlineCache, is_similarity
 from cuespin.track.radius import RadiusMap
+from cuespin.track.sphere import Sample, learn_sphere
 
 OK, NO_BALL, PARTIAL, TWO_BLOBS, GONE, FIT_FAILED, PULLED, OFF_PATH = 0, 1, 2, 3, 4, 5, 6, 7
 STATUS_TEXT = {OK: "ok", NO_BALL: "no ball", PARTIAL: "ball partly out of the frame",
@@ -153,6 +154,10 @@ class TrackerConfig:
         ``auto``: learnt from the video, by fitting both to the first
         ``LOOK_FRAMES`` frames the ball is found in and keeping ``shaded``
         only if it explains them significantly better (chi-square, 0.1%).
+        A shaded ball is then fitted as a lit sphere
+        (:class:`cuespin.track.model.SphereLook`) whose light and
+        shininess are learnt from those frames (``sphere`` True); False
+        keeps the quadratic look.
     """
 
     refine: str = "fit"
@@ -160,6 +165,7 @@ class TrackerConfig:
     search_margin_px: float = 6.0
     threaded: bool = True
     look: str = "auto"
+    sphere: bool = True
 
 
 @dataclass
@@ -422,6 +428,8 @@ class BallTracker:
         self.was_partial_edge = False
         self.shade = {"disc": False, "shaded": True}.get(config.look)  # None: learning
         self._look_votes: list[tuple[float, float, int]] = []
+        # The voting frames' fits, refitted with the lit sphere once it is learnt.
+        self._look_fits: list[tuple] = []
         self._candidates: tuple = ()  # the last full search's blobs
         self._bands = None  # the radius map's bands on the search mask (multi-scale search)
         self._pred = None  # this frame's predicted centre (px), None without history
@@ -601,14 +609,16 @@ class BallTracker:
                      outline=self.outline)
         return g if g else f
 
-    def _unmarked(self, patch, felt, u0, v0, f, r, fit_blur, ol, foreign, G0=None):
+    def _unmarked(self, patch, felt, u0, v0, f, r, fit_blur, ol, foreign, G0=None, shade=True):
         """The fit ``f`` (converged or not: from where it stopped, with the
         level ``G0``, as its own may have run off) again without the
         markings' pixels (:func:`marking_pixels`) and the ``foreign`` ones:
         (fit, markings, whether it fitted the blur), or ``(f, None,
         fit_blur)`` when there are none or the refit fails.  A refit that
         fails fitting the blur is tried with it held: a blur fitted at rest
-        (from the moments of a shaded, marked ball) has no derivatives."""
+        (from the moments of a shaded, marked ball) has no derivatives.
+        ``shade``: the look the refit uses (:func:`fit_disc`'s; the lit
+        sphere once learnt)."""
         r_in = r if ol is None else min(r, 1.0 / np.sqrt(np.linalg.eigvalsh(ol.Qm)[1]))
         marks = marking_pixels(patch, felt, u0, v0, f.c, f.b, r, r_in, self.bg.sigma, self.bg.contrast, ol,
                                None if foreign is None else ~foreign)
@@ -617,7 +627,7 @@ class BallTracker:
         left = marks if foreign is None else marks | foreign
         G = f.G if G0 is None else G0
         for fb in (True, False) if fit_blur else (False,):
-            g = fit_disc(patch, felt, u0, v0, f.c, r, G, b0=f.b, fit_blur=fb, shade=True, valid=~left, outline=ol)
+            g = fit_disc(patch, felt, u0, v0, f.c, r, G, b0=f.b, fit_blur=fb, shade=shade, valid=~left, outline=ol)
             if g:
                 return g, marks, fb
         return f, None, fit_blur
@@ -631,6 +641,35 @@ class BallTracker:
         self._look_votes.append(look_vote(d, f_shaded, patch.size))
         if len(self._look_votes) >= LOOK_FRAMES:
             self.shade = shaded_look(self._look_votes)
+            if self.shade and self.cfg.sphere:
+                self._learn_sphere()
+            self._look_fits = []
+
+    def _keep_for_sphere(self, f, patch, felt, u0, v0, fit_blur, foreign, last_fit) -> None:
+        """Hold a voting frame's fit (and the arrays its Observation and
+        LastFit share) for :meth:`_learn_sphere`."""
+        if self.cfg.sphere and self.shade is None:
+            self._look_fits.append((Sample(patch.copy(), felt.copy(), u0, v0, f.c.copy(), f.b.copy(), f.G, bool(fit_blur),
+                                           f.shade, None if foreign is None else ~foreign), f, last_fit))
+
+    def _learn_sphere(self) -> None:
+        """Learn the lit sphere's geometry from the voting frames and refit
+        them with it: their centres and covariances are updated in place
+        (the arrays their Observations and LastFits hold), so the track
+        reports every frame with the same look."""
+        if not self._look_fits:
+            return
+        look, _ = learn_sphere([s for s, _, _ in self._look_fits], self.r, self.outline)
+        if look is None:
+            return
+        self.shade = look
+        for s, f, lf in self._look_fits:
+            g = fit_disc(s.patch, s.felt, s.u0, s.v0, s.c, self.r, s.G, b0=s.b, fit_blur=s.fit_blur, shade=look,
+                         valid=s.valid, outline=self.outline)
+            if g:
+                f.c[:], f.stderr[:], f.cov[:] = g.c, g.stderr, g.cov
+                if lf is not None:
+                    lf.c[:] = g.c
 
     def _departure_centre(self, frame, c, r_ball: float) -> np.ndarray:
         """Centroid (px) of the departure from the felt in either direction,
@@ -683,7 +722,8 @@ class BallTracker:
         else:
             fit_blur = np.hypot(*blur) > FIT_BLUR_PX
             G0 = float(felt.mean()) + self.pol * max(self.bg.contrast, 1.0)
-            shade = self.shade is not False
+            # The lit sphere once learnt; before, the quadratic look (or none).
+            shade = self.shade if isinstance(self.shade, SphereLook) else self.shade is not False
             f = first = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur, shade=shade, outline=ol)
             first_blur = fit_blur
             if not f and not fit_blur and self.exposure_frames > 0:
@@ -692,12 +732,19 @@ class BallTracker:
                 fit_blur = np.hypot(*blur) > FIT_BLUR_PX
                 f = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur, shade=shade,
                              outline=ol)
+            if not f and isinstance(shade, SphereLook):
+                # The sphere's fit failed (2 of 37 frames of
+                # sample_scenes(2, 5, realistic, MJPG)[1], at the strike):
+                # the quadratic look, whose basis is smooth, as before.
+                shade = True
+                f = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur, shade=shade, outline=ol)
             marks = None
             if not f and shade:
                 # Markings can stop the shaded fit converging (it stops near
                 # the ball's centre): without them, from where the first
                 # fit stopped.
-                f, marks, fit_blur = self._unmarked(patch, felt, u0, v0, first, r, first_blur, ol, None, G0)
+                f, marks, fit_blur = self._unmarked(patch, felt, u0, v0, first, r, first_blur, ol, None, G0,
+                                                    shade=shade)
             if not f:
                 return _lost(FIT_FAILED)
             foreign = foreign_near(D, u0, v0, f.c, f.b, r_out, self.bg.sigma, self.bg.contrast)
@@ -708,14 +755,14 @@ class BallTracker:
                     return _lost(FIT_FAILED)
                 f = g
             if shade and marks is None:
-                f, marks, fit_blur = self._unmarked(patch, felt, u0, v0, f, r, fit_blur, ol, foreign)
+                f, marks, fit_blur = self._unmarked(patch, felt, u0, v0, f, r, fit_blur, ol, foreign, shade=shade)
             pred = self._pred
             if marks is not None and pred is not None and np.hypot(*(f.c - pred)) > MARK_RETRY_RADII * r \
                     and u0 <= pred[0] <= u1 - 1 and v0 <= pred[1] <= v1 - 1:
                 # Markings' pixels judged from a centre they pulled are not
                 # theirs alone: from the prediction too, the better kept.
                 g, m2, fb2 = self._unmarked(patch, felt, u0, v0, replace(f, c=np.array(pred, float)), r, fit_blur,
-                                            ol, foreign)
+                                            ol, foreign, shade=shade)
                 if m2 is not None and g.rms < f.rms:
                     f, marks, fit_blur = g, m2, fb2
             if recentre:
@@ -746,11 +793,12 @@ class BallTracker:
                 again = self._refine(frame, f.c, f.b, recentre=False)
                 if again.status == OK:
                     return again
-            if self.shade is None:
-                self._learn_look(patch, felt, u0, v0, f, r, G0, blur, fit_blur)
             c, se, cov, rms = f.c, f.stderr, f.cov, f.rms
             self.last_fit = LastFit(u0, v0, v1 - v0, u1 - u0, f.c.copy(), f.b.copy(), f.G, bool(fit_blur),
                                     f.shade, ol, foreign, marks)
+            if self.shade is None:
+                self._keep_for_sphere(f, patch, felt, u0, v0, fit_blur, foreign, self.last_fit)
+                self._learn_look(patch, felt, u0, v0, f, r, G0, blur, fit_blur)
             self.last_patch = (patch, u0, v0)
         # The whole ball must lie inside the frame for the centre to be trusted.
         eu, ev = (r, r) if ol is None else ol.half_extent

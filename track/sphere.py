@@ -1,0 +1,157 @@
+"""The lit sphere's geometry learnt from a video's frames (pure functions).
+
+:class:`cuespin.track.model.SphereLook` is the ball's look with its light
+direction and shininess fixed for the video, each frame fitting only its
+centre, blur and three linear coefficients.  Those three numbers are learnt
+here, once, from the frames the tracker first fits (before the strike the
+ball rests: the same window many times, whose mean has the noise of one
+frame divided by their number), by minimising the fits' residual sum over
+them.  The tracker never reads the scene's ``render`` block: everything
+comes from the pixels.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from cuespin.track.model import SphereLook, blur_nodes, fit_disc
+
+# Frames whose centres lie within this of their group's first (px) are the
+# same still ball (its blur, predicted from a velocity that is noise, too
+# short to be modelled), averaged into one window before the fit: a resting ball's
+# fitted centre scatters by its error (0.002-0.03 px), a moving one moves by
+# its speed (>= 0.1 px a frame once it has left the rest).
+STILL_PX = 0.05
+# At most this many groups (the largest) enter the objective: each costs one
+# fit per evaluation.
+MAX_GROUPS = 3
+# The search's start: the elevation and shininess the renderer's and real
+# lights span (50-80 deg, Blinn exponents 20-80), and the azimuth from the
+# quadratic look's lit side or its opposite (the combination of channels
+# may make the ball's diffuse term negative).
+START_ELEVATIONS = (0.9, 1.15, 1.4)
+START_SHININESS = (15.0, 40.0, 100.0)
+# Compass search: first steps (azimuth rad, elevation rad, log shininess),
+# halved when no move helps, until below this fraction of them.
+STEPS = (0.3, 0.12, 0.5)
+MIN_STEP_FRACTION = 1 / 64
+ELEVATION_RANGE = (0.05, np.pi / 2)
+# Below ~10 Blinn's lobe is as broad as the diffuse term and takes its
+# place: on a matte ball (benchmarks/track.py realistic shot 1, seed 0, light
+# at 1.38 rad) the search went to shininess 4.4 and elevation 1.48.
+SHININESS_RANGE = (10.0, 2000.0)
+
+
+class Sample(NamedTuple):
+    """One frame's converged fit, as the tracker had it: the window (grey
+    levels, the tracker's combination), its felt, the corner ``u0, v0``
+    (px), the centre ``c`` and blur ``b`` (px), the level ``G``, whether the
+    blur was fitted, the quadratic look's coefficients (its lit side gives
+    the light's azimuth) and the valid pixels (None: all)."""
+    patch: np.ndarray
+    felt: np.ndarray
+    u0: int
+    v0: int
+    c: np.ndarray
+    b: np.ndarray
+    G: float
+    fit_blur: bool
+    shade: np.ndarray
+    valid: np.ndarray | None
+
+
+def still_groups(samples: list) -> list:
+    """The samples averaged into groups of the same still ball in the same
+    window, largest first (at most ``MAX_GROUPS``): list of Sample."""
+    groups: list[list] = []
+    for s in samples:
+        for g in groups:
+            f = g[0]
+            if (f.u0, f.v0, f.patch.shape) == (s.u0, s.v0, s.patch.shape) and np.hypot(*(s.c - f.c)) <= STILL_PX \
+                    and not s.fit_blur and not f.fit_blur and len(blur_nodes(np.hypot(*s.b))) == 1 \
+                    and len(blur_nodes(np.hypot(*f.b))) == 1:
+                g.append(s)
+                break
+        else:
+            groups.append([s])
+    groups.sort(key=len, reverse=True)
+    out = []
+    for g in groups[:MAX_GROUPS]:
+        valid = None
+        if any(s.valid is not None for s in g):
+            valid = np.logical_and.reduce([np.ones(s.patch.shape, bool) if s.valid is None else s.valid for s in g])
+        out.append(g[0]._replace(patch=np.mean([s.patch for s in g], axis=0),
+                                 felt=np.mean([s.felt for s in g], axis=0), valid=valid))
+    return out
+
+
+def _rss(groups, r: float, outline, look: SphereLook) -> float:
+    """Residual sum of squares of the sphere's fits to the groups (inf when one fails)."""
+    tot = 0.0
+    for s in groups:
+        f = fit_disc(s.patch, s.felt, s.u0, s.v0, s.c, r, s.G, b0=s.b, fit_blur=s.fit_blur, shade=look,
+                     valid=s.valid, outline=outline)
+        if not f:
+            return np.inf
+        n = s.patch.size if s.valid is None else int(s.valid.sum())
+        tot += f.rms**2 * (n - 6 - (2 if s.fit_blur else 0))
+    return tot
+
+
+def _look(x) -> SphereLook:
+    el = float(np.clip(x[1], *ELEVATION_RANGE))
+    p = float(np.clip(np.exp(x[2]), *SHININESS_RANGE))
+    return SphereLook(float(np.mod(x[0], 2 * np.pi)), el, p)
+
+
+def learn_sphere(samples: list, r: float, outline=None) -> tuple[SphereLook | None, float]:
+    """The light's direction and the shininess that explain the frames best.
+
+    Parameters
+    ----------
+    samples : list of Sample
+        The frames' converged fits (the quadratic look's).
+    r : float
+        Ball radius (px).
+    outline : Ellipse, optional
+        The ball's outline (None: the disc of radius ``r``).
+
+    Returns
+    -------
+    look : SphereLook or None
+        None when no start could be fitted.
+    rss : float
+        Its residual sum of squares over the groups (levels^2).
+    """
+    groups = still_groups(samples)
+    if not groups:
+        return None, np.inf
+    gu, gv = np.mean([s.shade[:2] for s in groups], axis=0)
+    az0 = float(np.arctan2(gv, gu))
+    best, best_x = np.inf, None
+    for az in (az0, az0 + np.pi):
+        for el in START_ELEVATIONS:
+            for p in START_SHININESS:
+                x = np.array([az, el, np.log(p)])
+                v = _rss(groups, r, outline, _look(x))
+                if v < best:
+                    best, best_x = v, x
+    if best_x is None:
+        return None, np.inf
+    step = np.array(STEPS, float)
+    x = best_x
+    while np.all(step >= np.array(STEPS) * MIN_STEP_FRACTION):
+        moved = False
+        for k in range(3):
+            for sign in (1.0, -1.0):
+                y = x.copy()
+                y[k] += sign * step[k]
+                v = _rss(groups, r, outline, _look(y))
+                if v < best:
+                    best, x, moved = v, y, True
+                    break
+        if not moved:
+            step = step / 2
+    return _look(x), best
