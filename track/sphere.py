@@ -106,7 +106,8 @@ def _look(x) -> SphereLook:
     return SphereLook(float(np.mod(x[0], 2 * np.pi)), el, p)
 
 
-def learn_sphere(samples: list, r: float, outline=None) -> tuple[SphereLook | None, float]:
+def learn_sphere(samples: list, r: float, outline=None, start: SphereLook | None = None
+                 ) -> tuple[SphereLook | None, float]:
     """The light's direction and the shininess that explain the frames best.
 
     Parameters
@@ -117,6 +118,9 @@ def learn_sphere(samples: list, r: float, outline=None) -> tuple[SphereLook | No
         Ball radius (px).
     outline : Ellipse, optional
         The ball's outline (None: the disc of radius ``r``).
+    start : SphereLook, optional
+        The search's only start (a look learnt before, against another
+        felt); None: the grid of starts above.
 
     Returns
     -------
@@ -131,13 +135,15 @@ def learn_sphere(samples: list, r: float, outline=None) -> tuple[SphereLook | No
     gu, gv = np.mean([s.shade[:2] for s in groups], axis=0)
     az0 = float(np.arctan2(gv, gu))
     best, best_x = np.inf, None
-    for az in (az0, az0 + np.pi):
-        for el in START_ELEVATIONS:
-            for p in START_SHININESS:
-                x = np.array([az, el, np.log(p)])
-                v = _rss(groups, r, outline, _look(x))
-                if v < best:
-                    best, best_x = v, x
+    if start is not None:
+        starts = [np.array([start.azimuth, start.elevation, np.log(start.shininess)])]
+    else:
+        starts = [np.array([az, el, np.log(p)]) for az in (az0, az0 + np.pi) for el in START_ELEVATIONS
+                  for p in START_SHININESS]
+    for x in starts:
+        v = _rss(groups, r, outline, _look(x))
+        if v < best:
+            best, best_x = v, x
     if best_x is None:
         return None, np.inf
     step = np.array(STEPS, float)

@@ -430,6 +430,8 @@ class BallTracker:
         self._look_votes: list[tuple[float, float, int]] = []
         # The voting frames' fits, refitted with the lit sphere once it is learnt.
         self._look_fits: list[tuple] = []
+        self._sphere_samples: list = []  # the Samples the lit sphere was learnt from
+        self._sphere_outline = None  # and their outline
         self._candidates: tuple = ()  # the last full search's blobs
         self._bands = None  # the radius map's bands on the search mask (multi-scale search)
         self._pred = None  # this frame's predicted centre (px), None without history
@@ -659,10 +661,12 @@ class BallTracker:
         reports every frame with the same look."""
         if not self._look_fits:
             return
-        look, _ = learn_sphere([s for s, _, _ in self._look_fits], self.r, self.outline)
+        samples = [s for s, _, _ in self._look_fits]
+        look, _ = learn_sphere(samples, self.r, self.outline)
         if look is None:
             return
         self.shade = look
+        self._sphere_samples, self._sphere_outline = samples, self.outline
         for s, f, lf in self._look_fits:
             g = fit_disc(s.patch, s.felt, s.u0, s.v0, s.c, self.r, s.G, b0=s.b, fit_blur=s.fit_blur, shade=look,
                          valid=s.valid, outline=self.outline)
@@ -670,6 +674,23 @@ class BallTracker:
                 f.c[:], f.stderr[:], f.cov[:] = g.c, g.stderr, g.cov
                 if lf is not None:
                     lf.c[:] = g.c
+
+    def relearn_sphere(self, felt: np.ndarray) -> SphereLook | None:
+        """The lit sphere learnt again from the same voting frames against a
+        better felt (the whole image, e.g. track.video's felt averaged over
+        the track), from the look learnt before: the first felt, learnt
+        while the ball rested, still holds its imprint at the rest spot,
+        and the geometry learnt against it absorbs it (realistic shot 1,
+        seed 0: elevation 1.46 rad for the renderer's 1.38).  Sets and
+        returns the new look; None (the look unchanged) without one."""
+        if not isinstance(self.shade, SphereLook) or not self._sphere_samples:
+            return None
+        samples = [s._replace(felt=felt[s.v0:s.v0 + s.patch.shape[0], s.u0:s.u0 + s.patch.shape[1]])
+                   for s in self._sphere_samples]
+        look, _ = learn_sphere(samples, self.r, self._sphere_outline, start=self.shade)
+        if look is not None:
+            self.shade = look
+        return look
 
     def _departure_centre(self, frame, c, r_ball: float) -> np.ndarray:
         """Centroid (px) of the departure from the felt in either direction,
