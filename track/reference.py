@@ -107,6 +107,8 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
     if shade:  # the coefficients, then (the lit sphere's) its geometry
         look = np.r_[np.zeros(3), shade.geometry() if isinstance(shade, SphereLook) else ()]
     sphere = isinstance(shade, SphereLook)
+    if sphere and outline is not None:  # scaled by the outline's own radius, as model.fit_disc
+        r = outline.radius
     n_look = 3 if shade else 0
     n_par = (5 if fit_blur else 3) + n_look
     taus = blur_nodes(np.hypot(*b))
