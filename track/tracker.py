@@ -156,8 +156,9 @@ class TrackerConfig:
         only if it explains them significantly better (chi-square, 0.1%).
         A shaded ball is then fitted as a lit sphere
         (:class:`cuespin.track.model.SphereLook`) whose light and
-        shininess are learnt from those frames (``sphere`` True); False
-        keeps the quadratic look.
+        shininess are learnt from those frames (``sphere`` True, and the
+        video lossless: :func:`cuespin.track.video.track_video` turns it off
+        on a lossy codec); False keeps the quadratic look.
     """
 
     refine: str = "fit"
@@ -630,7 +631,11 @@ class BallTracker:
         G = f.G if G0 is None else G0
         for fb in (True, False) if fit_blur else (False,):
             g = fit_disc(patch, felt, u0, v0, f.c, r, G, b0=f.b, fit_blur=fb, shade=shade, valid=~left, outline=ol)
-            if g:
+            # Left out, the markings' pixels can only lower the residual: a
+            # refit that explains its fewer pixels worse than the fit with
+            # them ran off (seed 0 shot 12 MJPG of the realistic benchmark,
+            # a highlighted ball: rms 136 and 72 against ~40).
+            if g and (not f or g.rms <= f.rms):
                 return g, marks, fb
         return f, None, fit_blur
 
@@ -649,12 +654,20 @@ class BallTracker:
             return b.rms < a.rms
         return g.rms < f.rms
 
-    def _learn_look(self, patch, felt, u0, v0, f_shaded, r, G0, blur, fit_blur):
+    def _learn_look(self, patch, felt, u0, v0, f_shaded, r, G0, blur, fit_blur, marks=None, foreign=None):
         """One frame's vote on the look: the disc fit's residual sum against
         the shaded one's; decided once ``LOOK_FRAMES`` frames have voted."""
         d = fit_disc(patch, felt, u0, v0, f_shaded.c, r, G0, b0=blur, fit_blur=fit_blur, outline=self.outline)
         if not d:
             return
+        if f_shaded.ok and (marks is not None or foreign is not None):
+            # Both looks on the same pixels (every one, as the disc's): the
+            # frame's own shaded fit left some out, and its residual over
+            # fewer pixels is no vote against the disc's over all of them.
+            f_shaded = fit_disc(patch, felt, u0, v0, f_shaded.c, r, G0, b0=blur, fit_blur=fit_blur, shade=True,
+                                outline=self.outline)
+            if not f_shaded:
+                return
         self._look_votes.append(look_vote(d, f_shaded, patch.size))
         if len(self._look_votes) >= LOOK_FRAMES:
             self.shade = shaded_look(self._look_votes)
@@ -837,12 +850,19 @@ class BallTracker:
                 again = self._refine(frame, f.c, f.b, recentre=False)
                 if again.status == OK:
                     return again
+            if not (np.all(np.isfinite(f.cov)) and f.cov[0, 0] > 0 and f.cov[1, 1] > 0 and np.linalg.det(f.cov) > 0):
+                # No stated error is no measurement: a zero covariance would
+                # weigh the frame infinitely downstream (9 frames of seed 0
+                # shot 12 of the realistic benchmark, MJPG, a highlighted
+                # ball refitted without "markings" that were the codec's
+                # blocks).
+                return _lost(FIT_FAILED)
             c, se, cov, rms = f.c, f.stderr, f.cov, f.rms
             self.last_fit = LastFit(u0, v0, v1 - v0, u1 - u0, f.c.copy(), f.b.copy(), f.G, bool(fit_blur),
                                     f.shade, ol, foreign, marks)
             if self.shade is None:
                 self._keep_for_sphere(f, patch, felt, u0, v0, fit_blur, foreign, self.last_fit)
-                self._learn_look(patch, felt, u0, v0, f, r, G0, blur, fit_blur)
+                self._learn_look(patch, felt, u0, v0, f, r, G0, blur, fit_blur, marks, foreign)
             self.last_patch = (patch, u0, v0)
         # The whole ball must lie inside the frame for the centre to be trusted.
         eu, ev = (r, r) if ol is None else ol.half_extent

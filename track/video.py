@@ -419,7 +419,13 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         # The top speed in px at the largest scale in view (the scale goes
         # with the ball's radius): near a tilted camera a px is fewer metres.
         max_step = MAX_SPEED_M_S / cam.fps * cam.px_per_m(center) * radii.r_max / radius_px
-        tracker = BallTracker(bg, radius_px, cam.exposure_s * cam.fps, config, projection=proj,
+        # The lit sphere on lossless video only: on a lossy codec its errors
+        # are the codec's bias (15-130x the lossless bound), it stated them
+        # worse than the quadratic look (err/se 1.3-4.6) and found centres
+        # 0.25 R off in 10 frames of a highlighted ball at 480 fps (seed 0
+        # shot 12 of the realistic benchmark, MJPG; 0 with the quadratic).
+        sphere_cfg = replace(config, sphere=config.sphere and bool(info.lossless))
+        tracker = BallTracker(bg, radius_px, cam.exposure_s * cam.fps, sphere_cfg, projection=proj,
                               search_mask=mask, max_step_px=max_step, camera=cam, R=R, radii=radii)
         felt = FeltAccumulator(first.shape)
         foreign_level = foreign_threshold(bg.sigma, bg.contrast)
