@@ -1134,7 +1134,12 @@ def focal_from_balls(balls, corners_px, size, table: Table = Table(), *, R: floa
         total = 0.0
         for b in balls:
             xy = cam.to_table(b.centre[None])[0]
-            fit = _fit_ellipse(cam.ball_outline(xy, R, n=90))      # as the measured outline is fitted
+            try:
+                fit = _fit_ellipse(cam.ball_outline(xy, R, n=90))  # as the measured outline is fitted
+            except cv2.error:
+                fit = None
+            if fit is None:  # no ellipse through the predicted outline: this f explains nothing
+                return math.inf
             total += float(np.sum((b.shape - _shape(fit[1])) ** 2)) / b.sigma**2
         return total
 

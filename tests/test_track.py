@@ -266,9 +266,13 @@ def test_felt_accumulator_sums_whole_frames_exactly():
     hidden = np.zeros(shape[:2], np.int32)
     for k in range(n):
         frame = rng.integers(0, 256, shape, dtype=np.uint8)
-        if k % 3 == 0:
-            frame[:] = 255  # the sum's worst case
-        centre = rng.uniform(0, 64, 2)
+        if k <= FULL_CARRY or k % 3 == 0:
+            # The sum's worst case, every frame up to the first carry: a
+            # carry one frame late (258 frames of 255) wraps 16 bits.
+            frame[:] = 255
+        # The ball in the left half only: the right half is never hidden,
+        # so its sums are the worst case's.
+        centre = rng.uniform((0.0, 0.0), (30.0, 48.0))
         felt.add_frame(frame, centre, 6.0)
         cv2.accumulate(frame, ref)
         out = FeltAccumulator._disc(0, 0, 48, 64, centre, 6.0)

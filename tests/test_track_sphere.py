@@ -8,6 +8,7 @@ import pytest
 
 from cuespin.track.model import SphereLook, fit_disc, streak_model
 from cuespin.track.sphere import Sample, learn_sphere
+from cuespin.track.tracker import BallTracker, TrackerConfig, marking_pixels
 
 H = W = 37
 U0, V0, R_PX = 500, 283, 14.3
@@ -38,6 +39,44 @@ def test_learnt_geometry_pins_the_centre():
     g = fit_disc(img, felt, U0, V0, c + [0.3, -0.2], R_PX, 170.0, shade=look)
     assert g and np.all(np.abs(g.c - c) <= 4 * g.stderr)
     assert quad > 3
+
+
+def test_markings_stay_out_of_the_lights_learning():
+    # The tracker's own hand-over (_keep_for_sphere, _learn_sphere): twelve
+    # still frames of a lit ball with two dark dots, each fitted with the
+    # dots left out as the tracker does.  With the dots back in the
+    # learning the elevation came out 1.283 for 1.10 and the refitted
+    # frames 0.044 px off (RMS, about 8 of their errors; review, seed 5);
+    # with them out, 1.099 and 0.0067 px.  Asserted: elevation within 0.05
+    # rad and the refitted frames within 2x the fixed code's RMS.
+    from types import SimpleNamespace
+
+    from cuespin.render.draw import disc_coverage
+    rng = np.random.default_rng(5)
+    truth = SphereLook(2.2, 1.1, 40.0)
+    felt = 90.0 + rng.normal(0, 2, (H, W))
+    c = np.array([518.31, 301.72])
+    clean = felt + streak_model(c, np.zeros(2), 150.0, felt, R_PX, U0, V0, np.zeros(1),
+                                np.r_[60.0, 120.0, 0.0, truth.geometry()])[0]
+    for a, d in ((0.5, 6.0), (2.8, 8.0)):
+        cov = disc_coverage(c[0] + d * np.cos(a), c[1] + d * np.sin(a), 2.5, U0, V0, H, W)
+        clean = clean * (1 - cov) + 30.0 * cov
+    T = SimpleNamespace(cfg=TrackerConfig(), shade=None, _look_fits=[], r=R_PX, outline=None)
+    fits = []
+    for _ in range(12):
+        img = np.clip(np.rint(clean + rng.normal(0, 3.0, clean.shape)), 0, 255)
+        f0 = fit_disc(img, felt, U0, V0, c + [0.2, -0.1], R_PX, 170.0, shade=True)
+        m = marking_pixels(img, felt, U0, V0, f0.c, f0.b, R_PX, R_PX, 3.0, 100.0)
+        assert m is not None
+        f = fit_disc(img, felt, U0, V0, f0.c, R_PX, f0.G, shade=True, valid=~m)
+        assert f
+        fits.append(f)
+        BallTracker._keep_for_sphere(T, f, img, felt, U0, V0, False, None, SimpleNamespace(marks=m, c=f.c.copy()))
+    BallTracker._learn_sphere(T)
+    assert isinstance(T.shade, SphereLook)
+    assert abs(T.shade.elevation - truth.elevation) < 0.05
+    err = np.array([np.hypot(*(f.c - c)) for f in fits])
+    assert np.sqrt(np.mean(err ** 2)) < 2 * 0.0067
 
 
 @pytest.mark.slow
@@ -71,3 +110,29 @@ def test_rendered_highlighted_ball_centre_within_its_stated_errors(tmp_path):
     z = float(np.sqrt(np.mean((e / res.stderr_px[:n][moving]) ** 2)))
     assert 0.75 <= z <= 1.25
     assert float(np.sqrt(np.mean(e**2))) <= 2.5 * 0.0038
+
+
+def test_sphere_look_scaled_by_the_outline():
+    # Under perspective the ball's image (its outline) is larger or smaller
+    # than the table-wide radius the tracker passes: the shading must be
+    # scaled by the outline.  An outline 1.1x r, eight noisy frames: the
+    # centre's error per axis, RMS in its stated errors, was 2.35 with the
+    # look at X / r, 0.64 at the outline's radius (measured, seed 2; at
+    # 1.3x r 1.28 and 0.66); asserted < 1.5.
+    from cuespin.track.outline import Ellipse
+    h = w = 45
+    rng = np.random.default_rng(2)
+    felt = 90.0 + rng.normal(0, 2, (h, w))
+    c = np.array([522.31, 305.72])
+    look = SphereLook(2.2, 1.1, 40.0)
+    rt = 1.1 * R_PX
+    clean = felt + streak_model(c, np.zeros(2), 150.0, felt, rt, U0, V0, np.zeros(1),
+                                np.r_[60.0, 120.0, 0.0, look.geometry()])[0]
+    ol = Ellipse(((1 / rt**2, 0.0), (0.0, 1 / rt**2)))
+    z = []
+    for _ in range(8):
+        img = np.clip(np.rint(clean + rng.normal(0, 3.0, clean.shape)), 0, 255)
+        f = fit_disc(img, felt, U0, V0, c + [0.2, -0.1], R_PX, 170.0, shade=look, outline=ol)
+        assert f
+        z.append((f.c - c) / f.stderr)
+    assert np.sqrt(np.mean(np.square(z))) < 1.5

@@ -106,3 +106,29 @@ def test_moved_boxes_from_integer_sums_are_the_float_blurs():
     noise_thr = 7.5 * np.maximum(sd, 0.5) / k + 1.0
     want = np.any(span > [spread_threshold(span[..., i], noise_thr[i]) for i in range(3)], axis=-1)
     assert np.array_equal(moved_boxes(samples, r, sd), want)
+
+
+def test_sample_medians_are_numpys_bit_for_bit():
+    """median_u8 (a sort network over the samples) and median_counts (from
+    the values' counts): numpy's medians bit for bit, odd and even counts."""
+    from cuespin.track.colour import median_counts, median_u8, noise_covariance
+
+    rng = np.random.default_rng(7)
+    for n in (1, 2, 3, 8, 9, 10):
+        X = rng.integers(0, 256, (n, 31, 17, 3), dtype=np.uint8)
+        X[:, :5] = 255  # ties and the extremes
+        assert np.array_equal(median_u8(X), np.median(X.astype(np.float32), axis=0))
+    for n in (1, 2, 1001, 1002):
+        x = rng.integers(0, 256, (n, 3), dtype=np.uint8)
+        assert np.array_equal(median_counts(x), np.median(x, axis=0))
+    # noise_covariance's robust centre and spread from counts: the numpy form's
+    a = rng.integers(0, 256, (64, 96, 3), dtype=np.uint8)
+    b = np.clip(a + rng.normal(0, 4, a.shape), 0, 255).astype(np.uint8)
+    b[10:30, 20:50] = 0  # something moved
+    d = (a.astype(np.float32) - b.astype(np.float32)).reshape(-1, 3)
+    med = np.median(d, axis=0)
+    mad = 1.4826 * np.median(np.abs(d - med), axis=0)
+    d = d[np.all(np.abs(d - med) <= np.maximum(5 * mad, 1.5), axis=1)].astype(np.float64)
+    cov = (d.T @ d) / len(d) / 2.0
+    want = cov + (1 / 12 + 0.05 * np.trace(cov) / 3.0) * np.eye(3)
+    assert np.array_equal(noise_covariance(a, b), want)

@@ -139,11 +139,12 @@ def felt_band(sigma: float) -> float:
 SPAN_P90_FACTOR = 1.8
 
 
-def spread_threshold(span: np.ndarray, noise_threshold: float) -> float:
+def spread_threshold(span: np.ndarray, noise_threshold: float, step: int = 4) -> float:
     """The span (levels) over the samples beyond which a pixel moved: the
     noise's ``noise_threshold``, or ``SPAN_P90_FACTOR`` times the 90th
-    percentile of the spans ``span`` (h, w) where that is larger."""
-    sub = span[::4, ::4]
+    percentile of the spans ``span`` (h, w) where that is larger (of every
+    ``step``-th row and column; 1 for spans already taken so)."""
+    sub = span[::step, ::step]
     return max(float(noise_threshold), SPAN_P90_FACTOR * float(np.percentile(sub, 90)))
 
 

@@ -91,6 +91,21 @@ class Projection:
 GREY = Projection()
 
 
+def median_counts(x: np.ndarray) -> np.ndarray:
+    """Each column's median of ``x`` (n, c), non-negative whole numbers of
+    any integer dtype: ``np.median(x, axis=0)`` (float64) bit for bit, from
+    the values' counts.  numpy selects down a column's strided values: 24 ms
+    for a 1280 x 640 frame's BGR against 4 ms here (measured, tspeed8)."""
+    n = len(x)
+    out = np.empty(x.shape[1])
+    for c in range(x.shape[1]):
+        cum = np.cumsum(np.bincount(x[:, c]))
+        # the order statistics (n - 1) // 2 and n // 2 (the same one for odd n)
+        lo, hi = np.searchsorted(cum, [(n - 1) // 2, n // 2], side="right")
+        out[c] = (lo + hi) / 2
+    return out
+
+
 def noise_covariance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Per-pixel noise covariance (3x3) from two colour frames of the same scene.
 
@@ -104,9 +119,12 @@ def noise_covariance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     step = max(int(np.sqrt(a.shape[0] * a.shape[1] / NOISE_PIXELS)), 1)
     a, b = a[::step, ::step], b[::step, ::step]
     d = (a.astype(np.float32) - b.astype(np.float32)).reshape(-1, 3)
-    med = np.median(d, axis=0)
-    mad = 1.4826 * np.median(np.abs(d - med), axis=0)
-    keep = np.all(np.abs(d - med) <= np.maximum(5 * mad, 1.5), axis=1)
+    # np.median(d, axis=0) and the MAD's median, bit for bit, from counts:
+    # the differences are whole levels, their deviations halves.
+    med = (median_counts(d.astype(np.int32) + 255) - 255).astype(np.float32)
+    dev = np.abs(d - med)
+    mad = 1.4826 * (median_counts((2 * dev).astype(np.int32)) / 2).astype(np.float32)
+    keep = np.all(dev <= np.maximum(5 * mad, 1.5), axis=1)
     d = d[keep].astype(np.float64)
     cov = (d.T @ d) / max(len(d), 1) / 2.0
     # A lossy codec can flatten the felt's noise and share it between the
@@ -117,6 +135,26 @@ def noise_covariance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     # of the mean variance, keep every direction's noise honest.
     floor = ROUNDING_VAR + CONDITION_FLOOR * np.trace(cov) / 3.0
     return cov + floor * np.eye(3)
+
+
+def median_u8(X: np.ndarray) -> np.ndarray:
+    """``np.median(X.astype(np.float32), axis=0)`` bit for bit, for a uint8
+    stack ``X`` (n, ...): by an odd-even transposition sort of the n frames
+    (elementwise min/max in 8 bits).  numpy's median along the first axis
+    selects within each pixel's n values one pixel at a time: 27 ms for
+    9 x 120 x 400 x 3 against 0.7 ms here (measured, tspeed8)."""
+    s = [x.copy() for x in X]
+    n = len(s)
+    for r in range(n):
+        for i in range(r % 2, n - 1, 2):
+            lo = np.minimum(s[i], s[i + 1])
+            np.maximum(s[i], s[i + 1], out=s[i + 1])
+            s[i] = lo
+    m = n // 2
+    if n % 2:
+        return s[m].astype(np.float32)
+    # whole levels: their mean (a half level at most) is exact in float32, as numpy's
+    return (s[m - 1].astype(np.float32) + s[m].astype(np.float32)) * np.float32(0.5)
 
 
 def departure_box_means(samples: np.ndarray, on: np.ndarray, ys: np.ndarray, xs: np.ndarray,
@@ -141,8 +179,8 @@ def departure_box_means(samples: np.ndarray, on: np.ndarray, ys: np.ndarray, xs:
         if not len(sel):
             continue
         u0, v0, w, h = stats[j, :4]
-        X = samples[:, v0:v0 + h, u0:u0 + w].astype(np.float32)
-        D = (X - np.median(X, axis=0)) * on[v0:v0 + h, u0:u0 + w, None]
+        X8 = samples[:, v0:v0 + h, u0:u0 + w]
+        D = (X8.astype(np.float32) - median_u8(X8)) * on[v0:v0 + h, u0:u0 + w, None]
         out[:, sel] = np.stack([cv2.blur(d, (k, k)) for d in D])[:, ys[sel] - v0, xs[sel] - u0]
     return out
 
@@ -224,9 +262,22 @@ def moved_boxes(samples: np.ndarray, radius_px, sd: np.ndarray) -> np.ndarray:
         else:
             np.minimum(lo, b, out=lo)
             np.maximum(hi, b, out=hi)
-    span = (hi * (1.0 / (k * k))).astype(np.float32) - (lo * (1.0 / (k * k))).astype(np.float32)
+    def span(hi, lo):  # cv2.blur's float32 means' span
+        return (hi * (1.0 / (k * k))).astype(np.float32) - (lo * (1.0 / (k * k))).astype(np.float32)
+
     noise_thr = 7.5 * np.maximum(sd, 0.5) / k + 1.0
-    return np.any(span > [spread_threshold(span[..., i], noise_thr[i]) for i in range(3)], axis=-1)
+    sub = span(hi[::4, ::4], lo[::4, ::4])
+    thr = np.array([spread_threshold(sub[..., i], noise_thr[i], step=1) for i in range(3)])
+    # The float32 span is the integer span / k^2 within 5e-5 levels (three
+    # float32 roundings of values < 256), so it is needed only where that
+    # comes within 1e-3 of a threshold: a few moving pixels, not the whole
+    # frame's float64 products (~25 ms a 1280 x 640 learning).
+    np.subtract(hi, lo, out=hi)
+    near = np.any(hi > np.floor((thr - 1e-3) * (k * k)).astype(np.int32), axis=-1)
+    out = np.zeros(near.shape, bool)
+    d, low = hi[near], lo[near]
+    out[near] = np.any(span(d + low, low) > thr, axis=-1)
+    return out
 
 
 def white_free(d: np.ndarray, S: np.ndarray) -> np.ndarray | None:
@@ -290,7 +341,7 @@ def learn_projection(samples: np.ndarray, radius_px) -> Projection:
     w = w / np.sqrt(w @ S @ w) * np.sqrt(np.trace(S) / 3.0)
     if blind is None and w.sum() < 0:  # keep bright things bright where it costs nothing (grey-like w)
         w = -w
-    felt = np.median(samples[0].reshape(-1, 3), axis=0)
+    felt = median_counts(samples[0].reshape(-1, 3))
     return Projection(w=w.astype(np.float32), offset=float(FELT_LEVEL - felt @ w), noise_cov=S)
 
 
