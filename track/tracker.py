@@ -626,18 +626,10 @@ class BallTracker:
             return f, None, fit_blur
         left = marks if foreign is None else marks | foreign
         G = f.G if G0 is None else G0
-        # The lit sphere's refit without the markings may not converge (41
-        # of 193 frames of a white ball with dots, benchmarks/track.py
-        # realistic seed 0 shot 18, FFV1: cycling for 24 iterations; with
-        # the markings in, its rms was 29 against 2.6 and the pulled-fit
-        # rule dropped the frame): then the quadratic look, as _refine falls
-        # back when the sphere's first fit fails.
-        for look in (shade, True) if isinstance(shade, SphereLook) else (shade,):
-            for fb in (True, False) if fit_blur else (False,):
-                g = fit_disc(patch, felt, u0, v0, f.c, r, G, b0=f.b, fit_blur=fb, shade=look, valid=~left,
-                             outline=ol)
-                if g:
-                    return g, marks, fb
+        for fb in (True, False) if fit_blur else (False,):
+            g = fit_disc(patch, felt, u0, v0, f.c, r, G, b0=f.b, fit_blur=fb, shade=shade, valid=~left, outline=ol)
+            if g:
+                return g, marks, fb
         return f, None, fit_blur
 
     @staticmethod
