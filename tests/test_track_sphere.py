@@ -12,6 +12,19 @@ from cuespin.track.tracker import BallTracker, TrackerConfig, marking_pixels
 
 H = W = 37
 U0, V0, R_PX = 500, 283, 14.3
+# The still ball the fast tests draw: lit from azimuth 2.2 at 1.1 rad with a
+# highlight of shininess 40 (level 150, diffuse 60, highlight 120).
+TRUTH = SphereLook(2.2, 1.1, 40.0)
+GEO = np.r_[60.0, 120.0, 0.0, TRUTH.geometry()]
+C_TRUE = np.array([518.31, 301.72])
+
+
+def lit_ball(seed: int, r: float = R_PX, shape=(H, W), c=C_TRUE):
+    """The generator after the felt's draw, a felt (90 +- 2) and the lit
+    ball's departure from it, radius ``r`` px, centre ``c``."""
+    rng = np.random.default_rng(seed)
+    felt = 90.0 + rng.normal(0, 2, shape)
+    return rng, felt, streak_model(c, np.zeros(2), 150.0, felt, r, U0, V0, np.zeros(1), GEO)[0]
 
 
 def test_learnt_geometry_pins_the_centre():
@@ -20,12 +33,9 @@ def test_learnt_geometry_pins_the_centre():
     # the quadratic look's fits, and the sphere's fit of one frame then
     # lands on the true centre within 4 of its stated errors (the
     # quadratic look's is pulled by its lit side: 5.1 of them, measured).
-    rng = np.random.default_rng(11)
-    truth = SphereLook(2.2, 1.1, 40.0)
-    felt = 90.0 + rng.normal(0, 2, (H, W))
-    c = np.array([518.31, 301.72])
-    clean = felt + streak_model(c, np.zeros(2), 150.0, felt, R_PX, U0, V0, np.zeros(1),
-                                np.r_[60.0, 120.0, 0.0, truth.geometry()])[0]
+    rng, felt, ball = lit_ball(11)
+    truth, c = TRUTH, C_TRUE
+    clean = felt + ball
     samples = []
     for _ in range(12):
         img = clean + rng.normal(0, 3.0, clean.shape)
@@ -50,14 +60,10 @@ def test_learnt_again_against_the_clean_felt():
     # BallTracker.relearn_sphere does), azimuth and elevation come within
     # 0.0008 and 0.0013 rad of the truth (measured) and the centre within
     # 0.3 of them.
-    rng = np.random.default_rng(11)
-    truth = SphereLook(2.2, 1.1, 40.0)
-    felt = 90.0 + rng.normal(0, 2, (H, W))
-    c = np.array([518.31, 301.72])
-    geo = np.r_[60.0, 120.0, 0.0, truth.geometry()]
-    ball = streak_model(c, np.zeros(2), 150.0, felt, R_PX, U0, V0, np.zeros(1), geo)[0]
+    rng, felt, ball = lit_ball(11)
+    truth, c = TRUTH, C_TRUE
     imprinted = felt + 0.15 * streak_model(c + [4.0, 0.0], np.zeros(2), 150.0, felt, R_PX, U0, V0, np.zeros(1),
-                                           geo)[0]
+                                           GEO)[0]
     samples = []
     for _ in range(12):
         img = felt + ball + rng.normal(0, 3.0, ball.shape)
@@ -83,12 +89,9 @@ def test_markings_stay_out_of_the_lights_learning():
     from types import SimpleNamespace
 
     from cuespin.render.draw import disc_coverage
-    rng = np.random.default_rng(5)
-    truth = SphereLook(2.2, 1.1, 40.0)
-    felt = 90.0 + rng.normal(0, 2, (H, W))
-    c = np.array([518.31, 301.72])
-    clean = felt + streak_model(c, np.zeros(2), 150.0, felt, R_PX, U0, V0, np.zeros(1),
-                                np.r_[60.0, 120.0, 0.0, truth.geometry()])[0]
+    rng, felt, ball = lit_ball(5)
+    truth, c = TRUTH, C_TRUE
+    clean = felt + ball
     for a, d in ((0.5, 6.0), (2.8, 8.0)):
         cov = disc_coverage(c[0] + d * np.cos(a), c[1] + d * np.sin(a), 2.5, U0, V0, H, W)
         clean = clean * (1 - cov) + 30.0 * cov
@@ -151,14 +154,9 @@ def test_sphere_look_scaled_by_the_outline():
     # look at X / r, 0.64 at the outline's radius (measured, seed 2; at
     # 1.3x r 1.28 and 0.66); asserted < 1.5.
     from cuespin.track.outline import Ellipse
-    h = w = 45
-    rng = np.random.default_rng(2)
-    felt = 90.0 + rng.normal(0, 2, (h, w))
-    c = np.array([522.31, 305.72])
-    look = SphereLook(2.2, 1.1, 40.0)
-    rt = 1.1 * R_PX
-    clean = felt + streak_model(c, np.zeros(2), 150.0, felt, rt, U0, V0, np.zeros(1),
-                                np.r_[60.0, 120.0, 0.0, look.geometry()])[0]
+    c, look, rt = np.array([522.31, 305.72]), TRUTH, 1.1 * R_PX
+    rng, felt, ball = lit_ball(2, rt, (45, 45), c)
+    clean = felt + ball
     ol = Ellipse(((1 / rt**2, 0.0), (0.0, 1 / rt**2)))
     z = []
     for _ in range(8):
