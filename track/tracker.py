@@ -209,6 +209,14 @@ def shaded_look(votes: list) -> bool:
     return bool(stat > chdtri(3 * len(rss_d), LOOK_P))
 
 
+def kept_pixels(*left) -> np.ndarray | None:
+    """A window's pixels a fit may use (:func:`~cuespin.track.model.fit_disc`'s
+    ``valid``) with the boolean masks ``left`` (each None or a mask: another
+    ball, the markings) left out; None when none is given (every pixel)."""
+    given = [m for m in left if m is not None]
+    return ~np.logical_or.reduce(given) if given else None
+
+
 def segment_distance(shape, u0: int, v0: int, c, b) -> np.ndarray:
     """Distance (px) of each pixel of a window (``shape`` (h, w), top-left
     ``(u0, v0)``) from the ball's blur segment (centre ``c``, blur vector
@@ -627,10 +635,10 @@ class BallTracker:
                                None if foreign is None else ~foreign)
         if marks is None:
             return f, None, fit_blur
-        left = marks if foreign is None else marks | foreign
+        valid = kept_pixels(marks, foreign)
         G = f.G if G0 is None else G0
         for fb in (True, False) if fit_blur else (False,):
-            g = fit_disc(patch, felt, u0, v0, f.c, r, G, b0=f.b, fit_blur=fb, shade=shade, valid=~left, outline=ol)
+            g = fit_disc(patch, felt, u0, v0, f.c, r, G, b0=f.b, fit_blur=fb, shade=shade, valid=valid, outline=ol)
             # Left out, the markings' pixels can only lower the residual: a
             # refit that explains its fewer pixels worse than the fit with
             # them ran off (seed 0 shot 12 MJPG of the realistic benchmark,
@@ -647,9 +655,9 @@ class BallTracker:
         markings, so the one that left out more of its worst pixels would
         look better whatever its centre (review).  Falls back to the own
         residuals when a refit fails."""
-        left = marks if foreign is None else marks | foreign
-        a = fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=shade, valid=~left, outline=ol)
-        b = fit_disc(patch, felt, u0, v0, g.c, r, g.G, b0=g.b, fit_blur=fit_blur, shade=shade, valid=~left, outline=ol)
+        valid = kept_pixels(marks, foreign)
+        a = fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=shade, valid=valid, outline=ol)
+        b = fit_disc(patch, felt, u0, v0, g.c, r, g.G, b0=g.b, fit_blur=fit_blur, shade=shade, valid=valid, outline=ol)
         if a and b:
             return b.rms < a.rms
         return g.rms < f.rms
@@ -684,10 +692,9 @@ class BallTracker:
             # dots left in put a learnt elevation 0.18 rad off and the
             # refitted still frames 0.044 px off, ~8 of their errors
             # (review, 12 still frames with two dots).
-            left = foreign if last_fit is None or last_fit.marks is None else (
-                last_fit.marks if foreign is None else foreign | last_fit.marks)
+            valid = kept_pixels(foreign, None if last_fit is None else last_fit.marks)
             self._look_fits.append((Sample(patch.copy(), felt.copy(), u0, v0, f.c.copy(), f.b.copy(), f.G, bool(fit_blur),
-                                           f.shade, None if left is None else ~left), f, last_fit))
+                                           f.shade, valid), f, last_fit))
 
     def _learn_sphere(self) -> None:
         """Learn the lit sphere's geometry from the voting frames and refit
@@ -812,7 +819,7 @@ class BallTracker:
             foreign = foreign_near(D, u0, v0, f.c, f.b, r_out, self.bg.sigma, self.bg.contrast)
             if foreign is not None:
                 g = fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=shade,
-                             valid=~foreign if marks is None else ~(foreign | marks), outline=ol)
+                             valid=kept_pixels(foreign, marks), outline=ol)
                 if not g:
                     return _lost(FIT_FAILED)
                 f = g

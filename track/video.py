@@ -33,7 +33,7 @@ from cuespin.track.radius import RadiusMap
 from cuespin.track.model import SphereLook, fit_disc, refit_shift, warm_up
 from cuespin.track.reader import FrameSource, ThreadedFrames, TrackError, frame_times, probe
 from cuespin.track.tracker import (OFF_PATH, OK, PULLED, STATUS_TEXT, STILL_PX, BallTracker, TrackerConfig,
-                                   beyond_ball, foreign_near, foreign_threshold, pulled_fits)
+                                   beyond_ball, foreign_near, foreign_threshold, kept_pixels, pulled_fits)
 
 # Bytes of decoded frames held before the background is learnt: 437 grey or
 # 145 BGR frames at 1280 x 720 (at 240 fps, 1.8 s or 0.6 s of video; the
@@ -504,16 +504,15 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
             changed = foreign_near(bg.polarity * (new - old), pu, pv, c, b, r_out, bg.sigma, bg.contrast)
             if changed is not None:
                 new = np.where(changed & beyond_ball(old.shape, pu, pv, c, b, r_out), old, new)
-            left = foreign if marks is None else marks if foreign is None else foreign | marks
+            valid = kept_pixels(foreign, marks)
             g = None
             if look is not None and kk in patches:
                 g = fit_disc(patches[kk], new, pu, pv, c, radius_px, G, b0=b, fit_blur=fb, shade=look,
-                             valid=None if left is None else ~left, outline=outline)
+                             valid=valid, outline=outline)
             if g:
                 uv[kk], cov[kk], rms[kk] = g.c, g.cov, g.rms
             else:
-                uv[kk] = c + refit_shift(old, new, pu, pv, c, b, G, radius_px, fb, shade, outline,
-                                         None if left is None else ~left)
+                uv[kk] = c + refit_shift(old, new, pu, pv, c, b, G, radius_px, fb, shade, outline, valid)
         bg = replace(bg, image=better)
     t_track = time.perf_counter() - t_start
     status = np.array(status, np.int8)
