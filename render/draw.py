@@ -1078,15 +1078,16 @@ class FrameRenderer:
         xy_c = tip - a_c[..., None] * d + c_c[..., None] * nrm                 # (m, 4, 2)
         uv_all = self.cam.project(np.c_[xy_c.reshape(-1, 2), np.full(xy_c.size // 2, R)])
         uv_all = uv_all.reshape(-1, 4, 2)
-        for a0, a1, uv in zip(edges[:-1], edges[1:], uv_all):
-            if not np.isfinite(uv).all():
-                continue
-            u_lo = max(int(math.floor(uv[:, 0].min())) - pad, 0)
-            v_lo = max(int(math.floor(uv[:, 1].min())) - pad, 0)
-            u_hi = min(int(math.ceil(uv[:, 0].max())) + pad, w - 1)
-            v_hi = min(int(math.ceil(uv[:, 1].max())) + pad, h - 1)
-            if u_hi < u_lo or v_hi < v_lo:
-                continue
+        # Every stretch's patch in the frame at once (most of a long cue is
+        # often out of view: per stretch, these reductions cost as much as a drawn one).
+        seen = np.isfinite(uv_all).all(axis=(1, 2))
+        lo = np.floor(np.where(seen[:, None], uv_all.min(axis=1), 0.0)).astype(int) - pad
+        hi = np.ceil(np.where(seen[:, None], uv_all.max(axis=1), -1.0)).astype(int) + pad
+        lo, hi = np.maximum(lo, 0), np.minimum(hi, [w - 1, h - 1])
+        seen &= (hi >= lo).all(axis=1)
+        for i in np.flatnonzero(seen):
+            a0, a1 = edges[i], edges[i + 1]
+            (u_lo, v_lo), (u_hi, v_hi) = lo[i].tolist(), hi[i].tolist()
             shape = (v_hi + 1 - v_lo, u_hi + 1 - u_lo)
             if self.similar:
                 # Affine in the pixel's position: two 1-D ramps, no per-pixel mapping.
@@ -1106,14 +1107,16 @@ class FrameRenderer:
                 a = -(rel @ d)
                 c = rel @ nrm
             own = (a >= a0) & (a < a1) if a0 > 0 else (a < a1)
-            ra = cue_radius(np.clip(a, 0, CUE_LENGTH_M))
-            cov = np.clip((ra - np.abs(c)) * px_m + 0.5, 0, 1) * np.clip(a * px_m + 0.5, 0, 1) * own
+            # np.minimum / np.maximum: np.clip's values without its call overhead.
+            ra = cue_radius(np.minimum(np.maximum(a, 0.0), CUE_LENGTH_M))
+            cov = (np.minimum(np.maximum((ra - np.abs(c)) * px_m + 0.5, 0.0), 1.0)
+                   * np.minimum(np.maximum(a * px_m + 0.5, 0.0), 1.0) * own)
             on = cov > 0
             if not on.any():
                 continue
             # Colour only where the cue is (it is thin): its part, cylinder shading.
             a_on, c_on, ra_on = a[on], c[on], ra[on]
-            across = np.clip(np.abs(c_on) / ra_on, 0, 1)
+            across = np.minimum(np.maximum(np.abs(c_on) / ra_on, 0.0), 1.0)
             colour = cue_colour(a_on) * (0.55 + 0.45 * np.sqrt(1 - across**2))[:, None]
             sharp = self._sharp[v_lo + self._border:v_hi + 1 + self._border,
                                 u_lo + self._border:u_hi + 1 + self._border]
@@ -1218,9 +1221,11 @@ def cue_radius(a):
 
 def cue_colour(a: np.ndarray) -> np.ndarray:
     """BGR colour of the cue at distances ``a`` (m) from its tip, shape (n, 3)."""
-    ends = np.array([e for e, _ in CUE_PARTS])
-    cols = np.array([c for _, c in CUE_PARTS], dtype=np.float32)
-    return cols[np.minimum(np.searchsorted(ends, a), len(ends) - 1)]
+    return _CUE_COLS[np.minimum(np.searchsorted(_CUE_ENDS, a), len(_CUE_ENDS) - 1)]
+
+
+_CUE_ENDS = np.array([e for e, _ in CUE_PARTS])
+_CUE_COLS = np.array([c for _, c in CUE_PARTS], dtype=np.float32)
 
 
 TILE_PX = 32
