@@ -877,7 +877,11 @@ class FrameRenderer:
             normals = np.stack([nx, ny, nz], -1)
         alb = np.broadcast_to(albedo, normals.shape)
         if rots is not None and self.settings["markings"] != "none":
-            body = np.einsum("kji,kabj->kabi", rots, normals)     # R^T n: table -> body
+            # R^T n: table -> body; einsum's sums (j in order) written out, the
+            # same values at a quarter of its cost.
+            R = rots[:, None, None]
+            n0, n1, n2 = normals[..., 0], normals[..., 1], normals[..., 2]
+            body = np.stack([R[..., 0, i] * n0 + R[..., 1, i] * n1 + R[..., 2, i] * n2 for i in range(3)], -1)
             m = lk.mark_mask(body, self.settings["markings"], r)[..., None]
             alb = alb * (1.0 - m) + self._mark_colour * m
         colour = lk.shade(normals, alb, self.settings, view)
