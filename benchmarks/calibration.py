@@ -21,6 +21,10 @@ With ``--auto``: the automatic calibration on drawn frames of the table
 calibration: corner error against the truth, the largest metre error over the
 table, and the v0 and R w0 RMS through it beside the exact camera's.
 
+With ``--stated``: the automatic corners' stated error (the edges'
+jackknife) against their real error, frame by frame, on drawn tables and on
+the renderer's realistic one.
+
 With ``--diagnose`` (``--height 2 --tilt 0 --k1 -0.25``): the automatic
 camera's v0 error split into its parts (corners, k1, focal length), each
 camera built from the true values but one.
@@ -31,7 +35,7 @@ shapes; ``--no-balls`` for the nominal one) and so are the perturbed cameras
 (``--no-kappa-camera`` leaves out the one for k1's error; ``--corner-sigma``
 states the corners' error instead of calibrate's floored one).
 
-Usage: python benchmarks/calibration.py [--n 40] [--seed 0] [--track-px 0.03] [--auto] [--diagnose]
+Usage: python benchmarks/calibration.py [--n 40] [--seed 0] [--track-px 0.03] [--auto] [--diagnose] [--stated]
 """
 
 import argparse
@@ -170,6 +174,55 @@ def auto(args):
               f"{cover['exact']:.0%} / {cover['auto']:.0%}, {zv['exact']:.2f} / {zv['auto']:.2f}", flush=True)
 
 
+def stated(args):
+    """The automatic corners' stated error (the edges' jackknife, as ``calibrate``
+    states it) against their real error, per frame: drawn tables (``--seeds``
+    noise seeds per camera) and the renderer's realistic table (texture seeds)."""
+    import math
+    from dataclasses import replace
+
+    from cuespin.data_gen.sampler import make_scene
+    from cuespin.physics.camera import Camera
+    from cuespin.physics.motion import Shot
+    from cuespin.pipeline.calibrate import detect_corners, synthetic_table_frame
+    from cuespin.render.draw import FrameRenderer
+
+    def row(label, img, truth):
+        det = detect_corners(img)
+        d = min((np.roll(det.corners, -s, axis=0) - truth for s in range(4)), key=lambda e: np.abs(e).max())
+        h, w = img.shape[:2]
+        naive = det.edge_rms * math.sqrt(4.0 / ((w + h) / 4.0))     # the scatter over the points' number
+        jk = math.sqrt(np.trace(det.corner_cov[:8, :8]) / 8.0)
+        real = math.sqrt(np.mean(d**2))
+        print(f"{label:32s} edge_rms {det.edge_rms:.3f} | real {real:.3f} scatter/sqrt(n) {naive:.3f} "
+              f"jackknife {jk:.3f} | jackknife/real {jk / real:.2f} scatter/real {naive / real:.2f} "
+              f"0.2/real {0.2 / real:.1f}", flush=True)
+
+    cams = [(2.0, 0.0, 0.0), (2.0, 10.0, 0.0), (1.5, 15.0, 0.0), (3.0, 5.0, -0.25),
+            (2.0, 10.0, -0.25), (1.5, 15.0, -0.25), (2.0, 12.0, 0.25), (2.0, 0.0, -0.25)]
+    for height, tilt, k1 in cams:
+        true = pinhole_camera(height_m=height, tilt_deg=tilt, k1=k1, size=SIZE, fps=FPS, roll_deg=ROLL_DEG,
+                              R=0.028575)
+        for sd in range(args.seeds):
+            img = synthetic_table_frame(true, seed=int(10 * tilt + 100 * abs(k1)) + 1000 * sd, cushion_m=0.05,
+                                        pockets=True)
+            row(f"drawn {height} {tilt:g} {k1:+.2f} s{sd}", img, true.project(table_corners(Table())))
+    shot, params = sample_shot(100, "random")
+    top = Camera(fps=FPS, width=1400, height=756, homography=((500.0, 0, 60.0), (0, -500.0, 695.0), (0, 0, 1.0)))
+    rendered = [("top-down H", top)] + [
+        (f"{h} {t:g} {k:+.2f}", pinhole_camera(height_m=h, tilt_deg=t, k1=k, size=SIZE, fps=FPS, roll_deg=ROLL_DEG,
+                                               margin_m=0.15, R=params.R))
+        for h, t, k in [(2.0, 0.0, 0.0), (2.0, 0.0, -0.25), (2.0, 10.0, -0.25), (1.5, 15.0, 0.0), (2.0, 12.0, 0.25)]]
+    for label, cam in rendered:
+        truth = (cam.project(table_corners(Table())) if cam.is_pinhole
+                 else cam.to_pixels(table_corners(Table())[:, :2]))
+        for sd in range(min(args.seeds, 2)):
+            scene = make_scene(Shot(shot.x0, shot.v0, shot.w0, t0=0.1), params,
+                               render={"look": "realistic", "noise_sigma": 2.0, "seed": 1 + sd})
+            img = next(iter(FrameRenderer(replace(scene, camera=cam), n_frames=1).frames()))
+            row(f"realistic {label} s{sd}", img, truth)
+
+
 def diagnose(args):
     """Where an automatic camera's v0 error comes from: the same shots through
     cameras built from the true and the found corners, k1 and focal length."""
@@ -242,7 +295,12 @@ def main():
     ap.add_argument("--k1", type=float, default=-0.25, help="--diagnose: the lens's k1")
     ap.add_argument("--diagnose", action="store_true",
                     help="where the automatic camera's v0 error comes from (--height, --tilt, --k1)")
+    ap.add_argument("--stated", action="store_true",
+                    help="the automatic corners' stated error against their real one, per frame")
+    ap.add_argument("--seeds", type=int, default=3, help="--stated: noise seeds per drawn camera")
     args = ap.parse_args()
+    if args.stated:
+        return stated(args)
     if args.auto:
         return auto(args)
     if args.diagnose:
