@@ -127,8 +127,8 @@ def auto(args):
     for height, tilt, k1 in [c for c in cams if not args.overhead or c[1] == 0.0]:
         true = Scene(physics=sample_shot(0)[1], camera=pinhole_camera(
             height_m=height, tilt_deg=tilt, k1=k1, size=SIZE, fps=FPS, roll_deg=ROLL_DEG)).camera
-        img = synthetic_table_frame(true, seed=int(10 * tilt + 100 * abs(k1)), cushion_m=args.cushion,
-                                    pockets=args.cushion > 0)
+        img = synthetic_table_frame(true, seed=int(10 * tilt + 100 * abs(k1)) + 1000 * args.frame_seed,
+                                    cushion_m=args.cushion, pockets=args.cushion > 0)
         # --true-focal: the true focal length given (--focal-px), to tell its share from the rest
         fk = {"focal_px": float(true.K[0, 0])} if args.true_focal else {}
         # what calibrate_video writes for this frame (corners, lens, f, perturbed cameras);
@@ -288,6 +288,8 @@ def main():
                     help="--auto: without the focal length from the balls' shapes (the nominal one overhead)")
     ap.add_argument("--corner-sigma", type=float, default=None, metavar="PX",
                     help="--auto: the corners' stated error (default: calibrate's, floored at 0.2 px)")
+    ap.add_argument("--frame-seed", type=int, default=0,
+                    help="--auto: another draw of each frame's noise (--stated's seeds), the same shots")
     ap.add_argument("--no-kappa-camera", action="store_true",
                     help="--auto: without the perturbed camera for k1's error")
     ap.add_argument("--propagate", action="store_true",
