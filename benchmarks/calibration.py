@@ -25,6 +25,9 @@ With ``--stated``: the automatic corners' stated error (the edges'
 jackknife) against their real error, frame by frame, on drawn tables and on
 the renderer's realistic one.
 
+With ``--shaded``: the balls' focal length on the renderer's shaded ball
+straight overhead, its light and blur changed one at a time.
+
 With ``--diagnose`` (``--height 2 --tilt 0 --k1 -0.25``): the automatic
 camera's v0 error split into its parts (corners, k1, focal length), each
 camera built from the true values but one.
@@ -35,7 +38,7 @@ shapes; ``--no-balls`` for the nominal one) and so are the perturbed cameras
 (``--no-kappa-camera`` leaves out the one for k1's error; ``--corner-sigma``
 states the corners' error instead of calibrate's floored one).
 
-Usage: python benchmarks/calibration.py [--n 40] [--seed 0] [--track-px 0.03] [--auto] [--diagnose] [--stated]
+Usage: python benchmarks/calibration.py [--n 40] [--seed 0] [--track-px 0.03] [--auto] [--diagnose] [--stated] [--shaded]
 """
 
 import argparse
@@ -223,6 +226,48 @@ def stated(args):
             row(f"realistic {label} s{sd}", img, truth)
 
 
+def shaded(args):
+    """The balls' focal length on the renderer's shaded ball straight overhead
+    (2 m, a ball at rest at (2.40, 1.15) m), the look's light and blur changed
+    one at a time: the measured shape against the exact outline's, and f."""
+    from dataclasses import replace
+
+    from cuespin.data_gen.sampler import make_scene
+    from cuespin.physics.motion import Shot
+    from cuespin.pipeline.calibrate import _shape, ball_images, calibrate_frame, detect_corners, signed_area
+    from cuespin.render.draw import FrameRenderer
+
+    shot, params = sample_shot(100, "random")
+    pos = np.array([2.40, 1.15])
+    variants = {"default": {}, "no blur": {"psf_sigma": 0.0}, "even light": {"ambient": 1.0, "specular": 0.0},
+                "even light, no blur": {"ambient": 1.0, "specular": 0.0, "psf_sigma": 0.0},
+                "light overhead": {"light_elevation": 1.55}}
+    for k1 in (0.0, -0.25):
+        true = pinhole_camera(height_m=2.0, tilt_deg=0.0, k1=k1, size=SIZE, fps=FPS, roll_deg=ROLL_DEG,
+                              margin_m=0.15, R=params.R)
+        x, y = true.ball_outline(pos, params.R, n=720).T          # the exact outline's area moments
+        x1, y1 = np.roll(x, -1), np.roll(y, -1)
+        a = x * y1 - x1 * y
+        A = a.sum() / 2
+        cx, cy = ((x + x1) * a).sum() / (6 * A), ((y + y1) * a).sum() / (6 * A)
+        mxx = ((x**2 + x * x1 + x1**2) * a).sum() / (12 * A) - cx**2
+        myy = ((y**2 + y * y1 + y1**2) * a).sum() / (12 * A) - cy**2
+        mxy = ((x * y1 + 2 * x * y + 2 * x1 * y1 + x1 * y) * a).sum() / (24 * A) - cx * cy
+        exact = _shape(np.array([[mxx, mxy], [mxy, myy]]))
+        for name, v in variants.items():
+            scene = make_scene(Shot(pos, shot.v0, shot.w0, t0=0.1), params,
+                               render={"look": "realistic", "noise_sigma": 2.0, "seed": 1, **v})
+            img = next(iter(FrameRenderer(replace(scene, camera=true), n_frames=1).frames()))
+            cal = calibrate_frame(img, Table(), fps=FPS, R_nominal=params.R)
+            det = detect_corners(img)
+            scale = np.sqrt(abs(signed_area(det.corners)) / (Table().length * Table().width))
+            balls = ball_images(img, det.corners, params.R * scale)
+            err = np.round(balls[0].shape - exact, 4).tolist() if balls else None
+            print(f"k1 {k1:+.2f} {name:20s} shape error {err} (exact {np.linalg.norm(exact):.3f}) | f from "
+                  f"{cal.focal_source} {cal.camera.K[0, 0] / true.K[0, 0] - 1:+.2%}, stated "
+                  f"{cal.perturbed[-1].K[0, 0] / cal.camera.K[0, 0] - 1:.2%}", flush=True)
+
+
 def diagnose(args):
     """Where an automatic camera's v0 error comes from: the same shots through
     cameras built from the true and the found corners, k1 and focal length."""
@@ -300,7 +345,11 @@ def main():
     ap.add_argument("--stated", action="store_true",
                     help="the automatic corners' stated error against their real one, per frame")
     ap.add_argument("--seeds", type=int, default=3, help="--stated: noise seeds per drawn camera")
+    ap.add_argument("--shaded", action="store_true",
+                    help="the balls' focal length on the renderer's shaded ball, light and blur one at a time")
     args = ap.parse_args()
+    if args.shaded:
+        return shaded(args)
     if args.stated:
         return stated(args)
     if args.auto:
