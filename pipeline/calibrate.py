@@ -1061,8 +1061,8 @@ BALL_MIN_CONTRAST = 20.0
 # outline's halfway point moves in on the darker side: on the renderer's
 # realistic balls straight overhead (balls at (2.40, 1.15) and (2.30, 0.20) m)
 # f came 2.0-5.3% low under its default light and 6.5-9.1% low under a lamp
-# overhead (a billiard table's usual light).  The stated f error grows about as
-# 3.3-3.7x this floor (0.01: 3.2-5.0%, up to 2.7x too small under the lamp);
+# overhead (a billiard table's usual light).  The stated f error is about 3-4
+# times this floor (0.01: 3.2-5.0%, up to 2.7x too small under the lamp);
 # 0.03 states 9.6-12.7%, covering the worst measured look at 0.9 of its stated
 # error at most (docs/calibration.md, section 6).
 BALL_SHAPE_FLOOR = 0.03
