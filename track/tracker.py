@@ -623,15 +623,19 @@ class BallTracker:
     def _ball_contrast(self, f, felt, G0=None) -> float:
         """The ball's contrast (levels) the markings rule is scaled by: the
         background's (``Background.contrast``), or the fit's own level
-        against the felt in its window where that is larger (``G0`` given:
-        a fit that did not converge, whose level may have run off, keeps the
-        background's).  On a lossy codec the background's can be a small
-        fraction of the ball's: a yellow ball on green felt at 480 fps,
-        MJPG, read 8.8 where the fitted level stands ~180 above the felt
-        (benchmarks/track.py realistic seed 0 shot 12: the codec's error at
-        the resting ball's edge sets it), and the rule, at 0.35 of 8.8,
-        took most of the ball for markings in 122 of 348 fits."""
-        own = self.pol * (f.G - float(felt.mean())) if G0 is None and np.isfinite(f.G) else 0.0
+        against the felt in its window where that is larger.  Only a fit
+        with the quadratic look states that level (its ``G`` is the disc's
+        mean; the lit sphere's is its unlit part, and taking it changed a
+        blue ball with a logo on FFV1, shot 3: RMSE 0.0278 -> 0.0354 px);
+        ``G0`` given: a fit that did not converge, whose level may have run
+        off, keeps the background's.  On a lossy codec the background's can
+        be a small fraction of the ball's: a yellow ball with a highlight on
+        green felt at 480 fps, MJPG, read 8.8 where the fitted level stands
+        ~140 above the felt (benchmarks/track.py realistic seed 0 shot 12),
+        and the rule, at 0.35 of 8.8, took most of the ball for markings in
+        122 of 348 fits (docs/measurements.md, branch marks3)."""
+        quadratic = f.shade is not None and np.size(f.shade) == 3
+        own = self.pol * (f.G - float(felt.mean())) if quadratic and G0 is None and np.isfinite(f.G) else 0.0
         return max(self.bg.contrast, own)
 
     def _unmarked(self, patch, felt, u0, v0, f, r, fit_blur, ol, foreign, G0=None, shade=True):
