@@ -21,6 +21,14 @@ With ``--auto``: the automatic calibration on drawn frames of the table
 calibration: corner error against the truth, the largest metre error over the
 table, and the v0 and R w0 RMS through it beside the exact camera's.
 
+With ``--stated``: the automatic corners' stated error (the edges'
+jackknife) against their real error, frame by frame, on drawn tables and on
+the renderer's realistic one.
+
+With ``--shaded``: the balls' focal length on the renderer's shaded ball
+straight overhead, its light and blur changed one at a time (``--ball-at X,Y``
+for the ball, ``--ball-floor`` for ``BALL_SHAPE_FLOOR``).
+
 With ``--diagnose`` (``--height 2 --tilt 0 --k1 -0.25``): the automatic
 camera's v0 error split into its parts (corners, k1, focal length), each
 camera built from the true values but one.
@@ -31,7 +39,7 @@ shapes; ``--no-balls`` for the nominal one) and so are the perturbed cameras
 (``--no-kappa-camera`` leaves out the one for k1's error; ``--corner-sigma``
 states the corners' error instead of calibrate's floored one).
 
-Usage: python benchmarks/calibration.py [--n 40] [--seed 0] [--track-px 0.03] [--auto] [--diagnose]
+Usage: python benchmarks/calibration.py [--n 40] [--seed 0] [--track-px 0.03] [--auto] [--diagnose] [--stated] [--shaded]
 """
 
 import argparse
@@ -123,8 +131,8 @@ def auto(args):
     for height, tilt, k1 in [c for c in cams if not args.overhead or c[1] == 0.0]:
         true = Scene(physics=sample_shot(0)[1], camera=pinhole_camera(
             height_m=height, tilt_deg=tilt, k1=k1, size=SIZE, fps=FPS, roll_deg=ROLL_DEG)).camera
-        img = synthetic_table_frame(true, seed=int(10 * tilt + 100 * abs(k1)), cushion_m=args.cushion,
-                                    pockets=args.cushion > 0)
+        img = synthetic_table_frame(true, seed=int(10 * tilt + 100 * abs(k1)) + 1000 * args.frame_seed,
+                                    cushion_m=args.cushion, pockets=args.cushion > 0)
         # --true-focal: the true focal length given (--focal-px), to tell its share from the rest
         fk = {"focal_px": float(true.K[0, 0])} if args.true_focal else {}
         # what calibrate_video writes for this frame (corners, lens, f, perturbed cameras);
@@ -168,6 +176,100 @@ def auto(args):
               f"{rv['exact']:.2e} / {rv['auto']:.2e} ({rv['auto'] / rv['exact']:.2f}x), "
               f"{rw['exact']:.2e} / {rw['auto']:.2e} | {len(res['auto'])} {sigma:.2f} {len(pert)} | "
               f"{cover['exact']:.0%} / {cover['auto']:.0%}, {zv['exact']:.2f} / {zv['auto']:.2f}", flush=True)
+
+
+def stated(args):
+    """The automatic corners' stated error (the edges' jackknife, as ``calibrate``
+    states it) against their real error, per frame: drawn tables (``--seeds``
+    noise seeds per camera) and the renderer's realistic table (texture seeds)."""
+    import math
+    from dataclasses import replace
+
+    from cuespin.data_gen.sampler import make_scene
+    from cuespin.physics.camera import Camera
+    from cuespin.physics.motion import Shot
+    from cuespin.pipeline.calibrate import detect_corners, synthetic_table_frame
+    from cuespin.render.draw import FrameRenderer
+
+    def row(label, img, truth):
+        det = detect_corners(img)
+        d = min((np.roll(det.corners, -s, axis=0) - truth for s in range(4)), key=lambda e: np.abs(e).max())
+        h, w = img.shape[:2]
+        naive = det.edge_rms * math.sqrt(4.0 / ((w + h) / 4.0))     # the scatter over the points' number
+        jk = math.sqrt(np.trace(det.corner_cov[:8, :8]) / 8.0)
+        real = math.sqrt(np.mean(d**2))
+        print(f"{label:32s} edge_rms {det.edge_rms:.3f} | real {real:.3f} scatter/sqrt(n) {naive:.3f} "
+              f"jackknife {jk:.3f} | jackknife/real {jk / real:.2f} scatter/real {naive / real:.2f} "
+              f"0.2/real {0.2 / real:.1f}", flush=True)
+
+    cams = [(2.0, 0.0, 0.0), (2.0, 10.0, 0.0), (1.5, 15.0, 0.0), (3.0, 5.0, -0.25),
+            (2.0, 10.0, -0.25), (1.5, 15.0, -0.25), (2.0, 12.0, 0.25), (2.0, 0.0, -0.25)]
+    for height, tilt, k1 in cams:
+        true = pinhole_camera(height_m=height, tilt_deg=tilt, k1=k1, size=SIZE, fps=FPS, roll_deg=ROLL_DEG,
+                              R=0.028575)
+        for sd in range(args.seeds):
+            img = synthetic_table_frame(true, seed=int(10 * tilt + 100 * abs(k1)) + 1000 * sd, cushion_m=0.05,
+                                        pockets=True)
+            row(f"drawn {height} {tilt:g} {k1:+.2f} s{sd}", img, true.project(table_corners(Table())))
+    shot, params = sample_shot(100, "random")
+    top = Camera(fps=FPS, width=1400, height=756, homography=((500.0, 0, 60.0), (0, -500.0, 695.0), (0, 0, 1.0)))
+    rendered = [("top-down H", top)] + [
+        (f"{h} {t:g} {k:+.2f}", pinhole_camera(height_m=h, tilt_deg=t, k1=k, size=SIZE, fps=FPS, roll_deg=ROLL_DEG,
+                                               margin_m=0.15, R=params.R))
+        for h, t, k in [(2.0, 0.0, 0.0), (2.0, 0.0, -0.25), (2.0, 10.0, -0.25), (1.5, 15.0, 0.0), (2.0, 12.0, 0.25)]]
+    for label, cam in rendered:
+        truth = (cam.project(table_corners(Table())) if cam.is_pinhole
+                 else cam.to_pixels(table_corners(Table())[:, :2]))
+        for sd in range(min(args.seeds, 2)):
+            scene = make_scene(Shot(shot.x0, shot.v0, shot.w0, t0=0.1), params,
+                               render={"look": "realistic", "noise_sigma": 2.0, "seed": 1 + sd})
+            img = next(iter(FrameRenderer(replace(scene, camera=cam), n_frames=1).frames()))
+            row(f"realistic {label} s{sd}", img, truth)
+
+
+def shaded(args):
+    """The balls' focal length on the renderer's shaded ball straight overhead
+    (2 m, a ball at rest at (2.40, 1.15) m), the look's light and blur changed
+    one at a time: the measured shape against the exact outline's, and f."""
+    from dataclasses import replace
+
+    import cuespin.pipeline.calibrate as calibrate
+    from cuespin.data_gen.sampler import make_scene
+    from cuespin.physics.motion import Shot
+    from cuespin.pipeline.calibrate import _shape, ball_images, calibrate_frame, detect_corners, signed_area
+    from cuespin.render.draw import FrameRenderer
+
+    if args.ball_floor is not None:     # the floor's stated error against the same balls' real one
+        calibrate.BALL_SHAPE_FLOOR = args.ball_floor
+    shot, params = sample_shot(100, "random")
+    pos = np.array([float(v) for v in args.ball_at.split(",")])
+    variants = {"default": {}, "no blur": {"psf_sigma": 0.0}, "even light": {"ambient": 1.0, "specular": 0.0},
+                "even light, no blur": {"ambient": 1.0, "specular": 0.0, "psf_sigma": 0.0},
+                "light overhead": {"light_elevation": 1.55}}
+    for k1 in (0.0, -0.25):
+        true = pinhole_camera(height_m=2.0, tilt_deg=0.0, k1=k1, size=SIZE, fps=FPS, roll_deg=ROLL_DEG,
+                              margin_m=0.15, R=params.R)
+        x, y = true.ball_outline(pos, params.R, n=720).T          # the exact outline's area moments
+        x1, y1 = np.roll(x, -1), np.roll(y, -1)
+        a = x * y1 - x1 * y
+        A = a.sum() / 2
+        cx, cy = ((x + x1) * a).sum() / (6 * A), ((y + y1) * a).sum() / (6 * A)
+        mxx = ((x**2 + x * x1 + x1**2) * a).sum() / (12 * A) - cx**2
+        myy = ((y**2 + y * y1 + y1**2) * a).sum() / (12 * A) - cy**2
+        mxy = ((x * y1 + 2 * x * y + 2 * x1 * y1 + x1 * y) * a).sum() / (24 * A) - cx * cy
+        exact = _shape(np.array([[mxx, mxy], [mxy, myy]]))
+        for name, v in variants.items():
+            scene = make_scene(Shot(pos, shot.v0, shot.w0, t0=0.1), params,
+                               render={"look": "realistic", "noise_sigma": 2.0, "seed": 1, **v})
+            img = next(iter(FrameRenderer(replace(scene, camera=true), n_frames=1).frames()))
+            cal = calibrate_frame(img, Table(), fps=FPS, R_nominal=params.R)
+            det = detect_corners(img)
+            scale = np.sqrt(abs(signed_area(det.corners)) / (Table().length * Table().width))
+            balls = ball_images(img, det.corners, params.R * scale)
+            err = np.round(balls[0].shape - exact, 4).tolist() if balls else None
+            print(f"k1 {k1:+.2f} {name:20s} shape error {err} (exact {np.linalg.norm(exact):.3f}) | f from "
+                  f"{cal.focal_source} {cal.camera.K[0, 0] / true.K[0, 0] - 1:+.2%}, stated "
+                  f"{cal.perturbed[-1].K[0, 0] / cal.camera.K[0, 0] - 1:.2%}", flush=True)
 
 
 def diagnose(args):
@@ -235,6 +337,8 @@ def main():
                     help="--auto: without the focal length from the balls' shapes (the nominal one overhead)")
     ap.add_argument("--corner-sigma", type=float, default=None, metavar="PX",
                     help="--auto: the corners' stated error (default: calibrate's, floored at 0.2 px)")
+    ap.add_argument("--frame-seed", type=int, default=0,
+                    help="--auto: another draw of each frame's noise (--stated's seeds), the same shots")
     ap.add_argument("--no-kappa-camera", action="store_true",
                     help="--auto: without the perturbed camera for k1's error")
     ap.add_argument("--propagate", action="store_true",
@@ -242,7 +346,18 @@ def main():
     ap.add_argument("--k1", type=float, default=-0.25, help="--diagnose: the lens's k1")
     ap.add_argument("--diagnose", action="store_true",
                     help="where the automatic camera's v0 error comes from (--height, --tilt, --k1)")
+    ap.add_argument("--stated", action="store_true",
+                    help="the automatic corners' stated error against their real one, per frame")
+    ap.add_argument("--seeds", type=int, default=3, help="--stated: noise seeds per drawn camera")
+    ap.add_argument("--shaded", action="store_true",
+                    help="the balls' focal length on the renderer's shaded ball, light and blur one at a time")
+    ap.add_argument("--ball-at", default="2.40,1.15", metavar="X,Y", help="--shaded: the ball's table position (m)")
+    ap.add_argument("--ball-floor", type=float, default=None, help="--shaded: BALL_SHAPE_FLOOR instead of calibrate's")
     args = ap.parse_args()
+    if args.shaded:
+        return shaded(args)
+    if args.stated:
+        return stated(args)
     if args.auto:
         return auto(args)
     if args.diagnose:

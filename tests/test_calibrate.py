@@ -166,6 +166,10 @@ def test_cli_calibrate_automatic_and_with_corners(tmp_path, capsys):
     err = np.abs(scene.camera.to_table(true.to_pixels(xy)) - xy).max()
     assert err < 1e-3, err
     assert "corner reprojection" in p.stdout and "noses" in p.stdout
+    # the corners' error from the edges' jackknife (real: 0.02-0.04 px on drawn
+    # tables), carried by 9 cameras moving the corners and the bow together
+    calib = json.loads(out.read_text())["calibration"]
+    assert 0.005 < calib["corner_sigma_px"] < 0.1 and len(calib["perturbed"]) == 9, calib["corner_sigma_px"]
     # clicked corners, rounded to whole pixels as a click is
     c = np.round(true_corners(true), 0).ravel()
     code, _, err_txt = run_main(capsys, "calibrate", video, "-o", out, "--corners", ",".join(f"{v:g}" for v in c))
@@ -181,6 +185,60 @@ def test_cli_calibrate_automatic_and_with_corners(tmp_path, capsys):
     code, _, err_txt = run_main(capsys, "calibrate", video, "-o", out, "--camera-height", "2",
                                 "--camera-height-error", "-1")
     assert code == 2 and "--camera-height-error" in err_txt and err_txt.strip().count("\n") == 0
+    for bad in ("nan", "-0.5", "0"):
+        code, _, err_txt = run_main(capsys, "calibrate", video, "-o", out, "--corner-error", bad)
+        assert code == 2 and "--corner-error" in err_txt and err_txt.strip().count("\n") == 0, err_txt
+
+
+def corner_errors(img, truth):
+    """(stated, real) RMS error of a corner coordinate found automatically (px):
+    the edges' jackknife and the distance from the true corners."""
+    det = detect_corners(img)
+    d = min((np.roll(det.corners, -s, axis=0) - truth for s in range(4)), key=lambda e: np.abs(e).max())
+    return float(np.sqrt(np.trace(det.corner_cov[:8, :8]) / 8.0)), float(np.sqrt(np.mean(d**2)))
+
+
+def test_the_automatic_corners_stated_error_is_their_real_one():
+    # The edge points along a side are correlated (smoothing, the drawing's
+    # staircase), so their scatter over their number states the corners 2-4
+    # times too sure; the edges' jackknife (with the bow re-estimated) gave
+    # stated/real 0.6-1.8 per frame on 23 of 24 drawn frames (one, a side with
+    # stray points, 5.1) and 1.04 pooled on these three (0.82, 1.04, 1.08;
+    # docs/calibration.md, section 6).
+    true = pinhole_camera(height_m=2.0, tilt_deg=10.0, k1=-0.25, R=R, size=SIZE, fps=240.0, roll_deg=1.0)
+    truth = true_corners(true)
+    pairs = np.array([corner_errors(synthetic_table_frame(true, seed=125 + 1000 * s, cushion_m=0.05, pockets=True),
+                                    truth) for s in range(3)])
+    ratio = np.sqrt(np.mean(pairs[:, 0] ** 2) / np.mean(pairs[:, 1] ** 2))
+    assert 0.5 < ratio < 2.0, pairs
+    # far below the 0.2 px floor stated before (3-7 times the real error)
+    assert pairs[:, 0].max() < 0.1, pairs
+
+
+@pytest.mark.slow
+def test_the_automatic_corners_stated_error_on_the_renderers_realistic_table():
+    # The realistic look's felt texture scatters the edge points by 0.6 px and
+    # correlates them along a side; the jackknife's stated/real on the
+    # renderer's tables, top-down and tilted 10 deg with k1 -0.25 (measured
+    # 1.29, 1.49 and 1.38, 1.31 over two texture seeds; 0.72-1.73 over
+    # 12 such frames, one 4.1).
+    from dataclasses import replace
+
+    from cuespin.data_gen.sampler import make_scene, sample_shot
+    from cuespin.physics.camera import Camera
+    from cuespin.physics.motion import Shot
+    from cuespin.render.draw import FrameRenderer
+
+    shot, params = sample_shot(100, "random")
+    scene = make_scene(Shot(shot.x0, shot.v0, shot.w0, t0=0.1), params,
+                       render={"look": "realistic", "noise_sigma": 2.0, "seed": 1})
+    top = Camera(fps=240.0, width=1400, height=756, homography=((500.0, 0, 60.0), (0, -500.0, 695.0), (0, 0, 1.0)))
+    tilted = pinhole_camera(height_m=2.0, tilt_deg=10.0, k1=-0.25, size=SIZE, fps=240.0, roll_deg=1.0,
+                            margin_m=0.15, R=params.R)
+    for cam, truth in ((top, top.to_pixels(table_corners(TABLE)[:, :2])), (tilted, true_corners(tilted))):
+        img = next(iter(FrameRenderer(replace(scene, camera=cam), n_frames=1).frames()))
+        stated, real = corner_errors(img, truth)
+        assert 0.5 < stated / real < 2.5, (stated, real)
 
 
 @pytest.mark.slow
@@ -285,8 +343,8 @@ def test_overhead_focal_length_from_the_balls_shapes(k1):
     # long one); a still ball's image is a sphere's silhouette, stretched away
     # from the optical axis by about 1 / cos of its angle from it, which f
     # sets.  The drawn frame's ball near the corner fixes f to about 1%
-    # (measured: 0.2-1.2% off; stated 3.2%, the floor the renderer's shaded
-    # balls set), where the nominal one is 2-5% off (up to 15% on a phone).
+    # (measured: 0.2-1.2% off; stated about 10%, the floor the renderer's
+    # shaded balls set), where the nominal one is 2-5% off (up to 15% on a phone).
     from cuespin.pipeline.calibrate import NOMINAL_FOCAL, calibrate_frame
 
     true = pinhole_camera(height_m=2.0, tilt_deg=0.0, k1=k1, R=R, size=SIZE, fps=240.0, roll_deg=1.0)
@@ -294,8 +352,8 @@ def test_overhead_focal_length_from_the_balls_shapes(k1):
     cal = calibrate_frame(img, TABLE, fps=240.0, R_nominal=R)
     assert cal.focal_source == "balls" and "still balls" in cal.notes[0]
     f_true, f = true.K[0, 0], cal.camera.K[0, 0]
-    sigma = cal.perturbed[8].K[0, 0] / f - 1.0            # the ninth camera: f one error longer
-    assert 0.0 < sigma < 0.05
+    sigma = cal.perturbed[-1].K[0, 0] / f - 1.0           # the last camera: f one error longer
+    assert 0.0 < sigma < 0.12                             # BALL_SHAPE_FLOOR's 0.03: about 10%
     assert abs(f / f_true - 1.0) < 2.0 * sigma, (f / f_true - 1.0, sigma)
     assert abs(f / f_true - 1.0) < 0.5 * abs(NOMINAL_FOCAL * SIZE[0] / f_true - 1.0)
     # k1 follows f (the bow fixes k1 / f^2), and the ball plane with it
@@ -305,10 +363,11 @@ def test_overhead_focal_length_from_the_balls_shapes(k1):
     assert without.focal_source == "nominal" and len(without.perturbed) == len(cal.perturbed)
 
 
-def test_the_lens_bows_error_is_a_perturbed_camera_and_moves_the_stated_error():
+def test_the_lens_bows_error_is_in_the_perturbed_cameras_and_moves_the_stated_error():
     # k1 estimated from the edges' bow carries its standard error (the edges'
-    # own fit; measured 1-4e-4 in k1, real errors 1-4e-4) as one more
-    # perturbed camera: k1 that much larger, the corners refitted with it.
+    # jackknife, jointly with the corners'; measured 1-4e-4 in k1, real errors
+    # 1-4e-4) in the perturbed cameras: each moves the corners and k1 together
+    # along one direction of their joint covariance.
     from cuespin.data_gen.sampler import sample_shot
     from cuespin.physics.motion import phases, positions
     from cuespin.pipeline.calibrate import calibrate_frame
@@ -318,13 +377,15 @@ def test_the_lens_bows_error_is_a_perturbed_camera_and_moves_the_stated_error():
     img = synthetic_table_frame(true, seed=102, cushion_m=0.05, pockets=True)
     cal = calibrate_frame(img, TABLE, fps=240.0, R_nominal=R)
     assert cal.focal_source == "corners" and len(cal.perturbed) == 9
-    f, k = cal.camera.K[0, 0], cal.perturbed[8]
-    dk1 = k.dist[0] / k.K[0, 0] ** 2 * f**2 - cal.camera.dist[0]       # kappa's step, in k1 at f
+    f = cal.camera.K[0, 0]
+    steps = np.array([c.dist[0] / c.K[0, 0] ** 2 * f**2 - cal.camera.dist[0] for c in cal.perturbed])  # in k1 at f
+    dk1 = float(np.sqrt(np.sum(steps**2)))                 # kappa's standard error, in k1
     assert 5e-5 < dk1 < 2e-3
+    k = cal.perturbed[int(np.argmax(np.abs(steps)))]
     # the bow in pixels (k1 / f^2; k1 itself follows the focal length found)
     k1_at_true_f = cal.camera.dist[0] / f**2 * true.K[0, 0] ** 2
     assert abs(k1_at_true_f + 0.25) < 4 * dk1, (k1_at_true_f, dk1)
-    # the same track through the camera found and through the k1 camera
+    # the same track through the camera found and through the one that moves k1 most
     shot, p = sample_shot(3, "random")
     t = np.arange(0.0, min(phases(shot, p).t2 + 0.3, 3.0), 1 / 240.0)
     xy = positions(shot, p, t, phases(shot, p))
@@ -344,12 +405,16 @@ def test_the_lens_bows_error_is_a_perturbed_camera_and_moves_the_stated_error():
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("look", [{}, {"light_elevation": 1.55}], ids=["default-light", "lamp-overhead"])
 @pytest.mark.parametrize("k1", [-0.25, 0.0])
-def test_overhead_focal_length_from_a_rendered_shaded_ball(k1):
-    # The renderer's realistic look: a shaded ball (lit from one side, a
-    # highlight, lens blur) at rest near a corner before the strike, straight
-    # overhead.  Its outline puts f 2.9-5.3% low (measured), within 2 of the
-    # errors stated (3.2-3.5%: BALL_SHAPE_FLOOR is set from these balls).
+def test_overhead_focal_length_from_a_rendered_shaded_ball(k1, look):
+    # The renderer's realistic look: a shaded ball (a highlight, lens blur;
+    # lit from one side, or by a lamp straight overhead, a billiard table's
+    # usual light) at rest near a corner before the strike, straight overhead.
+    # Its outline puts f low: 2.9-5.3% under the default light, 6.5-8.7%
+    # under the lamp (measured); the stated error must cover it at one sigma
+    # (BALL_SHAPE_FLOOR 0.03 states 9.6-10.6%, the worst at 0.9 of it; the
+    # former 0.01 stated 3.2%, 2.0-2.7x too small under the lamp: fails here).
     from dataclasses import replace
 
     from cuespin.data_gen.sampler import make_scene, sample_shot
@@ -359,12 +424,12 @@ def test_overhead_focal_length_from_a_rendered_shaded_ball(k1):
 
     shot, params = sample_shot(100, "random")
     scene = make_scene(Shot(np.array([2.40, 1.15]), shot.v0, shot.w0, t0=0.1), params,
-                       render={"look": "realistic", "noise_sigma": 2.0, "seed": 1})
+                       render={"look": "realistic", "noise_sigma": 2.0, "seed": 1, **look})
     true = pinhole_camera(height_m=2.0, tilt_deg=0.0, k1=k1, size=SIZE, fps=240.0, roll_deg=1.0, margin_m=0.15,
                           R=params.R)
     img = next(iter(FrameRenderer(replace(scene, camera=true), n_frames=1).frames()))
     cal = calibrate_frame(img, TABLE, fps=240.0, R_nominal=params.R)
     assert cal.focal_source == "balls"
     f = cal.camera.K[0, 0]
-    sigma = cal.perturbed[8].K[0, 0] / f - 1.0
-    assert abs(f / true.K[0, 0] - 1.0) < 2.0 * sigma, (f / true.K[0, 0] - 1.0, sigma)
+    sigma = cal.perturbed[-1].K[0, 0] / f - 1.0
+    assert abs(f / true.K[0, 0] - 1.0) < sigma, (f / true.K[0, 0] - 1.0, sigma)

@@ -91,6 +91,18 @@ MARK_MIN_PX = 3
 # (0.013 radii, rms 6.8; benchmarks/track.py realistic seed 0 shot 8, frame
 # 64).  A moving ball's prediction misses it by a few hundredths of a radius.
 MARK_RETRY_RADII = 0.1
+# A lit sphere's fit whose diffuse coefficient ``a`` (the ball's albedo
+# under the video's fixed light, in the tracker's combination of channels:
+# the same in every frame up to the lighting ramp) is below this fraction of
+# the voting frames' median is tried again from the quadratic look's fit
+# and the one that explains the window better kept.  The centroid the fit
+# starts from lies towards the light, and under lens blur the sphere has a
+# second minimum there: benchmarks/track.py realistic seed 0 shot 4 (an
+# orange ball on red felt, PSF sigma 0.77 px, 480 fps, noise 6.6, FFV1): 20
+# of its fits 0.26-0.35 radii towards the light with a = -23 to -0.9, against
+# 39-65 (median 54) in the frames fitted at the ball; the quadratic look
+# from the same start found all of them within 0.05 radii.
+SPHERE_A_MIN = 0.5
 # Frames whose two fits (disc and shaded) decide the look (config.look "auto").
 LOOK_FRAMES = 12
 # The shaded look is kept when its pooled residual reduction exceeds the
@@ -445,6 +457,7 @@ class BallTracker:
         self._look_fits: list[tuple] = []
         self._sphere_samples: list = []  # the Samples the lit sphere was learnt from
         self._sphere_outline = None  # and their outline
+        self._sphere_a = None  # the voting frames' median diffuse coefficient (SPHERE_A_MIN)
         self._candidates: tuple = ()  # the last full search's blobs
         self._bands = None  # the radius map's bands on the search mask (multi-scale search)
         self._pred = None  # this frame's predicted centre (px), None without history
@@ -624,6 +637,24 @@ class BallTracker:
                      outline=self.outline)
         return g if g else f
 
+    def _ball_contrast(self, f, felt, G0=None) -> float:
+        """The ball's contrast (levels) the markings rule is scaled by: the
+        background's (``Background.contrast``), or the fit's own level
+        against the felt in its window where that is larger.  Only a fit
+        with the quadratic look states that level (its ``G`` is the disc's
+        mean; the lit sphere's is its unlit part, and taking it changed a
+        blue ball with a logo on FFV1, shot 3: RMSE 0.0278 -> 0.0354 px);
+        ``G0`` given: a fit that did not converge, whose level may have run
+        off, keeps the background's.  On a lossy codec the background's can
+        be a small fraction of the ball's: a yellow ball with a highlight on
+        green felt at 480 fps, MJPG, read 8.8 where the fitted level stands
+        ~140 above the felt (benchmarks/track.py realistic seed 0 shot 12),
+        and the rule, at 0.35 of 8.8, took most of the ball for markings in
+        122 of 348 fits (docs/measurements.md, branch marks3)."""
+        quadratic = f.shade is not None and np.size(f.shade) == 3
+        own = self.pol * (f.G - float(felt.mean())) if quadratic and G0 is None and np.isfinite(f.G) else 0.0
+        return max(self.bg.contrast, own)
+
     def _unmarked(self, patch, felt, u0, v0, f, r, fit_blur, ol, foreign, G0=None, shade=True):
         """The fit ``f`` (converged or not: from where it stopped, with the
         level ``G0``, as its own may have run off) again without the
@@ -635,8 +666,8 @@ class BallTracker:
         ``shade``: the look the refit uses (:func:`fit_disc`'s; the lit
         sphere once learnt)."""
         r_in = r if ol is None else min(r, 1.0 / np.sqrt(np.linalg.eigvalsh(ol.Qm)[1]))
-        marks = marking_pixels(patch, felt, u0, v0, f.c, f.b, r, r_in, self.bg.sigma, self.bg.contrast, ol,
-                               None if foreign is None else ~foreign)
+        marks = marking_pixels(patch, felt, u0, v0, f.c, f.b, r, r_in, self.bg.sigma,
+                               self._ball_contrast(f, felt, G0), ol, None if foreign is None else ~foreign)
         if marks is None:
             return f, None, fit_blur
         valid = kept_pixels(marks, foreign)
@@ -665,6 +696,30 @@ class BallTracker:
         if a and b:
             return b.rms < a.rms
         return g.rms < f.rms
+
+    def _sphere_checked(self, patch, felt, u0, v0, f, c, r, G0, blurs, ol):
+        """The lit sphere's fit ``f`` (from ``c``), or, when its diffuse
+        coefficient is under ``SPHERE_A_MIN`` of the voting frames' (the
+        sphere's second minimum towards the light), the sphere fitted again
+        from the quadratic look's fit (or that fit, when the sphere does not
+        converge from it) if that explains the window better.
+        ``blurs``: the (blur, whether fitted) pairs the quadratic look
+        tries, the first that converges kept (the streak measured from the
+        moments, then the prediction's: a resting shaded ball's moments
+        make a streak its fit may not converge with)."""
+        a = self._sphere_a
+        if a is None or f.shade[0] * a >= SPHERE_A_MIN * a * a:
+            return f
+        for blur, fit_blur in blurs:
+            q = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur, shade=True, outline=ol)
+            if q:
+                g = fit_disc(patch, felt, u0, v0, q.c, r, G0, b0=q.b, fit_blur=fit_blur, shade=self.shade,
+                             outline=ol)
+                # When the sphere does not converge there either, the
+                # quadratic look, as for a frame whose sphere fit fails.
+                g = g if g else q
+                return g if g.rms < f.rms else f
+        return f
 
     def _learn_look(self, patch, felt, u0, v0, f_shaded, r, G0, blur, fit_blur, marks=None, foreign=None):
         """One frame's vote on the look: the disc fit's residual sum against
@@ -713,13 +768,16 @@ class BallTracker:
             return
         self.shade = look
         self._sphere_samples, self._sphere_outline = samples, self.outline
+        diffuse = []
         for s, f, lf in self._look_fits:
             g = fit_disc(s.patch, s.felt, s.u0, s.v0, s.c, self.r, s.G, b0=s.b, fit_blur=s.fit_blur, shade=look,
                          valid=s.valid, outline=self.outline)
             if g:
+                diffuse.append(g.shade[0])
                 f.c[:], f.stderr[:], f.cov[:] = g.c, g.stderr, g.cov
                 if lf is not None:
                     lf.c[:] = g.c
+        self._sphere_a = float(np.median(diffuse)) if diffuse else None
 
     def relearn_sphere(self, felt: np.ndarray) -> SphereLook | None:
         """The lit sphere learnt again from the same voting frames against a
@@ -792,13 +850,16 @@ class BallTracker:
             # The lit sphere once learnt; before, the quadratic look (or none).
             shade = self.shade if isinstance(self.shade, SphereLook) else self.shade is not False
             f = first = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur, shade=shade, outline=ol)
-            first_blur = fit_blur
+            first_blur, blurs = fit_blur, [(blur, fit_blur)]
             if not f and not fit_blur and self.exposure_frames > 0:
                 # A streak the prediction missed (the strike, a sudden turn).
                 blur = streak_from_moments(D, u0, v0, c, r)
                 fit_blur = np.hypot(*blur) > FIT_BLUR_PX
                 f = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur, shade=shade,
                              outline=ol)
+                blurs.insert(0, (blur, fit_blur))
+            if f and isinstance(shade, SphereLook):
+                f = self._sphere_checked(patch, felt, u0, v0, f, c, r, G0, blurs, ol)
             if not f and isinstance(shade, SphereLook):
                 # The sphere's fit failed (2 of 37 frames of
                 # sample_scenes(2, 5, realistic, MJPG)[1], at the strike):
