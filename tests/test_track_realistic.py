@@ -189,3 +189,26 @@ def test_red_ball_on_red_felt_in_low_light_reports_no_false_centre(tmp_path):
     found, err, tr = track_against_truth(scene, tmp_path / "red.avi")
     assert err.size and err.max() < MAX_ERR_RADII, f"a found centre {err.max():.2f} radii off"
     assert found >= 0.3, tr.status_counts()
+
+
+@pytest.mark.slow
+def test_red_ball_on_red_felt_in_h264_reports_no_false_centre(tmp_path):
+    # sample_scene(14, realistic) in H.264 (yuv420p), 120 frames: a red ball
+    # on red felt whose middle is brighter than the felt and rim darker in
+    # the learnt channel, rolling over the cushion and out of the frame at
+    # frame ~72.  Before the learnt contrast was taken on the ball's side of
+    # the felt only, it read 6 (the ball's middle departs by ~125): 47 of
+    # 120 frames found, 18 of them a pocket or plain felt, 545 px off, and
+    # the rest frames dropped as "pulled" against the pocket's fits.
+    # Measured after: 65 found (5 fits fail, as 4 do on FFV1), none off
+    # more than 2.5 px (0.21 radii).
+    from cuespin.data_gen.sampler import sample_scene
+
+    scene = sample_scene(14, look="realistic", codec="H264")
+    path = tmp_path / "red.mp4"
+    render_video(scene, path, n_frames=120)
+    tr = track_video(path, scene, TrackerConfig(threaded=False))
+    truth = pd.read_csv(path.with_suffix(".truth.csv")).iloc[:tr.n_frames]
+    err = np.hypot(*(tr.uv - np.c_[truth.uc_px.values, truth.vc_px.values]).T)[tr.ok] / tr.radius_px
+    assert err.size and err.max() < MAX_ERR_RADII, f"a found centre {err.max():.2f} radii off"
+    assert tr.ok.sum() >= 60, tr.status_counts()

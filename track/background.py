@@ -279,14 +279,15 @@ def learn_background(samples: np.ndarray, radius_px, where: np.ndarray | None = 
     felt0 = felt_nearest(P, felt_band(sigma), polarity * ref)
     # The contrast from the pixels the ball took to its own side of the felt
     # only.  A shaded ball close to the felt's colour is brighter in its
-    # middle and darker at its rim in some channels, and a lossy codec's
-    # error trails it; those pixels are strong too but lie on the other side
+    # middle and darker at its rim in some channels, and a lossy codec errs
+    # around its path; those pixels are strong too but lie on the other side
     # (H.264, red on red felt, sample_scene(14, realistic): 1320 of 2270
     # strong pixels, and the contrast read 6 where the ball's middle departs
     # by ~125: the detection threshold, a quarter of it, then let a pocket
     # and plain felt through as the ball, 545 px from it).  Where every
-    # strong pixel is on the ball's side (a plain ball; MJPG of the same
-    # scene: 992 of 1042, contrast 22.2 either way) nothing changes.
+    # strong pixel is on the ball's side (a plain ball) nothing changes, and
+    # little where most are (MJPG of the same scene: 992 of 1042, 22.2
+    # either way).
     side = strong & (polarity * (up - down) > 0)
     on = side if side.any() else strong
     contrast = float(np.percentile((P.max(axis=0) - felt0)[on], 75)) if on.any() else 0.0
