@@ -291,8 +291,8 @@ def learn_background(samples: np.ndarray, radius_px, where: np.ndarray | None = 
     # side of the felt) and the dilated path's rim passed as moved, half of
     # them within 11 levels of the felt, and the 75th percentile over all fell
     # to 8.8 where the ball departs ~190 (realistic seed 0 shot 12, MJPG: 2295
-    # pixels, 269 swept; shot 7: 110 against 400).  On FFV1 the two agree
-    # within 3% (shots 12 and 7: 138 -> 141, 135 -> 139).
+    # pixels, 269 swept; shot 7: 110 against 400).  On FFV1: shots 12 and 7
+    # 138 -> 141, 135 -> 139; shot 3 (a blue logo ball on blue) 72 -> 90.
     ball = strong & swept[ys, xs]
     contrast = float(np.percentile(span[ball], 75)) if ball.any() else 0.0
     # Felt samples lie within noise of the felt; a pixel partly covered by
