@@ -15,7 +15,7 @@ import numpy as np
 
 from cuespin.track.background import DETECT_SIGMAS, Background, box_size
 from cuespin.track.colour import GREY, Projection
-from cuespin.track.model import SphereLook, blur_nodes, fit_disc, streak_from_moments, streak_model
+from cuespin.track.model import SphereLook, _model_rows, blur_nodes, fit_disc, streak_from_moments, streak_model
 from cuespin.track.outline import OUTLINE_REFIT_PX, OutlineCache, is_similarity
 from cuespin.track.radius import RadiusMap
 from cuespin.track.sphere import Sample, learn_sphere
@@ -265,15 +265,19 @@ def marking_pixels(patch, felt, u0: int, v0: int, c, b, r: float, r_in: float, s
     inner = segment_distance(felt.shape, u0, v0, c, b) < r_in - MARK_RIM_PX
     if inner.sum() < 12:
         return None
-    m0, J = streak_model(c, b, 0.0, felt, r, u0, v0, blur_nodes(np.hypot(*b)), np.zeros(3), False, outline)
+    # streak_model's rows without the blur's (never read here: its zero
+    # columns cost two np.insert copies a frame, ~0.18 ms); the same values.
+    m0, JT = _model_rows(c, b, 0.0, felt, r, u0, v0, blur_nodes(np.hypot(*b)), np.zeros(3), False, outline)
     y = (np.asarray(patch, np.float64) - felt - m0).ravel()
-    A = J[:, 4:8]  # level and the look's three: linear at a fixed centre
+    A = JT[2:6].T  # level and the look's three: linear at a fixed centre
     use = np.ones(len(y), bool) if valid is None else np.asarray(valid, bool).ravel().copy()
     thresh = max(MARK_CONTRAST * contrast, OUTLIER_SIGMAS * max(sigma, 0.5))
     bad = np.zeros(len(y), bool)
     for _ in range(2):
         theta = np.linalg.lstsq(A[use & ~bad], y[use & ~bad], rcond=1e-9)[0]
         bad = inner.ravel() & (np.abs(y - A @ theta) > thresh)
+        if not bad.any():
+            break  # a second fit would use the first's pixels: the same theta, none again
     if bad.sum() < MARK_MIN_PX:
         return None
     bad = bad.reshape(felt.shape).astype(np.uint8)
