@@ -311,3 +311,17 @@ def test_contrast_of_a_shaded_ball_is_its_middles():
     # The middle's departure, less the texture's and the rim's blur at the
     # middle's edge: measured 120.0 here, 2.0 when the rim's pixels counted.
     assert bg.contrast > 0.5 * middle, bg.contrast
+    # The detection threshold is a fraction of the ball's own search score in
+    # the samples, not of the contrast: this ball's box (its middle and most
+    # of its dark rim) scores 27.8 against a contrast of 121, under a quarter
+    # of it (the former threshold, 30.2: this failed), so the search missed
+    # it; the felt's texture (0.18) must stay well under the threshold (8.3).
+    from cuespin.track.tracker import BallTracker
+
+    trk = BallTracker(bg, r, 0.0)
+    frame = samples[4].astype(np.float32)
+    sm = trk._score(bg.polarity * (frame - bg.image))
+    d = np.hypot(uu - (40.0 + 45.0 * 4), vv - 40.0)
+    peak, felt = sm[d < r].max(), np.abs(sm[d > 3 * r]).max()
+    assert bg.score == pytest.approx(peak, rel=0.1), (bg.score, peak)
+    assert 3 * felt < trk.thresh < 0.5 * peak, (felt, trk.thresh, peak)

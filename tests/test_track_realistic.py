@@ -203,7 +203,10 @@ def test_red_ball_on_red_felt_in_h264_reports_no_false_centre(tmp_path):
     # Measured with the contrast from the ball-side pixels: 65 found, none
     # off more than 2.5 px (0.21 radii); with the swept pixels' (main, since
     # contrast3) 47, none off more than 1.1 px: the threshold, a quarter of
-    # 106, is above this shaded ball's score in most moving frames.
+    # 106, was above this shaded ball's score (28) in most moving frames.
+    # With the threshold from the ball's own score in the samples (0.3 of
+    # it, 8.3): 70 found (every frame with the ball on the cloth), none off
+    # more than 1.1 px.
     from cuespin.data_gen.sampler import sample_scene
 
     scene = sample_scene(14, look="realistic", codec="H264")
@@ -213,4 +216,4 @@ def test_red_ball_on_red_felt_in_h264_reports_no_false_centre(tmp_path):
     truth = pd.read_csv(path.with_suffix(".truth.csv")).iloc[:tr.n_frames]
     err = np.hypot(*(tr.uv - np.c_[truth.uc_px.values, truth.vc_px.values]).T)[tr.ok] / tr.radius_px
     assert err.size and err.max() < MAX_ERR_RADII, f"a found centre {err.max():.2f} radii off"
-    assert tr.ok.sum() >= 40, tr.status_counts()
+    assert tr.ok.sum() >= 65, tr.status_counts()

@@ -66,6 +66,10 @@ class Background:
         False when every path pixel is well covered.
     moved_px : int
         Pixels where something a ball fits in moved (:func:`ball_wide`).
+    score : float
+        The ball's search score (:func:`box_score`, levels) in the samples:
+        the largest over them of the peak on the swept path (the ball where
+        it rests or rolls).  0 when nothing moved.
     """
 
     image: np.ndarray
@@ -76,6 +80,7 @@ class Background:
     path_pixels: int
     weak_samples: np.ndarray
     moved_px: int = 0
+    score: float = 0.0
 
 
 # Where the ball moved, the samples disagree over a region a disc of this
@@ -207,6 +212,48 @@ def box_size(radius_px: float) -> int:
     return max(3, int(round(1.4 * radius_px)) | 1)
 
 
+# The search's score clips each pixel's departure from the felt at this
+# multiple of the ball's contrast (Background.contrast, the 75th percentile
+# of the path's largest departures: the ball's lit middle).  Measured on
+# sample_scenes(6, 6, realistic, MJPG)[0] (blue on blue, contrast 56): the
+# ferrule, 106 levels off the felt, scored 34 at the window's edge against
+# the ball's 33, and was tracked for 44 frames after the strike.
+SCORE_CAP = 1.0
+
+
+def box_score(D: np.ndarray, k: int, K: int) -> np.ndarray:
+    """Ball-likeness at every pixel of a ball-positive image ``D`` (levels,
+    float32, already clipped): the mean over the ``k`` x ``k`` box the ball
+    fills less the mean over the ring of felt out to ``K`` x ``K``.  A stick
+    (the cue) or an edge fills the ring as much as the box and scores near 0."""
+    inner = cv2.blur(D, (k, k))
+    outer = cv2.boxFilter(D, -1, (K, K), normalize=False)
+    return inner - (outer - inner * (k * k)) / (K * K - k * k)
+
+
+def ball_score(samples: np.ndarray, image: np.ndarray, polarity: int, contrast: float,
+               swept: np.ndarray, radius_px: float) -> float:
+    """The ball's :func:`box_score` in the samples (levels): per sample the
+    peak over the swept path, the largest over the samples (a sample the
+    ball has left scores the felt's noise there, one with it rolling its
+    blurred score).  Sized for ``radius_px``; departures clipped at
+    ``SCORE_CAP`` of ``contrast``, as the search does."""
+    k, K = box_size(radius_px), box_size(2 * radius_px) | 1
+    ys, xs = np.nonzero(swept)
+    if not len(ys):
+        return 0.0
+    H, W = image.shape
+    m = K // 2 + 1  # the ring's reach beyond the path
+    v0, v1, u0, u1 = max(ys.min() - m, 0), min(ys.max() + m + 1, H), max(xs.min() - m, 0), min(xs.max() + m + 1, W)
+    on = swept[v0:v1, u0:u1]
+    cap = SCORE_CAP * max(contrast, 1.0)
+    best = 0.0
+    for f in samples:
+        D = np.clip(polarity * (f[v0:v1, u0:u1].astype(np.float32) - image[v0:v1, u0:u1]), -cap, cap)
+        best = max(best, float(box_score(D, k, K)[on].max()))
+    return best
+
+
 # A path pixel showed the felt in some sample when its extreme nearer the
 # felt around the path lies within the noise's band of it, or within this
 # fraction of the other extreme's departure (a textured felt under a ramp
@@ -319,9 +366,18 @@ def learn_background(samples: np.ndarray, radius_px, where: np.ndarray | None = 
     count = keep.sum(axis=0)
     weak = (count < MIN_FELT_SAMPLES) & (count < n)
     weak_samples = keep[:, weak].any(axis=1) if weak.any() else np.zeros(n, bool)
+    # The ball's own search score where it is in the samples: the detection
+    # threshold is set from it (BallTracker), not from the pixel contrast,
+    # which a shaded ball's box score need not follow (red on red, H.264,
+    # sample_scene(14, realistic): contrast 106, the ball's score 28).
+    # On the playing surface only, as the search is: the ball crossing the
+    # cushion there scored 54 against the rail's cloth.
+    on = swept & where if where is not None else swept
+    r_path = float(np.median(radii.image()[on])) if on.any() else radii.r_centre
+    score = ball_score(samples, image, polarity, contrast, on, r_path)
     return Background(image=image, sigma=sigma, polarity=polarity, contrast=contrast,
                       n_samples=n, path_pixels=int(len(ys)), weak_samples=weak_samples,
-                      moved_px=int(strong.sum()))
+                      moved_px=int(strong.sum()), score=score)
 
 
 # Samples that must agree (within felt_band) for a sample to count as the

@@ -13,7 +13,7 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
-from cuespin.track.background import DETECT_SIGMAS, Background, box_size
+from cuespin.track.background import DETECT_SIGMAS, SCORE_CAP, Background, box_score, box_size
 from cuespin.track.colour import GREY, Projection
 from cuespin.track.model import SphereLook, _model_rows, blur_nodes, fit_disc, streak_from_moments, streak_model
 from cuespin.track.outline import OUTLINE_REFIT_PX, OutlineCache, is_similarity
@@ -53,13 +53,12 @@ FOREIGN_GAP_PX = 2.0
 FOREIGN_CONTRAST = 0.25
 FOREIGN_MIN_PX = 4
 FOREIGN_GROW_PX = 3
-# The search's score clips each pixel's departure from the felt at this
-# multiple of the ball's contrast (Background.contrast, the 75th percentile
-# of the path's largest departures: the ball's lit middle).  Measured on
-# sample_scenes(6, 6, realistic, MJPG)[0] (blue on blue, contrast 56): the
-# ferrule, 106 levels off the felt, scored 34 at the window's edge against
-# the ball's 33, and was tracked for 44 frames after the strike.
-SCORE_CAP = 1.0
+# The search's detection threshold as a fraction of the ball's own score in
+# the look-ahead samples (Background.score): the former rule, a quarter of
+# the pixel contrast, assumed the score is ~0.8 of it (0.25 / 0.8); a shaded
+# red ball on red felt in H.264 scores 0.26 of its contrast (28 of 106,
+# sample_scene(14, realistic)) and was lost in most moving frames.
+SCORE_FRACTION = 0.3
 # A fit is tried again from the centroid of the departure from the felt in
 # either direction when that lies more than this many radii from its centre
 # (red on red in a low light, sample_scenes(6, 7, realistic, MJPG)[5]: the
@@ -440,8 +439,11 @@ class BallTracker:
         # Box-filtered noise of a frame minus a (slightly noisy) background;
         # the smallest box's, the noisiest, for every scale.
         k_min = min(k for k, _ in self.boxes)
-        self.thresh = max(DETECT_SIGMAS * max(background.sigma, 0.5) * 1.1 / k_min,
-                          0.25 * background.contrast)
+        # Above the noise (pockets, felt) and a fraction of the ball's own
+        # score; without a learnt score (a Background made by hand), a
+        # quarter of its contrast.
+        ball = SCORE_FRACTION * background.score if background.score > 0 else 0.25 * background.contrast
+        self.thresh = max(DETECT_SIGMAS * max(background.sigma, 0.5) * 1.1 / k_min, ball)
         self.mask = search_mask
         self.max_step_px = float(max_step_px)
         # The projected window of the last converged fit, for the felt average.
@@ -489,10 +491,7 @@ class BallTracker:
         as much as a low-contrast ball and half fills the box, outscored the
         ball it touched."""
         k, K = self.boxes[j]
-        D = np.clip(D, -self.cap, self.cap)
-        inner = cv2.blur(D, (k, k))
-        outer = cv2.boxFilter(D, -1, (K, K), normalize=False)
-        return inner - (outer - inner * (k * k)) / (K * K - k * k)
+        return box_score(np.clip(D, -self.cap, self.cap), k, K)
 
     def _peak(self, frame: np.ndarray, u0: int, v0: int, u1: int, v1: int, j: int = 0):
         """Peak of :meth:`_score` at scale ``j`` in a window; value and
