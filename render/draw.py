@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import functools
 import math
-import queue
 from dataclasses import dataclass
 
 import numpy as np
@@ -1132,21 +1131,17 @@ class FrameRenderer:
         self._cue_cache = (gap, tiles)
         return tiles
 
-    def _render_realistic(self, k: int, rng: np.random.Generator, out: np.ndarray | None) -> np.ndarray:
+    def _render_realistic(self, k: int, rng: np.random.Generator) -> np.ndarray:
         import cv2
 
         if self.sigma > 0:
             if not isinstance(self._noise, NoiseSampler):
-                frame = self._noise.add_to(self.background, rng, out)    # one word of rng seeds the frame
+                frame = self._noise.add_to(self.background, rng)    # one word of rng seeds the frame
             else:
                 # SFC64 writes random bytes about a third faster than PCG64; seeded
                 # from the caller's generator, so frames stay reproducible.
                 fast = np.random.Generator(np.random.SFC64(int(rng.integers(0, 2**63))))
-                frame = cv2.add(self._noise.draw(fast, self._bg16.shape), self._bg16, dst=out,
-                                dtype=cv2.CV_8U)
-        elif out is not None:
-            frame = out
-            np.copyto(frame, self.background)
+                frame = cv2.add(self._noise.draw(fast, self._bg16.shape), self._bg16, dtype=cv2.CV_8U)
         else:
             frame = self.background.copy()
         tiles = dict(self._cue_tiles(k))
@@ -1170,7 +1165,7 @@ class FrameRenderer:
             frame[sl] = cv2.add(clean, acc[:f.shape[0], :f.shape[1]], dtype=cv2.CV_8U)
         return frame
 
-    def render(self, k: int, rng: np.random.Generator, out: np.ndarray | None = None) -> np.ndarray:
+    def render(self, k: int, rng: np.random.Generator) -> np.ndarray:
         """Frame ``k`` as an 8-bit image: grey (height, width) in the plain
         look, BGR (height, width, 3) in the realistic one.
 
@@ -1181,13 +1176,9 @@ class FrameRenderer:
         rng : numpy.random.Generator
             Noise source; frames drawn in order from one generator are
             independent.
-        out : ndarray of uint8, optional
-            A C-contiguous array of the frame's shape, overwritten with the
-            frame (the realistic look; the plain look ignores it): a reused
-            buffer is already mapped, a fresh one is paged in as it is written.
         """
         if self.realistic:
-            return self._render_realistic(k, rng, out)
+            return self._render_realistic(k, rng)
         bg = self.background
         if self._plain_noise is not None:
             frame = self._plain_noise.add_to(bg, rng)     # the law of self.lut, exactly
@@ -1209,24 +1200,13 @@ class FrameRenderer:
             frame[v0:v0 + h, u0:u0 + w] = np.clip(np.rint(clean), 0, 255).astype(np.uint8)
         return frame
 
-    def frames(self, seed=None, buffers=None):
-        """Yield every frame in order, drawn from one local generator.
-
-        ``buffers``: a queue (``get_nowait``) of frames the consumer is done
-        with; each frame is drawn into one of them when there is one (the
-        same pixels), else into a new array.
-        """
+    def frames(self, seed=None):
+        """Yield every frame in order, drawn from one local generator."""
         if seed is None:
             seed = int(self.settings["seed"])
         rng = np.random.default_rng(seed)
         for k in range(self.n_frames):
-            out = None
-            if buffers is not None:
-                try:
-                    out = buffers.get_nowait()
-                except queue.Empty:
-                    pass
-            yield self.render(k, rng, out)
+            yield self.render(k, rng)
 
 
 # The cue (m): length, tip and butt radii, and where its parts end from the tip.

@@ -180,8 +180,7 @@ class _PyAvWriter:
 
 
 def encode_frames(frames, path: Path, codec: str, fps: float, size: tuple[int, int],
-                  progress=None, times: FrameTimes | None = None, crf: float = H264_CRF,
-                  recycle=None) -> int:
+                  progress=None, times: FrameTimes | None = None, crf: float = H264_CRF) -> int:
     """Encode an iterable of 8-bit frames, drawing them on a second thread.
 
     Parameters
@@ -205,10 +204,6 @@ def encode_frames(frames, path: Path, codec: str, fps: float, size: tuple[int, i
         stamp ``k / fps``).  Constant rate when absent.
     crf : float
         H.264 constant rate factor (0 lossless .. 51; lower is better).
-    recycle : callable, optional
-        Called with each frame once it is written (both writers are done
-        with it then: OpenCV encodes it in ``write``, PyAV copies it), e.g.
-        to hand the array back to the drawing loop.
 
     Returns
     -------
@@ -248,8 +243,6 @@ def encode_frames(frames, path: Path, codec: str, fps: float, size: tuple[int, i
     try:
         while (fr := q.get()) is not done:
             writer.write(fr, n)
-            if recycle is not None:
-                recycle(fr)
             n += 1
             if progress is not None:
                 progress(1)
@@ -315,11 +308,8 @@ def render_video(scene: Scene, path, progress=None, n_frames: int | None = None)
     if codec not in LOSSLESS_CODECS and (cam.width % 2 or cam.height % 2):
         raise VideoError(f"codec {codec} needs an even frame size, got {cam.width}x{cam.height}; "
                          f"make camera.width and camera.height even or use FFV1")
-    # Written frames go back to the drawing loop to be drawn over: fresh
-    # frame-sized arrays cost page faults and cold cache lines each frame.
-    free: queue.SimpleQueue = queue.SimpleQueue()
-    n = encode_frames(renderer.frames(buffers=free), path, codec, cam.fps, (cam.width, cam.height),
-                      progress, times=times, crf=crf, recycle=free.put)
+    n = encode_frames(renderer.frames(), path, codec, cam.fps, (cam.width, cam.height), progress,
+                      times=times, crf=crf)
     if n != renderer.n_frames:
         raise VideoError(f"wrote {n} of {renderer.n_frames} frames to {path}")
     write_truth_csv(truth_path(path), renderer.truth)
