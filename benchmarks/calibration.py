@@ -26,7 +26,8 @@ jackknife) against their real error, frame by frame, on drawn tables and on
 the renderer's realistic one.
 
 With ``--shaded``: the balls' focal length on the renderer's shaded ball
-straight overhead, its light and blur changed one at a time.
+straight overhead, its light and blur changed one at a time (``--ball-at X,Y``
+for the ball, ``--ball-floor`` for ``BALL_SHAPE_FLOOR``).
 
 With ``--diagnose`` (``--height 2 --tilt 0 --k1 -0.25``): the automatic
 camera's v0 error split into its parts (corners, k1, focal length), each
@@ -232,13 +233,16 @@ def shaded(args):
     one at a time: the measured shape against the exact outline's, and f."""
     from dataclasses import replace
 
+    import cuespin.pipeline.calibrate as calibrate
     from cuespin.data_gen.sampler import make_scene
     from cuespin.physics.motion import Shot
     from cuespin.pipeline.calibrate import _shape, ball_images, calibrate_frame, detect_corners, signed_area
     from cuespin.render.draw import FrameRenderer
 
+    if args.ball_floor is not None:     # the floor's stated error against the same balls' real one
+        calibrate.BALL_SHAPE_FLOOR = args.ball_floor
     shot, params = sample_shot(100, "random")
-    pos = np.array([2.40, 1.15])
+    pos = np.array([float(v) for v in args.ball_at.split(",")])
     variants = {"default": {}, "no blur": {"psf_sigma": 0.0}, "even light": {"ambient": 1.0, "specular": 0.0},
                 "even light, no blur": {"ambient": 1.0, "specular": 0.0, "psf_sigma": 0.0},
                 "light overhead": {"light_elevation": 1.55}}
@@ -347,6 +351,8 @@ def main():
     ap.add_argument("--seeds", type=int, default=3, help="--stated: noise seeds per drawn camera")
     ap.add_argument("--shaded", action="store_true",
                     help="the balls' focal length on the renderer's shaded ball, light and blur one at a time")
+    ap.add_argument("--ball-at", default="2.40,1.15", metavar="X,Y", help="--shaded: the ball's table position (m)")
+    ap.add_argument("--ball-floor", type=float, default=None, help="--shaded: BALL_SHAPE_FLOOR instead of calibrate's")
     args = ap.parse_args()
     if args.shaded:
         return shaded(args)

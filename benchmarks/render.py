@@ -14,6 +14,7 @@ shaded ball's image lies from its centre, for a few looks (noise-free).
 
 Usage: python benchmarks/render.py [--look realistic] [--codec MJPG] [--codec FFV1] [--codec H264] [--noise 5]
        python benchmarks/render.py --offsets
+       python benchmarks/render.py --setup --look realistic --seconds 1.5 --repeat 3
 """
 
 import argparse
@@ -85,6 +86,34 @@ def bench(codec: str, look: str, noise: float, seconds: float, repeat: int,
             "ratios": ratios, "cpu_ratio": statistics.median(cpu), "two_core": statistics.median(two)}
 
 
+def setup_cost(look: str, noise: float, seconds: float, repeat: int, camera: str = "topdown") -> dict:
+    """CPU (s) of the renderer's set-up (``FrameRenderer(scene)``: static layer,
+    orientation) and of drawing the shot's frames without encoding, per run,
+    after one warm-up render (noise tables, compiled kernels, imports)."""
+    shot, params = sample_shot(1, "case3")
+    render = {"noise_sigma": noise, "duration": seconds}
+    if look == "plain":
+        render["gradient"] = 10.0
+        scene = make_scene(shot, params, fps=240.0, render=render)
+    else:
+        render.update(specular=0.5, markings="dots", cue=True,
+                      balls=[{"x": 0.4, "y": 0.3, "colour": [45, 40, 200]},
+                             {"x": 2.2, "y": 1.0, "colour": [30, 205, 240]}])
+        scene = realistic_scene(shot, params, 240.0, render, camera=camera)
+    for _ in FrameRenderer(scene).frames():
+        pass
+    setup, frames = [], []
+    for _ in range(repeat):
+        c = time.process_time()
+        r = FrameRenderer(scene)
+        c1 = time.process_time()
+        for _ in r.frames():
+            pass
+        setup.append(c1 - c)
+        frames.append(time.process_time() - c1)
+    return {"frames": r.n_frames, "setup": setup, "draw": frames}
+
+
 OFFSET_LOOKS = {
     "matte, overhead light": {"ambient": 0.35, "light_elevation": 1.5, "specular": 0.0},
     "matte, light at 60 deg": {"ambient": 0.35, "light_elevation": 1.05, "specular": 0.0},
@@ -128,11 +157,20 @@ def main():
     ap.add_argument("--camera", choices=("topdown", "tilted"), default="topdown",
                     help="realistic look's camera (tilted: 2 m, 10 deg, k1 -0.2)")
     ap.add_argument("--offsets", action="store_true", help="measure shaded-ball centroid offsets")
+    ap.add_argument("--setup", action="store_true",
+                    help="CPU of the renderer's set-up and of drawing the frames (no encoding), --repeat runs")
     ap.add_argument("--noise-law", choices=("byte", "alias"), action="append",
                     help="realistic look's noise (render.draw.NOISE_LAW; repeatable); default byte")
     args = ap.parse_args()
     if args.offsets:
         offsets()
+        return
+    if args.setup:
+        for look in args.look or ["plain", "realistic"]:
+            r = setup_cost(look, args.noise, args.seconds, args.repeat, args.camera)
+            print(f"{look:9} frames {r['frames']}: set-up CPU min {min(r['setup']) * 1e3:.0f} ms, median "
+                  f"{statistics.median(r['setup']) * 1e3:.0f} ms; drawing CPU median "
+                  f"{statistics.median(r['draw']) / r['frames'] * 1e3:.2f} ms a frame", flush=True)
         return
     print(f"camera {args.camera}")
     print("ratio: wall-clock; cpu: encoding's CPU / render_video's (which encodes too, so < 1 always); "

@@ -91,9 +91,10 @@ def null_rolling_tracks(n: int, seed: int, fps_grid=FPS_GRID, sigma_grid=SIGMA_G
 
 
 def sliding_tracks(n: int, seed: int, presets=("random", "case1", "case3", "case5", "masse"),
-                   fps_grid=FPS_GRID, sigma_grid=SIGMA_GRID_M, blur: bool = True):
+                   fps_grid=FPS_GRID, sigma_grid=SIGMA_GRID_M, blur: bool = True, rho: float = 0.0):
     """``n`` tracks of shots that slide (the sampler's presets), cycling over
-    frame rates and noise levels.  Yields :class:`SimTrack`."""
+    frame rates and noise levels; ``rho``: AR(1) errors
+    (:func:`simulate_track`).  Yields :class:`SimTrack`."""
     rng = np.random.default_rng(seed)
     for i in range(n):
         fps, sigma = _grid_point(i, fps_grid, sigma_grid)
@@ -101,7 +102,7 @@ def sliding_tracks(n: int, seed: int, presets=("random", "case1", "case3", "case
         exposure = _exposure(rng, fps, blur)
         ph = phases(shot, params)
         yield simulate_track(shot, params, fps, sigma, rng, exposure,
-                             t_end=min(ph.t2 + 0.3, max(ph.t1 + 1.0, shot.t0 + MAX_AFTER_STRIKE_S)))
+                             t_end=min(ph.t2 + 0.3, max(ph.t1 + 1.0, shot.t0 + MAX_AFTER_STRIKE_S)), rho=rho)
 
 
 def mixed_tracks(n: int, seed: int):

@@ -39,6 +39,8 @@ SIMILARITY_RTOL = 1e-6
 OUTLINE_VERTICES = 128
 # Spacing (px) of the grid on which the lens is inverted for the ray map.
 RAY_GRID_PX = 8
+# Tiles (px) in which the static scene's table parts are skipped when wholly cloth.
+LABEL_TILE_PX = 16
 # Exposure nodes whose rotations are evaluated in one call (a block of frames):
 # 4096 nodes hold 0.3 MB of matrices.
 ROTATION_BLOCK_NODES = 4096
@@ -617,10 +619,13 @@ class FrameRenderer:
         self._sharp = cv2_copy_border(sharp, B)
         blur = gaussian(sharp, self._psf)
         self._blur = blur
-        self.background = np.clip(np.rint(blur), 0, 255).astype(np.uint8)
-        self._bg16 = self.background.astype(np.int16)
-        self._frac = (blur - self.background).astype(np.float32)   # what 8 bits rounded off
+        import cv2
+        # OpenCV's saturating conversion: np.rint (half to even), then clip to 0-255.
+        self.background = cv2.addWeighted(blur, 1.0, blur, 0.0, 0.0, dtype=cv2.CV_8U)
+        self._frac = np.subtract(blur, self.background, dtype=np.float32)   # what 8 bits rounded off
         self._noise = sensor_noise(self.sigma)
+        # The background in int16 only for the noise drawn as integers (large sigma).
+        self._bg16 = self.background.astype(np.int16) if isinstance(self._noise, NoiseSampler) else None
         self._orient = None
         if s["markings"] != "none":
             t0 = min(0.0, float(self._t_nodes.min()))
@@ -692,6 +697,65 @@ class FrameRenderer:
         return np.stack([(Hi[0, 0] * u + Hi[0, 1] * v + Hi[0, 2]) / den,
                          (Hi[1, 0] * u + Hi[1, 1] * v + Hi[1, 2]) / den], -1)
 
+    def _homography_labels(self, h: int, w: int):
+        """The table parts' labels (:func:`~cuespin.render.look.table_labels`)
+        at every pixel of an ``h x w`` frame through a homography, and the
+        cloth point of any pixels, ``at(rows, cols) -> (x, y)`` (m).
+
+        :meth:`_cloth_grid`'s arithmetic, but only where a part other than the
+        cloth may be: a tile whose corners all lie farther inside every edge
+        than the largest pocket's radius (the pockets' centres lie on or
+        outside the cushion line) is cloth at every pixel (the homography maps
+        the tile onto the convex hull of its corners' points, the denominator
+        keeping its sign there); one wholly past the rails' outer edge (and
+        every pocket's reach) on one side is beyond at every pixel.  The
+        table's parts are computed on the other tiles only (a fifth to a
+        third of a framed view's pixels).
+        """
+        Hi = np.linalg.inv(self.H)
+
+        def at(rows, cols):
+            u, v = cols.astype(np.float64), rows.astype(np.float64)
+            den = Hi[2, 0] * u + Hi[2, 1] * v + Hi[2, 2]
+            return ((Hi[0, 0] * u + Hi[0, 1] * v + Hi[0, 2]) / den,
+                    (Hi[1, 0] * u + Hi[1, 1] * v + Hi[1, 2]) / den)
+
+        tb, T = self.scene.table, LABEL_TILE_PX
+        L, W = tb.length, tb.width
+        pk = lk.pockets(L, W)
+        # 1 mm to spare: rounding is ~1e-16 m.
+        m = max(r for _, _, r in pk) + 1e-3
+        # Beyond the rails: past every pocket's reach outside the cushion line too.
+        e = max([lk.CUSHION_WIDTH_M + lk.RAIL_WIDTH_M]
+                + [max(-px, px - L, -py, py - W, 0.0) + r for px, py, r in pk]) + 1e-3
+        r0 = np.arange(0, h, T)
+        c0 = np.arange(0, w, T)
+        rows = np.stack([r0, np.minimum(r0 + T - 1, h - 1)])[:, :, None, None]   # (2, th, 1, 1)
+        cols = np.stack([c0, np.minimum(c0 + T - 1, w - 1)], -1)[None, None]    # (1, 1, tw, 2)
+        rows, cols = np.broadcast_arrays(rows, cols)                             # (2, th, tw, 2)
+        x, y = at(rows, cols)
+        den = Hi[2, 0] * cols + Hi[2, 1] * rows + Hi[2, 2]
+
+        def every(c):                                      # at all four corners of a tile
+            return c.all(axis=(0, 3))
+
+        convex = every(den > 0) | every(den < 0)
+        inner = convex & every((x >= m) & (x <= L - m) & (y >= m) & (y <= W - m))
+        # Wholly in one half-plane past the rails' outer edge.
+        beyond = convex & (every(x <= -e) | every(x >= L + e) | every(y <= -e) | every(y >= W + e))
+        code = np.full(inner.shape, 255, np.uint8)
+        code[inner] = lk.TABLE_PARTS.index("cloth")
+        code[beyond] = lk.TABLE_PARTS.index("beyond")
+        label = np.ascontiguousarray(np.repeat(np.repeat(code, T, axis=0), T, axis=1)[:h, :w])
+        ti, tj = np.nonzero(code == 255)
+        a = np.arange(T)
+        rr = np.broadcast_to(ti[:, None, None] * T + a[:, None], (len(ti), T, T))
+        cc = np.broadcast_to(tj[:, None, None] * T + a[None, :], (len(tj), T, T))
+        keep = (rr < h) & (cc < w)
+        rr, cc = rr[keep], cc[keep]
+        label[rr, cc] = lk.table_labels(*at(rr, cc), L, W)
+        return label, at
+
     def _static_scene(self) -> np.ndarray:
         """The static scene before lens blur, float32 (h, w, 3): cloth with its
         texture, cushions, rails, pockets and sights (2x2 supersampled),
@@ -699,50 +763,45 @@ class FrameRenderer:
         s, cam, tb = self.settings, self.cam, self.scene.table
         h, w = cam.height, cam.width
         felt = np.asarray(s["felt_colour"], dtype=np.float32)
-        names = ("cloth", "cushion", "rail", "sight", "pocket", "beyond")
+        # Colours of lk.TABLE_PARTS, in its order.
         palette = np.array([felt, 0.8 * felt, s["rail_colour"], [215, 228, 235], [16, 16, 18],
                             [35, 35, 38]], np.float32)
-        img = np.zeros((h, w, 3), np.float32)
-        felt_share = np.zeros((h, w), np.float32)
         if s["rails"]:
-            if cam.is_pinhole:
-                xy = self._plane_points(0, h, 0, w, 0.0)        # the cloth, z = 0
-            else:
-                xy = self._cloth_grid(h, w)
             tb_lw = (tb.length, tb.width)
+            if cam.is_pinhole or cam.has_lens:
+                xy = self._plane_points(0, h, 0, w, 0.0) if cam.is_pinhole else self._cloth_grid(h, w)
+                label = lk.table_labels(xy[..., 0], xy[..., 1], *tb_lw)
 
-            def labels(pts):
-                layers = lk.table_layers(pts, *tb_lw)
-                lab = np.zeros(pts.shape[:-1], np.uint8)
-                for i, name in enumerate(names[1:], start=1):
-                    lab[layers[name]] = i
-                return lab
-
+                def at(rows, cols):
+                    return xy[rows, cols, 0], xy[rows, cols, 1]
+            else:
+                label, at = self._homography_labels(h, w)
             # Labels at pixel centres; pixels on an edge between parts (a
             # neighbour differs) are supersampled 4 x 4 from the local map's
             # derivatives, the rest take their one label.
-            label = labels(xy)
             import cv2
             kernel = np.ones((3, 3), np.uint8)
             edge = cv2.dilate(label, kernel) != cv2.erode(label, kernel)
-            img[:] = palette[label]
-            felt_share[:] = label <= 1
+            img = palette[label]
+            felt_share = (label <= 1).astype(np.float32)
             ev, eu = np.nonzero(edge)
             if len(ev):
                 ss = 4
                 off = (np.arange(ss) + 0.5) / ss - 0.5
                 ou, ov = np.meshgrid(off, off)
-                ou, ov = ou.ravel(), ov.ravel()
-                dxy_du = gradient_at(xy, ev, eu, axis=1)
-                dxy_dv = gradient_at(xy, ev, eu, axis=0)
-                pts = (xy[ev, eu][:, None, :] + ou[None, :, None] * dxy_du[:, None, :]
-                       + ov[None, :, None] * dxy_dv[:, None, :])
-                sub = labels(pts)                                   # (n_edge, 16)
+                ou, ov = ou.ravel()[None, :], ov.ravel()[None, :]
+                dx_du, dy_du = gradient_at(at, ev, eu, 1, w)
+                dx_dv, dy_dv = gradient_at(at, ev, eu, 0, h)
+                x, y = at(ev, eu)
+                sub = lk.table_labels(x[:, None] + ou * dx_du[:, None] + ov * dx_dv[:, None],
+                                      y[:, None] + ou * dy_du[:, None] + ov * dy_dv[:, None],
+                                      *tb_lw)                       # (n_edge, 16)
                 img[ev, eu] = palette[sub].mean(axis=1)
                 felt_share[ev, eu] = (sub <= 1).mean(axis=1)
         else:
+            img = np.empty((h, w, 3), np.float32)
             img[:] = felt
-            felt_share[:] = 1.0
+            felt_share = np.ones((h, w), np.float32)
         tex_amp = float(s["texture"])
         if tex_amp > 0:
             rng = np.random.default_rng(np.random.SeedSequence([int(s["seed"]), 7]))
@@ -818,7 +877,11 @@ class FrameRenderer:
             normals = np.stack([nx, ny, nz], -1)
         alb = np.broadcast_to(albedo, normals.shape)
         if rots is not None and self.settings["markings"] != "none":
-            body = np.einsum("kji,kabj->kabi", rots, normals)     # R^T n: table -> body
+            # R^T n: table -> body; einsum's sums (j in order) written out, the
+            # same values at a quarter of its cost.
+            R = rots[:, None, None]
+            n0, n1, n2 = normals[..., 0], normals[..., 1], normals[..., 2]
+            body = np.stack([R[..., 0, i] * n0 + R[..., 1, i] * n1 + R[..., 2, i] * n2 for i in range(3)], -1)
             m = lk.mark_mask(body, self.settings["markings"], r)[..., None]
             alb = alb * (1.0 - m) + self._mark_colour * m
         colour = lk.shade(normals, alb, self.settings, view)
@@ -1019,15 +1082,16 @@ class FrameRenderer:
         xy_c = tip - a_c[..., None] * d + c_c[..., None] * nrm                 # (m, 4, 2)
         uv_all = self.cam.project(np.c_[xy_c.reshape(-1, 2), np.full(xy_c.size // 2, R)])
         uv_all = uv_all.reshape(-1, 4, 2)
-        for a0, a1, uv in zip(edges[:-1], edges[1:], uv_all):
-            if not np.isfinite(uv).all():
-                continue
-            u_lo = max(int(math.floor(uv[:, 0].min())) - pad, 0)
-            v_lo = max(int(math.floor(uv[:, 1].min())) - pad, 0)
-            u_hi = min(int(math.ceil(uv[:, 0].max())) + pad, w - 1)
-            v_hi = min(int(math.ceil(uv[:, 1].max())) + pad, h - 1)
-            if u_hi < u_lo or v_hi < v_lo:
-                continue
+        # Every stretch's patch in the frame at once (most of a long cue is
+        # often out of view: per stretch, these reductions cost as much as a drawn one).
+        seen = np.isfinite(uv_all).all(axis=(1, 2))
+        lo = np.floor(np.where(seen[:, None], uv_all.min(axis=1), 0.0)).astype(int) - pad
+        hi = np.ceil(np.where(seen[:, None], uv_all.max(axis=1), -1.0)).astype(int) + pad
+        lo, hi = np.maximum(lo, 0), np.minimum(hi, [w - 1, h - 1])
+        seen &= (hi >= lo).all(axis=1)
+        for i in np.flatnonzero(seen):
+            a0, a1 = edges[i], edges[i + 1]
+            (u_lo, v_lo), (u_hi, v_hi) = lo[i].tolist(), hi[i].tolist()
             shape = (v_hi + 1 - v_lo, u_hi + 1 - u_lo)
             if self.similar:
                 # Affine in the pixel's position: two 1-D ramps, no per-pixel mapping.
@@ -1047,14 +1111,16 @@ class FrameRenderer:
                 a = -(rel @ d)
                 c = rel @ nrm
             own = (a >= a0) & (a < a1) if a0 > 0 else (a < a1)
-            ra = cue_radius(np.clip(a, 0, CUE_LENGTH_M))
-            cov = np.clip((ra - np.abs(c)) * px_m + 0.5, 0, 1) * np.clip(a * px_m + 0.5, 0, 1) * own
+            # np.minimum / np.maximum: np.clip's values without its call overhead.
+            ra = cue_radius(np.minimum(np.maximum(a, 0.0), CUE_LENGTH_M))
+            cov = (np.minimum(np.maximum((ra - np.abs(c)) * px_m + 0.5, 0.0), 1.0)
+                   * np.minimum(np.maximum(a * px_m + 0.5, 0.0), 1.0) * own)
             on = cov > 0
             if not on.any():
                 continue
             # Colour only where the cue is (it is thin): its part, cylinder shading.
             a_on, c_on, ra_on = a[on], c[on], ra[on]
-            across = np.clip(np.abs(c_on) / ra_on, 0, 1)
+            across = np.minimum(np.maximum(np.abs(c_on) / ra_on, 0.0), 1.0)
             colour = cue_colour(a_on) * (0.55 + 0.45 * np.sqrt(1 - across**2))[:, None]
             sharp = self._sharp[v_lo + self._border:v_hi + 1 + self._border,
                                 u_lo + self._border:u_hi + 1 + self._border]
@@ -1159,9 +1225,11 @@ def cue_radius(a):
 
 def cue_colour(a: np.ndarray) -> np.ndarray:
     """BGR colour of the cue at distances ``a`` (m) from its tip, shape (n, 3)."""
-    ends = np.array([e for e, _ in CUE_PARTS])
-    cols = np.array([c for _, c in CUE_PARTS], dtype=np.float32)
-    return cols[np.minimum(np.searchsorted(ends, a), len(ends) - 1)]
+    return _CUE_COLS[np.minimum(np.searchsorted(_CUE_ENDS, a), len(_CUE_ENDS) - 1)]
+
+
+_CUE_ENDS = np.array([e for e, _ in CUE_PARTS])
+_CUE_COLS = np.array([c for _, c in CUE_PARTS], dtype=np.float32)
 
 
 TILE_PX = 32
@@ -1196,19 +1264,20 @@ def gaussian(img: np.ndarray, sigma: float, constant: bool = False) -> np.ndarra
     return cv2.GaussianBlur(img, (0, 0), sigma, borderType=border)
 
 
-def gradient_at(a: np.ndarray, rows: np.ndarray, cols: np.ndarray, axis: int) -> np.ndarray:
-    """``np.gradient(a, axis=axis)[rows, cols]`` computed at those pixels only:
-    central differences inside, one-sided at the borders, the same arithmetic."""
-    n = a.shape[axis]
+def gradient_at(at, rows: np.ndarray, cols: np.ndarray, axis: int, n: int) -> tuple:
+    """``np.gradient(a, axis=axis)[rows, cols]`` of a map of two coordinates,
+    ``at(rows, cols) -> (x, y)``, of ``n`` pixels along ``axis``, computed at
+    those pixels only: central differences inside, one-sided at the borders,
+    the same arithmetic."""
     idx = cols if axis == 1 else rows
     lo, hi = np.maximum(idx - 1, 0), np.minimum(idx + 1, n - 1)
-    if axis == 1:
-        d = a[rows, hi] - a[rows, lo]
-    else:
-        d = a[hi, cols] - a[lo, cols]
+    (xh, yh), (xl, yl) = (at(rows, hi), at(rows, lo)) if axis == 1 else (at(hi, cols), at(lo, cols))
     inner = (idx > 0) & (idx < n - 1)
-    d[inner] = d[inner] / 2.0
-    return d
+    out = []
+    for d in (xh - xl, yh - yl):
+        d[inner] = d[inner] / 2.0
+        out.append(d)
+    return tuple(out)
 
 
 def cv2_copy_border(img: np.ndarray, b: int) -> np.ndarray:

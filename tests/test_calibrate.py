@@ -343,8 +343,8 @@ def test_overhead_focal_length_from_the_balls_shapes(k1):
     # long one); a still ball's image is a sphere's silhouette, stretched away
     # from the optical axis by about 1 / cos of its angle from it, which f
     # sets.  The drawn frame's ball near the corner fixes f to about 1%
-    # (measured: 0.2-1.2% off; stated 3.2%, the floor the renderer's shaded
-    # balls set), where the nominal one is 2-5% off (up to 15% on a phone).
+    # (measured: 0.2-1.2% off; stated about 10%, the floor the renderer's
+    # shaded balls set), where the nominal one is 2-5% off (up to 15% on a phone).
     from cuespin.pipeline.calibrate import NOMINAL_FOCAL, calibrate_frame
 
     true = pinhole_camera(height_m=2.0, tilt_deg=0.0, k1=k1, R=R, size=SIZE, fps=240.0, roll_deg=1.0)
@@ -353,7 +353,7 @@ def test_overhead_focal_length_from_the_balls_shapes(k1):
     assert cal.focal_source == "balls" and "still balls" in cal.notes[0]
     f_true, f = true.K[0, 0], cal.camera.K[0, 0]
     sigma = cal.perturbed[-1].K[0, 0] / f - 1.0           # the last camera: f one error longer
-    assert 0.0 < sigma < 0.05
+    assert 0.0 < sigma < 0.12                             # BALL_SHAPE_FLOOR's 0.03: about 10%
     assert abs(f / f_true - 1.0) < 2.0 * sigma, (f / f_true - 1.0, sigma)
     assert abs(f / f_true - 1.0) < 0.5 * abs(NOMINAL_FOCAL * SIZE[0] / f_true - 1.0)
     # k1 follows f (the bow fixes k1 / f^2), and the ball plane with it
@@ -405,12 +405,16 @@ def test_the_lens_bows_error_is_in_the_perturbed_cameras_and_moves_the_stated_er
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("look", [{}, {"light_elevation": 1.55}], ids=["default-light", "lamp-overhead"])
 @pytest.mark.parametrize("k1", [-0.25, 0.0])
-def test_overhead_focal_length_from_a_rendered_shaded_ball(k1):
-    # The renderer's realistic look: a shaded ball (lit from one side, a
-    # highlight, lens blur) at rest near a corner before the strike, straight
-    # overhead.  Its outline puts f 2.9-5.3% low (measured), within 2 of the
-    # errors stated (3.2-3.5%: BALL_SHAPE_FLOOR is set from these balls).
+def test_overhead_focal_length_from_a_rendered_shaded_ball(k1, look):
+    # The renderer's realistic look: a shaded ball (a highlight, lens blur;
+    # lit from one side, or by a lamp straight overhead, a billiard table's
+    # usual light) at rest near a corner before the strike, straight overhead.
+    # Its outline puts f low: 2.9-5.3% under the default light, 6.5-8.7%
+    # under the lamp (measured); the stated error must cover it at one sigma
+    # (BALL_SHAPE_FLOOR 0.03 states 9.6-10.6%, the worst at 0.9 of it; the
+    # former 0.01 stated 3.2%, 2.0-2.7x too small under the lamp: fails here).
     from dataclasses import replace
 
     from cuespin.data_gen.sampler import make_scene, sample_shot
@@ -420,7 +424,7 @@ def test_overhead_focal_length_from_a_rendered_shaded_ball(k1):
 
     shot, params = sample_shot(100, "random")
     scene = make_scene(Shot(np.array([2.40, 1.15]), shot.v0, shot.w0, t0=0.1), params,
-                       render={"look": "realistic", "noise_sigma": 2.0, "seed": 1})
+                       render={"look": "realistic", "noise_sigma": 2.0, "seed": 1, **look})
     true = pinhole_camera(height_m=2.0, tilt_deg=0.0, k1=k1, size=SIZE, fps=240.0, roll_deg=1.0, margin_m=0.15,
                           R=params.R)
     img = next(iter(FrameRenderer(replace(scene, camera=true), n_frames=1).frames()))
@@ -428,4 +432,4 @@ def test_overhead_focal_length_from_a_rendered_shaded_ball(k1):
     assert cal.focal_source == "balls"
     f = cal.camera.K[0, 0]
     sigma = cal.perturbed[-1].K[0, 0] / f - 1.0
-    assert abs(f / true.K[0, 0] - 1.0) < 2.0 * sigma, (f / true.K[0, 0] - 1.0, sigma)
+    assert abs(f / true.K[0, 0] - 1.0) < sigma, (f / true.K[0, 0] - 1.0, sigma)

@@ -334,3 +334,39 @@ def test_ar1_bound_at_the_true_correlation_matches_the_errors():
     assert len(errs) >= 30
     ratio = np.sqrt(np.mean(np.square(errs), axis=0)) / bound
     assert np.all((ratio > 0.67) & (ratio < 1.33)), ratio
+
+
+def sliding_answers_z(n: int, seed: int, rho: float = 0.0) -> np.ndarray:
+    """The MLE's errors in its own standard errors (v0, w0 components; rows
+    of shots answered ok with free slip) on ``n`` simulated sliding tracks
+    (recover.simulate.sliding_tracks: the sampler's presets, 60-480 fps,
+    noise 2e-5-6e-4 m, errors independent or AR(1) of lag-1 ``rho``), each
+    fitted with its true per-frame error as the stated one (a lossless
+    track: the estimator's own calibration, apart from any tracker's)."""
+    from cuespin.recover.estimate import estimate
+    from cuespin.recover.simulate import sliding_tracks
+    rows = []
+    for tr in sliding_tracks(n, seed, rho=rho):
+        m = estimate(tr.t, tr.xy, np.full(len(tr.t), tr.sigma), tr.params, tr.exposure_s, run_paper=False).mle
+        if m.status == "ok" and m.model == "full":
+            rows.append((np.r_[m.v0, m.w0] - np.r_[tr.shot.v0, tr.shot.w0]) / np.r_[m.stderr["v0"], m.stderr["w0"]])
+    return np.array(rows)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("rho", [0.0, 0.67])
+def test_mle_intervals_cover_on_400_simulated_tracks(rho):
+    """Coverage of the 95% intervals and RMS error in stated errors over 408
+    simulated sliding tracks, independent errors and AR(1) errors of lag-1
+    0.67 (a lossy codec at low noise): separates the estimator's
+    calibration from the tracker's stated errors (issue 11).  Measured
+    (seed 41; docs/measurements.md, stats7): independent errors, 407 ok,
+    coverage 95.9%, RMS 0.98.  Held to the issue's targets, coverage 93-97%
+    and RMS 0.9-1.1 (the same tracks each time: only a change of the fit
+    moves them)."""
+    z = sliding_answers_z(408, 41, rho)
+    assert len(z) >= 250, len(z)
+    cover = np.mean(np.abs(z) < 1.959964)
+    rms = np.sqrt(np.mean(z**2))
+    print(f"rho {rho}: {len(z)} ok with free slip, coverage {cover:.1%}, RMS / stated {rms:.3f}")
+    assert 0.93 <= cover <= 0.97 and 0.9 <= rms <= 1.1, (len(z), cover, rms)

@@ -345,6 +345,84 @@ def test_orientation_of_a_rolling_ball_turns_by_distance_over_R():
     np.testing.assert_allclose(w * np.sign(np.sin(expect[k])), axis, atol=1e-6)
 
 
+def test_prefix_product_on_rows_is_the_pairwise_scan_bit_for_bit():
+    # The scan on component rows (4, n) does quat_mul's and the norm's
+    # arithmetic in their order: the orientation (so every marked frame) is unchanged.
+    from cuespin.render.look import prefix_product, quat_from_rotvec, quat_mul
+
+    def on_pairs(dq):                                # the scan as it was, on (n, 4)
+        q, d = dq.copy(), 1
+        while d < len(q):
+            q[d:] = quat_mul(q[d:], q[:-d])
+            q /= np.linalg.norm(q, axis=-1, keepdims=True)
+            d *= 2
+        return q
+
+    rng = np.random.default_rng(5)
+    for n in (1, 2, 3, 17, 1000):
+        rv = np.c_[rng.normal(0, 0.002, (n, 2)), np.zeros(n)]
+        rv[::4] = 0.0
+        dq = quat_from_rotvec(rv)
+        assert np.array_equal(prefix_product(dq), on_pairs(dq))
+    seq = dq[0]
+    for k in range(1, 50):
+        seq = quat_mul(dq[k], seq)
+    np.testing.assert_allclose(prefix_product(dq)[49], seq, atol=1e-12)
+
+
+def test_table_labels_are_the_layers_masks():
+    # Points on every part, near sights and pockets, and on the parts'
+    # boundaries exactly: the one-pass labels are table_layers' masks.
+    from cuespin.physics.scene import Table
+    from cuespin.render import look as lk
+
+    tb = Table()
+    L, W, C, R = tb.length, tb.width, lk.CUSHION_WIDTH_M, lk.RAIL_WIDTH_M
+    rng = np.random.default_rng(2)
+    n = 60000
+    s, p = lk.sights(L, W), np.array(lk.pockets(L, W))
+    k, j, a = rng.integers(len(s), size=n), rng.integers(len(p), size=n), rng.uniform(0, 2 * np.pi, n)
+    rr = p[j, 2] * rng.uniform(0.97, 1.03, n)
+    x = np.r_[rng.uniform(-0.3, L + 0.3, n), s[k, 0] + rng.uniform(-0.012, 0.012, n),
+              p[j, 0] + rr * np.cos(a), rng.choice([0.0, L, -C, L + C, -C - R, L + C + R, 0.5 * L], n)]
+    y = np.r_[rng.uniform(-0.3, W + 0.3, n), s[k, 1] + rng.uniform(-0.012, 0.012, n),
+              p[j, 1] + rr * np.sin(a), rng.choice([0.0, W, -C, W + C, -C - R, W + C + R, 0.3], n)]
+    layers = lk.table_layers(np.stack([x, y], -1), L, W)
+    want = np.zeros(len(x), np.uint8)
+    for i, name in enumerate(lk.TABLE_PARTS[1:], start=1):
+        want[layers[name]] = i
+    got = lk.table_labels(x, y, L, W)
+    assert np.array_equal(got, want)
+    assert set(np.unique(got)) == set(range(len(lk.TABLE_PARTS)))
+
+
+@pytest.mark.parametrize("turn, tilt", [(0.0, 0.0), (0.35, 0.0), (-0.2, 2e-4)])
+def test_static_labels_computed_only_off_the_cloth_are_the_full_maps(turn, tilt):
+    # Through a homography the table's parts are computed only on tiles
+    # that are not wholly cloth or wholly beyond the rails: the same labels,
+    # and the same table points, as on every pixel.
+    from cuespin.physics.scene import Camera, Scene
+    from cuespin.render import look as lk
+
+    sc = realistic(noise=0.0, duration=0.05)
+    H0 = np.asarray(sc.camera.homography, float)
+    c, s = np.cos(turn), np.sin(turn)
+    w, h = sc.camera.width, sc.camera.height
+    # Turned about the frame's centre, with a little perspective.
+    M = np.array([[c, -s, 0.5 * w * (1 - c) + 0.5 * h * s], [s, c, 0.5 * h * (1 - c) - 0.5 * w * s],
+                  [tilt, 0.0, 1.0 - tilt * 0.5 * w]])
+    cam = Camera(fps=sc.camera.fps, width=w, height=h, homography=tuple(map(tuple, M @ H0)))
+    r = FrameRenderer(Scene(physics=sc.physics, camera=cam, table=sc.table, render=sc.render,
+                            truth=sc.truth))
+    label, at = r._homography_labels(h, w)
+    xy = r._cloth_grid(h, w)
+    assert np.array_equal(label, lk.table_labels(xy[..., 0], xy[..., 1], sc.table.length, sc.table.width))
+    assert (label == 0).mean() > 0.3 and (label == 2).any() and (label == 4).any()
+    rows, cols = np.nonzero(label >= 0)
+    x, y = at(rows, cols)
+    assert np.array_equal(x, xy[..., 0].ravel()) and np.array_equal(y, xy[..., 1].ravel())
+
+
 def test_markings_move_with_spin():
     # A rolling ball's top moves at 2 v: the marks seen from above run ahead
     # of the centre in the direction of motion, and a still ball's do not move.

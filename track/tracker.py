@@ -15,7 +15,7 @@ import numpy as np
 
 from cuespin.track.background import DETECT_SIGMAS, Background, box_size
 from cuespin.track.colour import GREY, Projection
-from cuespin.track.model import SphereLook, blur_nodes, fit_disc, streak_from_moments, streak_model
+from cuespin.track.model import SphereLook, _model_rows, blur_nodes, fit_disc, streak_from_moments, streak_model
 from cuespin.track.outline import OUTLINE_REFIT_PX, OutlineCache, is_similarity
 from cuespin.track.radius import RadiusMap
 from cuespin.track.sphere import Sample, learn_sphere
@@ -281,15 +281,19 @@ def marking_pixels(patch, felt, u0: int, v0: int, c, b, r: float, r_in: float, s
     inner = segment_distance(felt.shape, u0, v0, c, b) < r_in - MARK_RIM_PX
     if inner.sum() < 12:
         return None
-    m0, J = streak_model(c, b, 0.0, felt, r, u0, v0, blur_nodes(np.hypot(*b)), np.zeros(3), False, outline)
+    # streak_model's rows without the blur's (never read here: its zero
+    # columns cost two np.insert copies a frame, ~0.18 ms); the same values.
+    m0, JT = _model_rows(c, b, 0.0, felt, r, u0, v0, blur_nodes(np.hypot(*b)), np.zeros(3), False, outline)
     y = (np.asarray(patch, np.float64) - felt - m0).ravel()
-    A = J[:, 4:8]  # level and the look's three: linear at a fixed centre
+    A = JT[2:6].T  # level and the look's three: linear at a fixed centre
     use = np.ones(len(y), bool) if valid is None else np.asarray(valid, bool).ravel().copy()
     thresh = max(MARK_CONTRAST * contrast, OUTLIER_SIGMAS * max(sigma, 0.5))
     bad = np.zeros(len(y), bool)
     for _ in range(2):
         theta = np.linalg.lstsq(A[use & ~bad], y[use & ~bad], rcond=1e-9)[0]
         bad = inner.ravel() & (np.abs(y - A @ theta) > thresh)
+        if not bad.any():
+            break  # a second fit would use the first's pixels: the same theta, none again
     if bad.sum() < MARK_MIN_PX:
         return None
     bad = bad.reshape(felt.shape).astype(np.uint8)
@@ -697,6 +701,24 @@ class BallTracker:
                      outline=self.outline)
         return g if g else f
 
+    def _ball_contrast(self, f, felt, G0=None) -> float:
+        """The ball's contrast (levels) the markings rule is scaled by: the
+        background's (``Background.contrast``), or the fit's own level
+        against the felt in its window where that is larger.  Only a fit
+        with the quadratic look states that level (its ``G`` is the disc's
+        mean; the lit sphere's is its unlit part, and taking it changed a
+        blue ball with a logo on FFV1, shot 3: RMSE 0.0278 -> 0.0354 px);
+        ``G0`` given: a fit that did not converge, whose level may have run
+        off, keeps the background's.  On a lossy codec the background's can
+        be a small fraction of the ball's: a yellow ball with a highlight on
+        green felt at 480 fps, MJPG, read 8.8 where the fitted level stands
+        ~140 above the felt (benchmarks/track.py realistic seed 0 shot 12),
+        and the rule, at 0.35 of 8.8, took most of the ball for markings in
+        122 of 348 fits (docs/measurements.md, branch marks3)."""
+        quadratic = f.shade is not None and np.size(f.shade) == 3
+        own = self.pol * (f.G - float(felt.mean())) if quadratic and G0 is None and np.isfinite(f.G) else 0.0
+        return max(self.bg.contrast, own)
+
     def _unmarked(self, patch, felt, u0, v0, f, r, fit_blur, ol, foreign, G0=None, shade=True):
         """The fit ``f`` (converged or not: from where it stopped, with the
         level ``G0``, as its own may have run off) again without the
@@ -708,8 +730,8 @@ class BallTracker:
         ``shade``: the look the refit uses (:func:`fit_disc`'s; the lit
         sphere once learnt)."""
         r_in = r if ol is None else min(r, 1.0 / np.sqrt(np.linalg.eigvalsh(ol.Qm)[1]))
-        marks = marking_pixels(patch, felt, u0, v0, f.c, f.b, r, r_in, self.bg.sigma, self.bg.contrast, ol,
-                               None if foreign is None else ~foreign)
+        marks = marking_pixels(patch, felt, u0, v0, f.c, f.b, r, r_in, self.bg.sigma,
+                               self._ball_contrast(f, felt, G0), ol, None if foreign is None else ~foreign)
         if marks is None:
             return f, None, fit_blur
         valid = kept_pixels(marks, foreign)
