@@ -286,3 +286,28 @@ def test_felt_accumulator_sums_whole_frames_exactly():
     want = np.where(full_count >= 20, ref[..., 1] / np.maximum(full_count, 1), fallback)
     assert np.array_equal(felt.full, ref)
     assert np.array_equal(grey, want.astype(np.float32))
+
+
+def test_contrast_of_a_shaded_ball_is_its_middles():
+    # A ball brighter than the felt in its middle and darker at its wider
+    # rim (the projected look of a red ball on red felt on H.264,
+    # sample_scene(14, realistic)): the rim's pixels are strong but lie on
+    # the felt's other side.  Counted with the middle's, the contrast read
+    # 6 where the middle departs by ~125; the detection threshold, a quarter
+    # of it, let a pocket through as the ball, 545 px off.
+    from cuespin.track.background import learn_background
+
+    rng = np.random.default_rng(14)
+    n, H, W, r, middle, rim = 9, 80, 440, 10.0, 120.0, -30.0
+    vv, uu = np.mgrid[0:H, 0:W]
+    texture = rng.normal(100.0, 1.0, (H, W))
+    samples = []
+    for k in range(n):
+        d = np.hypot(uu - (40.0 + 45.0 * k), vv - 40.0)
+        ball = np.where(d < 0.5 * r, middle, np.where(d < r, rim, 0.0))
+        samples.append(texture + ball + rng.normal(0.0, 0.5, (H, W)))
+    bg = learn_background(np.clip(np.rint(samples), 0, 255).astype(np.uint8), r)
+    assert bg.polarity == 1
+    # The middle's departure, less the texture's and the rim's blur at the
+    # middle's edge: measured 120.0 here, 2.0 when the rim's pixels counted.
+    assert bg.contrast > 0.5 * middle, bg.contrast

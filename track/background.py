@@ -277,7 +277,24 @@ def learn_background(samples: np.ndarray, radius_px, where: np.ndarray | None = 
                          radii.r_min)  # a box every ball fills
     P = polarity * S  # ball is high in P
     felt0 = felt_nearest(P, felt_band(sigma), polarity * ref)
-    contrast = float(np.percentile((P.max(axis=0) - felt0)[strong], 75)) if strong.any() else 0.0
+    # Where the ball came and went: samples span a good part of its contrast
+    # (a resting ball's rim spreads by the codec's error at an edge).  The
+    # scale is the largest spans: a lossy codec smooths the noise the spread
+    # test is set by (MJPG, 4.5 per channel: sigma read as 1.2) but not its
+    # error at edges, so the rims of balls at rest spread too.
+    span = P.max(axis=0) - felt0
+    swept = np.zeros((H, W), bool)
+    if strong.any():
+        swept[ys, xs] = span > SWEPT_FRACTION * np.percentile(span[strong], SWEPT_PERCENTILE)
+    # The contrast is the ball's lit middle among the swept pixels only: on
+    # MJPG the pockets' and sights' flicker, the ball's ringing halo (the far
+    # side of the felt) and the dilated path's rim passed as moved, half of
+    # them within 11 levels of the felt, and the 75th percentile over all fell
+    # to 8.8 where the ball departs ~190 (realistic seed 0 shot 12, MJPG: 2295
+    # pixels, 269 swept; shot 7: 110 against 400).  On FFV1: shots 12 and 7
+    # 138 -> 141, 135 -> 139; shot 3 (a blue logo ball on blue) 72 -> 90.
+    ball = strong & swept[ys, xs]
+    contrast = float(np.percentile(span[ball], 75)) if ball.any() else 0.0
     # Felt samples lie within noise of the felt; a pixel partly covered by
     # the ball lies between, so the band is set by the noise, not the contrast.
     band = felt_band(sigma)
@@ -297,16 +314,6 @@ def learn_background(samples: np.ndarray, radius_px, where: np.ndarray | None = 
         felt[~near] = felt_m
         keep[:, ~near] = keep_m
     image[ys, xs] = polarity * felt
-    # Where the ball came and went: samples span a good part of its contrast
-    # (a resting ball's rim spreads by the codec's error at an edge).  The
-    # scale is the largest spans, not ``contrast``: a lossy codec smooths the
-    # noise the spread test is set by (MJPG, 4.5 per channel: sigma read as
-    # 1.2) but not its error at edges, so the rims of balls at rest spread
-    # too and pulled ``contrast`` down to 38 where the ball's span is ~290.
-    span = P.max(axis=0) - felt0
-    swept = np.zeros((H, W), bool)
-    if strong.any():
-        swept[ys, xs] = span > SWEPT_FRACTION * np.percentile(span[strong], SWEPT_PERCENTILE)
     # The hidden-felt window must be one the largest ball cannot fill.
     image = fill_unseen(image, hidden_ball(image, swept, polarity, contrast, sigma, radii.r_max))
     count = keep.sum(axis=0)

@@ -15,7 +15,7 @@ import numpy as np
 
 from cuespin.track.background import DETECT_SIGMAS, Background, box_size
 from cuespin.track.colour import GREY, Projection
-from cuespin.track.model import SphereLook, blur_nodes, fit_disc, streak_from_moments, streak_model
+from cuespin.track.model import SphereLook, _model_rows, blur_nodes, fit_disc, streak_from_moments, streak_model
 from cuespin.track.outline import OUTLINE_REFIT_PX, OutlineCache, is_similarity
 from cuespin.track.radius import RadiusMap
 from cuespin.track.sphere import Sample, learn_sphere
@@ -60,6 +60,22 @@ FOREIGN_GROW_PX = 3
 # ferrule, 106 levels off the felt, scored 34 at the window's edge against
 # the ball's 33, and was tracked for 44 frames after the strike.
 SCORE_CAP = 1.0
+# A stick is not the ball: the pixels departing from the felt by more than
+# the foreign threshold (foreign_threshold) that join the blob's core (within
+# a radius of its peak) and run out of the window the ball could fill (its
+# radius, half its expected blur and STICK_GAP_PX for the optics' blur), in
+# a band narrower than STICK_WIDTH_RADII ball radii (the width of a uniform
+# band with their second moments across it), are the cue's shaft.  A ball,
+# even with the cue's tip at its rear, fills the window's middle a diameter
+# wide.  Measured on sample_scenes(6, 6, realistic, FFV1)[0] (blue on blue,
+# a tan cue darker than the felt in the tracker's combination, as the ball):
+# the felt learnt under the still-looking shaft left a 35 px stretch behind
+# the tip, 0.6 radii wide, departing 40-70 levels (threshold 32), tracked as
+# the ball for 52 frames, 5-9 radii off.
+STICK_GAP_PX = 4.0
+STICK_WIDTH_RADII = 1.0
+# The full search looks past at most this many sticks for the ball.
+STICK_SKIPS = 8
 # A fit is tried again from the centroid of the departure from the felt in
 # either direction when that lies more than this many radii from its centre
 # (red on red in a low light, sample_scenes(6, 7, realistic, MJPG)[5]: the
@@ -265,15 +281,19 @@ def marking_pixels(patch, felt, u0: int, v0: int, c, b, r: float, r_in: float, s
     inner = segment_distance(felt.shape, u0, v0, c, b) < r_in - MARK_RIM_PX
     if inner.sum() < 12:
         return None
-    m0, J = streak_model(c, b, 0.0, felt, r, u0, v0, blur_nodes(np.hypot(*b)), np.zeros(3), False, outline)
+    # streak_model's rows without the blur's (never read here: its zero
+    # columns cost two np.insert copies a frame, ~0.18 ms); the same values.
+    m0, JT = _model_rows(c, b, 0.0, felt, r, u0, v0, blur_nodes(np.hypot(*b)), np.zeros(3), False, outline)
     y = (np.asarray(patch, np.float64) - felt - m0).ravel()
-    A = J[:, 4:8]  # level and the look's three: linear at a fixed centre
+    A = JT[2:6].T  # level and the look's three: linear at a fixed centre
     use = np.ones(len(y), bool) if valid is None else np.asarray(valid, bool).ravel().copy()
     thresh = max(MARK_CONTRAST * contrast, OUTLIER_SIGMAS * max(sigma, 0.5))
     bad = np.zeros(len(y), bool)
     for _ in range(2):
         theta = np.linalg.lstsq(A[use & ~bad], y[use & ~bad], rcond=1e-9)[0]
         bad = inner.ravel() & (np.abs(y - A @ theta) > thresh)
+        if not bad.any():
+            break  # a second fit would use the first's pixels: the same theta, none again
     if bad.sum() < MARK_MIN_PX:
         return None
     bad = bad.reshape(felt.shape).astype(np.uint8)
@@ -319,6 +339,31 @@ def foreign_near(D: np.ndarray, u0: int, v0: int, c, b, r_out: float, sigma: flo
         return None
     return foreign_pixels(D, beyond_ball(D.shape, u0, v0, c, b, r_out), sigma, contrast)
 
+
+def stick_through(D: np.ndarray, u0: int, v0: int, c, r: float, thresh: float) -> bool:
+    """Whether a ball-positive window ``D`` (top-left ``(u0, v0)``, its
+    border where the ball can no longer reach) shows a stick through its
+    blob at ``c`` (px; ``STICK_GAP_PX``'s rule): the pixels departing by
+    more than ``thresh`` that join those within ``r`` (px, the ball's
+    radius) of ``c`` reach the border, in a band under ``STICK_WIDTH_RADII``
+    radii wide."""
+    on = (D > thresh).astype(np.uint8)
+    n, labels = cv2.connectedComponents(on, connectivity=8)
+    if n < 2:
+        return False
+    h, w = D.shape
+    ys, xs = np.mgrid[v0:v0 + h, u0:u0 + w]
+    core = np.unique(labels[(np.hypot(xs - c[0], ys - c[1]) <= r) & (labels > 0)])
+    if not len(core):
+        return False
+    blob = np.isin(labels, core)
+    if not (blob[0].any() or blob[-1].any() or blob[:, 0].any() or blob[:, -1].any()):
+        return False  # the blob ends where a ball could: not a stick through it
+    y, x = np.nonzero(blob)
+    if len(x) < 3:
+        return False
+    lam = np.linalg.eigvalsh(np.cov(np.c_[x, y].T, bias=True))
+    return bool(np.sqrt(12 * max(lam[0], 0.0)) < STICK_WIDTH_RADII * r)  # a uniform band's width
 
 def centroid(D: np.ndarray, u0: int, v0: int, c0, radius: float, n_iter: int = 3) -> np.ndarray:
     """:func:`cuespin.track.model.moments`, compiled
@@ -505,9 +550,22 @@ class BallTracker:
         _, val, _, loc = cv2.minMaxLoc(sm)
         return D, sm, val, np.array([loc[0] + u0, loc[1] + v0], float)
 
-    def _full_search(self, frame):
+    def _stick(self, frame, loc, blur=None) -> bool:
+        """Whether the blob at ``loc`` (px) is a stick (:func:`stick_through`:
+        the cue's shaft), not the ball; ``blur`` (px) the streak expected
+        there (None: none, the ball at rest)."""
+        r = self.radii.at(loc)
+        half = int(np.ceil(r + STICK_GAP_PX + (0.0 if blur is None else 0.5 * np.hypot(*blur))))
+        u0, v0 = max(int(round(loc[0])) - half, 0), max(int(round(loc[1])) - half, 0)
+        u1, v1 = min(int(round(loc[0])) + half + 1, self.W), min(int(round(loc[1])) + half + 1, self.H)
+        D = self.pol * (self.proj(frame, v0, v1, u0, u1) - self.bg.image[v0:v1, u0:u1])
+        return stick_through(D, u0, v0, loc, r, foreign_threshold(self.bg.sigma, self.bg.contrast))
+
+    def _full_search(self, frame, blur=None):
         """The most ball-like blob (:meth:`_score`) on the playing surface,
-        each pixel scored at its own scale of the radius map."""
+        each pixel scored at its own scale of the radius map, that is not a
+        stick (:meth:`_stick`, for the streak ``blur`` (px) expected; None:
+        none)."""
         D = self.pol * (self.proj(frame) - self.bg.image)
         if len(self.radii.scales) == 1:
             sm = self._score(D)
@@ -528,15 +586,25 @@ class BallTracker:
                 np.copyto(sm[v0:v1, u0:u1], part[v0 - V0:v1 - V0, u0 - U0:u1 - U0], where=on)
         if self.mask is not None:
             sm[~self.mask] = -np.inf
-        _, val, _, at = cv2.minMaxLoc(sm)
-        loc = np.array(at, float)
-        if val < self.thresh:
+        blobs = []  # the two best blobs that are not sticks (the cue's shaft), value and place
+        for _ in range(STICK_SKIPS + 2):
+            _, val, _, at = cv2.minMaxLoc(sm)
+            if val < self.thresh:
+                break
+            loc = np.array(at, float)
+            if not self._stick(frame, loc, blur):
+                blobs.append((val, loc))
+                if len(blobs) == 2:
+                    break
+            # The next blob away from this one.
+            mask = np.zeros_like(sm, dtype=np.uint8)
+            cv2.circle(mask, (int(loc[0]), int(loc[1])), int(2.5 * self.radii.at(loc) + 4), 1, -1)
+            sm[mask.astype(bool)] = -np.inf
+        if not blobs:
             return None, NO_BALL
+        val, loc = blobs[0]
+        val2, at2 = blobs[1] if len(blobs) == 2 else (-np.inf, None)
         # A second ball-like blob away from the first: flag, don't guess.
-        mask = np.zeros_like(sm, dtype=np.uint8)
-        cv2.circle(mask, (int(loc[0]), int(loc[1])), int(2.5 * self.radii.at(loc) + 4), 1, -1)
-        sm[mask.astype(bool)] = -np.inf
-        _, val2, _, at2 = cv2.minMaxLoc(sm)
         if val2 >= max(self.thresh, 0.5 * val):
             # Two blobs.  Before the strike the ball rests while the cue
             # moves: the one that stayed put since the last frame is the ball.
@@ -571,10 +639,10 @@ class BallTracker:
             k_box = self.boxes[j][0]
             if u1 - u0 > k_box and v1 - v0 > k_box:
                 _, _, val, at = self._peak(frame, u0, v0, u1, v1, j)
-                if val >= self.thresh:
+                if val >= self.thresh and not self._stick(frame, at, blur):
                     loc = at
         if loc is None:
-            loc, status = self._full_search(frame)
+            loc, status = self._full_search(frame, blur)
             if loc is None:
                 if self.was_partial_edge:
                     self.gone = True
@@ -598,9 +666,30 @@ class BallTracker:
         obs = self._refine(frame, loc, blur)
         if obs.status != OK and blur is not None and not self.history:
             obs = self._refine(frame, loc, None)
+        if obs.status == OK and self.mask is not None and not self._on_surface(obs.uv):
+            # The search's peak lies on the playing surface but the fit left
+            # it: no ball's centre is there (a ball drawn rolling over the
+            # cushion, sample_scene(14, realistic, H.264): the fit 3.3 px,
+            # 0.28 radii, off where the felt's model no longer holds).
+            self.last_fit = self.last_patch = None
+            return _lost(NO_BALL)
         if obs.status == OK:
             self.history = (self.history + [(k, obs.uv)])[-2:]
         return obs
+
+    def _window_level(self, D, felt, u0: int, v0: int, c, r: float) -> float:
+        """A fit's start level (projected levels) from the window: the felt's
+        mean plus the 75th percentile of the departure ``D`` within ``r`` (px)
+        of ``c``, the learnt contrast's statistic taken in this frame."""
+        vv, uu = np.mgrid[v0:v0 + D.shape[0], u0:u0 + D.shape[1]]
+        inside = np.hypot(uu - c[0], vv - c[1]) <= r
+        dep = float(np.percentile(D[inside], 75)) if inside.any() else 0.0
+        return float(felt.mean()) + self.pol * max(dep, 1.0)
+
+    def _on_surface(self, uv) -> bool:
+        """The centre ``uv`` (px) lies where the search mask lets a ball's centre be."""
+        u, v = int(round(uv[0])), int(round(uv[1]))
+        return 0 <= v < self.H and 0 <= u < self.W and bool(self.mask[v, u])
 
     def _max_blur_px(self, frame, loc, r: float) -> float:
         """Longest streak (px) the exposure allows, from the extent of the
@@ -854,6 +943,14 @@ class BallTracker:
                 f = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur, shade=shade,
                              outline=ol)
                 blurs.insert(0, (blur, fit_blur))
+            if not f:
+                # Started from the window's own level: the learnt contrast
+                # is the track's, not this frame's (H.264 of
+                # sample_scene(12, realistic): 3 frames failed from 188, the
+                # ball's 75th percentile over the samples, and converged
+                # from their own).
+                f = fit_disc(patch, felt, u0, v0, c, r, self._window_level(D, felt, u0, v0, c, r_ball),
+                             b0=blur, fit_blur=fit_blur, shade=shade, outline=ol)
             if f and isinstance(shade, SphereLook):
                 f = self._sphere_checked(patch, felt, u0, v0, f, c, r, G0, blurs, ol)
             if not f and isinstance(shade, SphereLook):

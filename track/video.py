@@ -492,7 +492,10 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         # The lit sphere learnt again against the felt (BallTracker.relearn_sphere),
         # taken where at least SPHERE_FELT_FRAMES frames showed it; the frames
         # are then refitted with it rather than shifted.
-        look = tracker.relearn_sphere(felt.felt(bg.image, proj, SPHERE_FELT_FRAMES)) if patches else None
+        # (Only with the lit sphere: relearn_sphere does nothing without it,
+        # and the felt's whole-frame passes cost ~50 ms a 1280 x 640 video.)
+        look = tracker.relearn_sphere(felt.felt(bg.image, proj, SPHERE_FELT_FRAMES)) \
+            if patches and isinstance(tracker.shade, SphereLook) else None
         for kk, (pu, pv, ph, pw, c, b, G, fb, shade, outline, foreign, marks) in fits:
             old = bg.image[pv:pv + ph, pu:pu + pw]
             new = better[pv:pv + ph, pu:pu + pw]
