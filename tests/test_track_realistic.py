@@ -101,11 +101,10 @@ NOT_YET = {
                  "the set 97.98% of its frames on open cloth",
     (7, "FFV1"): "issue 10: shot 5 (red on red in a low light): 29 of 81 frames found, the set 97.59% of its "
                  "frames on open cloth",
-    (6, "FFV1"): "issue 10: shot 0 (a blue ball with dots on blue felt, 120 fps, a cue): 52 found centres "
-                 "5-9.4 radii off, frames 12-81, all at one spot of the cue's shaft (646, 445): the tan cue is "
-                 "darker than the felt in the tracker's combination, as the ball is, and a shaft moving along "
-                 "its own line looks still there; frames 0-6 saw two blobs, 12-81 track the shaft (the same "
-                 "on 5d53d40)",
+    (6, "FFV1"): "issue 10: found in 1968 of 1988 frames on open cloth (98.99%), no centre off; shot 0 (a blue "
+                 "ball with dots on blue felt, 120 fps, a cue) loses frames 0-11 to the cue's shaft, whose "
+                 "departing stretch is still inside the ball's window there (two blobs, then the shaft picked "
+                 "once); the stick rule (STICK_GAP_PX) took its 52 centres 5-9.4 radii off away",
 }
 
 
@@ -217,3 +216,42 @@ def test_red_ball_on_red_felt_in_h264_reports_no_false_centre(tmp_path):
     err = np.hypot(*(tr.uv - np.c_[truth.uc_px.values, truth.vc_px.values]).T)[tr.ok] / tr.radius_px
     assert err.size and err.max() < MAX_ERR_RADII, f"a found centre {err.max():.2f} radii off"
     assert tr.ok.sum() >= 65, tr.status_counts()
+
+
+def test_cue_shaft_is_not_the_ball():
+    # sample_scenes(6, 6, realistic, FFV1)[0] before the strike: a blue ball
+    # with dots on blue felt and a tan cue, darker than the felt in the
+    # tracker's combination as the ball is (the combination track_video
+    # learnt on this shot, measured), the shaft departing 50-70 levels and
+    # the ball ~30.  With the shaft ahead of the ball in the search, the
+    # search saw two blobs in every frame; with the ball hidden (its window
+    # copied into the felt), the shaft alone was taken for the ball.
+    from cuespin.track.background import Background
+    from cuespin.track.colour import Projection
+    from cuespin.track.tracker import NO_BALL, OK, BallTracker
+    from cuespin.track.video import search_mask
+
+    scene = sample_scenes(1, 6, look="realistic", codec="FFV1")[0]
+    assert scene.render["cue"]
+    scene.render["max_duration"] = 0.25  # at rest, the cue drawn back and coming in (strike at 0.31 s)
+    fr = FrameRenderer(scene)
+    proj = Projection(w=np.array([-0.0574, 0.7334, -0.6759], np.float32), offset=71.16)
+    felt = proj(fr.background)
+    cam, R = scene.camera, scene.physics.R
+    r = R * cam.px_per_m(scene.truth.x0)
+    mask = search_mask(cam, scene.table, R, felt.shape)  # the playing surface, as track_video's
+    frames = list(fr.frames())
+    for k in (0, 20, 29):
+        frame, truth = frames[k], fr.truth.uvc[k]
+        bg = Background(image=felt, sigma=scene.render["noise_sigma"], polarity=-1, contrast=30.0, n_samples=9,
+                        path_pixels=0, weak_samples=np.zeros(9, bool))
+        loc, status = BallTracker(bg, r, 0.5, projection=proj, search_mask=mask)._full_search(frame)
+        assert status == OK and np.hypot(*(loc - truth)) < 0.5 * r, (k, loc, status)  # a blob, refined later
+        # The ball hidden: the cue alone is no ball.
+        hidden = felt.copy()
+        u, v, h = int(round(truth[0])), int(round(truth[1])), int(2 * r)
+        hidden[v - h:v + h + 1, u - h:u + h + 1] = proj(frame)[v - h:v + h + 1, u - h:u + h + 1]
+        alone = Background(image=hidden, sigma=bg.sigma, polarity=-1, contrast=30.0, n_samples=9, path_pixels=0,
+                           weak_samples=np.zeros(9, bool))
+        loc, status = BallTracker(alone, r, 0.5, projection=proj, search_mask=mask)._full_search(frame)
+        assert status == NO_BALL, (k, loc, status)

@@ -59,6 +59,22 @@ FOREIGN_GROW_PX = 3
 # red ball on red felt in H.264 scores 0.26 of its contrast (28 of 106,
 # sample_scene(14, realistic)) and was lost in most moving frames.
 SCORE_FRACTION = 0.3
+# A stick is not the ball: the pixels departing from the felt by more than
+# the foreign threshold (foreign_threshold) that join the blob's core (within
+# a radius of its peak) and run out of the window the ball could fill (its
+# radius, half its expected blur and STICK_GAP_PX for the optics' blur), in
+# a band narrower than STICK_WIDTH_RADII ball radii (the width of a uniform
+# band with their second moments across it), are the cue's shaft.  A ball,
+# even with the cue's tip at its rear, fills the window's middle a diameter
+# wide.  Measured on sample_scenes(6, 6, realistic, FFV1)[0] (blue on blue,
+# a tan cue darker than the felt in the tracker's combination, as the ball):
+# the felt learnt under the still-looking shaft left a 35 px stretch behind
+# the tip, 0.6 radii wide, departing 40-70 levels (threshold 32), tracked as
+# the ball for 52 frames, 5-9 radii off.
+STICK_GAP_PX = 4.0
+STICK_WIDTH_RADII = 1.0
+# The full search looks past at most this many sticks for the ball.
+STICK_SKIPS = 8
 # A fit is tried again from the centroid of the departure from the felt in
 # either direction when that lies more than this many radii from its centre
 # (red on red in a low light, sample_scenes(6, 7, realistic, MJPG)[5]: the
@@ -323,6 +339,31 @@ def foreign_near(D: np.ndarray, u0: int, v0: int, c, b, r_out: float, sigma: flo
     return foreign_pixels(D, beyond_ball(D.shape, u0, v0, c, b, r_out), sigma, contrast)
 
 
+def stick_through(D: np.ndarray, u0: int, v0: int, c, r: float, thresh: float) -> bool:
+    """Whether a ball-positive window ``D`` (top-left ``(u0, v0)``, its
+    border where the ball can no longer reach) shows a stick through its
+    blob at ``c`` (px; ``STICK_GAP_PX``'s rule): the pixels departing by
+    more than ``thresh`` that join those within ``r`` (px, the ball's
+    radius) of ``c`` reach the border, in a band under ``STICK_WIDTH_RADII``
+    radii wide."""
+    on = (D > thresh).astype(np.uint8)
+    n, labels = cv2.connectedComponents(on, connectivity=8)
+    if n < 2:
+        return False
+    h, w = D.shape
+    ys, xs = np.mgrid[v0:v0 + h, u0:u0 + w]
+    core = np.unique(labels[(np.hypot(xs - c[0], ys - c[1]) <= r) & (labels > 0)])
+    if not len(core):
+        return False
+    blob = np.isin(labels, core)
+    if not (blob[0].any() or blob[-1].any() or blob[:, 0].any() or blob[:, -1].any()):
+        return False  # the blob ends where a ball could: not a stick through it
+    y, x = np.nonzero(blob)
+    if len(x) < 3:
+        return False
+    lam = np.linalg.eigvalsh(np.cov(np.c_[x, y].T, bias=True))
+    return bool(np.sqrt(12 * max(lam[0], 0.0)) < STICK_WIDTH_RADII * r)  # a uniform band's width
+
 def centroid(D: np.ndarray, u0: int, v0: int, c0, radius: float, n_iter: int = 3) -> np.ndarray:
     """:func:`cuespin.track.model.moments`, compiled
     (:func:`cuespin.track.window.centroid`)."""
@@ -508,9 +549,22 @@ class BallTracker:
         _, val, _, loc = cv2.minMaxLoc(sm)
         return D, sm, val, np.array([loc[0] + u0, loc[1] + v0], float)
 
-    def _full_search(self, frame):
+    def _stick(self, frame, loc, blur=None) -> bool:
+        """Whether the blob at ``loc`` (px) is a stick (:func:`stick_through`:
+        the cue's shaft), not the ball; ``blur`` (px) the streak expected
+        there (None: none, the ball at rest)."""
+        r = self.radii.at(loc)
+        half = int(np.ceil(r + STICK_GAP_PX + (0.0 if blur is None else 0.5 * np.hypot(*blur))))
+        u0, v0 = max(int(round(loc[0])) - half, 0), max(int(round(loc[1])) - half, 0)
+        u1, v1 = min(int(round(loc[0])) + half + 1, self.W), min(int(round(loc[1])) + half + 1, self.H)
+        D = self.pol * (self.proj(frame, v0, v1, u0, u1) - self.bg.image[v0:v1, u0:u1])
+        return stick_through(D, u0, v0, loc, r, foreign_threshold(self.bg.sigma, self.bg.contrast))
+
+    def _full_search(self, frame, blur=None):
         """The most ball-like blob (:meth:`_score`) on the playing surface,
-        each pixel scored at its own scale of the radius map."""
+        each pixel scored at its own scale of the radius map, that is not a
+        stick (:meth:`_stick`, for the streak ``blur`` (px) expected; None:
+        none)."""
         D = self.pol * (self.proj(frame) - self.bg.image)
         if len(self.radii.scales) == 1:
             sm = self._score(D)
@@ -531,15 +585,25 @@ class BallTracker:
                 np.copyto(sm[v0:v1, u0:u1], part[v0 - V0:v1 - V0, u0 - U0:u1 - U0], where=on)
         if self.mask is not None:
             sm[~self.mask] = -np.inf
-        _, val, _, at = cv2.minMaxLoc(sm)
-        loc = np.array(at, float)
-        if val < self.thresh:
+        blobs = []  # the two best blobs that are not sticks (the cue's shaft), value and place
+        for _ in range(STICK_SKIPS + 2):
+            _, val, _, at = cv2.minMaxLoc(sm)
+            if val < self.thresh:
+                break
+            loc = np.array(at, float)
+            if not self._stick(frame, loc, blur):
+                blobs.append((val, loc))
+                if len(blobs) == 2:
+                    break
+            # The next blob away from this one.
+            mask = np.zeros_like(sm, dtype=np.uint8)
+            cv2.circle(mask, (int(loc[0]), int(loc[1])), int(2.5 * self.radii.at(loc) + 4), 1, -1)
+            sm[mask.astype(bool)] = -np.inf
+        if not blobs:
             return None, NO_BALL
+        val, loc = blobs[0]
+        val2, at2 = blobs[1] if len(blobs) == 2 else (-np.inf, None)
         # A second ball-like blob away from the first: flag, don't guess.
-        mask = np.zeros_like(sm, dtype=np.uint8)
-        cv2.circle(mask, (int(loc[0]), int(loc[1])), int(2.5 * self.radii.at(loc) + 4), 1, -1)
-        sm[mask.astype(bool)] = -np.inf
-        _, val2, _, at2 = cv2.minMaxLoc(sm)
         if val2 >= max(self.thresh, 0.5 * val):
             # Two blobs.  Before the strike the ball rests while the cue
             # moves: the one that stayed put since the last frame is the ball.
@@ -574,10 +638,10 @@ class BallTracker:
             k_box = self.boxes[j][0]
             if u1 - u0 > k_box and v1 - v0 > k_box:
                 _, _, val, at = self._peak(frame, u0, v0, u1, v1, j)
-                if val >= self.thresh:
+                if val >= self.thresh and not self._stick(frame, at, blur):
                     loc = at
         if loc is None:
-            loc, status = self._full_search(frame)
+            loc, status = self._full_search(frame, blur)
             if loc is None:
                 if self.was_partial_edge:
                     self.gone = True
