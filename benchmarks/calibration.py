@@ -36,8 +36,9 @@ camera built from the true values but one.
 With ``--auto``, the camera is what ``calibrate_video`` writes for the frame
 (:func:`calibrate_frame`: overhead, the focal length from the still balls'
 shapes; ``--no-balls`` for the nominal one) and so are the perturbed cameras
-(``--no-kappa-camera`` leaves out the one for k1's error; ``--corner-sigma``
-states the corners' error instead of calibrate's floored one).
+(``--no-kappa-camera`` leaves out the one for k1's error, and with the
+jackknife's joint moves, each of which moves k1, all of them; ``--corner-sigma``
+states the corners' error instead of the jackknife's, one coordinate at a time).
 
 Usage: python benchmarks/calibration.py [--n 40] [--seed 0] [--track-px 0.03] [--auto] [--diagnose] [--stated] [--shaded]
 """
@@ -336,7 +337,7 @@ def main():
     ap.add_argument("--no-balls", action="store_true",
                     help="--auto: without the focal length from the balls' shapes (the nominal one overhead)")
     ap.add_argument("--corner-sigma", type=float, default=None, metavar="PX",
-                    help="--auto: the corners' stated error (default: calibrate's, floored at 0.2 px)")
+                    help="--auto: the corners' stated error (default: calibrate's, the edges' jackknife)")
     ap.add_argument("--frame-seed", type=int, default=0,
                     help="--auto: another draw of each frame's noise (--stated's seeds), the same shots")
     ap.add_argument("--no-kappa-camera", action="store_true",

@@ -77,7 +77,8 @@ class Scene:
     takes no part in comparisons.  ``calibration`` holds the cameras of the
     file's ``calibration.perturbed`` list (``cuespin calibrate`` writes them:
     the camera re-solved with one corner coordinate moved by its stated
-    error, each in turn), from which the recovery carries the calibration's
+    error, each in turn, or with the corners and k1 moved jointly along their
+    covariance's directions), from which the recovery carries the calibration's
     error into its own (empty: the camera is taken as exact).
     """
 

@@ -100,11 +100,17 @@ class Calibration:
         Automatic detection only: ``noses`` or ``felt`` (:class:`Detection`).
     corner_sigma_px : float or None
         Error of each corner coordinate (px) assumed (clicked: ``--corner-error``,
-        default 1; automatic: from the edges' scatter).
+        default 1; automatic: the RMS over the 8 coordinates of the edges'
+        jackknife error, :func:`corner_covariance`).
     perturbed : tuple of Camera
-        The camera re-solved with each of the 8 corner coordinates moved by
-        ``corner_sigma_px`` in turn (:func:`perturbed_cameras`), written to the
-        scene file's ``calibration.perturbed`` for the recovery's errors.
+        The cameras of the calibration's sensitivity set (:func:`perturbed_cameras`):
+        with a corner error given, each of the 8 corner coordinates moved by
+        ``corner_sigma_px`` in turn (and one for k1's error); for automatic
+        corners, the 9 joint moves of the corners and k1 whose outer products
+        sum to their jackknife covariance (:func:`covariance_moves`); then one
+        for the focal length's error where it was not fixed by the corners.
+        Written to the scene file's ``calibration.perturbed`` for the
+        recovery's errors.
     """
 
     camera: Camera

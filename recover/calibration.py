@@ -5,14 +5,17 @@ corners are (a corner clicked 1 px off put v0 10-30 stated errors off,
 ``docs/calibration.md``).  The tracker's errors know nothing of it, so the
 recovery states it separately: the same track is converted to table metres
 through each camera of the calibration's sensitivity set (the camera
-re-solved with one corner coordinate moved by its stated error, in turn;
-``cuespin calibrate`` writes them) and refitted, keeping every decision the
+re-solved with one corner coordinate moved by its stated error in turn, or,
+for automatic corners, with the corners and k1 moved jointly along each of
+the 9 directions of their jackknife covariance; ``cuespin calibrate`` writes
+them) and refitted, keeping every decision the
 fit through the calibrated camera made (sliding or rolling, sliding ended,
 the segmentation's strike and rest, the paper's path shape and root:
 recover.estimate.Decided), so the spread is the camera's alone and never a
 model that a perturbed camera tips the other way; to first order, with the
-corners' errors independent, the calibration's variance of an answer ``q`` is
-``sum_k (q_k - q)^2``.
+moves' outer products summing to the corners' covariance (independent
+coordinates, or the joint moves of a covariance), the calibration's variance
+of an answer ``q`` is ``sum_k (q_k - q)^2``.
 """
 
 from __future__ import annotations
