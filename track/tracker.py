@@ -781,7 +781,7 @@ class BallTracker:
             return b.rms < a.rms
         return g.rms < f.rms
 
-    def _sphere_checked(self, patch, felt, u0, v0, f, c, r, G0, blurs, ol):
+    def _sphere_checked(self, patch, felt, u0, v0, f, c, r, G0, blurs, ol, fit_blur):
         """The lit sphere's fit ``f`` (from ``c``), or, when its diffuse
         coefficient is under ``SPHERE_A_MIN`` of the voting frames' (the
         sphere's second minimum towards the light), the sphere fitted again
@@ -790,20 +790,22 @@ class BallTracker:
         ``blurs``: the (blur, whether fitted) pairs the quadratic look
         tries, the first that converges kept (the streak measured from the
         moments, then the prediction's: a resting shaded ball's moments
-        make a streak its fit may not converge with)."""
+        make a streak its fit may not converge with).  Returns the fit and
+        whether its blur was fitted (``fit_blur``: that of ``f``), which the
+        refits after it (markings, foreign pixels) and the track keep."""
         a = self._sphere_a
         if a is None or f.shade[0] * a >= SPHERE_A_MIN * a * a:
-            return f
-        for blur, fit_blur in blurs:
-            q = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur, shade=True, outline=ol)
+            return f, fit_blur
+        for blur, q_fit_blur in blurs:
+            q = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=q_fit_blur, shade=True, outline=ol)
             if q:
-                g = fit_disc(patch, felt, u0, v0, q.c, r, G0, b0=q.b, fit_blur=fit_blur, shade=self.shade,
+                g = fit_disc(patch, felt, u0, v0, q.c, r, G0, b0=q.b, fit_blur=q_fit_blur, shade=self.shade,
                              outline=ol)
                 # When the sphere does not converge there either, the
                 # quadratic look, as for a frame whose sphere fit fails.
                 g = g if g else q
-                return g if g.rms < f.rms else f
-        return f
+                return (g, q_fit_blur) if g.rms < f.rms else (f, fit_blur)
+        return f, fit_blur
 
     def _learn_look(self, patch, felt, u0, v0, f_shaded, r, G0, blur, fit_blur, marks=None, foreign=None):
         """One frame's vote on the look: the disc fit's residual sum against
@@ -878,6 +880,12 @@ class BallTracker:
         look, _ = learn_sphere(samples, self.r, self._sphere_outline, start=self.shade)
         if look is not None:
             self.shade = look
+            # The second minimum's check (SPHERE_A_MIN) against the new
+            # look's diffuse coefficient, not the first look's.
+            diffuse = [g.shade[0] for g in (fit_disc(s.patch, s.felt, s.u0, s.v0, s.c, self.r, s.G, b0=s.b,
+                                                     fit_blur=s.fit_blur, shade=look, valid=s.valid,
+                                                     outline=self._sphere_outline) for s in samples) if g]
+            self._sphere_a = float(np.median(diffuse)) if diffuse else None
         return look
 
     def _departure_centre(self, frame, c, r_ball: float) -> np.ndarray:
@@ -951,7 +959,7 @@ class BallTracker:
                 f = fit_disc(patch, felt, u0, v0, c, r, self._window_level(D, felt, u0, v0, c, r_ball),
                              b0=blur, fit_blur=fit_blur, shade=shade, outline=ol)
             if f and isinstance(shade, SphereLook):
-                f = self._sphere_checked(patch, felt, u0, v0, f, c, r, G0, blurs, ol)
+                f, fit_blur = self._sphere_checked(patch, felt, u0, v0, f, c, r, G0, blurs, ol, fit_blur)
             if not f and isinstance(shade, SphereLook):
                 # The sphere's fit failed (2 of 37 frames of
                 # sample_scenes(2, 5, realistic, MJPG)[1], at the strike):
