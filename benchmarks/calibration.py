@@ -341,7 +341,8 @@ def main():
     ap.add_argument("--frame-seed", type=int, default=0,
                     help="--auto: another draw of each frame's noise (--stated's seeds), the same shots")
     ap.add_argument("--no-kappa-camera", action="store_true",
-                    help="--auto: without the perturbed camera for k1's error")
+                    help="--auto: without the perturbed camera for k1's error (with the jackknife's joint "
+                         "moves, each of which moves k1: without all of them)")
     ap.add_argument("--propagate", action="store_true",
                     help="add the calibration's error (8 perturbed cameras) to the stated errors")
     ap.add_argument("--k1", type=float, default=-0.25, help="--diagnose: the lens's k1")
