@@ -191,7 +191,12 @@ def test_red_ball_on_red_felt_in_low_light_reports_no_false_centre(tmp_path):
 
 
 @pytest.mark.slow
-def test_red_ball_on_red_felt_in_h264_reports_no_false_centre(tmp_path):
+@pytest.mark.parametrize("codec, suffix, floor", [
+    # Floors measured with the threshold from the ball's own score (thresh):
+    # H.264 70 and FFV1 66 of 120 found (the ball on the cloth ~70 frames);
+    # with the threshold from the swept contrast they were 47 and 32.
+    ("H264", ".mp4", 65), ("FFV1", ".avi", 62)])
+def test_red_ball_on_red_felt_in_h264_reports_no_false_centre(tmp_path, codec, suffix, floor):
     # sample_scene(14, realistic) in H.264 (yuv420p), 120 frames: a red ball
     # on red felt whose middle is brighter than the felt and rim darker in
     # the learnt channel, rolling over the cushion and out of the frame at
@@ -208,14 +213,14 @@ def test_red_ball_on_red_felt_in_h264_reports_no_false_centre(tmp_path):
     # more than 1.1 px.
     from cuespin.data_gen.sampler import sample_scene
 
-    scene = sample_scene(14, look="realistic", codec="H264")
-    path = tmp_path / "red.mp4"
+    scene = sample_scene(14, look="realistic", codec=codec)
+    path = tmp_path / ("red" + suffix)
     render_video(scene, path, n_frames=120)
     tr = track_video(path, scene, TrackerConfig(threaded=False))
     truth = pd.read_csv(path.with_suffix(".truth.csv")).iloc[:tr.n_frames]
     err = np.hypot(*(tr.uv - np.c_[truth.uc_px.values, truth.vc_px.values]).T)[tr.ok] / tr.radius_px
     assert err.size and err.max() < MAX_ERR_RADII, f"a found centre {err.max():.2f} radii off"
-    assert tr.ok.sum() >= 65, tr.status_counts()
+    assert tr.ok.sum() >= floor, tr.status_counts()
 
 
 def test_cue_shaft_is_not_the_ball():
