@@ -119,7 +119,9 @@ def mle_bound(scene: Scene, track, mle: dict | None = None, independent: bool = 
                                       px_to_m=pixel_to_table(cam, xy) if in_px else None,
                                       clear_s=mle.get("cue_clear_s") or 0.0,
                                       # under the AR(1) model the fit kept a lossless rest frame by frame
-                                      group_rest=not mle.get("ar1")
+                                      group_rest=not mle.get("ar1"),
+                                      rest_scale=mle.get("rest_scale") or 1.0,
+                                      rest_scale_dof=mle.get("rest_scale_dof") or float("inf"),
                                       ).with_codec(np.sign(c) * c * c)
     if ar1 is None:
         ar1 = (mle or {}).get("ar1") or 0.0

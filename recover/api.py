@@ -154,6 +154,11 @@ def mle_dict(est: Estimate) -> dict:
            # ball (recover.measurements.cue_clear_s): the bound leaves out
            # the same frames.
            "cue_clear_s": _num(est.decided.clear_s) if est.decided is not None else None,
+           # The moving frames' chi2/dof (and its dof) a lossless rest's
+           # scatter was judged against (recover.measurements.moving_scale):
+           # the bound judges it the same.
+           "rest_scale": _num(est.decided.rest_scale[0]) if est.decided is not None else None,
+           "rest_scale_dof": _num(est.decided.rest_scale[1]) if est.decided is not None else None,
            "codec_noise_m": _num(math.copysign(math.sqrt(abs(c_m2)), c_m2)),
            "codec_noise_px": None if not in_px else _num(math.copysign(math.sqrt(abs(est.codec_var)),
                                                                          est.codec_var))}

@@ -18,7 +18,7 @@ from cuespin.fit.decide import Decision, autocorrelated, sliding_ended, sliding_
 from cuespin.fit.segment import Segments, segment_track
 from cuespin.physics.motion import BallParams, phases
 from cuespin.recover.measurements import (CUE_CLEAR_FRAMES, Measurements, as_covariance, build_measurements,
-                                          codec_excess, cue_clear_s, fill_covariance)
+                                          codec_excess, cue_clear_s, fill_covariance, moving_scale)
 from cuespin.recover.mle import (CodecCorrelation, MLEResult, ModelFit, ar1_from_residuals, correlated_codec_var,
                                  fit_model, fit_models, initial_guess, lag1_autocorrelation, result, slip_lr,
                                  with_profile_interval)
@@ -59,7 +59,10 @@ class Decided:
     :attr:`recover.mle.MLEResult.verdicts`), ``stop_apart`` (the paper's
     case 2 question, :attr:`recover.paper.PaperResult.stop_apart`) and
     ``clear_s`` (the time after ``t0`` whose frames the cue's tip may touch,
-    left out: recover.measurements.cue_clear_s).
+    left out: recover.measurements.cue_clear_s), ``rest_scale`` (the first
+    fit's chi2/dof over the moving frames and its degrees of freedom, which
+    a lossless rest's scatter is judged against:
+    recover.measurements.moving_scale).
     """
 
     sliding_seen: bool | None
@@ -78,6 +81,7 @@ class Decided:
     verdicts: dict | None = None
     stop_apart: bool | None = None
     clear_s: float = 0.0
+    rest_scale: tuple = (1.0, float("inf"))
 
 
 @dataclass(frozen=True)
@@ -211,10 +215,12 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
     # The frames after the strike whose ball the cue's tip still touches are
     # left out too, for the time the ball takes to clear it at the speed the
     # segmentation and then the first fit give (recover.measurements.CUE_CLEAR_R).
-    def measure(t0, clear_s, group_rest=True):
+    # A lossless rest's scatter is judged against the moving frames' own
+    # scale of their stated errors, measured by the first fit.
+    def measure(t0, clear_s, group_rest=True, scale=(1.0, float("inf"))):
         return build_measurements(t, xy, cov, t0=t0, t_rest=seg.t2, exposure_s=exposure_s,
                                   frame_dt=frame_dt, shared_rest=not independent, px_to_m=px_to_m, clear_s=clear_s,
-                                  group_rest=group_rest)
+                                  group_rest=group_rest, rest_scale=scale[0], rest_scale_dof=scale[1])
 
     if keep is not None:
         codec = CodecCorrelation(keep.codec_var, frame_dt) if inter_frame and not lossless else None
@@ -231,8 +237,10 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
     clear_s = cue_window(np.hypot(*starts[0][2]), seg.t0) if starts else 0.0
     meas1 = measure(seg.t0, clear_s)
     first = _first_fit(meas1, params, starts, exposure_s, fit_friction)
-    codec_var, t0 = 0.0, seg.t0
+    codec_var, t0, scale = 0.0, seg.t0, (1.0, float("inf"))
     if first is not None:
+        if independent:
+            scale = moving_scale(meas1, first.residuals, len(first.x))
         if not lossless and inter_frame:
             codec_var = correlated_codec_var(first, meas1, frame_dt)
         elif not lossless:
@@ -240,7 +248,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         if abs(first.shot.t0 - seg.t0) < MAX_T0_SHIFT_FRAMES * frame_dt:
             t0 = first.shot.t0
             clear_s = cue_window(np.hypot(*first.shot.v0), t0)
-    meas = measure(t0, clear_s).with_codec(codec_var)
+    meas = measure(t0, clear_s, scale=scale).with_codec(codec_var)
     codec = CodecCorrelation(codec_var, frame_dt) if inter_frame and not lossless else None
     # An intra-frame lossy codec (MJPG): its error is shared by frames that
     # show the ball at nearly the same place (recover.mle.still_codec_sandwich).
@@ -266,7 +274,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
                 # is the one that would show as much in these residuals.
                 rho = ar1_from_residuals(meas, full, rho)
                 if independent:  # the AR(1) model carries a lossless rest's correlation itself
-                    meas = measure(t0, clear_s, group_rest=False).with_codec(codec_var)
+                    meas = measure(t0, clear_s, group_rest=False, scale=scale).with_codec(codec_var)
                 full, roll = fit_models(meas, params, (full.shot.x0, full.shot.t0, full.shot.v0, full.shot.w0),
                                         exposure_s, fit_friction,
                                         (roll.shot.x0, roll.shot.t0, roll.shot.v0, roll.shot.w0),
@@ -318,7 +326,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         ar1=0.0 if fit is None else fit.ar1,
         breaks=(chosen.t0, float("inf") if runs_to_end(chosen) else chosen.t1) if chosen else None,
         hac=hac, verdicts=dict(mle.verdicts) or None, stop_apart=None if paper is None else paper.stop_apart,
-        clear_s=clear_s)
+        clear_s=clear_s, rest_scale=scale)
     return Estimate(chosen, paper, mle, meas, codec_var, decisions,
                     {"fit": t_fit, "recover": time.perf_counter() - clock}, decided)
 
@@ -330,7 +338,7 @@ def _refit(keep: Decided, seg, t, xy, params, exposure_s, fit_friction, run_pape
     path shape and root for the paper's method."""
     nan = float("nan")
     chosen = kept_segments(seg, keep)
-    meas = measure(keep.t0, keep.clear_s, group_rest=not keep.ar1).with_codec(keep.codec_var)
+    meas = measure(keep.t0, keep.clear_s, group_rest=not keep.ar1, scale=keep.rest_scale).with_codec(keep.codec_var)
     decisions = {"sliding_ended": Decision(keep.sliding_ended, nan, nan)}
     mle = None
     if keep.sliding_seen is None or keep.start is None:

@@ -69,6 +69,57 @@ def test_lossless_rest_shares_what_its_scatter_does_not_show():
     assert np.all((v > 0.85) & (v < 0.95)), v
 
 
+def _share_claimed(n, stated_over_real, scale_dof, seeds=2000):
+    """How often an independent rest of ``n`` frames, the tracker stating
+    ``stated_over_real`` times their real error, is given a shared share:
+    judged against the moving frames' scale measured on ``scale_dof``
+    degrees of freedom (the first fit's chi2/dof), or against 1 (None)."""
+    from cuespin.recover.measurements import group_covariance, group_scatter
+
+    rng = np.random.default_rng(3)
+    C = np.broadcast_to(np.eye(2), (n, 2, 2)).copy()
+    g = np.zeros(n, int)
+    hits = 0
+    for _ in range(seeds):
+        xy = rng.standard_normal((n, 2)) / stated_over_real
+        scale = (1.0, np.inf) if scale_dof is None else (
+            rng.chisquare(scale_dof) / scale_dof / stated_over_real**2, scale_dof)
+        hits += group_covariance(C, g, 1, group_scatter(xy, g, True), 0.0, *scale)[0, 0, 0] > 1.0 / n + 1e-12
+    return hits / seeds
+
+
+def test_lossless_rest_shares_at_its_level_with_the_trackers_overstated_errors():
+    # Review 6: the tracker states 1.18 times its real error on FFV1 at
+    # noise < 0.5 (moving frames' chi2/dof 0.72).  Judged against C, an
+    # independent rest of 50 frames passed for shared 65% of the time;
+    # against the moving frames' measured scale (150 dof: 75+ moving frames)
+    # at REST_SHARED_LEVEL, held within 3 binomial standard errors (2000
+    # rests: 0.35%).  Exact stated errors: the same level either way.
+    from cuespin.recover.measurements import REST_SHARED_LEVEL
+
+    se = 3 * np.sqrt(REST_SHARED_LEVEL * (1 - REST_SHARED_LEVEL) / 2000)
+    assert _share_claimed(50, 1.18, None) > 0.5
+    for n, over in ((10, 1.18), (50, 1.18), (100, 1.18), (50, 1.0)):
+        rate = _share_claimed(n, over, 150)
+        assert abs(rate - REST_SHARED_LEVEL) < se, (n, over, rate)
+    assert abs(_share_claimed(50, 1.0, None) - REST_SHARED_LEVEL) < se
+
+
+def test_moving_scale_is_the_single_frames_chi2_per_dof():
+    # A track with a resting start: the scale is the moving frames' whitened
+    # residuals' mean square, the rest's mean left out.
+    from cuespin.recover.measurements import moving_scale
+
+    t = np.arange(100) / 100.0
+    m = build_measurements(t, np.zeros((100, 2)), np.full(100, SIGMA), t0=0.2, exposure_s=0.005, frame_dt=0.01)
+    r = np.random.default_rng(1).standard_normal((m.n, 2))
+    r[~m.single] = 50.0
+    s, dof = moving_scale(m, r, 7)
+    assert dof == 2 * m.single.sum() - 7
+    assert s == pytest.approx(np.sum(r[m.single] ** 2) / dof)
+    assert moving_scale(m, r[:3], 7) == (1.0, np.inf)
+
+
 def test_chi2_per_dof_near_one_with_shared_rest_errors():
     # A lossy codec's rests: every still frame carries the same error (plus
     # a little of its own); fitted as lossy, chi2/dof must be ~1 (it was
@@ -175,7 +226,10 @@ def test_shared_errors_on_a_lossless_codec_measure_no_codec_share():
     # Passed as a lossy codec, the codec share came out negative (-3/4 of
     # the stated variance) and shrank v0's errors to 0.55 of what the
     # stated errors give; kept apart (lossless, independent False) they stay
-    # as stated (measured 1.11: the rest one measurement).
+    # as stated (measured 1.11: the rest one measurement, before its
+    # lossless baseline judged the rest's scatter against the moving frames'
+    # scale: at twice the real errors it called the independent rest shared
+    # (l = 0.25); now l / s near 1, the rest C / n: measured 1.43, 1.40).
     shot, p = sample_shot(7, "random")
     ph = phases(shot, p)
     t = np.arange(0.0, min(ph.t2 + 0.3, 4.0), 1 / 240)
@@ -191,7 +245,7 @@ def test_shared_errors_on_a_lossless_codec_measure_no_codec_share():
     lossy, c_lossy = se_v0(lossless=False)
     shared, c_shared = se_v0(lossless=True, independent=False)
     assert c_lossy < 0 and np.all(lossy / indep < 0.7)
-    assert c_shared == 0.0 and np.all(shared / indep >= 1.0) and np.all(shared / indep < 1.3)
+    assert c_shared == 0.0 and np.all(shared / indep >= 1.0) and np.all(shared / indep < 1.6)
 
 
 def test_paper_degenerate_when_the_strike_is_not_in_view():
