@@ -47,18 +47,24 @@ def realistic_scene(shot, params, fps: float, render: dict, size=(1280, 720), ex
     return Scene(physics=params, camera=cam, table=table, render=look, truth=shot)
 
 
-def bench(codec: str, look: str, noise: float, seconds: float, repeat: int,
-          camera: str = "topdown", law: str = "byte") -> dict:
+def bench_scene(look: str, noise: float, seconds: float, camera: str = "topdown", **render):
+    """The benchmark's shot (case 3, 240 fps) in the plain look (a felt
+    gradient) or the realistic one (a highlight, dots, a cue, two other
+    balls), ``render`` added to its render block."""
     shot, params = sample_shot(1, "case3")
-    render = {"noise_sigma": noise, "codec": codec, "duration": seconds}
+    render.update(noise_sigma=noise, duration=seconds)
     if look == "plain":
         render["gradient"] = 10.0
-        scene = make_scene(shot, params, fps=240.0, render=render)
-    else:
-        render.update(specular=0.5, markings="dots", cue=True,
-                      balls=[{"x": 0.4, "y": 0.3, "colour": [45, 40, 200]},
-                             {"x": 2.2, "y": 1.0, "colour": [30, 205, 240]}])
-        scene = realistic_scene(shot, params, 240.0, render, camera=camera)
+        return make_scene(shot, params, fps=240.0, render=render)
+    render.update(specular=0.5, markings="dots", cue=True,
+                  balls=[{"x": 0.4, "y": 0.3, "colour": [45, 40, 200]},
+                         {"x": 2.2, "y": 1.0, "colour": [30, 205, 240]}])
+    return realistic_scene(shot, params, 240.0, render, camera=camera)
+
+
+def bench(codec: str, look: str, noise: float, seconds: float, repeat: int,
+          camera: str = "topdown", law: str = "byte") -> dict:
+    scene = bench_scene(look, noise, seconds, camera, codec=codec)
     draw.NOISE_LAW = law
     frames = list(FrameRenderer(scene).frames())
     n = len(frames)
@@ -90,16 +96,7 @@ def setup_cost(look: str, noise: float, seconds: float, repeat: int, camera: str
     """CPU (s) of the renderer's set-up (``FrameRenderer(scene)``: static layer,
     orientation) and of drawing the shot's frames without encoding, per run,
     after one warm-up render (noise tables, compiled kernels, imports)."""
-    shot, params = sample_shot(1, "case3")
-    render = {"noise_sigma": noise, "duration": seconds}
-    if look == "plain":
-        render["gradient"] = 10.0
-        scene = make_scene(shot, params, fps=240.0, render=render)
-    else:
-        render.update(specular=0.5, markings="dots", cue=True,
-                      balls=[{"x": 0.4, "y": 0.3, "colour": [45, 40, 200]},
-                             {"x": 2.2, "y": 1.0, "colour": [30, 205, 240]}])
-        scene = realistic_scene(shot, params, 240.0, render, camera=camera)
+    scene = bench_scene(look, noise, seconds, camera)
     for _ in FrameRenderer(scene).frames():
         pass
     setup, frames = [], []
