@@ -101,10 +101,6 @@ NOT_YET = {
                  "the set 97.98% of its frames on open cloth",
     (7, "FFV1"): "issue 10: shot 5 (red on red in a low light): 29 of 81 frames found, the set 97.59% of its "
                  "frames on open cloth",
-    (6, "FFV1"): "issue 10: found in 1968 of 1988 frames on open cloth (98.99%), no centre off; shot 0 (a blue "
-                 "ball with dots on blue felt, 120 fps, a cue) loses frames 0-11 to the cue's shaft, whose "
-                 "departing stretch is still inside the ball's window there (two blobs, then the shaft picked "
-                 "once); the stick rule (STICK_GAP_PX) took its 52 centres 5-9.4 radii off away",
 }
 
 
