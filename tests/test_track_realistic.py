@@ -142,9 +142,6 @@ def test_cue_tip_at_the_strike_is_not_the_ball(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(reason="issue 10: with the lit sphere learnt on this ball 191 of 193 frames are found (2 "
-                          "'fit pulled off the ball'), under the 99% target; 193 of 193 with the quadratic look "
-                          "(the markings' branch, before the sphere)", strict=True)
 def test_dots_on_a_white_ball_do_not_pull_the_centre(tmp_path):
     # benchmarks/track.py realistic seed 0 shot 18: a white ball with dots
     # on blue felt, 240 fps, noise 1.7, no cue.  Before the markings were
