@@ -27,6 +27,20 @@ def lit_ball(seed: int, r: float = R_PX, shape=(H, W), c=C_TRUE):
     return rng, felt, streak_model(c, np.zeros(2), 150.0, felt, r, U0, V0, np.zeros(1), GEO)[0]
 
 
+def render_and_track(scene, path):
+    """Render ``scene`` to ``path`` and track it as the command does:
+    (the result, the truth sidecar's rows the track covers, their true
+    centres (px))."""
+    from cuespin.render import render_video
+    from cuespin.track.video import track_video
+
+    render_video(scene, path)
+    res = track_video(path, scene, TrackerConfig(threaded=False))
+    truth = pd.read_csv(path.with_suffix(".truth.csv"))
+    truth = truth.iloc[:min(res.n_frames, len(truth))]
+    return res, truth, np.c_[truth.uc_px.values, truth.vc_px.values]
+
+
 def test_learnt_geometry_pins_the_centre():
     # Twelve noisy frames of a still ball (noise 3) lit from azimuth 2.2 at
     # 1.1 rad with a highlight of shininess 40: the geometry is learnt from
@@ -125,20 +139,13 @@ def test_rendered_highlighted_ball_centre_within_its_stated_errors(tmp_path):
     # quadratic look's fails it; the RMSE is held to 2.5 times the measured
     # (the quadratic look: 8.7 times).
     from cuespin.data_gen.sampler import sample_scenes
-    from cuespin.render import render_video
-    from cuespin.track.tracker import TrackerConfig
-    from cuespin.track.video import track_video
 
     scene = sample_scenes(3, 0, look="realistic", codec="FFV1")[2]
     scene.render.update({"markings": "none", "psf_sigma": 0.0, "specular": 0.318, "cue": False, "balls": [],
                          "max_duration": 0.8})
-    path = tmp_path / "highlight.avi"
-    render_video(scene, path)
-    truth = pd.read_csv(path.with_suffix(".truth.csv"))
-    res = track_video(path, scene, TrackerConfig(threaded=False))
-    n = min(res.n_frames, len(truth))
-    tuv = np.c_[truth.uc_px.values, truth.vc_px.values][:n]
-    moving = res.ok[:n] & (truth.t.values[:n] > scene.truth.t0 + 0.02)
+    res, truth, tuv = render_and_track(scene, tmp_path / "highlight.avi")
+    n = len(truth)
+    moving = res.ok[:n] & (truth.t.values > scene.truth.t0 + 0.02)
     assert moving.sum() >= 80
     e = res.uv[:n][moving] - tuv[moving]
     z = float(np.sqrt(np.mean((e / res.stderr_px[:n][moving]) ** 2)))
@@ -157,18 +164,12 @@ def test_sphere_second_minimum_under_lens_blur_is_not_kept(tmp_path):
     # the quadratic look's centre when the coefficient says so
     # (tracker.SPHERE_A_MIN), none; 382 of 385 frames found either way.
     from cuespin.data_gen.sampler import sample_scenes
-    from cuespin.render import render_video
-    from cuespin.track.video import track_video
 
     scene = sample_scenes(5, 0, look="realistic", codec="FFV1")[4]
     scene.render.update({"markings": "none", "psf_sigma": 0.769, "specular": 0.0, "cue": False, "balls": [],
                          "max_duration": 0.8})
-    path = tmp_path / "blur.avi"
-    render_video(scene, path)
-    truth = pd.read_csv(path.with_suffix(".truth.csv"))
-    res = track_video(path, scene, TrackerConfig(threaded=False))
-    n = min(res.n_frames, len(truth))
-    tuv = np.c_[truth.uc_px.values, truth.vc_px.values][:n]
+    res, truth, tuv = render_and_track(scene, tmp_path / "blur.avi")
+    n = len(truth)
     assert res.ok[:n].mean() >= 0.99  # issue 10's share
     err = np.hypot(*(res.uv[:n] - tuv).T)[res.ok[:n]] / res.radius_px
     assert err.max() < 0.25, f"{int((err >= 0.25).sum())} centres a quarter radius off"
