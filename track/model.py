@@ -19,17 +19,7 @@ import numpy as np
 from cuespin.render.draw import quadrant_area
 from cuespin.track.outline import _slices, ellipse_with_gradient
 
-# Iterations before a fit is given up.  A shaded ball at rest converges
-# slowly (its look's terms and the centre trade off; after DAMP_AFTER every
-# step is halved): at 24, frames 2-9 of realistic seed 0 shot 6 (FFV1,
-# 120 fps) failed and the recentring rule's second fit, stopping at the
-# first fit's centre but not converged there, dropped frames 12-30 as
-# pulled (11 of 97 frames lost).  Allowed 100, every one of that shot's 327
-# fits converged, in at most 43 iterations (99th percentile 38; its grey
-# frames at rest fitted against the renderer's felt, up to 48; shot 4
-# MJPG, 480 fps, at most 32); a fit that converges stops early, so only
-# the failing ones cost the extra iterations.
-MAX_ITER = 64
+MAX_ITER = 24
 # Where the look departs from the model (chroma subsampled at half
 # resolution, a lossy codec's ringing, a shaded ball) the residuals are
 # large and Gauss-Newton converges only linearly: each step 0.4 of the one
