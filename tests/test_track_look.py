@@ -65,29 +65,3 @@ def test_shaded_ball_is_fitted_as_shaded():
 def test_codec_smeared_uniform_ball_is_fitted_as_shaded():
     # Measured: 34 of 34 (the smear's misfit passes the chi-square test).
     assert decisions("smeared").mean() >= 1 - 1 / N_DECISIONS
-
-
-def test_only_a_reported_frame_votes_on_the_look():
-    # A ball whose fitted centre lies off the playing surface (the search's
-    # peak on it, a pixel inside the mask's edge) is reported as no ball;
-    # its fit is then no sample of the ball's look and casts no vote (review:
-    # the rejected fit had voted).  The same frame with the whole image
-    # allowed is reported and votes once.
-    from cuespin.track.background import Background
-    from cuespin.track.tracker import NO_BALL, OK, BallTracker, TrackerConfig
-
-    rng = np.random.default_rng(3)
-    H, W, c = 80, 100, np.array([50.3, 40.6])
-    frame = FELT + (BALL - FELT) * disc_coverage(c[0], c[1], R, 0, 0, W, H)
-    frame = np.clip(np.rint(frame + NOISE * rng.standard_normal(frame.shape)), 0, 255).astype(np.uint8)
-    bg = Background(image=np.full((H, W), FELT, np.float32), sigma=NOISE, polarity=1, contrast=BALL - FELT,
-                    n_samples=9, path_pixels=0, weak_samples=np.zeros(9, bool), score=0.8 * (BALL - FELT))
-    cfg = TrackerConfig(threaded=False, sphere=False)
-    edge = np.zeros((H, W), bool)
-    edge[:, :int(c[0]) - 1] = True  # the ball's centre two columns beyond the surface's edge
-    for mask, status, votes in ((edge, NO_BALL, 0), (np.ones((H, W), bool), OK, 1)):
-        T = BallTracker(bg, R, 0.0, cfg, search_mask=mask)
-        assert T.shade is None  # still learning the look
-        obs = T.step(0, frame)
-        assert obs.status == status
-        assert len(T._look_votes) == votes

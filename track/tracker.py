@@ -504,7 +504,6 @@ class BallTracker:
         self._candidates: tuple = ()  # the last full search's blobs
         self._bands = None  # the radius map's bands on the search mask (multi-scale search)
         self._pred = None  # this frame's predicted centre (px), None without history
-        self._vote = None  # this frame's fit's vote on the look, cast once it is reported (_cast_vote)
         # The ball's outline from the camera; None: the disc everywhere.
         self.outline_of = None if is_similarity(camera) or R is None else OutlineCache(camera, R, self.r)
         self.outline = None  # this frame's (Ellipse or None)
@@ -675,20 +674,7 @@ class BallTracker:
             return _lost(NO_BALL)
         if obs.status == OK:
             self.history = (self.history + [(k, obs.uv)])[-2:]
-            self._cast_vote()
         return obs
-
-    def _cast_vote(self) -> None:
-        """The reported frame's fit votes on the look and is kept for the lit
-        sphere.  Only a reported frame: a fit then dropped (off the playing
-        surface, pulled, partly out of the frame) is no sample of the ball's
-        look (review: the fit rejected as off the surface had voted)."""
-        if self._vote is None or self.shade is not None:
-            return
-        f, patch, felt, u0, v0, fit_blur, foreign, last_fit, r, G0, blur, marks = self._vote
-        self._vote = None
-        self._keep_for_sphere(f, patch, felt, u0, v0, fit_blur, foreign, last_fit)
-        self._learn_look(patch, felt, u0, v0, f, r, G0, blur, fit_blur, marks, foreign)
 
     def _window_level(self, D, felt, u0: int, v0: int, c, r: float) -> float:
         """A fit's start level (projected levels) from the window: the felt's
@@ -923,7 +909,6 @@ class BallTracker:
         return self.r if outline is None else max(self.r, outline.max_radius)
 
     def _refine(self, frame, loc, blur, recentre: bool = True) -> Observation:
-        self._vote = None  # a former try's fit is not this one's
         r = self.r
         # The ball's outline here, from the camera (None: the disc of r).
         ol = self.outline = self.outline_of(loc) if self.outline_of is not None else None
@@ -1053,8 +1038,9 @@ class BallTracker:
             c, se, cov, rms = f.c, f.stderr, f.cov, f.rms
             self.last_fit = LastFit(u0, v0, v1 - v0, u1 - u0, f.c.copy(), f.b.copy(), f.G, bool(fit_blur),
                                     f.shade, ol, foreign, marks)
-            if self.shade is None:  # cast once the frame is reported (step)
-                self._vote = (f, patch, felt, u0, v0, fit_blur, foreign, self.last_fit, r, G0, blur, marks)
+            if self.shade is None:
+                self._keep_for_sphere(f, patch, felt, u0, v0, fit_blur, foreign, self.last_fit)
+                self._learn_look(patch, felt, u0, v0, f, r, G0, blur, fit_blur, marks, foreign)
             self.last_patch = (patch, u0, v0)
         # The whole ball must lie inside the frame for the centre to be trusted.
         eu, ev = (r, r) if ol is None else ol.half_extent
