@@ -28,7 +28,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import brentq, least_squares
-from scipy.stats import chi2 as chi2_dist
 
 from cuespin.fit.decide import autocorrelated
 from cuespin.physics.motion import BallParams, Shot, phases, positions, z_cross
@@ -121,13 +120,6 @@ PROFILE_BISECTIONS = 8
 # 75 answered rolling after slides of 0.2-7.6 frames) up to 4.3, covering
 # 99.7% (0% without the unseen slip's share).
 UNSEEN_SLIP_SIGMAS = 4.0
-# The stated errors are scaled down to the residuals' own scale only when
-# chi2 lies below its SCALE_DOWN_LEVEL point at the fit's dof (chi2/dof
-# significantly below 1: the tracker states its errors too wide, as on FFV1
-# at noise < 0.5, chi2/dof median 0.72, stats7); above 1 they always scale
-# (quasi-likelihood).  With exact stated errors the rule fires on this share
-# of fits (measured on simulated tracks: docs/measurements.md, stats9).
-SCALE_DOWN_LEVEL = 0.01
 # Two-sided 95% normal quantile: the unseen slip's bound is stated as the
 # standard error whose 95% interval spans it.
 Z95 = 1.959964
@@ -687,23 +679,10 @@ def still_codec_sandwich(fit: ModelFit, meas: Measurements) -> np.ndarray:
     return A @ (J.T @ J + off + off.T) @ A
 
 
-def error_scale(chi2: float, dof: int) -> float:
-    """The factor a fit's ``(J^T J)^-1`` takes for its chi-square ``chi2`` on
-    ``dof`` degrees of freedom: chi2/dof when above 1, or when chi2 lies
-    below its :data:`SCALE_DOWN_LEVEL` point of chi^2(dof) (the stated
-    per-frame errors measurably too wide); 1 otherwise (a chi2/dof a little
-    below 1 is what exact errors give)."""
-    s = chi2 / dof
-    if s >= 1.0 or chi2 < chi2_dist.ppf(SCALE_DOWN_LEVEL, dof):
-        return float(s)
-    return 1.0
-
-
 def covariance(fit: ModelFit, meas: Measurements, codec: CodecCorrelation | None = None,
                still_codec: bool = False, hac: bool | None = None):
     """The parameters' covariance: ``(J^T J)^-1`` scaled by the reduced
-    chi-square when that exceeds 1 or lies significantly below it
-    (:func:`error_scale`), or, when the residuals show lag-1
+    chi-square when that exceeds 1, or, when the residuals show lag-1
     autocorrelation, the HAC sandwich (its variances never below the
     former's: a sandwich estimated from one track can come out small by
     chance).  With an inter-frame codec (``codec`` given, its measured
@@ -720,10 +699,10 @@ def covariance(fit: ModelFit, meas: Measurements, codec: CodecCorrelation | None
     singular.  ``hac``: the autocorrelation decided once by the caller (as
     :func:`slip_lr`'s); None: asked here of ``fit``'s residuals."""
     rho, z = lag1_autocorrelation(meas, fit.residuals)
-    if codec is not None and codec.var > 0:  # an inter-frame codec's error looks like the motion: never down
-        return codec_sandwich(fit, meas, codec) * max(1.0, fit.chi2 / fit.dof), True, rho
-    scale = error_scale(fit.chi2, fit.dof)
+    scale = max(1.0, fit.chi2 / fit.dof)
     base = info_inverse(fit.jac) * scale
+    if codec is not None and codec.var > 0:
+        return codec_sandwich(fit, meas, codec) * scale, True, rho
     widened = False
     if still_codec:
         wide = _at_least(still_codec_sandwich(fit, meas) * scale, base)
@@ -926,7 +905,7 @@ def with_profile_interval(res: MLEResult, fit: ModelFit, meas: Measurements, exp
         return res
     from dataclasses import replace
     e = _slip_direction(fit)
-    scale = error_scale(fit.chi2, fit.dof)  # the residuals' scale, as the covariance's
+    scale = max(1.0, fit.chi2 / fit.dof)
     C = res.cov
     var_d = float(e @ C[5:7, 5:7] @ e) / float(e @ e) ** 2  # delta's variance, w0 = w0_hat + delta e
     step = max(np.sqrt(max(var_d, 0.0)), 1e-6 * float(np.hypot(*fit.shot.w0)) / float(np.hypot(*e)))

@@ -112,21 +112,6 @@ def test_mle_within_its_standard_errors(preset, seed):
     assert m.chi2 / m.dof == pytest.approx(1.0, abs=0.15)
 
 
-def test_overstated_errors_scale_down():
-    """Per-frame errors stated 1.3 times the true ones (the tracker's 1.18 on
-    FFV1 at noise < 0.5, stats7): chi2/dof about 0.6 lies far below its
-    SCALE_DOWN_LEVEL point, so the stated errors come out as the true
-    ones' (measured 1.29 times with the one-sided max(1, chi2/dof): chi2/dof
-    0.60 on 2,393 dof; the exact errors' fit 1.01)."""
-    shot, p = sample_shot(1, "random")
-    t, xy = synthetic(shot, p, seed=1)
-    exact, wide = mle_of(t, xy, p), mle_of(t, xy, p, sigma=1.3 * 2e-5)
-    assert exact.status == wide.status == "ok" and exact.model == wide.model
-    ratio = np.r_[wide.stderr["v0"], wide.stderr["w0"]] / np.r_[exact.stderr["v0"], exact.stderr["w0"]]
-    assert np.all(np.abs(ratio - 1.0) < 0.1), ratio
-    assert wide.chi2 / wide.dof == pytest.approx(1 / 1.69, rel=0.1)
-
-
 def test_mle_rolling_from_the_strike():
     shot, p = sample_shot(9, "case4")
     t, xy = synthetic(shot, p, t_cut=shot.t0 + 1.5)
@@ -385,24 +370,3 @@ def test_mle_intervals_cover_on_400_simulated_tracks(rho):
     rms = np.sqrt(np.mean(z**2))
     print(f"rho {rho}: {len(z)} ok with free slip, coverage {cover:.1%}, RMS / stated {rms:.3f}")
     assert 0.93 <= cover <= 0.97 and 0.9 <= rms <= 1.1, (len(z), cover, rms)
-
-
-@pytest.mark.slow
-def test_scale_down_false_rate_on_400_simulated_tracks():
-    """How often the stated errors are scaled down (recover.mle.error_scale)
-    when they are exact: 408 simulated sliding tracks (seed 41, as the
-    coverage test's), each fitted with its true per-frame error; the share of
-    answers ok whose chi2 lies below its SCALE_DOWN_LEVEL point, held to the
-    level plus two binomial standard errors (docs/measurements.md, stats9)."""
-    from cuespin.recover.estimate import estimate
-    from cuespin.recover.mle import SCALE_DOWN_LEVEL, error_scale
-    from cuespin.recover.simulate import sliding_tracks
-
-    down = []
-    for tr in sliding_tracks(408, 41):
-        m = estimate(tr.t, tr.xy, np.full(len(tr.t), tr.sigma), tr.params, tr.exposure_s, run_paper=False).mle
-        if m.status == "ok":
-            down.append(error_scale(m.chi2, m.dof) < 1.0)
-    n, rate = len(down), float(np.mean(down))
-    print(f"{n} ok, scaled down {sum(down)} ({rate:.2%})")
-    assert n >= 300 and rate <= SCALE_DOWN_LEVEL + 2 * np.sqrt(SCALE_DOWN_LEVEL * (1 - SCALE_DOWN_LEVEL) / n)
