@@ -834,7 +834,8 @@ class BallTracker:
                                 outline=self.outline, block=self.block)
             if not f_shaded:
                 return
-        self._look_votes.append(look_vote(d, f_shaded, patch.size))
+        # (the blocks' fits have a pixel a block: their residuals' count)
+        self._look_votes.append(look_vote(d, f_shaded, patch.size // self.block**2))
         if len(self._look_votes) >= LOOK_FRAMES:
             self.shade = shaded_look(self._look_votes)
             if self.shade and self.cfg.sphere:
