@@ -128,11 +128,14 @@ def auto(args):
     xs, ys = np.meshgrid(np.linspace(0.1, 2.44, 9), np.linspace(0.1, 1.17, 5))
     grid = np.column_stack([xs.ravel(), ys.ravel()])
     cams = [(2.0, 0.0, 0.0), (2.0, 10.0, 0.0), (1.5, 15.0, 0.0), (3.0, 5.0, -0.25),
-            (2.0, 10.0, -0.25), (1.5, 15.0, -0.25), (2.0, 12.0, 0.25), (2.0, 0.0, -0.25)]
-    for height, tilt, k1 in [c for c in cams if not args.overhead or c[1] == 0.0]:
-        true = Scene(physics=sample_shot(0)[1], camera=pinhole_camera(
-            height_m=height, tilt_deg=tilt, k1=k1, size=SIZE, fps=FPS, roll_deg=ROLL_DEG)).camera
-        img = synthetic_table_frame(true, seed=int(10 * tilt + 100 * abs(k1)) + 1000 * args.frame_seed,
+            (2.0, 10.0, -0.25), (1.5, 15.0, -0.25), (2.0, 12.0, 0.25), (2.0, 0.0, -0.25),
+            (2.0, 2.0, 0.0), (2.0, 3.0, -0.25)]       # the last two: where the corners' f meets the balls'
+    if args.cameras:
+        cams = [tuple(float(v) for v in c.split(",")) for c in args.cameras.split(";")]
+    pooled = []
+
+    def calibrated(true, tilt, k1, frame_seed):
+        img = synthetic_table_frame(true, seed=int(10 * tilt + 100 * abs(k1)) + 1000 * frame_seed,
                                     cushion_m=args.cushion, pockets=args.cushion > 0)
         # --true-focal: the true focal length given (--focal-px), to tell its share from the rest
         fk = {"focal_px": float(true.K[0, 0])} if args.true_focal else {}
@@ -141,16 +144,27 @@ def auto(args):
         if args.corner_sigma is not None:
             fk["corner_sigma_px"] = args.corner_sigma
         cal = calibrate_frame(img, Table(), fps=FPS, use_balls=not args.no_balls, **fk)
-        pert, sigma, edge_rms = cal.perturbed, cal.corner_sigma_px, cal.edge_rms_px
+        pert = cal.perturbed
         kappa = float(cal.camera.dist[0]) / float(cal.camera.K[0, 0]) ** 2
         if args.no_kappa_camera:  # the perturbed cameras as before k1's error was in them
             pert = [c for c in pert if abs(c.dist[0] / c.K[0, 0] ** 2 - kappa) <= 1e-9 * abs(kappa)]
+        return cal, pert, kappa
+
+    for height, tilt, k1 in [c for c in cams if not args.overhead or c[1] == 0.0]:
+        true = Scene(physics=sample_shot(0)[1], camera=pinhole_camera(
+            height_m=height, tilt_deg=tilt, k1=k1, size=SIZE, fps=FPS, roll_deg=ROLL_DEG)).camera
+        cal, pert, kappa = calibrated(true, tilt, k1, args.frame_seed)
+        sigma, edge_rms = cal.corner_sigma_px, cal.edge_rms_px
         truth = true.project(table_corners(Table()))
         c_rms = float(np.sqrt(np.mean(np.sum((cal.corners_px - truth) ** 2, axis=1))))
         cam = Scene(physics=sample_shot(0)[1], camera=cal.camera).camera
         m_err = float(np.abs(cam.to_table(true.to_pixels(grid)) - grid).max())
         res = {"exact": [], "auto": []}
+        f_err = []
         for i in range(args.n):
+            if args.frames and i:
+                # --frames: one calibration per shot, each from another noise draw of the frame
+                cal, pert, kappa = calibrated(true, tilt, k1, args.frame_seed + i)
             shot, params = sample_shot(args.seed * 1000 + i, "random")
             tr = Scene(physics=params, camera=true).camera
             uv = track_pixels(shot, params, tr, np.random.default_rng(i), args.track_px)
@@ -166,17 +180,40 @@ def auto(args):
                     extra_v += (rk[0] - dv) ** 2
                     extra_w += (rk[1] - dw) ** 2
             res["auto"].append((dv, dw, np.sqrt(sv**2 + extra_v), np.sqrt(sw**2 + extra_w)))
+            f_err.append((cal.camera.K[0, 0] / true.K[0, 0] - 1, getattr(cal, "focal_sigma", None) or 0.0))
         rv = {k: np.sqrt(np.mean([np.sum(r[0] ** 2) / 2 for r in v])) for k, v in res.items()}
         rw = {k: np.sqrt(np.mean([np.sum(r[1] ** 2) / 2 for r in v])) for k, v in res.items()}
-        cover = {k: np.mean([np.abs(np.concatenate([r[0] / r[2], r[1] / r[3]])) < 1.96 for r in v])
-                 for k, v in res.items()}
+        inside = {k: np.array([np.abs(np.concatenate([r[0] / r[2], r[1] / r[3]])) < 1.96 for r in v])
+                  for k, v in res.items()}
+        cover = {k: v.mean() for k, v in inside.items()}
         zv = {k: np.sqrt(np.mean([np.sum((r[0] / r[2]) ** 2) / 2 for r in v])) for k, v in res.items()}
+        fe = np.array(f_err)
         print(f"{height:6.1f} {tilt:4.0f} {k1:+.2f} | {c_rms:13.3f} {edge_rms:11.3f} "
-              f"{kappa * cal.camera.K[0, 0] ** 2:+.3f} {cal.focal_source:10s} "
-              f"f {cal.camera.K[0, 0] / true.K[0, 0] - 1:+.2%} | {m_err:9.1e} | "
+              f"{kappa * cal.camera.K[0, 0] ** 2:+.3f} {cal.focal_source:13s} "
+              f"f {fe[:, 0].mean() if args.frames else fe[-1, 0]:+.2%} (stated {fe[:, 1].mean():.1%}) | {m_err:9.1e} | "
               f"{rv['exact']:.2e} / {rv['auto']:.2e} ({rv['auto'] / rv['exact']:.2f}x), "
               f"{rw['exact']:.2e} / {rw['auto']:.2e} | {len(res['auto'])} {sigma:.2f} {len(pert)} | "
-              f"{cover['exact']:.0%} / {cover['auto']:.0%}, {zv['exact']:.2f} / {zv['auto']:.2f}", flush=True)
+              f"{cover['exact']:.0%} / {cover['auto']:.0%}{boot(inside['auto'])}, "
+              f"{zv['exact']:.2f} / {zv['auto']:.2f}", flush=True)
+        pooled.append(inside["auto"])
+        if args.frames:
+            print(f"    f error per frame (%): {np.round(100 * fe[:, 0], 2).tolist()}; z "
+                  f"{np.round(fe[:, 0] / np.where(fe[:, 1] > 0, fe[:, 1], np.nan), 2).tolist()}", flush=True)
+    if len(pooled) > 1:
+        print(f"pooled over {len(pooled)} rows, {sum(len(p) for p in pooled)} shots: cover "
+              f"{np.mean(np.concatenate(pooled)):.1%}{boot(*pooled)}")
+
+
+def boot(*rows, n: int = 2000, seed: int = 0) -> str:
+    """A 95% bootstrap interval of the coverage, shots resampled within each row
+    (a shot's four components share its calibration and its track)."""
+    rng = np.random.default_rng(seed)
+    rows = [np.asarray(r, dtype=float).reshape(len(r), -1) for r in rows if len(r)]
+    if not rows:
+        return ""
+    means = [np.mean(np.concatenate([r[rng.integers(0, len(r), len(r))].ravel() for r in rows])) for _ in range(n)]
+    lo, hi = np.percentile(means, [2.5, 97.5])
+    return f" [{lo:.0%}, {hi:.0%}]"
 
 
 def stated(args):
@@ -193,7 +230,7 @@ def stated(args):
     from cuespin.render.draw import FrameRenderer
 
     def row(label, img, truth):
-        det = detect_corners(img)
+        det = detect_corners(img, robust=not args.no_robust)
         d = min((np.roll(det.corners, -s, axis=0) - truth for s in range(4)), key=lambda e: np.abs(e).max())
         h, w = img.shape[:2]
         naive = det.edge_rms * math.sqrt(4.0 / ((w + h) / 4.0))     # the scatter over the points' number
@@ -340,6 +377,11 @@ def main():
                     help="--auto: the corners' stated error (default: calibrate's, the edges' jackknife)")
     ap.add_argument("--frame-seed", type=int, default=0,
                     help="--auto: another draw of each frame's noise (--stated's seeds), the same shots")
+    ap.add_argument("--frames", action="store_true",
+                    help="--auto: one calibration per shot, each from another noise draw of the frame "
+                         "(coverage over many frames' corner errors, not one's)")
+    ap.add_argument("--cameras", default=None, metavar="H,T,K1;...",
+                    help="--auto: these cameras (height m, tilt deg, k1) instead of the table's")
     ap.add_argument("--no-kappa-camera", action="store_true",
                     help="--auto: without the perturbed camera for k1's error (with the jackknife's joint "
                          "moves, each of which moves k1: without all of them)")
@@ -351,6 +393,8 @@ def main():
     ap.add_argument("--stated", action="store_true",
                     help="the automatic corners' stated error against their real one, per frame")
     ap.add_argument("--seeds", type=int, default=3, help="--stated: noise seeds per drawn camera")
+    ap.add_argument("--no-robust", action="store_true",
+                    help="--stated: keep the edge points STRAY_EDGE_Z or more from their line (as before)")
     ap.add_argument("--shaded", action="store_true",
                     help="the balls' focal length on the renderer's shaded ball, light and blur one at a time")
     ap.add_argument("--ball-at", default="2.40,1.15", metavar="X,Y", help="--shaded: the ball's table position (m)")
