@@ -39,6 +39,11 @@ shapes; ``--no-balls`` for the nominal one) and so are the perturbed cameras
 (``--no-kappa-camera`` leaves out the one for k1's error, and with the
 jackknife's joint moves, each of which moves k1, all of them; ``--corner-sigma``
 states the corners' error instead of the jackknife's, one coordinate at a time).
+``--frames``: one calibration per shot, each from another noise draw of the
+frame, so that a row's coverage is over many frames' corner errors, with a
+95% bootstrap interval (shots resampled) per row and pooled;
+``--cameras H,T,K1;...`` for other cameras than the table's (which ends
+with two at 2-3 degrees of tilt, where the corners' f meets the balls').
 
 Usage: python benchmarks/calibration.py [--n 40] [--seed 0] [--track-px 0.03] [--auto] [--diagnose] [--stated] [--shaded]
 """
