@@ -137,7 +137,7 @@ def auto(args):
             (2.0, 2.0, 0.0), (2.0, 3.0, -0.25)]       # the last two: where the corners' f meets the balls'
     if args.cameras:
         cams = [tuple(float(v) for v in c.split(",")) for c in args.cameras.split(";")]
-    pooled = []
+    pooled, pooled_cal = [], []
 
     def calibrated(true, tilt, k1, frame_seed):
         img = synthetic_table_frame(true, seed=int(10 * tilt + 100 * abs(k1)) + 1000 * frame_seed,
@@ -165,7 +165,7 @@ def auto(args):
         cam = Scene(physics=sample_shot(0)[1], camera=cal.camera).camera
         m_err = float(np.abs(cam.to_table(true.to_pixels(grid)) - grid).max())
         res = {"exact": [], "auto": []}
-        f_err = []
+        f_err, cal_z = [], []
         for i in range(args.n):
             if args.frames and i:
                 # --frames: one calibration per shot, each from another noise draw of the frame
@@ -185,6 +185,10 @@ def auto(args):
                     extra_v += (rk[0] - dv) ** 2
                     extra_w += (rk[1] - dw) ** 2
             res["auto"].append((dv, dw, np.sqrt(sv**2 + extra_v), np.sqrt(sw**2 + extra_w)))
+            # the calibration's own error (the answer's move from the exact camera's, the same
+            # track) in units of the share it states: the fit's own error left out
+            cal_z.append(np.concatenate([(dv - r["exact"][0]) / np.sqrt(extra_v),
+                                         (dw - r["exact"][1]) / np.sqrt(extra_w)]))
             f_err.append((cal.camera.K[0, 0] / true.K[0, 0] - 1, getattr(cal, "focal_sigma", None) or 0.0))
         rv = {k: np.sqrt(np.mean([np.sum(r[0] ** 2) / 2 for r in v])) for k, v in res.items()}
         rw = {k: np.sqrt(np.mean([np.sum(r[1] ** 2) / 2 for r in v])) for k, v in res.items()}
@@ -201,12 +205,17 @@ def auto(args):
               f"{cover['exact']:.0%} / {cover['auto']:.0%}{boot(inside['auto'])}, "
               f"{zv['exact']:.2f} / {zv['auto']:.2f}", flush=True)
         pooled.append(inside["auto"])
+        cz = np.array(cal_z)
+        pooled_cal.append(np.abs(cz) < 1.96)
+        print(f"    the calibration's share alone: (auto - exact) / stated share, RMS {np.sqrt(np.mean(cz**2)):.2f}, "
+              f"cover95 {np.mean(np.abs(cz) < 1.96):.0%}{boot(np.abs(cz) < 1.96)}", flush=True)
         if args.frames:
             print(f"    f error per frame (%): {np.round(100 * fe[:, 0], 2).tolist()}; z "
                   f"{np.round(fe[:, 0] / np.where(fe[:, 1] > 0, fe[:, 1], np.nan), 2).tolist()}", flush=True)
     if len(pooled) > 1:
         print(f"pooled over {len(pooled)} rows, {sum(len(p) for p in pooled)} shots: cover "
-              f"{np.mean(np.concatenate(pooled)):.1%}{boot(*pooled)}")
+              f"{np.mean(np.concatenate(pooled)):.1%}{boot(*pooled)}; the calibration's share alone "
+              f"{np.mean(np.concatenate(pooled_cal)):.1%}{boot(*pooled_cal)}")
 
 
 def boot(*rows, n: int = 2000, seed: int = 0) -> str:
