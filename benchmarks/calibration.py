@@ -29,6 +29,10 @@ With ``--shaded``: the balls' focal length on the renderer's shaded ball
 straight overhead, its light and blur changed one at a time (``--ball-at X,Y``
 for the ball, ``--ball-floor`` for ``BALL_SHAPE_FLOOR``).
 
+With ``--focal`` (``--tilts 2,2.5,3``, ``--seeds``, ``--rendered``): the
+focal length ``calibrate_frame`` writes at small tilts, its source and its
+error against its stated one.
+
 With ``--diagnose`` (``--height 2 --tilt 0 --k1 -0.25``): the automatic
 camera's v0 error split into its parts (corners, k1, focal length), each
 camera built from the true values but one.
@@ -279,6 +283,46 @@ def stated(args):
             row(f"realistic {label} s{sd}", img, truth)
 
 
+def focal(args):
+    """The focal length ``calibrate_frame`` writes at small tilts (``--tilts``,
+    2 m, k1 0 and -0.25), its source and its error against its stated one:
+    drawn frames (``--seeds`` noise seeds), or with ``--rendered`` the
+    renderer's realistic table with a ball at rest at (2.40, 1.15) m under
+    the default light and a lamp overhead."""
+    import math
+    from dataclasses import replace
+
+    from cuespin.data_gen.sampler import make_scene
+    from cuespin.physics.motion import Shot
+    from cuespin.pipeline.calibrate import calibrate_frame, synthetic_table_frame
+    from cuespin.render.draw import FrameRenderer
+
+    shot, params = sample_shot(100, "random")
+    zs = []
+    for tilt in (float(t) for t in args.tilts.split(",")):
+        for k1 in (0.0, -0.25):
+            R = params.R if args.rendered else 0.028575    # the drawn balls: a pool ball's
+            true = pinhole_camera(height_m=2.0, tilt_deg=tilt, k1=k1, size=SIZE, fps=FPS, roll_deg=ROLL_DEG,
+                                  margin_m=0.15 if args.rendered else 0.1, R=R)
+            if args.rendered:
+                frames = []
+                for name, look in (("default", {}), ("lamp", {"light_elevation": 1.55})):
+                    scene = make_scene(Shot(np.array([2.40, 1.15]), shot.v0, shot.w0, t0=0.1), params,
+                                       render={"look": "realistic", "noise_sigma": 2.0, "seed": 1, **look})
+                    frames.append((name, next(iter(FrameRenderer(replace(scene, camera=true), n_frames=1).frames()))))
+            else:
+                frames = [(f"s{sd}", synthetic_table_frame(true, seed=int(10 * tilt + 100 * abs(k1)) + 1000 * sd,
+                                                           cushion_m=0.05, pockets=True)) for sd in range(args.seeds)]
+            for label, img in frames:
+                cal = calibrate_frame(img, Table(), fps=FPS, R_nominal=R)
+                err = cal.camera.K[0, 0] / true.K[0, 0] - 1.0
+                zs.append(err / cal.focal_sigma)
+                print(f"tilt {tilt:g} k1 {k1:+.2f} {label}: {cal.focal_source:13s} f {err:+.2%} stated "
+                      f"{cal.focal_sigma:.2%} z {zs[-1]:+.2f} corner sigma {cal.corner_sigma_px:.3f} px", flush=True)
+    z = np.array(zs)
+    print(f"{len(z)} frames: f error / stated RMS {math.sqrt(np.mean(z**2)):.2f}, max |.| {np.abs(z).max():.2f}")
+
+
 def shaded(args):
     """The balls' focal length on the renderer's shaded ball straight overhead
     (2 m, a ball at rest at (2.40, 1.15) m), the look's light and blur changed
@@ -411,11 +455,17 @@ def main():
                     help="--stated: keep the edge points STRAY_EDGE_Z or more from their line (as before)")
     ap.add_argument("--shaded", action="store_true",
                     help="the balls' focal length on the renderer's shaded ball, light and blur one at a time")
+    ap.add_argument("--focal", action="store_true",
+                    help="the focal length written at small tilts and its error against its stated one")
+    ap.add_argument("--tilts", default="2,2.5,3", help="--focal: tilts (deg)")
+    ap.add_argument("--rendered", action="store_true", help="--focal: on the renderer's realistic table")
     ap.add_argument("--ball-at", default="2.40,1.15", metavar="X,Y", help="--shaded: the ball's table position (m)")
     ap.add_argument("--ball-floor", type=float, default=None, help="--shaded: BALL_SHAPE_FLOOR instead of calibrate's")
     args = ap.parse_args()
     if args.shaded:
         return shaded(args)
+    if args.focal:
+        return focal(args)
     if args.stated:
         return stated(args)
     if args.auto:
