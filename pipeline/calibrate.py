@@ -1502,8 +1502,6 @@ def calibrate_frame(frame: np.ndarray, table: Table = Table(), *, intrinsics=Non
                 focal_sigma = (1.0 - w) * fb[1] / f
             cal = replace(calibrate_corners(cal.corners_px, size, table, **same), focal_source=source,
                           focal_sigma=sigma / f)
-            what = {"corners": f"the corners' perspective (+/- {100 * fc[1] / fc[0]:.1f}%)",
-                    "balls": "the still balls' shapes (a sphere's image stretches away from the optical axis)"}
             if source == "corners+balls":
                 notes = [f"f = {f:.0f} px +/- {100 * sigma / f:.1f}% from the corners' perspective ({fc[0]:.0f} px "
                          f"+/- {100 * fc[1] / fc[0]:.1f}%) and the still balls' shapes ({fb[0]:.0f} px +/- "
@@ -1511,8 +1509,8 @@ def calibrate_frame(frame: np.ndarray, table: Table = Table(), *, intrinsics=Non
                          f"{cal.height_m:.2f} m above the cloth"]
             elif source == "balls":
                 notes = [f"the corners do not fix the focal length (camera nearly overhead); f = {f:.0f} px "
-                         f"+/- {100 * sigma / f:.1f}% from {what['balls']}, camera {cal.height_m:.2f} m above "
-                         f"the cloth"]
+                         f"+/- {100 * sigma / f:.1f}% from the still balls' shapes (a sphere's image stretches "
+                         f"away from the optical axis), camera {cal.height_m:.2f} m above the cloth"]
             else:
                 notes = []
         elif cal.focal_source == "corners":
