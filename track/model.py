@@ -19,7 +19,7 @@ import numpy as np
 from cuespin.render.draw import quadrant_area
 from cuespin.track.outline import Ellipse, _slices, ellipse_with_gradient
 
-MAX_ITER = 24
+MAX_ITER = 64
 # Where the look departs from the model (chroma subsampled at half
 # resolution, a lossy codec's ringing, a shaded ball) the residuals are
 # large and Gauss-Newton converges only linearly: each step 0.4 of the one
