@@ -19,6 +19,8 @@ import numpy as np
 from cuespin.render.draw import quadrant_area
 from cuespin.track.outline import Ellipse, _slices, ellipse_with_gradient
 
+# Gauss-Newton's iteration cap: a shaded ball at rest needs 18-48
+# (realistic seed 0 shot 6, FFV1: at 24, 11 of 97 frames lost; at 64, none).
 MAX_ITER = 64
 # Where the look departs from the model (chroma subsampled at half
 # resolution, a lossy codec's ringing, a shaded ball) the residuals are
