@@ -354,3 +354,5 @@ def test_streak_fallback_keeps_the_strike_and_refuses_a_streak_across_the_rest_s
     assert not leaves(f, f.c, np.zeros(2)) and not leaves(f, f.c + 0.3 * f.b, np.zeros(2))
     # Where a streak was predicted (a ball rolling), half of it is allowed.
     assert leaves(f, f.c, f.b)
+    # A streak under FIT_BLUR_PX is no streak (a sharp ball's fit): kept.
+    assert leaves(replace(f, b=0.3 * f.b), f.c, np.zeros(2))

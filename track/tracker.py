@@ -930,12 +930,13 @@ class BallTracker:
         no prediction), where a streak ``pred_blur`` (px) was predicted.  A
         ball struck from rest at ``pred`` streaks away from it: both of the
         streak's ends lie on one side of it, the nearer at most
-        ``STREAK_BEHIND_PX`` plus half the predicted streak behind."""
+        ``STREAK_BEHIND_PX`` plus half the predicted streak behind.  A
+        streak fitted under ``FIT_BLUR_PX`` is kept (as a sharp ball)."""
         if pred is None:
             return True
         half = 0.5 * np.hypot(*f.b)
-        if half == 0.0:
-            return True
+        if 2.0 * half <= FIT_BLUR_PX:
+            return True  # no streak: its length is ill-posed, its centre the sharp fit's
         along = abs(float(np.dot(f.c - pred, f.b))) / (2.0 * half)
         return along >= half - STREAK_BEHIND_PX - 0.5 * np.hypot(*pred_blur)
 
