@@ -150,7 +150,7 @@ def test_a_smeared_dot_is_left_out_along_the_blur():
     # noise 3, fitted with the blur: with the dot in, the centre is 0.56 px
     # off (RMS; 99 of the fits converge); left out, its faint ends along the streak pulled the
     # refit to RMS 0.0263 (max 0.074) when grown by one pixel only, and
-    # 0.0211 (max 0.049) grown along the blur (smear_kernel), against the
+    # 0.0206 (max 0.053) grown along the blur inside the rim (smear_kernel), against the
     # unmarked ball's 0.0180 (max 0.045): tolerances between the two.
     from cuespin.track.model import blur_nodes
 
