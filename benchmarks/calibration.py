@@ -29,6 +29,10 @@ With ``--shaded``: the balls' focal length on the renderer's shaded ball
 straight overhead, its light and blur changed one at a time (``--ball-at X,Y``
 for the ball, ``--ball-floor`` for ``BALL_SHAPE_FLOOR``).
 
+With ``--focal`` (``--tilts 2,2.5,3``, ``--seeds``, ``--rendered``): the
+focal length ``calibrate_frame`` writes at small tilts, its source and its
+error against its stated one.
+
 With ``--diagnose`` (``--height 2 --tilt 0 --k1 -0.25``): the automatic
 camera's v0 error split into its parts (corners, k1, focal length), each
 camera built from the true values but one.
@@ -39,6 +43,11 @@ shapes; ``--no-balls`` for the nominal one) and so are the perturbed cameras
 (``--no-kappa-camera`` leaves out the one for k1's error, and with the
 jackknife's joint moves, each of which moves k1, all of them; ``--corner-sigma``
 states the corners' error instead of the jackknife's, one coordinate at a time).
+``--frames``: one calibration per shot, each from another noise draw of the
+frame, so that a row's coverage is over many frames' corner errors, with a
+95% bootstrap interval (shots resampled) per row and pooled;
+``--cameras H,T,K1;...`` for other cameras than the table's (which ends
+with two at 2-3 degrees of tilt, where the corners' f meets the balls').
 
 Usage: python benchmarks/calibration.py [--n 40] [--seed 0] [--track-px 0.03] [--auto] [--diagnose] [--stated] [--shaded]
 """
@@ -128,11 +137,14 @@ def auto(args):
     xs, ys = np.meshgrid(np.linspace(0.1, 2.44, 9), np.linspace(0.1, 1.17, 5))
     grid = np.column_stack([xs.ravel(), ys.ravel()])
     cams = [(2.0, 0.0, 0.0), (2.0, 10.0, 0.0), (1.5, 15.0, 0.0), (3.0, 5.0, -0.25),
-            (2.0, 10.0, -0.25), (1.5, 15.0, -0.25), (2.0, 12.0, 0.25), (2.0, 0.0, -0.25)]
-    for height, tilt, k1 in [c for c in cams if not args.overhead or c[1] == 0.0]:
-        true = Scene(physics=sample_shot(0)[1], camera=pinhole_camera(
-            height_m=height, tilt_deg=tilt, k1=k1, size=SIZE, fps=FPS, roll_deg=ROLL_DEG)).camera
-        img = synthetic_table_frame(true, seed=int(10 * tilt + 100 * abs(k1)) + 1000 * args.frame_seed,
+            (2.0, 10.0, -0.25), (1.5, 15.0, -0.25), (2.0, 12.0, 0.25), (2.0, 0.0, -0.25),
+            (2.0, 2.0, 0.0), (2.0, 3.0, -0.25)]       # the last two: where the corners' f meets the balls'
+    if args.cameras:
+        cams = [tuple(float(v) for v in c.split(",")) for c in args.cameras.split(";")]
+    pooled, pooled_cal = [], []
+
+    def calibrated(true, tilt, k1, frame_seed):
+        img = synthetic_table_frame(true, seed=int(10 * tilt + 100 * abs(k1)) + 1000 * frame_seed,
                                     cushion_m=args.cushion, pockets=args.cushion > 0)
         # --true-focal: the true focal length given (--focal-px), to tell its share from the rest
         fk = {"focal_px": float(true.K[0, 0])} if args.true_focal else {}
@@ -141,16 +153,27 @@ def auto(args):
         if args.corner_sigma is not None:
             fk["corner_sigma_px"] = args.corner_sigma
         cal = calibrate_frame(img, Table(), fps=FPS, use_balls=not args.no_balls, **fk)
-        pert, sigma, edge_rms = cal.perturbed, cal.corner_sigma_px, cal.edge_rms_px
+        pert = cal.perturbed
         kappa = float(cal.camera.dist[0]) / float(cal.camera.K[0, 0]) ** 2
         if args.no_kappa_camera:  # the perturbed cameras as before k1's error was in them
             pert = [c for c in pert if abs(c.dist[0] / c.K[0, 0] ** 2 - kappa) <= 1e-9 * abs(kappa)]
+        return cal, pert, kappa
+
+    for height, tilt, k1 in [c for c in cams if not args.overhead or c[1] == 0.0]:
+        true = Scene(physics=sample_shot(0)[1], camera=pinhole_camera(
+            height_m=height, tilt_deg=tilt, k1=k1, size=SIZE, fps=FPS, roll_deg=ROLL_DEG)).camera
+        cal, pert, kappa = calibrated(true, tilt, k1, args.frame_seed)
+        sigma, edge_rms = cal.corner_sigma_px, cal.edge_rms_px
         truth = true.project(table_corners(Table()))
         c_rms = float(np.sqrt(np.mean(np.sum((cal.corners_px - truth) ** 2, axis=1))))
         cam = Scene(physics=sample_shot(0)[1], camera=cal.camera).camera
         m_err = float(np.abs(cam.to_table(true.to_pixels(grid)) - grid).max())
         res = {"exact": [], "auto": []}
+        f_err, cal_z = [], []
         for i in range(args.n):
+            if args.frames and i:
+                # --frames: one calibration per shot, each from another noise draw of the frame
+                cal, pert, kappa = calibrated(true, tilt, k1, args.frame_seed + i)
             shot, params = sample_shot(args.seed * 1000 + i, "random")
             tr = Scene(physics=params, camera=true).camera
             uv = track_pixels(shot, params, tr, np.random.default_rng(i), args.track_px)
@@ -166,17 +189,49 @@ def auto(args):
                     extra_v += (rk[0] - dv) ** 2
                     extra_w += (rk[1] - dw) ** 2
             res["auto"].append((dv, dw, np.sqrt(sv**2 + extra_v), np.sqrt(sw**2 + extra_w)))
+            # the calibration's own error (the answer's move from the exact camera's, the same
+            # track) in units of the share it states: the fit's own error left out
+            cal_z.append(np.concatenate([(dv - r["exact"][0]) / np.sqrt(extra_v),
+                                         (dw - r["exact"][1]) / np.sqrt(extra_w)]))
+            f_err.append((cal.camera.K[0, 0] / true.K[0, 0] - 1, getattr(cal, "focal_sigma", None) or 0.0))
         rv = {k: np.sqrt(np.mean([np.sum(r[0] ** 2) / 2 for r in v])) for k, v in res.items()}
         rw = {k: np.sqrt(np.mean([np.sum(r[1] ** 2) / 2 for r in v])) for k, v in res.items()}
-        cover = {k: np.mean([np.abs(np.concatenate([r[0] / r[2], r[1] / r[3]])) < 1.96 for r in v])
-                 for k, v in res.items()}
+        inside = {k: np.array([np.abs(np.concatenate([r[0] / r[2], r[1] / r[3]])) < 1.96 for r in v])
+                  for k, v in res.items()}
+        cover = {k: v.mean() for k, v in inside.items()}
         zv = {k: np.sqrt(np.mean([np.sum((r[0] / r[2]) ** 2) / 2 for r in v])) for k, v in res.items()}
+        fe = np.array(f_err)
         print(f"{height:6.1f} {tilt:4.0f} {k1:+.2f} | {c_rms:13.3f} {edge_rms:11.3f} "
-              f"{kappa * cal.camera.K[0, 0] ** 2:+.3f} {cal.focal_source:10s} "
-              f"f {cal.camera.K[0, 0] / true.K[0, 0] - 1:+.2%} | {m_err:9.1e} | "
+              f"{kappa * cal.camera.K[0, 0] ** 2:+.3f} {cal.focal_source:13s} "
+              f"f {fe[:, 0].mean() if args.frames else fe[-1, 0]:+.2%} (stated {fe[:, 1].mean():.1%}) | {m_err:9.1e} | "
               f"{rv['exact']:.2e} / {rv['auto']:.2e} ({rv['auto'] / rv['exact']:.2f}x), "
               f"{rw['exact']:.2e} / {rw['auto']:.2e} | {len(res['auto'])} {sigma:.2f} {len(pert)} | "
-              f"{cover['exact']:.0%} / {cover['auto']:.0%}, {zv['exact']:.2f} / {zv['auto']:.2f}", flush=True)
+              f"{cover['exact']:.0%} / {cover['auto']:.0%}{boot(inside['auto'])}, "
+              f"{zv['exact']:.2f} / {zv['auto']:.2f}", flush=True)
+        pooled.append(inside["auto"])
+        cz = np.array(cal_z)
+        pooled_cal.append(np.abs(cz) < 1.96)
+        print(f"    the calibration's share alone: (auto - exact) / stated share, RMS {np.sqrt(np.mean(cz**2)):.2f}, "
+              f"cover95 {np.mean(np.abs(cz) < 1.96):.0%}{boot(np.abs(cz) < 1.96)}", flush=True)
+        if args.frames:
+            print(f"    f error per frame (%): {np.round(100 * fe[:, 0], 2).tolist()}; z "
+                  f"{np.round(fe[:, 0] / np.where(fe[:, 1] > 0, fe[:, 1], np.nan), 2).tolist()}", flush=True)
+    if len(pooled) > 1:
+        print(f"pooled over {len(pooled)} rows, {sum(len(p) for p in pooled)} shots: cover "
+              f"{np.mean(np.concatenate(pooled)):.1%}{boot(*pooled)}; the calibration's share alone "
+              f"{np.mean(np.concatenate(pooled_cal)):.1%}{boot(*pooled_cal)}")
+
+
+def boot(*rows, n: int = 2000, seed: int = 0) -> str:
+    """A 95% bootstrap interval of the coverage, shots resampled within each row
+    (a shot's four components share its calibration and its track)."""
+    rng = np.random.default_rng(seed)
+    rows = [np.asarray(r, dtype=float).reshape(len(r), -1) for r in rows if len(r)]
+    if not rows:
+        return ""
+    means = [np.mean(np.concatenate([r[rng.integers(0, len(r), len(r))].ravel() for r in rows])) for _ in range(n)]
+    lo, hi = np.percentile(means, [2.5, 97.5])
+    return f" [{lo:.0%}, {hi:.0%}]"
 
 
 def stated(args):
@@ -193,7 +248,7 @@ def stated(args):
     from cuespin.render.draw import FrameRenderer
 
     def row(label, img, truth):
-        det = detect_corners(img)
+        det = detect_corners(img, robust=not args.no_robust)
         d = min((np.roll(det.corners, -s, axis=0) - truth for s in range(4)), key=lambda e: np.abs(e).max())
         h, w = img.shape[:2]
         naive = det.edge_rms * math.sqrt(4.0 / ((w + h) / 4.0))     # the scatter over the points' number
@@ -226,6 +281,46 @@ def stated(args):
                                render={"look": "realistic", "noise_sigma": 2.0, "seed": 1 + sd})
             img = next(iter(FrameRenderer(replace(scene, camera=cam), n_frames=1).frames()))
             row(f"realistic {label} s{sd}", img, truth)
+
+
+def focal(args):
+    """The focal length ``calibrate_frame`` writes at small tilts (``--tilts``,
+    2 m, k1 0 and -0.25), its source and its error against its stated one:
+    drawn frames (``--seeds`` noise seeds), or with ``--rendered`` the
+    renderer's realistic table with a ball at rest at (2.40, 1.15) m under
+    the default light and a lamp overhead."""
+    import math
+    from dataclasses import replace
+
+    from cuespin.data_gen.sampler import make_scene
+    from cuespin.physics.motion import Shot
+    from cuespin.pipeline.calibrate import calibrate_frame, synthetic_table_frame
+    from cuespin.render.draw import FrameRenderer
+
+    shot, params = sample_shot(100, "random")
+    zs = []
+    for tilt in (float(t) for t in args.tilts.split(",")):
+        for k1 in (0.0, -0.25):
+            R = params.R if args.rendered else 0.028575    # the drawn balls: a pool ball's
+            true = pinhole_camera(height_m=2.0, tilt_deg=tilt, k1=k1, size=SIZE, fps=FPS, roll_deg=ROLL_DEG,
+                                  margin_m=0.15 if args.rendered else 0.1, R=R)
+            if args.rendered:
+                frames = []
+                for name, look in (("default", {}), ("lamp", {"light_elevation": 1.55})):
+                    scene = make_scene(Shot(np.array([2.40, 1.15]), shot.v0, shot.w0, t0=0.1), params,
+                                       render={"look": "realistic", "noise_sigma": 2.0, "seed": 1, **look})
+                    frames.append((name, next(iter(FrameRenderer(replace(scene, camera=true), n_frames=1).frames()))))
+            else:
+                frames = [(f"s{sd}", synthetic_table_frame(true, seed=int(10 * tilt + 100 * abs(k1)) + 1000 * sd,
+                                                           cushion_m=0.05, pockets=True)) for sd in range(args.seeds)]
+            for label, img in frames:
+                cal = calibrate_frame(img, Table(), fps=FPS, R_nominal=R)
+                err = cal.camera.K[0, 0] / true.K[0, 0] - 1.0
+                zs.append(err / cal.focal_sigma)
+                print(f"tilt {tilt:g} k1 {k1:+.2f} {label}: {cal.focal_source:13s} f {err:+.2%} stated "
+                      f"{cal.focal_sigma:.2%} z {zs[-1]:+.2f} corner sigma {cal.corner_sigma_px:.3f} px", flush=True)
+    z = np.array(zs)
+    print(f"{len(z)} frames: f error / stated RMS {math.sqrt(np.mean(z**2)):.2f}, max |.| {np.abs(z).max():.2f}")
 
 
 def shaded(args):
@@ -340,6 +435,11 @@ def main():
                     help="--auto: the corners' stated error (default: calibrate's, the edges' jackknife)")
     ap.add_argument("--frame-seed", type=int, default=0,
                     help="--auto: another draw of each frame's noise (--stated's seeds), the same shots")
+    ap.add_argument("--frames", action="store_true",
+                    help="--auto: one calibration per shot, each from another noise draw of the frame "
+                         "(coverage over many frames' corner errors, not one's)")
+    ap.add_argument("--cameras", default=None, metavar="H,T,K1;...",
+                    help="--auto: these cameras (height m, tilt deg, k1) instead of the table's")
     ap.add_argument("--no-kappa-camera", action="store_true",
                     help="--auto: without the perturbed camera for k1's error (with the jackknife's joint "
                          "moves, each of which moves k1: without all of them)")
@@ -351,13 +451,21 @@ def main():
     ap.add_argument("--stated", action="store_true",
                     help="the automatic corners' stated error against their real one, per frame")
     ap.add_argument("--seeds", type=int, default=3, help="--stated: noise seeds per drawn camera")
+    ap.add_argument("--no-robust", action="store_true",
+                    help="--stated: keep the edge points STRAY_EDGE_Z or more from their line (as before)")
     ap.add_argument("--shaded", action="store_true",
                     help="the balls' focal length on the renderer's shaded ball, light and blur one at a time")
+    ap.add_argument("--focal", action="store_true",
+                    help="the focal length written at small tilts and its error against its stated one")
+    ap.add_argument("--tilts", default="2,2.5,3", help="--focal: tilts (deg)")
+    ap.add_argument("--rendered", action="store_true", help="--focal: on the renderer's realistic table")
     ap.add_argument("--ball-at", default="2.40,1.15", metavar="X,Y", help="--shaded: the ball's table position (m)")
     ap.add_argument("--ball-floor", type=float, default=None, help="--shaded: BALL_SHAPE_FLOOR instead of calibrate's")
     args = ap.parse_args()
     if args.shaded:
         return shaded(args)
+    if args.focal:
+        return focal(args)
     if args.stated:
         return stated(args)
     if args.auto:

@@ -111,6 +111,10 @@ class Calibration:
         for the focal length's error where it was not fixed by the corners.
         Written to the scene file's ``calibration.perturbed`` for the
         recovery's errors.
+    focal_sigma : float or None
+        Automatic calibration without a lens, focal length or height given:
+        the focal length's stated relative error (the corners', the balls',
+        their combination's, :func:`choose_focal`, or ``NOMINAL_FOCAL_SIGMA``).
     """
 
     camera: Camera
@@ -122,6 +126,7 @@ class Calibration:
     edge: str | None = None
     corner_sigma_px: float | None = None
     perturbed: tuple = ()
+    focal_sigma: float | None = None
 
     @property
     def rms_px(self) -> float:
@@ -254,6 +259,75 @@ def focal_from_corners(obj, img, size, sigma_px: float):
     c0 = _chi2(obj, img, f, size) / sigma_px**2
     inside = grid[chi <= c0 + 1.0]
     return f, (float(min(inside.min(), f)), float(max(inside.max(), f))) if inside.size else (f, f)
+
+
+def corner_focal(corners_px, size, table: Table, moves, *, kappa: float = 0.0, margin_m: float = 0.0,
+                 corner_height_m: float = 0.0):
+    """The focal length the corners give (:func:`focal_from_corners`, through the
+    lens's bow ``kappa``) and its standard error under the corners' errors.
+
+    The corners are moved by each row of ``moves`` in turn (shape (m, 9): the
+    8 corner coordinates in table order and kappa; :func:`covariance_moves` of
+    the edges' jackknife, or one coordinate at a time) and f refitted:
+    ``sigma^2 = sum_k (f_k - f)^2``, the first-order variance the perturbed
+    cameras would carry.  (The chi^2 interval of :func:`focal_from_corners`
+    assumes independent corners and is read off a grid 5% apart: at 2-3
+    degrees of tilt it cannot tell 2% from 5%.)
+
+    Returns
+    -------
+    (f, sigma, f_k) : float, float, ndarray of shape (m,)
+        Focal length (px), its standard error (px; infinite when f or a
+        refit lies at ``FOCAL_RANGE``'s edge), and f under each move.
+    """
+    obj = table_corners(table, margin_m, corner_height_m)
+    centre = np.array([(size[0] - 1) / 2.0, (size[1] - 1) / 2.0])
+    base = np.asarray(corners_px, dtype=float).reshape(4, 2)
+
+    def fit(c, k):
+        return focal_from_corners(obj, _undistort_radial(c, centre, k) if k else c, size, 1.0)[0]
+    f = fit(base, kappa)
+    fk = np.array([fit(base + row[:8].reshape(4, 2), kappa + row[8]) for row in np.asarray(moves, dtype=float)])
+    lo, hi = FOCAL_RANGE[0] * max(size) * 1.01, FOCAL_RANGE[1] * max(size) / 1.01
+    if not lo < min(f, fk.min()) <= max(f, fk.max()) < hi:
+        # a minimum on FOCAL_RANGE's edge is no minimum (straight overhead chi^2
+        # falls towards one end): the corners do not fix f
+        return f, math.inf, fk
+    return f, float(np.sqrt(np.sum((fk - f) ** 2))), fk
+
+
+def choose_focal(corners=None, balls=None):
+    """Where the focal length comes from, one rule for every view: of the
+    sources whose stated error is under the nominal focal length's
+    (``NOMINAL_FOCAL_SIGMA``), the one with the smaller stated error, or, when
+    both the corners' perspective and the still balls' shapes qualify, their
+    inverse-variance combination (independent measurements: the table's edges
+    and the balls' outlines; both stated honestly, docs/calibration.md,
+    section 3).
+
+    Parameters
+    ----------
+    corners, balls : (f, sigma) or None
+        Focal length and its standard error (px) from :func:`corner_focal` and
+        :func:`focal_from_balls`.
+
+    Returns
+    -------
+    (source, f, sigma, w) or None
+        ``corners``, ``balls`` or ``corners+balls``; f and its standard error
+        (px); ``w`` the corners' weight (1 - w the balls').  None: neither
+        qualifies (the nominal focal length then).
+    """
+    use = {k: v for k, v in (("corners", corners), ("balls", balls))
+           if v is not None and np.isfinite(v[1]) and 0 < v[1] < NOMINAL_FOCAL_SIGMA * v[0]}
+    if not use:
+        return None
+    if len(use) == 1:
+        (k, (f, s)), = use.items()
+        return k, float(f), float(s), 1.0 if k == "corners" else 0.0
+    (fc, sc), (fb, sb) = use["corners"], use["balls"]
+    w = sb**2 / (sc**2 + sb**2)
+    return "corners+balls", float(w * fc + (1.0 - w) * fb), float(sc * sb / math.hypot(sc, sb)), float(w)
 
 
 def calibrate_corners(corners_px, size, table: Table = Table(), *, intrinsics=None, distortion=None,
@@ -419,7 +493,7 @@ def _homography_calibration(obj, img, size, intrinsics, distortion, kappa, fps, 
 
 def perturbed_cameras(corners_px, sigma_px: float, size, table: Table = Table(), *,
                       height_sigma_m: float = 0.0, focal_sigma: float = 0.0, kappa_sigma: float = 0.0,
-                      kappa_corners=None, moves=None, **kw) -> list:
+                      kappa_corners=None, moves=None, focal_moves=None, **kw) -> list:
     """The cameras of the 8 corner coordinates each moved by ``sigma_px``, one at a
     time, and, when the focal length is the nominal one (an overhead camera
     without a lens calibration or height), a ninth with it
@@ -444,21 +518,28 @@ def perturbed_cameras(corners_px, sigma_px: float, size, table: Table = Table(),
     moved by ``moves[k, :8]`` together and ``kappa`` by ``moves[k, 8]``, so
     that ``sum_k (q_k - q)^2`` is the first-order variance under the corners'
     and the bow's joint covariance (adjacent corners share a side's line).
+
+    ``focal_moves`` (one focal length (px) per corner move, in the order of
+    ``moves`` or of the 8 single moves): with the focal length fixed
+    (``focal_px``) but taken partly from the corners (:func:`choose_focal`),
+    camera k has it at ``focal_moves[k]``, what the corners so moved give it.
     """
     base = np.asarray(corners_px, dtype=float).reshape(4, 2)
     cams = []
+    def at(k, trial):
+        return trial if focal_moves is None else dict(trial, focal_px=float(focal_moves[k]))
     if moves is not None:
-        for row in np.asarray(moves, dtype=float):
+        for k, row in enumerate(np.asarray(moves, dtype=float)):
             trial = dict(kw, kappa=kw["kappa"] + row[8]) if row[8] and "kappa" in kw else kw
             try:
-                cams.append(calibrate_corners(base + row[:8].reshape(4, 2), size, table, **trial).camera)
+                cams.append(calibrate_corners(base + row[:8].reshape(4, 2), size, table, **at(k, trial)).camera)
             except CalibrationError:
                 continue
     for k in range(8 if moves is None else 0):
         c = base.copy()
         c.flat[k] += sigma_px
         try:
-            cams.append(calibrate_corners(c, size, table, **kw).camera)
+            cams.append(calibrate_corners(c, size, table, **at(k, kw)).camera)
         except CalibrationError:
             continue
     if focal_sigma > 0 and kw.get("focal_px") and kw.get("intrinsics") is None and not kw.get("homography"):
@@ -825,6 +906,30 @@ def radial_sigma(sides, centre, kappa: float, size) -> float:
     return float(math.sqrt(2.0 / curv)) if curv > 0 else 0.0
 
 
+# Edge points further than this many robust standard deviations (1.4826 x the
+# median absolute residual) from their side's line are strays (a ball or the
+# cue near the cushion, a pocket's jaw): measured on the drawn tables' 24
+# frames, the clean sides' points reach 2.4-3.8 (as many Gaussian draws
+# would), the strays 4-200.  _fit_line's own cut (6) keeps those between 4 and
+# 6, and a jackknife run that leaves a group of them out moves a line by
+# several times its error (the corners' stated error up to 5x the real one).
+STRAY_EDGE_Z = 4.0
+
+
+def drop_strays(sides, K=None, dist=None, kappa: float = 0.0, centre=None, z: float = STRAY_EDGE_Z) -> list:
+    """Each side's edge points without those further than ``z`` robust standard
+    deviations from its line (``STRAY_EDGE_Z``), so that every fit after (the
+    bow, the corners, their jackknife) sees the same points."""
+    out = []
+    for p, q in zip(sides, _straightened(sides, K, dist, kappa, centre)):
+        c, d, _ = _fit_line(q)
+        r = (q - c) @ np.array([-d[1], d[0]])
+        scale = max(1.4826 * float(np.median(np.abs(r))), 0.01)
+        keep = np.abs(r) <= z * scale
+        out.append(p[keep] if keep.sum() >= 2 * JACKKNIFE_GROUPS else p)
+    return out
+
+
 # The groups of consecutive edge points per side the corners' jackknife leaves
 # out in turn: long enough (about 1/16 of a side, 30-60 points) that the
 # texture's and the drawing's correlation along a side (a few px) stays
@@ -982,7 +1087,7 @@ class Detection:
 
 
 def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = True,
-                   noses: bool = True) -> Detection:
+                   noses: bool = True, robust: bool = True) -> Detection:
     """The playing surface's four corners in a frame (:class:`Detection`).
 
     Parameters
@@ -995,6 +1100,10 @@ def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = Tru
         Without ``K``: estimate one radial coefficient from the edges' bow.
     noses : bool
         Look for the cushions' noses inside the felt-coloured outline.
+    robust : bool
+        Drop the edge points ``STRAY_EDGE_Z`` robust standard deviations or
+        more from their side's line (:func:`drop_strays`) before the bow,
+        the corners and their jackknife.
     """
     D, thr = _felt_distance(img)
     quad, contour = _felt_quad(D, thr)
@@ -1010,6 +1119,10 @@ def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = Tru
     corners_kappa = None
     if K is None and estimate_lens:
         kappa = radial_from_edges(sides, centre, (w, h))
+    if robust:
+        sides = drop_strays(sides, K, dist, kappa, centre)
+    if K is None and estimate_lens:
+        kappa = radial_from_edges(sides, centre, (w, h)) if robust else kappa     # without the strays
         kappa_sigma = radial_sigma(sides, centre, kappa, (w, h))
         corners_kappa = fit_sides(sides, kappa=kappa + kappa_sigma, centre=centre)[0]
     corners, edge_rms = fit_sides(sides, K, dist, kappa, centre)
@@ -1326,14 +1439,14 @@ def calibrate_frame(frame: np.ndarray, table: Table = Table(), *, intrinsics=Non
                     camera_height_sigma_m: float = 0.0, use_balls: bool = True, **kw) -> Calibration:
     """The camera found in one frame of the table (``calibrate_video``'s automatic
     path): the corners and the lens's bow from :func:`detect_corners`, the
-    corners' order from :func:`assign_corners`, and, where the corners cannot
-    fix the focal length (straight overhead, no lens, height or focal length
-    given), the focal length from the still balls' shapes
-    (:func:`focal_from_balls`) when that is surer than the nominal one's
-    ``NOMINAL_FOCAL_SIGMA`` (``use_balls``); then the perturbed cameras, with one for the
-    lens's bow (``kappa`` one standard error larger) and one for a focal
-    length from the balls (one standard error longer).  ``kw`` as for
-    :func:`calibrate_corners`."""
+    corners' order from :func:`assign_corners`, and, with no lens, height or
+    focal length given, the focal length by one rule (:func:`choose_focal`):
+    the corners' perspective (:func:`corner_focal`) and the still balls'
+    shapes (:func:`focal_from_balls`, ``use_balls``), whichever states the
+    smaller error, or both weighted by their errors, when under the nominal
+    one's ``NOMINAL_FOCAL_SIGMA``; then the perturbed cameras, each with the
+    corners' share of f moved with the corners, and one for the balls' share
+    (one weighted error longer).  ``kw`` as for :func:`calibrate_corners`."""
     h, w = frame.shape[:2]
     size = (int(w), int(h))
     K = None if intrinsics is None else np.asarray(intrinsics, dtype=float)
@@ -1354,32 +1467,67 @@ def calibrate_frame(frame: np.ndarray, table: Table = Table(), *, intrinsics=Non
     same = dict(intrinsics=K, distortion=dist, fps=kw.pop("fps", 30.0), kappa=kappa, margin_m=felt_margin_m,
                 corner_height_m=felt_height_m, **kw)
     cal = assign_corners(quad, size, table, **same)
-    notes = list(cal.notes)
-    focal_sigma = 0.0
-    if cal.focal_source == "nominal" and use_balls:
-        R = float(kw.get("R_nominal", 0.028575))
-        scale = math.sqrt(abs(signed_area(quad)) / (table.length * table.width))   # px per m, roughly
-        fb = focal_from_balls(ball_images(frame, quad, R * scale), cal.corners_px, size, table, R=R, **same)
-        if fb is not None and fb[1] / fb[0] < NOMINAL_FOCAL_SIGMA:
-            same["focal_px"] = fb[0]
-            focal_sigma = fb[1] / fb[0]
-            cal = assign_corners(quad, size, table, **same)
-            notes = [f"the corners do not fix the focal length (camera nearly overhead); f = {fb[0]:.0f} px "
-                     f"+/- {100 * focal_sigma:.1f}% from the still balls' shapes (a sphere's image "
-                     f"stretches away from the optical axis), camera {cal.height_m:.2f} m above the cloth"]
-            cal = replace(cal, focal_source="balls")
     # the corners refitted with kappa one standard error larger, in the order assigned
     s = int(np.argmin([np.abs(np.roll(quad, -k, axis=0) - cal.corners_px).max() for k in range(4)]))
     kappa_corners = None if det.corners_kappa is None else np.roll(det.corners_kappa, -s, axis=0)
-    cal = replace(cal, notes=notes, edge_rms_px=edge_rms, edge=det.edge)
     kappa_sigma = det.kappa_sigma
     if moves is not None:
         # the covariance in the assigned order: corner j is the detection's (j + s) % 4
         idx = [2 * ((j + s) % 4) + c for j in range(4) for c in (0, 1)] + [8]
         moves = covariance_moves(moves[np.ix_(idx, idx)])
         kappa_sigma = 0.0                   # the bow's error is in the joint moves
+    notes = list(cal.notes)
+    focal_sigma = 0.0
+    focal_moves = None
+    if K is None and same.get("focal_px") is None and same.get("camera_height_m") is None and not same.get(
+            "homography"):
+        # One rule for the focal length at every tilt (choose_focal): the
+        # corners' perspective, the still balls' shapes, or both weighted by
+        # their stated errors; the nominal one when neither is under its 15%.
+        steps = moves if moves is not None else np.hstack([kw["corner_sigma_px"] * np.eye(8), np.zeros((8, 1))])
+        fc = corner_focal(cal.corners_px, size, table, steps, kappa=kappa, margin_m=felt_margin_m,
+                          corner_height_m=felt_height_m)
+        fb = None
+        if use_balls:
+            R = float(kw.get("R_nominal", 0.028575))
+            scale = math.sqrt(abs(signed_area(quad)) / (table.length * table.width))   # px per m, roughly
+            fb = focal_from_balls(ball_images(frame, quad, R * scale), cal.corners_px, size, table, R=R, **same)
+        pick = choose_focal(fc[:2], fb)
+        if pick is not None:
+            source, f, sigma, w = pick
+            same["focal_px"] = f
+            if w > 0:                       # the corners' share of f moves with them in each perturbed camera
+                focal_moves = f + w * (fc[2] - fc[0])
+            if w < 1:                       # the balls' share: one camera with it one (weighted) error longer
+                focal_sigma = (1.0 - w) * fb[1] / f
+            cal = replace(calibrate_corners(cal.corners_px, size, table, **same), focal_source=source,
+                          focal_sigma=sigma / f)
+            if source == "corners+balls":
+                notes = [f"f = {f:.0f} px +/- {100 * sigma / f:.1f}% from the corners' perspective ({fc[0]:.0f} px "
+                         f"+/- {100 * fc[1] / fc[0]:.1f}%) and the still balls' shapes ({fb[0]:.0f} px +/- "
+                         f"{100 * fb[1] / fb[0]:.1f}%), weighted by their stated errors; camera "
+                         f"{cal.height_m:.2f} m above the cloth"]
+            elif source == "balls":
+                notes = [f"the corners do not fix the focal length (camera nearly overhead); f = {f:.0f} px "
+                         f"+/- {100 * sigma / f:.1f}% from the still balls' shapes (a sphere's image stretches "
+                         f"away from the optical axis), camera {cal.height_m:.2f} m above the cloth"]
+            else:
+                notes = []
+        elif cal.focal_source == "corners":
+            # the corners' own spread says more than the nominal 15%: the nominal one, with its error
+            same["focal_px"] = NOMINAL_FOCAL * max(size)
+            focal_sigma = NOMINAL_FOCAL_SIGMA
+            cal = replace(calibrate_corners(cal.corners_px, size, table, **same), focal_source="nominal",
+                          focal_sigma=NOMINAL_FOCAL_SIGMA)
+            notes = [f"the corners do not fix the focal length (+/- {100 * fc[1] / fc[0]:.0f}%); assumed f = "
+                     f"{same['focal_px']:.0f} px (a phone's main camera), camera {cal.height_m:.2f} m above the "
+                     f"cloth: give --camera-height or --intrinsics"]
+        else:
+            cal = replace(cal, focal_sigma=NOMINAL_FOCAL_SIGMA)
+    cal = replace(cal, notes=notes, edge_rms_px=edge_rms, edge=det.edge)
     return _with_perturbed(cal, size, table, height_sigma_m=camera_height_sigma_m, focal_sigma=focal_sigma,
-                           kappa_sigma=kappa_sigma, kappa_corners=kappa_corners, moves=moves, **same)
+                           kappa_sigma=kappa_sigma, kappa_corners=kappa_corners, moves=moves,
+                           focal_moves=focal_moves, **same)
 
 
 def _with_perturbed(cal: Calibration, size, table: Table, **kw) -> Calibration:
@@ -1392,7 +1540,7 @@ def _with_perturbed(cal: Calibration, size, table: Table, **kw) -> Calibration:
                              corner_sigma_px=cal.corner_sigma_px, **kw)
     notes = list(cal.notes)
     moves = kw.get("moves")
-    want = (8 if moves is None else len(moves)) + (cal.focal_source == "nominal") + (
+    want = (8 if moves is None else len(moves)) + (cal.focal_source == "nominal" and not kw.get("focal_px")) + (
         cal.focal_source == "camera-height" and kw.get("height_sigma_m", 0.0) > 0)
     want += (kw.get("focal_sigma", 0.0) > 0 and bool(kw.get("focal_px"))) + (
         kw.get("kappa_sigma", 0.0) > 0 and bool(kw.get("kappa")) and not kw.get("homography")
@@ -1579,7 +1727,8 @@ def cmd_calibrate(args) -> int:
     found = ("given" if corners is not None else
              f"found in the video ({what}, edges straight to {cal.edge_rms_px:.2f} px RMS)")
     where = (f"camera {cal.height_m:.2f} m above the cloth, tilted {cal.tilt_deg:.1f} deg, "
-             f"f = {cam.K[0, 0]:.0f} px (from {cal.focal_source})" if cam.is_pinhole else
+             f"f = {cam.K[0, 0]:.0f} px" + (f" +/- {100 * cal.focal_sigma:.1f}%" if cal.focal_sigma else "")
+             + f" (from {cal.focal_source})" if cam.is_pinhole else
              "camera: the corners' homography")
     print(f"wrote {out}: corners {found}; corner reprojection {cal.rms_px:.2f} px RMS "
           f"(max {np.linalg.norm(cal.residual_px, axis=1).max():.2f} px); {where}")

@@ -216,40 +216,63 @@ def test_red_ball_on_red_felt_in_h264_reports_no_false_centre(tmp_path, codec, s
     assert tr.ok.sum() >= floor, tr.status_counts()
 
 
-def test_cue_shaft_is_not_the_ball():
-    # sample_scenes(6, 6, realistic, FFV1)[0] before the strike: a blue ball
-    # with dots on blue felt and a tan cue, darker than the felt in the
-    # tracker's combination as the ball is (the combination track_video
-    # learnt on this shot, measured), the shaft departing 50-70 levels and
-    # the ball ~30.  With the shaft ahead of the ball in the search, the
-    # search saw two blobs in every frame; with the ball hidden (its window
-    # copied into the felt), the shaft alone was taken for the ball.
-    from cuespin.track.background import Background
-    from cuespin.track.colour import Projection
-    from cuespin.track.tracker import NO_BALL, OK, BallTracker
-    from cuespin.track.video import search_mask
+@pytest.fixture(scope="module")
+def cue_shot():
+    """sample_scenes(6, 6, realistic, FFV1)[0], its first 0.8 s, with the
+    projection, felt, contrast and detection score learnt from its own
+    frames by track_video's learning (learn_model): the thresholds the
+    tracker uses, not hand-set ones."""
+    from cuespin.track.tracker import TrackerConfig
+    from cuespin.track.video import learn_model, search_mask
 
     scene = sample_scenes(1, 6, look="realistic", codec="FFV1")[0]
     assert scene.render["cue"]
-    scene.render["max_duration"] = 0.25  # at rest, the cue drawn back and coming in (strike at 0.31 s)
+    scene.render["max_duration"] = 0.8  # strike at 0.31 s: the cue drawn back and coming in, then the ball moves
     fr = FrameRenderer(scene)
-    proj = Projection(w=np.array([-0.0574, 0.7334, -0.6759], np.float32), offset=71.16)
-    felt = proj(fr.background)
+
+    class Frames:  # rendered on demand: learning reads only its samples (~20 of 96 frames)
+        def __len__(self):
+            return len(fr.truth.t)
+
+        def __getitem__(self, k):
+            return fr.render(k, np.random.default_rng([6, k]))
+
+    frames = Frames()
     cam, R = scene.camera, scene.physics.R
     r = R * cam.px_per_m(scene.truth.x0)
-    mask = search_mask(cam, scene.table, R, felt.shape)  # the playing surface, as track_video's
-    frames = list(fr.frames())
-    for k in (0, 20, 29):
-        frame, truth = frames[k], fr.truth.uvc[k]
-        bg = Background(image=felt, sigma=scene.render["noise_sigma"], polarity=-1, contrast=30.0, n_samples=9,
-                        path_pixels=0, weak_samples=np.zeros(9, bool))
-        loc, status = BallTracker(bg, r, 0.5, projection=proj, search_mask=mask)._full_search(frame)
-        assert status == OK and np.hypot(*(loc - truth)) < 0.5 * r, (k, loc, status)  # a blob, refined later
-        # The ball hidden: the cue alone is no ball.
-        hidden = felt.copy()
-        u, v, h = int(round(truth[0])), int(round(truth[1])), int(2 * r)
-        hidden[v - h:v + h + 1, u - h:u + h + 1] = proj(frame)[v - h:v + h + 1, u - h:u + h + 1]
-        alone = Background(image=hidden, sigma=bg.sigma, polarity=-1, contrast=30.0, n_samples=9, path_pixels=0,
-                           weak_samples=np.zeros(9, bool))
-        loc, status = BallTracker(alone, r, 0.5, projection=proj, search_mask=mask)._full_search(frame)
-        assert status == NO_BALL, (k, loc, status)
+    mask = search_mask(cam, scene.table, R, frames[0].shape[:2])  # the playing surface, as track_video's
+    proj, bg = learn_model(frames, r, TrackerConfig().n_background, mask)
+    assert bg.polarity and bg.score > 0  # the ball seen moving, with its own detection score
+    return frames, fr.truth.uvc, r, mask, proj, bg
+
+
+CUE_CLIP_XFAIL = pytest.mark.xfail(strict=True, reason=(
+    "measured on d3fc09e: on this 0.8-s clip the learnt detection score is 42 (on the whole 732-frame video "
+    "20): ball_score's largest sample is set by the cue, so the resting ball (dots, blue on blue) is under "
+    "the threshold and the shaft alone, its tip a few radii from the hidden ball, passes; track_video on "
+    "the clip: 24 of 97 frames ok, 44 no ball"))
+
+
+@pytest.mark.parametrize("k", [pytest.param(k, marks=CUE_CLIP_XFAIL) for k in (0, 20, 29)])
+def test_cue_shaft_is_not_the_ball(cue_shot, k):
+    # A blue ball with dots on blue felt and a tan cue, before the strike:
+    # the ball is found, not the shaft; with the ball hidden (its window
+    # copied into the felt), the shaft alone is no ball.
+    from dataclasses import replace
+
+    from cuespin.track.tracker import NO_BALL, OK, TWO_BLOBS, BallTracker
+
+    frames, uvc, r, mask, proj, bg = cue_shot
+    frame, truth = frames[k], uvc[k]
+    loc, status = BallTracker(bg, r, 0.5, projection=proj, search_mask=mask)._full_search(frame)
+    # Frames 0-7 (the tip within a few radii of the ball) are "two ball-like
+    # blobs" with the learnt model, on the whole video too (track_video, 732
+    # frames: 8 such, none wrong); never the shaft.
+    assert status in (OK, TWO_BLOBS) if k == 0 else status == OK, (k, loc, status)
+    if status == OK:
+        assert np.hypot(*(loc - truth)) < 0.5 * r, (k, loc, status)  # a blob, refined later
+    hidden = bg.image.copy()
+    u, v, h = int(round(truth[0])), int(round(truth[1])), int(2 * r)
+    hidden[v - h:v + h + 1, u - h:u + h + 1] = proj(frame)[v - h:v + h + 1, u - h:u + h + 1]
+    loc, status = BallTracker(replace(bg, image=hidden), r, 0.5, projection=proj, search_mask=mask)._full_search(frame)
+    assert status == NO_BALL, (k, loc, status)

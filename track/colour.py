@@ -52,6 +52,9 @@ FELT_LEVEL = 100.0
 # the lit side; blind to white (keeping ~0.45 of the separation) none were,
 # the largest error 0.09 radii.
 WHITE_FREE_MIN = 0.4
+# Weights summing to at most this fraction of their absolute sum are blind
+# to luma (the white-free weights sum to zero; float32 rounds them by ~1e-7).
+LUMA_BLIND_TOL = 1e-5
 
 
 @dataclass(frozen=True)
@@ -71,6 +74,17 @@ class Projection:
     w: np.ndarray | None = None
     offset: float = 0.0
     noise_cov: np.ndarray | None = None
+
+    @property
+    def luma_blind(self) -> bool:
+        """The weights sum to zero: luma, which a YUV video's decoder adds
+        to B, G and R alike, leaves the projected level unchanged, so the
+        channel is the video's chroma alone (half resolution in a 4:2:0
+        video: :func:`cuespin.track.model.fit_disc`'s ``block``)."""
+        if self.w is None:
+            return False
+        w = self.w.astype(np.float64)
+        return abs(float(w.sum())) <= LUMA_BLIND_TOL * float(np.abs(w).sum())
 
     def __call__(self, frame: np.ndarray, v0: int = 0, v1: int | None = None, u0: int = 0,
                  u1: int | None = None) -> np.ndarray:

@@ -32,6 +32,9 @@ LOSSLESS_CODECS = {"ffv1", "huffyuv", "ffvhuff", "png", "rawvideo", "utvideo", "
 INTRA_CODECS = {"mjpeg", "mjpg", "jpeg", "mjpa", "mjpb", "jpeg2000", "mjp2", "prores", "apch", "apcn",
                 "dnxhd", "avdn", "dvvideo", "dvsd"}
 GREY_PIX_FMTS = {"gray", "gray8", "y8", "gray10le", "gray12le", "gray16le", "gray16be", "monow", "monob"}
+# Pixel formats storing colour at half resolution both ways (4:2:0) besides
+# those named ``*420*`` (FFmpeg's names): one chroma sample a 2 x 2 block.
+CHROMA_420_PIX_FMTS = {"nv12", "nv21", "p010le", "p010be", "p016le", "p016be"}
 
 # A grey video's frames still decode to BGR when its stream is yuv (MJPG
 # with neutral chroma); after YUV to BGR conversion the three planes agree
@@ -83,6 +86,14 @@ class VideoInfo:
         """A lossy codec that predicts frames from other frames (not in
         :data:`INTRA_CODECS`): its error is shared between frames."""
         return not self.lossless and self.codec.strip().lower() not in INTRA_CODECS
+
+    @property
+    def chroma_block(self) -> int:
+        """Side (px) of the pixel blocks sharing one chroma sample: 2 for a
+        4:2:0 stream (MJPG from OpenCV's writer, H.264's yuv420p), 1
+        otherwise or when the pixel format is unknown."""
+        pf = self.pix_fmt.strip().lower()
+        return 2 if "420" in pf or pf in CHROMA_420_PIX_FMTS else 1
 
 
 def _check_path(path) -> Path:

@@ -15,7 +15,7 @@ import numpy as np
 
 from cuespin.track.model import (AITKEN_COS, AITKEN_RHO, CLUSTER_PX, DAMP_AFTER, MAX_ITER, NO_CONVERGENCE_SE,
                                  SPHERE_CLUSTER_PX, STEP_TOL_PX, STEP_TOL_SE, DiscFit, SphereLook, _failed,
-                                 blur_nodes, coverage_with_gradient, look_value)
+                                 _fit_blocks, blur_nodes, coverage_with_gradient, look_value)
 
 
 def model_rows(c, b, G, felt, r, u0, v0, taus, shade=None, blur_rows=True, outline=None):
@@ -94,8 +94,10 @@ def model_rows(c, b, G, felt, r, u0, v0, taus, shade=None, blur_rows=True, outli
 
 def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float, G0: float,
              b0=(0.0, 0.0), fit_blur: bool = False, shade: bool = False, valid=None,
-             outline=None) -> DiscFit:
+             outline=None, block: int = 1) -> DiscFit:
     """:func:`cuespin.track.model.fit_disc` in numpy (same arguments and result)."""
+    if block > 1:
+        return _fit_blocks(block, frame, felt, u0, v0, c0, r, G0, b0, fit_blur, shade, valid, outline, fit=fit_disc)
     felt = np.asarray(felt, dtype=np.float64)
     h, w = felt.shape
     y = (np.asarray(frame, dtype=np.float64) - felt).ravel()

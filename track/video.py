@@ -426,7 +426,8 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         # shot 12 of the realistic benchmark, MJPG; 0 with the quadratic).
         sphere_cfg = replace(config, sphere=config.sphere and bool(info.lossless))
         tracker = BallTracker(bg, radius_px, cam.exposure_s * cam.fps, sphere_cfg, projection=proj,
-                              search_mask=mask, max_step_px=max_step, camera=cam, R=R, radii=radii)
+                              search_mask=mask, max_step_px=max_step, camera=cam, R=R, radii=radii,
+                              chroma_block=info.chroma_block)
         felt = FeltAccumulator(first.shape)
         foreign_level = foreign_threshold(bg.sigma, bg.contrast)
         fits = []  # (frame index, the fit's state) for the final background correction
@@ -511,11 +512,12 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
             g = None
             if look is not None and kk in patches:
                 g = fit_disc(patches[kk], new, pu, pv, c, radius_px, G, b0=b, fit_blur=fb, shade=look,
-                             valid=valid, outline=outline)
+                             valid=valid, outline=outline, block=tracker.block)
             if g:
                 uv[kk], cov[kk], rms[kk] = g.c, g.cov, g.rms
             else:
-                uv[kk] = c + refit_shift(old, new, pu, pv, c, b, G, radius_px, fb, shade, outline, valid)
+                uv[kk] = c + refit_shift(old, new, pu, pv, c, b, G, radius_px, fb, shade, outline, valid,
+                                         tracker.block)
         bg = replace(bg, image=better)
     t_track = time.perf_counter() - t_start
     status = np.array(status, np.int8)
