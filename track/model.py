@@ -515,8 +515,59 @@ def _fit_blocks(block, frame, felt, u0, v0, c0, r, G0, b0, fit_blur, shade, vali
         g = fit(y, f, U0, V0, c, rc, p.G, b0=b, fit_blur=fit_blur, shade=shade, valid=ok, outline=ol)
         if not g:
             return p
+    g = _jackknife_cov(g, y, f, U0, V0, rc, fit_blur, shade, ok, ol)
     return replace(g, c=block * g.c + (block - 1) / 2.0, b=block * g.b, stderr=block * g.stderr,
                    cov=block * block * g.cov)
+
+
+def _jackknife_cov(g: DiscFit, y, felt, U0, V0, r, fit_blur, shade, ok, outline) -> DiscFit:
+    """The blocks' fit ``g`` with the jackknife's sandwich for its covariance
+    (``y`` and ``felt`` the blocks' means, ``r`` and ``outline`` on their grid).
+
+    The fit's sandwich (HC1 per block, or CR1 over clusters of
+    ``CLUSTER_PX`` x ``CLUSTER_PX`` blocks with the shaded look) sums the
+    residuals, which the fit has made orthogonal to its Jacobian: the part
+    of the error that looks like a shift went into the centre and is missing
+    from them.  Per pixel that is a share ~ k / n of each cluster's score
+    (CR1's n / (n - k) makes it up); on the blocks' grid a window holds a
+    quarter as many samples, the clusters (6 px) a quarter as many, and the
+    edge's clusters, which locate the centre, have leverage far above the
+    mean.  Measured (realistic seed 0 MJPG, the blocks' fits' residuals and
+    Jacobians at the tracked centres, /tmp/chroma2/lev.py): err/se 1.31 /
+    1.67 on shots 2 / 7 with CR1, residual correlation between
+    neighbouring blocks 0.29 / 0.03, so not the clusters' size.  The
+    jackknife's (CR3: each cluster's residuals scaled by ``(I - H_gg)^-1``,
+    ``H_gg`` the cluster's block of the hat matrix) states each cluster's
+    score as if the cluster had been left out of the fit: 1.03 / 1.21 there.
+    """
+    h, w = y.shape
+    if isinstance(shade, SphereLook) and outline is not None:  # as fit_disc: the outline's own radius
+        r = outline.radius
+    m, JT = _model_rows(g.c, g.b, g.G, felt, r, U0, V0, blur_nodes(np.hypot(*g.b)), g.shade, fit_blur, outline)
+    use = np.ones((h, w)) if ok is None else np.asarray(ok, float)
+    e = ((np.asarray(y, float) - felt - m) * use).ravel()
+    JT = JT * use.ravel()
+    k = JT.shape[0]
+    B = max(int(CLUSTER_PX if shade is True else SPHERE_CLUSTER_PX), 1)
+    try:
+        A = np.linalg.inv(JT @ JT.T)
+        idx = np.arange(h * w).reshape(h, w)
+        meat = np.zeros((k, k))
+        for r0 in range(0, h, B):
+            for c0 in range(0, w, B):
+                i = idx[r0:r0 + B, c0:c0 + B].ravel()
+                Jg = JT[:, i]
+                # (I - H_gg)^-1 e_g, H_gg = J_g^T A J_g: the cluster's residual had it been left out
+                eg = np.linalg.solve(np.eye(len(i)) - Jg.T @ A @ Jg, e[i])
+                sg = Jg @ eg
+                meat += np.outer(sg, sg)
+    except np.linalg.LinAlgError:
+        return g
+    cov = (A @ meat @ A)[:2, :2]
+    cov = 0.5 * (cov + cov.T)
+    if not (np.all(np.isfinite(cov)) and np.all(np.linalg.eigvalsh(cov) > 0)):
+        return g
+    return replace(g, cov=cov, stderr=np.sqrt(np.diag(cov)))
 
 
 def _failed(reason, c, b, G, it):
