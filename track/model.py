@@ -549,20 +549,22 @@ def _jackknife_cov(g: DiscFit, y, felt, U0, V0, r, fit_blur, shade, ok, outline)
     JT = JT * use.ravel()
     k = JT.shape[0]
     B = max(int(CLUSTER_PX if shade is True else SPHERE_CLUSTER_PX), 1)
+    # The clusters as (n_clusters, B * B) columns, the window padded with
+    # zeros (no Jacobian, no residual: those rows of I - H_gg are the identity's).
+    H, W = h + (-h % B), w + (-w % B)
+    Jp, ep = np.zeros((k, H, W)), np.zeros((H, W))
+    Jp[:, :h, :w], ep[:h, :w] = JT.reshape(k, h, w), e.reshape(h, w)
+    Jg = Jp.reshape(k, H // B, B, W // B, B).transpose(1, 3, 0, 2, 4).reshape(-1, k, B * B)
+    eg = ep.reshape(H // B, B, W // B, B).transpose(0, 2, 1, 3).reshape(-1, B * B)
     try:
         A = np.linalg.inv(JT @ JT.T)
-        idx = np.arange(h * w).reshape(h, w)
-        meat = np.zeros((k, k))
-        for r0 in range(0, h, B):
-            for c0 in range(0, w, B):
-                i = idx[r0:r0 + B, c0:c0 + B].ravel()
-                Jg = JT[:, i]
-                # (I - H_gg)^-1 e_g, H_gg = J_g^T A J_g: the cluster's residual had it been left out
-                eg = np.linalg.solve(np.eye(len(i)) - Jg.T @ A @ Jg, e[i])
-                sg = Jg @ eg
-                meat += np.outer(sg, sg)
+        # (I - H_gg)^-1 e_g, H_gg = J_g^T A J_g: the cluster's residuals had it been left out
+        Hgg = np.einsum("gki,kl,glj->gij", Jg, A, Jg)
+        eg = np.linalg.solve(np.eye(B * B) - Hgg, eg[..., None])[..., 0]
     except np.linalg.LinAlgError:
         return g
+    S = np.einsum("gki,gi->gk", Jg, eg)
+    meat = S.T @ S
     cov = (A @ meat @ A)[:2, :2]
     cov = 0.5 * (cov + cov.T)
     if not (np.all(np.isfinite(cov)) and np.all(np.linalg.eigvalsh(cov) > 0)):
