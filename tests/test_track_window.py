@@ -132,3 +132,33 @@ def test_sample_medians_are_numpys_bit_for_bit():
     cov = (d.T @ d) / len(d) / 2.0
     want = cov + (1 / 12 + 0.05 * np.trace(cov) / 3.0) * np.eye(3)
     assert np.array_equal(noise_covariance(a, b), want)
+
+
+def test_linear_fit_is_lstsqs_solution():
+    # The markings rule's fit (level and the look's three columns) by the
+    # normal equations: numpy's SVD solution to rounding (the rule compares
+    # residuals with a threshold of levels; 1e-9 relative is far below any).
+    rng = np.random.default_rng(4)
+    for _ in range(100):
+        n = int(rng.integers(12, 1500))
+        JT = rng.normal(0, 1, (6, n))
+        JT[2] = 1.0  # the level's column
+        y = rng.normal(0, 20, n)
+        sel = rng.random(n) < 0.8
+        theta, ok = window.linear_fit(JT[2:6], y, sel)
+        ref = np.linalg.lstsq(JT[2:6].T[sel], y[sel], rcond=1e-9)[0]
+        assert ok
+        np.testing.assert_allclose(theta, ref, rtol=0, atol=1e-9 * np.abs(ref).max())
+    # A singular Gram (two equal columns) is left to the SVD.
+    JT = rng.normal(0, 1, (6, 50))
+    JT[3] = JT[2]
+    assert not window.linear_fit(JT[2:6], rng.normal(0, 1, 50), np.ones(50, bool))[1]
+
+
+def test_label_table_is_isin():
+    from cuespin.track.tracker import _members
+    rng = np.random.default_rng(5)
+    img = (rng.random((40, 50)) < 0.3).astype(np.uint8)
+    n, labels = cv2.connectedComponents(img, connectivity=8)
+    pick = rng.choice(n, size=max(n // 3, 1), replace=False)
+    assert np.array_equal(_members(n, pick)[labels], np.isin(labels, pick))

@@ -289,7 +289,11 @@ def marking_pixels(patch, felt, u0: int, v0: int, c, b, r: float, r_in: float, s
     thresh = max(MARK_CONTRAST * contrast, OUTLIER_SIGMAS * max(sigma, 0.5))
     bad = np.zeros(len(y), bool)
     for _ in range(2):
-        theta = np.linalg.lstsq(A[use & ~bad], y[use & ~bad], rcond=1e-9)[0]
+        # Compiled normal equations (~0.1 ms a fit less than numpy's copies
+        # and SVD); the SVD where the Gram is near singular.
+        theta, ok = _compiled().linear_fit(JT[2:6], y, use & ~bad)
+        if not ok:
+            theta = np.linalg.lstsq(A[use & ~bad], y[use & ~bad], rcond=1e-9)[0]
         bad = inner.ravel() & (np.abs(y - A @ theta) > thresh)
         if not bad.any():
             break  # a second fit would use the first's pixels: the same theta, none again
@@ -300,7 +304,15 @@ def marking_pixels(patch, felt, u0: int, v0: int, c, b, r: float, r_in: float, s
     big = np.nonzero(stats[1:, cv2.CC_STAT_AREA] >= MARK_MIN_PX)[0] + 1
     if not len(big):
         return None
-    return cv2.dilate(np.isin(labels, big).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    return cv2.dilate(_members(n, big).view(np.uint8)[labels], np.ones((3, 3), np.uint8)).astype(bool)
+
+
+def _members(n: int, labels) -> np.ndarray:
+    """Lookup table over the ``n`` labels of a labelling: True at ``labels``
+    (``table[image]`` is ``np.isin(image, labels)``, without its sort)."""
+    table = np.zeros(n, bool)
+    table[labels] = True
+    return table
 
 
 def foreign_threshold(sigma: float, contrast: float) -> float:
@@ -321,7 +333,7 @@ def foreign_pixels(D: np.ndarray, beyond: np.ndarray, sigma: float, contrast: fl
     big = np.nonzero(stats[1:, cv2.CC_STAT_AREA] >= FOREIGN_MIN_PX)[0] + 1
     if not len(big):
         return None
-    bad = np.isin(labels, big).astype(np.uint8)
+    bad = _members(n, big).view(np.uint8)[labels]
     g = 2 * FOREIGN_GROW_PX + 1
     return cv2.dilate(bad, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (g, g))).astype(bool)
 
@@ -351,11 +363,13 @@ def stick_through(D: np.ndarray, u0: int, v0: int, c, r: float, thresh: float) -
     if n < 2:
         return False
     h, w = D.shape
-    ys, xs = np.mgrid[v0:v0 + h, u0:u0 + w]
-    core = np.unique(labels[(np.hypot(xs - c[0], ys - c[1]) <= r) & (labels > 0)])
+    # Open grids broadcast (no full index grids) and a label lookup table
+    # instead of np.isin (which sorts): the same pixels, ~0.2 ms less a frame.
+    ys, xs = np.ogrid[v0:v0 + h, u0:u0 + w]
+    core = labels[(np.hypot(xs - c[0], ys - c[1]) <= r) & (labels > 0)]
     if not len(core):
         return False
-    blob = np.isin(labels, core)
+    blob = _members(n, core)[labels]
     if not (blob[0].any() or blob[-1].any() or blob[:, 0].any() or blob[:, -1].any()):
         return False  # the blob ends where a ball could: not a stick through it
     y, x = np.nonzero(blob)

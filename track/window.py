@@ -161,6 +161,66 @@ def foreign_count(D, u0, v0, cu, cv, bu, bv, reach, thr):
     return n
 
 
+# linear_fit's Gram, scaled to a unit diagonal, is taken as singular (and
+# left to numpy's SVD, which drops such directions at lstsq's rcond=1e-9)
+# when a Cholesky pivot falls below this: a condition number past ~1e12,
+# where the normal equations lose more than ~1e-4 of the solution; the
+# markings rule's windows give ~1e2-1e4.
+GRAM_PIVOT_MIN = 1e-12
+
+
+@_jit()
+def linear_fit(AT, y, sel):
+    """Least squares of ``y`` on the columns ``AT.T`` over the pixels
+    ``sel`` (bool), by the normal equations (a Cholesky solve of the
+    Gram, scaled to a unit diagonal): ``np.linalg.lstsq(AT.T[sel],
+    y[sel])``'s solution to rounding, in one call instead of numpy's
+    copies and SVD.  Returns (theta, ok); ok False when the Gram is
+    singular to ``GRAM_PIVOT_MIN`` (the caller's SVD decides then)."""
+    k, n = AT.shape
+    G = np.zeros((k, k))
+    g = np.zeros(k)
+    for p in range(n):
+        if sel[p]:
+            for i in range(k):
+                a = AT[i, p]
+                g[i] += a * y[p]
+                for j in range(i + 1):
+                    G[i, j] += a * AT[j, p]
+    theta = np.zeros(k)
+    s = np.empty(k)
+    for i in range(k):
+        if not G[i, i] > 0.0:
+            return theta, False
+        s[i] = 1.0 / math.sqrt(G[i, i])
+    L = np.zeros((k, k))
+    for i in range(k):  # Cholesky of diag(s) G diag(s)
+        for j in range(i + 1):
+            acc = G[i, j] * s[i] * s[j]
+            for q in range(j):
+                acc -= L[i, q] * L[j, q]
+            if i == j:
+                if not acc > GRAM_PIVOT_MIN:
+                    return theta, False
+                L[i, i] = math.sqrt(acc)
+            else:
+                L[i, j] = acc / L[j, j]
+    z = np.empty(k)
+    for i in range(k):  # L z = diag(s) g
+        acc = g[i] * s[i]
+        for q in range(i):
+            acc -= L[i, q] * z[q]
+        z[i] = acc / L[i, i]
+    for i in range(k - 1, -1, -1):  # L^T x = z; theta = diag(s) x
+        acc = z[i]
+        for q in range(i + 1, k):
+            acc -= L[q, i] * theta[q]
+        theta[i] = acc / L[i, i]
+    for i in range(k):
+        theta[i] *= s[i]
+    return theta, True
+
+
 def warm_up() -> None:
     """Load (after an install, compile) each kernel for the arrays the
     tracker passes: float32 windows, contiguous or cut from the felt."""
@@ -169,6 +229,8 @@ def warm_up() -> None:
     centroid(D, 0, 0, 4.0, 4.0, 3.0, 3)
     departure_centroid(D, felt, 1.0, 0, 0, 4.0, 4.0, 3.0, 5)
     foreign_count(D, 0, 0, 4.0, 4.0, 0.0, 0.0, 3.0, 1.0)
+    AT = np.ones((6, 9))
+    linear_fit(AT[2:6], np.ones(9), np.ones(9, bool))
 
 
-__all__ = ["centroid", "departure_centroid", "foreign_count", "warm_up"]
+__all__ = ["centroid", "departure_centroid", "foreign_count", "linear_fit", "warm_up"]
