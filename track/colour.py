@@ -33,18 +33,6 @@ BALL_SIGMAS = 6.0
 # A box position votes on the ball's colour when its departure is at least
 # this fraction of the largest in its sample (the ball's whole box).
 PEAK_FRACTION = 0.5
-# A box position votes only where its departure fills at least this share
-# of the box (:func:`box_filled`): a ball fills the box it is sized for (a
-# ball close to the felt's colour, whose pixels depart by less than the
-# noise, still ~0.5 or more), a cue's shaft or tip a band across it.
-# Measured on sample_scenes(1, 6, realistic, FFV1)[0] cut to 0.8 s (blue
-# ball with dots on blue felt, a tan cue in every sample; /tmp/cue4/fill.py):
-# box positions within R/2 of the ball's centre filled 0.51-0.89 (median
-# 0.64 at rest, 0.78-0.82 moving), the cue's largest departures 0.39-0.50
-# in 7 of 9 samples.  Without it the cue's box means (67-70 levels, the
-# ball's 23-30) were the largest in 7 of 9 samples, PEAK_FRACTION left the
-# ball out and the channel was the cue's (R - B; 24 of 97 frames found).
-FILL_FRACTION = 0.6
 # Pixels the noise covariance is estimated from: its variances' relative
 # error is sqrt(2 / n), 0.4%, and the medians over a whole 1280 x 720 frame
 # cost ~1.5 s, more than tracking a short shot.
@@ -211,46 +199,6 @@ def departure_box_means(samples: np.ndarray, on: np.ndarray, ys: np.ndarray, xs:
     return out
 
 
-def box_filled(samples: np.ndarray, Zm: np.ndarray, cand: np.ndarray, ys: np.ndarray, xs: np.ndarray,
-               k: int, L: np.ndarray) -> np.ndarray:
-    """The share of its k x k box a box position's departure fills (float,
-    shape (n, len(ys)); 0 off ``cand``, bool (n, len(ys))): the box's pixels
-    whose whitened departure from the samples' median, along the box's mean
-    whitened departure ``Zm`` (n, len(ys), 3), reaches half of that mean's.
-
-    A ball fills the box (its pixels' departures scatter about the mean by
-    the noise: about half or more pass however faint it is); a stick (the
-    cue), bright enough per pixel to give the same mean, fills a band.
-    Computed over each connected part's bounding box, one sample at a time.
-    """
-    n, H, W, _ = samples.shape
-    out = np.zeros(cand.shape)
-    h = k // 2
-    anyc = cand.any(axis=0)
-    on = np.zeros((H, W), np.uint8)
-    on[ys[anyc], xs[anyc]] = 1
-    n_parts, labels, stats, _ = cv2.connectedComponentsWithStats(on, connectivity=8)
-    part = labels[ys, xs]
-    Li = np.linalg.inv(L).astype(np.float32)
-    for j in range(1, n_parts):
-        sel = np.flatnonzero((part == j) & anyc)
-        u0, v0, w, hh = stats[j, :4]
-        U0, V0, U1, V1 = max(u0 - h, 0), max(v0 - h, 0), min(u0 + w + h, W), min(v0 + hh + h, H)
-        X8 = samples[:, V0:V1, U0:U1]
-        med = median_u8(X8)
-        for s in range(n):
-            m = sel[cand[s, sel]]
-            if not len(m):
-                continue
-            Zp = (X8[s].astype(np.float32) - med) @ Li.T  # whitened, float32: one sample at a time
-            Zp = np.pad(Zp, ((h, h), (h, h), (0, 0)))  # the frame's edge: no departure
-            win = np.lib.stride_tricks.sliding_window_view(Zp, (k, k), axis=(0, 1))  # y, x, 3, k, k
-            z = Zm[s, m].astype(np.float32)                      # (m, 3)
-            dot = np.einsum("mckl,mc->mkl", win[ys[m] - V0, xs[m] - U0], z)
-            out[s, m] = (dot >= 0.5 * np.einsum("mc,mc->m", z, z)[:, None, None]).mean(axis=(1, 2))
-    return out
-
-
 def ball_direction(samples: np.ndarray, ys: np.ndarray, xs: np.ndarray, radius_px,
                    L: np.ndarray) -> np.ndarray | None:
     """The whitened colour direction (unit, shape (3,)) in which the samples
@@ -279,15 +227,13 @@ def ball_direction(samples: np.ndarray, ys: np.ndarray, xs: np.ndarray, radius_p
     Db = departure_box_means(samples, on, ys, xs, k).astype(np.float64)
     Z = np.linalg.solve(L, Db.reshape(-1, 3).T).T.reshape(Db.shape) * k  # whitened: a box mean's noise is S / k^2
     norm2 = np.einsum("sij,sij->si", Z, Z)
-    cand = norm2 > BALL_SIGMAS**2
-    cand &= box_filled(samples, Z / k, cand, ys, xs, k, L) >= FILL_FRACTION
     # Only departures near the sample's largest: a ball fills the box, while
     # a lossy codec's error (MJPG's blocks, correlated over the box, so not
     # averaged away) departs by a fraction of it but over the whole moving
     # region (blue on blue, MJPG: 2600-3800 such box positions per sample
     # against the ball's 430, and the direction was the codec's).
-    peak2 = np.where(cand, norm2, 0.0).max(axis=1, keepdims=True)
-    big = cand & (norm2 > PEAK_FRACTION**2 * peak2)
+    peak2 = norm2.max(axis=1, keepdims=True)
+    big = (norm2 > BALL_SIGMAS**2) & (norm2 > PEAK_FRACTION**2 * peak2)
     if big.sum() < 10:
         return None
     # One vote per sample (its unit vectors' mean outer product): the ball
