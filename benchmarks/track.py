@@ -32,7 +32,8 @@ realistic: per look of the realistic renderer (uniform, shaded, highlight,
           and tracked three times: found %, false positives (> R/4 off),
           RMSE on moving frames against the truth sidecar's projected centre,
           the colour Cramer-Rao bound of that look (every channel, the look's
-          nuisance parameters: track.bound.centroid_crb_realistic), the ratio,
+          nuisance parameters, the markings' pattern unknown:
+          track.bound.centroid_crb_realistic), the ratio,
           err/se (the tracker's stated errors; raw: before track.misfit's
           factor; dm: about the shot's mean error, the constant bias x0
           absorbs), the same for MJPG, and grey-only against the luma bound.

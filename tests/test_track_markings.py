@@ -142,3 +142,41 @@ def test_mjpg_ball_flagged_only_with_markings(tmp_path, markings, specular):
         assert marks is None
     else:  # the highlight at most: under a tenth of the ball
         assert marks is None or marks.sum() < 0.1 * np.pi * r * r
+
+
+def test_a_smeared_dot_is_left_out_along_the_blur():
+    # A shaded ball smeared over 6.3 px (24 nodes) with a dark dot (radius
+    # 2.5 px, 0.4-0.7 radii off-centre) smeared with it, 100 patches at
+    # noise 3, fitted with the blur: with the dot in, the centre is 0.56 px
+    # off (RMS; 99 of the fits converge); left out, its faint ends along the streak pulled the
+    # refit to RMS 0.0263 (max 0.074) when grown by one pixel only, and
+    # 0.0206 (max 0.053) grown along the blur inside the rim (smear_kernel), against the
+    # unmarked ball's 0.0180 (max 0.045): tolerances between the two.
+    from cuespin.track.model import blur_nodes
+
+    b = np.array([6.0, 2.0])
+    taus = blur_nodes(24.0)
+    rng = np.random.default_rng(3)
+    half = int(np.ceil(R + 0.5 * np.hypot(*b) + 3))
+    n = 2 * half + 1
+    felt = np.full((n, n), FELT)
+    err = []
+    for _ in range(100):
+        c = np.array([60.0, 50.0]) + rng.uniform(-0.5, 0.5, 2)
+        u0, v0 = int(round(c[0])) - half, int(round(c[1])) - half
+        img, _ = streak_model(c, b, BALL, felt, R, u0, v0, taus, (-40.0, -40.0, -30.0))
+        a, d = rng.uniform(0, 2 * np.pi), rng.uniform(0.4, 0.7) * R
+        dot = np.mean([disc_coverage(c[0] + t * b[0] + d * np.cos(a), c[1] + t * b[1] + d * np.sin(a), 2.5,
+                                     u0, v0, n, n) for t in taus], axis=0)
+        img = np.clip(np.rint(img + felt + dot * (30.0 - BALL) + NOISE * rng.standard_normal(img.shape)), 0, 255)
+        f = fit_disc(img, felt, u0, v0, c + rng.normal(0, 0.05, 2), R, BALL, b0=b, fit_blur=True, shade=True)
+        if not f:  # the dot in, the first fit may not converge (measured: 1 of 100)
+            continue
+        m = marking_pixels(img, felt, u0, v0, f.c, f.b, R, R, NOISE, BALL - FELT)
+        assert m is not None
+        g = fit_disc(img, felt, u0, v0, f.c, R, f.G, b0=f.b, fit_blur=True, shade=True, valid=~m)
+        assert g, g.reason
+        err.append(np.hypot(*(g.c - c)))
+    err = np.array(err)
+    assert len(err) >= 98
+    assert np.sqrt(np.mean(err**2)) < 0.024 and err.max() < 0.06, (np.sqrt(np.mean(err**2)), err.max())

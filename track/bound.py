@@ -193,28 +193,34 @@ _LOOK_STEPS = {"ambient": 1e-3, "light_azimuth": 1e-3, "light_elevation": 1e-3, 
                "psf_sigma": 1e-3}
 _ALBEDO_STEP = 0.05
 _TURN_STEP = 1e-3
+# A pixel the markings change by more than this (levels) depends on their
+# pattern: far below the noise (1-8 levels) and 8-bit rounding (0.29), and
+# far above float32 rounding of the rendered levels (~1e-5).
+MARK_SUPPORT_LEVELS = 1e-3
 
 
-def realistic_nuisances(settings: dict, fit_blur: bool) -> list[str]:
+def realistic_nuisances(settings: dict, fit_blur: bool, pattern_known: bool = False) -> list[str]:
     """The realistic look's nuisance parameters a tracker that learns the
     ball's look from the video does not know: the ball's albedo (one per
     channel), the ambient share, the light's two angles, the highlight's
     strength (when there is one), the lens's PSF width (when there is
-    blur), the markings' orientation (three turns, when there are
-    markings) and, where the tracker fits it, the blur vector."""
+    blur), with ``pattern_known`` the markings' orientation (three turns,
+    when there are markings; without it the markings' pixels are left out
+    instead, :func:`realistic_image_jacobian`) and, where the tracker fits
+    it, the blur vector."""
     names = ["albedo_b", "albedo_g", "albedo_r", "ambient", "light_azimuth", "light_elevation"]
     if float(settings["specular"]) > 0:
         names.append("specular")
     if float(settings["psf_sigma"]) > 0:
         names.append("psf_sigma")
-    if settings["markings"] != "none":
+    if pattern_known and settings["markings"] != "none":
         names += ["turn_x", "turn_y", "turn_z"]
     if fit_blur:
         names += ["blur_u", "blur_v"]
     return names
 
 
-def realistic_image_jacobian(renderer, k: int, fit_blur: bool = False):
+def realistic_image_jacobian(renderer, k: int, fit_blur: bool = False, pattern_known: bool = False):
     """Derivatives of the realistic look's noise-free colour image of frame ``k``.
 
     The image near the ball is the blurred static scene plus the ball's
@@ -225,6 +231,22 @@ def realistic_image_jacobian(renderer, k: int, fit_blur: bool = False):
     position with it), then :func:`realistic_nuisances`.  The static scene
     under the ball is known (the tracker learns the felt from the video).
     Top-down (similarity) cameras only.
+
+    Markings: a tracker that does not know the markings' pattern (dots or a
+    logo: where on the ball, what shape) cannot use their edges.  Unknown,
+    the pattern is a free level (per channel) for every pixel it changes:
+    the Fisher information of ``(centre, nuisances, free levels)`` restricted
+    to the centre and nuisances by the Schur complement is that of the other
+    pixels alone (each free level's column is its own pixel's indicator, so
+    it absorbs that pixel's row), so those pixels' rows are set to zero
+    (``pattern_known`` False, the default: the pixels the markings change
+    by more than ``MARK_SUPPORT_LEVELS``, every exposure node's markings at
+    the frame's orientation).  Knowing which pixels they are is still more
+    than a tracker knows, so this stays a lower bound for one that finds
+    them.  With ``pattern_known`` the pattern is known and only its
+    orientation (three turns) is a nuisance: the bound of a tracker that
+    matches the dots themselves, which the dots' sharp edges make 2-10
+    times lower (docs/measurements.md).
 
     Returns
     -------
@@ -252,14 +274,14 @@ def realistic_image_jacobian(renderer, k: int, fit_blur: bool = False):
     settings0 = renderer.settings
     albedo0 = np.asarray(renderer._albedo, float)
     orient = renderer._orient
-    names = realistic_nuisances(settings0, fit_blur)
+    names = realistic_nuisances(settings0, fit_blur, pattern_known)
 
-    def image(d_uv=np.zeros(2), d_blur=np.zeros(2), albedo=albedo0, settings=None, turn=None):
+    def image(d_uv=np.zeros(2), d_blur=np.zeros(2), albedo=albedo0, settings=None, turn=None, marked=True):
         """The ball's change to the scene on the fixed window, with the parameters moved."""
         shift = d_uv[None, :] + np.outer(taus, d_blur)
         nodes_uv = uv + shift
         nodes_xy = xy + shift @ Jinv.T
-        rot = orient
+        rot = orient if marked else None
         if turn is not None and orient is not None:
             Rt = lk.quat_to_matrix(lk.quat_from_rotvec(np.asarray(turn, float)))
 
@@ -304,14 +326,19 @@ def realistic_image_jacobian(renderer, k: int, fit_blur: bool = False):
             col = (image(settings=up) - image(settings=down)) / (2 * h)
         cols.append(col)
     J = np.stack([c.reshape(-1, 3) for c in cols], axis=2)
+    if not pattern_known and orient is not None:
+        support = np.abs(image() - image(marked=False)).max(axis=2) > MARK_SUPPORT_LEVELS
+        J[support.ravel()] = 0.0
     return J, ["cu", "cv"] + names
 
 
-def centroid_crb_realistic(renderer, k: int, fit_blur: bool = False, grey_weights=None) -> np.ndarray:
+def centroid_crb_realistic(renderer, k: int, fit_blur: bool = False, grey_weights=None,
+                           pattern_known: bool = False) -> np.ndarray:
     """Per-axis Cramer-Rao bound (px) for the ball's centre in frame ``k`` of a realistic render.
 
     From :func:`realistic_image_jacobian` (every channel, the look's
-    nuisance parameters), with the renderer's noise: ``noise_sigma`` per
+    nuisance parameters; markings of unknown pattern unless
+    ``pattern_known``), with the renderer's noise: ``noise_sigma`` per
     channel, independent, plus 8-bit rounding (1/12 per channel).  With
     ``grey_weights`` (B, G, R weights, e.g. OpenCV's luma 0.114, 0.587,
     0.299) the bound of a tracker that sees only that one channel of the
@@ -322,7 +349,7 @@ def centroid_crb_realistic(renderer, k: int, fit_blur: bool = False, grey_weight
     -------
     ndarray, shape (2,)
     """
-    J, _ = realistic_image_jacobian(renderer, k, fit_blur)
+    J, _ = realistic_image_jacobian(renderer, k, fit_blur, pattern_known)
     s2 = float(renderer.sigma) ** 2
     if grey_weights is None:
         fisher = np.einsum("mcp,mcq->pq", J, J) / (s2 + 1.0 / 12.0)

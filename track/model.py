@@ -517,8 +517,61 @@ def _fit_blocks(block, frame, felt, u0, v0, c0, r, G0, b0, fit_blur, shade, vali
         g = fit(y, f, U0, V0, c, rc, p.G, b0=b, fit_blur=fit_blur, shade=shade, valid=ok, outline=ol)
         if not g:
             return p
+    g = _jackknife_cov(g, y, f, U0, V0, rc, fit_blur, shade, ok, ol)
     return replace(g, c=block * g.c + (block - 1) / 2.0, b=block * g.b, stderr=block * g.stderr,
                    cov=block * block * g.cov)
+
+
+def _jackknife_cov(g: DiscFit, y, felt, U0, V0, r, fit_blur, shade, ok, outline) -> DiscFit:
+    """The blocks' fit ``g`` with the jackknife's sandwich for its covariance
+    (``y`` and ``felt`` the blocks' means, ``r`` and ``outline`` on their grid).
+
+    The fit's sandwich (HC1 per block, or CR1 over clusters of
+    ``CLUSTER_PX`` x ``CLUSTER_PX`` blocks with the shaded look) sums the
+    residuals, which the fit has made orthogonal to its Jacobian: the part
+    of the error that looks like a shift went into the centre and is missing
+    from them.  Per pixel that is a share ~ k / n of each cluster's score
+    (CR1's n / (n - k) makes it up); on the blocks' grid a window holds a
+    quarter as many samples, the clusters (6 px) a quarter as many, and the
+    edge's clusters, which locate the centre, have leverage far above the
+    mean.  Measured (realistic seed 0 MJPG, the blocks' fits' residuals and
+    Jacobians at the tracked centres, /tmp/chroma2/lev.py): err/se 1.31 /
+    1.67 on shots 2 / 7 with CR1, residual correlation between
+    neighbouring blocks 0.29 / 0.03, so not the clusters' size.  The
+    jackknife's (CR3: each cluster's residuals scaled by ``(I - H_gg)^-1``,
+    ``H_gg`` the cluster's block of the hat matrix) states each cluster's
+    score as if the cluster had been left out of the fit: 1.03 / 1.21 there.
+    """
+    h, w = y.shape
+    if isinstance(shade, SphereLook) and outline is not None:  # as fit_disc: the outline's own radius
+        r = outline.radius
+    m, JT = _model_rows(g.c, g.b, g.G, felt, r, U0, V0, blur_nodes(np.hypot(*g.b)), g.shade, fit_blur, outline)
+    use = np.ones((h, w)) if ok is None else np.asarray(ok, float)
+    e = ((np.asarray(y, float) - felt - m) * use).ravel()
+    JT = JT * use.ravel()
+    k = JT.shape[0]
+    B = max(int(CLUSTER_PX if shade is True else SPHERE_CLUSTER_PX), 1)
+    # The clusters as (n_clusters, B * B) columns, the window padded with
+    # zeros (no Jacobian, no residual: those rows of I - H_gg are the identity's).
+    H, W = h + (-h % B), w + (-w % B)
+    Jp, ep = np.zeros((k, H, W)), np.zeros((H, W))
+    Jp[:, :h, :w], ep[:h, :w] = JT.reshape(k, h, w), e.reshape(h, w)
+    Jg = Jp.reshape(k, H // B, B, W // B, B).transpose(1, 3, 0, 2, 4).reshape(-1, k, B * B)
+    eg = ep.reshape(H // B, B, W // B, B).transpose(0, 2, 1, 3).reshape(-1, B * B)
+    try:
+        A = np.linalg.inv(JT @ JT.T)
+        # (I - H_gg)^-1 e_g, H_gg = J_g^T A J_g: the cluster's residuals had it been left out
+        Hgg = np.einsum("gki,kl,glj->gij", Jg, A, Jg)
+        eg = np.linalg.solve(np.eye(B * B) - Hgg, eg[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        return g
+    S = np.einsum("gki,gi->gk", Jg, eg)
+    meat = S.T @ S
+    cov = (A @ meat @ A)[:2, :2]
+    cov = 0.5 * (cov + cov.T)
+    if not (np.all(np.isfinite(cov)) and np.all(np.linalg.eigvalsh(cov) > 0)):
+        return g
+    return replace(g, cov=cov, stderr=np.sqrt(np.diag(cov)))
 
 
 def _failed(reason, c, b, G, it):
