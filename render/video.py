@@ -117,12 +117,23 @@ def to_i420(frame: np.ndarray) -> np.ndarray:
     colours by up to 4 levels.  Grey frames take a lookup table with the
     same luma and neutral chroma.
 
+    The chroma is each 2 x 2 block's mean, as an encoder's downsampling
+    filter gives: OpenCV's own conversion takes the block's top-left pixel,
+    which moved a ball tracked in a colour channel by ~0.5 px in u and v on
+    every H.264 render (review7: realistic seed 0 shot 7, mean error +0.40 /
+    +0.59 px; a colour edge 0.44 px, against 0.02-0.03 on MJPG).
+
     Returns
     -------
     ndarray of uint8, shape (3 height / 2, width)
     """
     if frame.ndim == 3:
-        return cv2.cvtColor(frame, cv2.COLOR_BGR2YUV_I420)
+        h, w = frame.shape[:2]
+        out = cv2.cvtColor(frame, cv2.COLOR_BGR2YUV_I420)
+        mean = cv2.resize(cv2.resize(frame, (w // 2, h // 2), interpolation=cv2.INTER_AREA), (w, h),
+                          interpolation=cv2.INTER_NEAREST)
+        out[h:] = cv2.cvtColor(mean, cv2.COLOR_BGR2YUV_I420)[h:]
+        return out
     h, w = frame.shape
     out = np.full((h * 3 // 2, w), 128, dtype=np.uint8)
     out[:h] = _GREY_LUMA[frame]

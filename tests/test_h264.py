@@ -107,3 +107,24 @@ def test_h264_recovery_errors_within_stated(tmp_path):
         assert len(rows) >= 3, codec
         r = np.concatenate(rows)
         assert np.sqrt(np.mean(r**2)) < rms_bound(len(r)), (codec, np.round(r, 2))
+
+
+def test_i420_chroma_is_each_blocks_mean():
+    # A colour edge through the middle of each 2 x 2 block: the block's
+    # chroma lies halfway between the two colours' (an encoder's
+    # downsampling), not at the left one's as OpenCV's conversion takes it;
+    # that had moved a ball tracked in a colour channel ~0.5 px on every
+    # H.264 render (review7).
+    import cv2
+
+    from cuespin.render.video import to_i420
+
+    h, w = 8, 8
+    frame = np.zeros((h, w, 3), np.uint8)
+    frame[:, 0::2] = (40, 200, 220)  # BGR: yellow, in the even columns
+    frame[:, 1::2] = (40, 110, 30)   # green, in the odd ones
+    u = to_i420(frame)[h:h + h // 4].ravel()  # the U plane's rows
+    left = cv2.cvtColor(np.full((2, 2, 3), (40, 200, 220), np.uint8), cv2.COLOR_BGR2YUV_I420)[2, 0]
+    right = cv2.cvtColor(np.full((2, 2, 3), (40, 110, 30), np.uint8), cv2.COLOR_BGR2YUV_I420)[2, 0]
+    assert abs(int(left) - int(right)) > 10  # the two colours' chroma differ
+    assert np.all(np.abs(u.astype(float) - (int(left) + int(right)) / 2) <= 1.0)
