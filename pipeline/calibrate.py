@@ -1523,6 +1523,12 @@ def calibrate_frame(frame: np.ndarray, table: Table = Table(), *, intrinsics=Non
                      f"{same['focal_px']:.0f} px (a phone's main camera), camera {cal.height_m:.2f} m above the "
                      f"cloth: give --camera-height or --intrinsics"]
         else:
+            # Already the nominal one: held fixed in the perturbed cameras too,
+            # with its error carried by one of them, as in the branch above
+            # (left free, each perturbed camera re-ran the corners' own rule
+            # on its moved corners and could take a corner-derived f: review7).
+            same["focal_px"] = float(np.asarray(cal.camera.intrinsics, float)[0, 0])
+            focal_sigma = NOMINAL_FOCAL_SIGMA
             cal = replace(cal, focal_sigma=NOMINAL_FOCAL_SIGMA)
     cal = replace(cal, notes=notes, edge_rms_px=edge_rms, edge=det.edge)
     return _with_perturbed(cal, size, table, height_sigma_m=camera_height_sigma_m, focal_sigma=focal_sigma,
