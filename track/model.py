@@ -369,7 +369,7 @@ class DiscFit:
 
 def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float, G0: float,
              b0=(0.0, 0.0), fit_blur: bool = False, shade: bool = False, valid=None,
-             outline=None, block: int = 1) -> DiscFit:
+             outline=None, block: int = 1, jackknife: bool = True) -> DiscFit:
     """Least-squares fit of the exact disc (or streak) model to a patch.
 
     Parameters
@@ -410,6 +410,11 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
         its block: a 4:2:0 video's colour as its decoder hands it back
         (2), seen through a projection blind to luma.  The model is then
         averaged over the same blocks (:func:`block_patch`); 1: pixels.
+    jackknife : bool
+        With ``block`` > 1, the covariance from the blocks' jackknife
+        (:func:`_jackknife_cov`); False keeps the fit's own sandwich, for
+        callers that read only the fit's residual, centre or look (its cost
+        is ~0.3-0.9 ms a fit).
 
     Returns
     -------
@@ -417,7 +422,8 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
         Never raises for bad data; ``ok`` False with a reason instead.
     """
     if block > 1:
-        return _fit_blocks(block, frame, felt, u0, v0, c0, r, G0, b0, fit_blur, shade, valid, outline)
+        return _fit_blocks(block, frame, felt, u0, v0, c0, r, G0, b0, fit_blur, shade, valid, outline,
+                           jackknife=jackknife)
     felt = np.ascontiguousarray(felt, dtype=np.float64)
     h, w = felt.shape
     y = (np.asarray(frame, dtype=np.float64) - felt).ravel()
@@ -495,12 +501,14 @@ def _coarse(block: int, c, r: float, b, outline):
     return (np.asarray(c, float) - half) / block, r / block, np.asarray(b, float) / block, ol
 
 
-def _fit_blocks(block, frame, felt, u0, v0, c0, r, G0, b0, fit_blur, shade, valid, outline, fit=None) -> DiscFit:
+def _fit_blocks(block, frame, felt, u0, v0, c0, r, G0, b0, fit_blur, shade, valid, outline, fit=None,
+                jackknife=True) -> DiscFit:
     """:func:`fit_disc` of the block means on the blocks' grid, its centre,
     blur and covariance back in the frame's pixels.  The block means' noise
     is the chroma samples' own (one value a block), so the stated error
     counts each block once.  ``fit``: the pixels' fit (this module's
-    :func:`fit_disc`, or the numpy reference's)."""
+    :func:`fit_disc`, or the numpy reference's); ``jackknife`` as
+    :func:`fit_disc`'s."""
     fit = fit_disc if fit is None else fit
     (U0, V0), (y, f, ok) = block_patch(block, u0, v0, frame, felt, None if valid is None else np.asarray(valid, bool))
     c, rc, b, ol = _coarse(block, c0, r, b0, outline)
@@ -521,7 +529,8 @@ def _fit_blocks(block, frame, felt, u0, v0, c0, r, G0, b0, fit_blur, shade, vali
             # conservative bound (review7 measured its err/se 1.5-1.9x the
             # blocks' on the chroma test's 24 MJPG frames).
             return replace(p, stderr=block * p.stderr, cov=block * block * p.cov)
-    g = _jackknife_cov(g, y, f, U0, V0, rc, fit_blur, shade, ok, ol)
+    if jackknife:
+        g = _jackknife_cov(g, y, f, U0, V0, rc, fit_blur, shade, ok, ol)
     return replace(g, c=block * g.c + (block - 1) / 2.0, b=block * g.b, stderr=block * g.stderr,
                    cov=block * block * g.cov)
 

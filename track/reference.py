@@ -94,10 +94,11 @@ def model_rows(c, b, G, felt, r, u0, v0, taus, shade=None, blur_rows=True, outli
 
 def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float, G0: float,
              b0=(0.0, 0.0), fit_blur: bool = False, shade: bool = False, valid=None,
-             outline=None, block: int = 1) -> DiscFit:
+             outline=None, block: int = 1, jackknife: bool = True) -> DiscFit:
     """:func:`cuespin.track.model.fit_disc` in numpy (same arguments and result)."""
     if block > 1:
-        return _fit_blocks(block, frame, felt, u0, v0, c0, r, G0, b0, fit_blur, shade, valid, outline, fit=fit_disc)
+        return _fit_blocks(block, frame, felt, u0, v0, c0, r, G0, b0, fit_blur, shade, valid, outline, fit=fit_disc,
+                           jackknife=jackknife)
     felt = np.asarray(felt, dtype=np.float64)
     h, w = felt.shape
     y = (np.asarray(frame, dtype=np.float64) - felt).ravel()

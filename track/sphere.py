@@ -97,7 +97,7 @@ def _rss(groups, r: float, outline, look: SphereLook, block: int = 1) -> float:
     tot = 0.0
     for s in groups:
         f = fit_disc(s.patch, s.felt, s.u0, s.v0, s.c, r, s.G, b0=s.b, fit_blur=s.fit_blur, shade=look,
-                     valid=s.valid, outline=outline, block=block)
+                     valid=s.valid, outline=outline, block=block, jackknife=False)  # its residual only
         if not f:
             return np.inf
         n = (s.patch.size if s.valid is None else int(s.valid.sum())) // (block * block)

@@ -831,10 +831,11 @@ class BallTracker:
         look better whatever its centre (review).  Falls back to the own
         residuals when a refit fails."""
         valid = kept_pixels(marks, foreign)
+        # Their residuals only: no covariance needed (fit_disc's jackknife).
         a = fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=shade, valid=valid, outline=ol,
-                     block=block)
+                     block=block, jackknife=False)
         b = fit_disc(patch, felt, u0, v0, g.c, r, g.G, b0=g.b, fit_blur=fit_blur, shade=shade, valid=valid, outline=ol,
-                     block=block)
+                     block=block, jackknife=False)
         if a and b:
             return b.rms < a.rms
         return g.rms < f.rms
@@ -945,7 +946,8 @@ class BallTracker:
             # look's diffuse coefficient, not the first look's.
             diffuse = [g.shade[0] for g in (fit_disc(s.patch, s.felt, s.u0, s.v0, s.c, self.r, s.G, b0=s.b,
                                                      fit_blur=s.fit_blur, shade=look, valid=s.valid,
-                                                     outline=self._sphere_outline, block=self.block)
+                                                     outline=self._sphere_outline, block=self.block,
+                                                     jackknife=False)  # the looks' coefficients only
                                         for s in samples) if g]
             self._sphere_a = float(np.median(diffuse)) if diffuse else None
         return look
