@@ -1527,7 +1527,7 @@ def calibrate_frame(frame: np.ndarray, table: Table = Table(), *, intrinsics=Non
             # with its error carried by one of them, as in the branch above
             # (left free, each perturbed camera re-ran the corners' own rule
             # on its moved corners and could take a corner-derived f: review7).
-            same["focal_px"] = float(np.asarray(cal.camera.intrinsics, float)[0, 0])
+            same["focal_px"] = float(cal.camera.K[0, 0])
             focal_sigma = NOMINAL_FOCAL_SIGMA
             cal = replace(cal, focal_sigma=NOMINAL_FOCAL_SIGMA)
     cal = replace(cal, notes=notes, edge_rms_px=edge_rms, edge=det.edge)

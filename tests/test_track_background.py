@@ -1,11 +1,12 @@
 """The look-ahead's background: the ball's contrast on a lossy codec."""
-import cv2
 import numpy as np
 
 from cuespin.data_gen.sampler import sample_scenes
 from cuespin.render.draw import FrameRenderer
+from cuespin.render.video import encode_frames
 from cuespin.track.background import learn_background
 from cuespin.track.colour import learn_projection
+from cuespin.track.reader import FrameSource, probe
 from cuespin.track.video import search_mask
 
 
@@ -22,13 +23,9 @@ def test_contrast_on_mjpg_is_the_lossless_one(tmp_path):
     fr = FrameRenderer(scene)
     rng = np.random.default_rng(0)
     raw = [fr.render(int(k), rng) for k in np.linspace(0, fr.n_frames - 1, 9).round()]
-    path = str(tmp_path / "look_ahead.avi")
-    w = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*"MJPG"), scene.camera.fps, raw[0].shape[1::-1], True)
-    for f in raw:
-        w.write(f)
-    w.release()
-    cap = cv2.VideoCapture(path)
-    coded = np.stack([cap.read()[1] for _ in raw])
+    path = tmp_path / "look_ahead.avi"
+    encode_frames(raw, path, "MJPG", scene.camera.fps, raw[0].shape[1::-1])
+    coded = np.stack(list(FrameSource(path, probe(path))))
     c = scene.camera.to_pixels(np.array([scene.truth.x0[:2]]))[0]
     r = scene.physics.R * scene.camera.px_per_m(c)
     where = search_mask(scene.camera, scene.table, scene.physics.R, coded.shape[1:3])

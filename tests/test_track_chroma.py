@@ -1,13 +1,13 @@
 """A 4:2:0 video's half-resolution colour in the centre's fit (MJPG)."""
-import cv2
 import numpy as np
 import pytest
 
 from cuespin.data_gen.sampler import sample_scenes
 from cuespin.render.draw import FrameRenderer
+from cuespin.render.video import encode_frames
 from cuespin.track.colour import learn_projection
 from cuespin.track.model import fit_disc, streak_model
-from cuespin.track.reader import probe
+from cuespin.track.reader import FrameSource, probe
 from cuespin.track.tracker import FIT_BLUR_PX
 
 
@@ -32,13 +32,9 @@ def mjpg_fits(tmp_path, n=48):
     rng = np.random.default_rng(0)
     ks = np.linspace(20, fr.n_frames - 20, n).round().astype(int)
     raw = [fr.render(int(k), rng) for k in ks]
-    path = str(tmp_path / "shot.avi")
-    w = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*"MJPG"), scene.camera.fps, raw[0].shape[1::-1], True)
-    for f in raw:
-        w.write(f)
-    w.release()
-    cap = cv2.VideoCapture(path)
-    coded = np.stack([cap.read()[1] for _ in raw])
+    path = tmp_path / "shot.avi"
+    encode_frames(raw, path, "MJPG", scene.camera.fps, raw[0].shape[1::-1])
+    coded = np.stack(list(FrameSource(path, probe(path))))
     uv = np.array([fr._uv_nodes[k].mean(axis=0) for k in ks])
     blur = np.array([fr._uv_nodes[k][-1] - fr._uv_nodes[k][0] for k in ks])
     r = scene.physics.R * scene.camera.px_per_m(uv[n // 2])

@@ -14,7 +14,9 @@ import numpy as np
 import pytest
 
 from cuespin.render.draw import disc_coverage
+from cuespin.render.video import encode_frames
 from cuespin.track.model import fit_disc, streak_model
+from cuespin.track.reader import FrameSource, probe
 from cuespin.track.tracker import marking_pixels
 
 R, FELT, BALL, NOISE = 10.0, 80.0, 200.0, 3.0
@@ -93,13 +95,9 @@ def mjpg_still(tmp_path, markings: str, specular: float):
     fr = FrameRenderer(scene)
     rng = np.random.default_rng(0)
     still, gone = fr.render(0, rng), fr.render(fr.n_frames - 1, rng)
-    path = str(tmp_path / f"{markings}_{specular}.avi")
-    w = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*"MJPG"), scene.camera.fps, still.shape[1::-1], True)
-    w.write(still)
-    w.write(gone)
-    w.release()
-    cap = cv2.VideoCapture(path)
-    coded = [cap.read()[1] for _ in range(2)]
+    path = tmp_path / f"{markings}_{specular}.avi"
+    encode_frames([still, gone], path, "MJPG", scene.camera.fps, still.shape[1::-1])
+    coded = list(FrameSource(path, probe(path)))
     c = scene.camera.to_pixels(np.array([scene.truth.x0[:2]]))[0]
     return coded[0], coded[1], c, scene.physics.R * scene.camera.px_per_m(c), scene
 
