@@ -1432,8 +1432,8 @@ def calibrate_video(path, table: Table = Table(), corners=None, *, intrinsics=No
     K = None if intrinsics is None else np.asarray(intrinsics, dtype=float)
     dist = None if distortion is None else np.asarray(distortion, dtype=float).ravel()
     if corners is not None:
-        # the median frame only where the rule reads the still balls
-        frame = reference_frame(path) if use_balls and _focal_by_rule(dict(kw, intrinsics=K)) else None
+        # the median frame where the edges' bow or the still balls are read
+        frame = reference_frame(path) if K is None and not kw.get("homography") else None
         return calibrate_clicked(corners, size, table, frame=frame, intrinsics=K, distortion=dist, fps=fps,
                                  camera_height_sigma_m=camera_height_sigma_m, use_balls=use_balls, **kw)
     return calibrate_frame(reference_frame(path), table, intrinsics=K, distortion=dist, fps=fps,
@@ -1449,18 +1449,44 @@ def _focal_by_rule(same: dict) -> bool:
             and same.get("camera_height_m") is None and not same.get("homography"))
 
 
+# Clicked corners take the lens's bow from the table's edges in the frame
+# (:func:`detect_corners`) when the outline found there is the table they
+# were clicked on: every found corner within this share of the clicked
+# quadrilateral's shorter side of a clicked one (a felt-coloured outline
+# beyond cloth-covered cushions lies some 5% of the width out; a wrong
+# outline, far off).
+CLICKED_BOW_MATCH = 0.15
+
+
+def edges_bow(frame: np.ndarray, corners_px):
+    """The lens's bow from the table's edges in ``frame`` (no lens known):
+    ``(kappa, its standard error)`` (px^-2, :class:`Detection`), or None when
+    no outline is found there or it is not the table of ``corners_px``
+    (``CLICKED_BOW_MATCH``)."""
+    c = np.asarray(corners_px, dtype=float).reshape(4, 2)
+    try:
+        det = detect_corners(frame)
+    except (CalibrationError, cv2.error, np.linalg.LinAlgError):
+        return None
+    side = float(np.linalg.norm(np.roll(c, -1, axis=0) - c, axis=1).min())
+    off = min(float(np.abs(np.roll(det.corners, -s, axis=0) - c).max()) for s in range(4))
+    return (float(det.kappa), float(det.kappa_sigma)) if off <= CLICKED_BOW_MATCH * side else None
+
+
 def calibrate_clicked(corners_px, size, table: Table = Table(), *, frame=None, use_balls: bool = True,
-                      camera_height_sigma_m: float = 0.0, **kw) -> Calibration:
+                      estimate_lens: bool = True, camera_height_sigma_m: float = 0.0, **kw) -> Calibration:
     """The camera from given (clicked) corners, by the automatic path's rules.
 
     The corners are taken in the order given (:func:`calibrate_corners`'
     checks), each coordinate with the error ``corner_sigma_px`` (default 1 px,
-    independent): the focal length comes from the one rule
-    (:func:`choose_focal`: the corners' perspective, the still balls' shapes
-    in ``frame`` when given, or the nominal focal length) and the perturbed
-    cameras move each coordinate in turn, with the corners' share of f.  The
-    same as :func:`calibrate_frame` would write for these corners with that
-    error and the lens's bow ``kappa`` (kw) taken as exact.
+    independent).  With no lens given, the lens's bow comes from the table's
+    edges in ``frame`` (:func:`edges_bow`), its error one more move; the
+    focal length from the one rule (:func:`choose_focal`: the corners'
+    perspective, the still balls' shapes in ``frame``, or the nominal focal
+    length); the perturbed cameras move each coordinate in turn, with the
+    corners' share of f.  The same as :func:`calibrate_frame` writes for
+    corners found with that error, but for the corners' move with the bow
+    (clicked corners do not follow the edges).
 
     Parameters
     ----------
@@ -1469,9 +1495,10 @@ def calibrate_clicked(corners_px, size, table: Table = Table(), *, frame=None, u
     size : (int, int)
         Frame ``(width, height)`` (px).
     frame : ndarray, optional
-        A frame of the table without the moving ball, for the still balls' f.
-    use_balls : bool
-        Read the still balls' shapes in ``frame``.
+        A frame of the table without the moving ball: the edges' bow and the
+        still balls' f.
+    use_balls, estimate_lens : bool
+        Read the still balls' shapes, the edges' bow, in ``frame``.
     camera_height_sigma_m : float
         Error of ``camera_height_m`` (m), carried by one more camera.
     **kw
@@ -1480,10 +1507,24 @@ def calibrate_clicked(corners_px, size, table: Table = Table(), *, frame=None, u
     size = (int(size[0]), int(size[1]))
     kw.setdefault("corner_sigma_px", 1.0)
     kw.setdefault("fps", 30.0)
-    cal = calibrate_corners(corners_px, size, table, **kw)
+    cal = calibrate_corners(corners_px, size, table, **kw)      # the checks, the order as given
     moves = np.hstack([kw["corner_sigma_px"] * np.eye(8), np.zeros((8, 1))])
-    return _focal_and_errors(cal, size, table, kw, moves, frame=frame if use_balls else None,
-                             camera_height_sigma_m=camera_height_sigma_m)
+    bow = None
+    if frame is not None and estimate_lens and kw.get("intrinsics") is None and not kw.get("homography") \
+            and not kw.get("kappa"):
+        bow = edges_bow(frame, cal.corners_px)
+    if bow is not None:
+        kw["kappa"] = bow[0]
+        cal = calibrate_corners(corners_px, size, table, **kw)
+        if bow[1] > 0:
+            moves = np.vstack([moves, np.append(np.zeros(8), bow[1])])
+    cal = _focal_and_errors(cal, size, table, kw, moves, frame=frame if use_balls else None,
+                            camera_height_sigma_m=camera_height_sigma_m)
+    if bow is not None:
+        f = float(cal.camera.K[0, 0])
+        cal = replace(cal, notes=[f"the lens's bow from the table's edges in the video: k1 = {bow[0] * f * f:+.3f} "
+                                  f"+/- {bow[1] * f * f:.3f} at f = {f:.0f} px"] + list(cal.notes))
+    return cal
 
 
 def _focal_and_errors(cal: Calibration, size, table: Table, same: dict, moves: np.ndarray, *, frame=None,
@@ -1565,16 +1606,17 @@ def calibrate_frame(frame: np.ndarray, table: Table = Table(), *, corners=None, 
     jackknife, or ``corner_sigma_px`` a coordinate with the bow's own), then
     the focal length by one rule and the perturbed cameras
     (:func:`_focal_and_errors`, as for clicked corners).  With ``corners``
-    given: :func:`calibrate_clicked` on them (the balls read in ``frame``).
-    ``estimate_lens=False``: the lens taken as undistorted (no bow fitted).
+    given: :func:`calibrate_clicked` on them (the bow and the balls read in
+    ``frame``).  ``estimate_lens=False``: the lens taken as undistorted (no
+    bow fitted).
     ``kw`` as for :func:`calibrate_corners`."""
     h, w = frame.shape[:2]
     size = (int(w), int(h))
     K = None if intrinsics is None else np.asarray(intrinsics, dtype=float)
     dist = None if distortion is None else np.asarray(distortion, dtype=float).ravel()
     if corners is not None:
-        return calibrate_clicked(corners, size, table, frame=frame, use_balls=use_balls, intrinsics=K,
-                                 distortion=dist, camera_height_sigma_m=camera_height_sigma_m, **kw)
+        return calibrate_clicked(corners, size, table, frame=frame, use_balls=use_balls, estimate_lens=estimate_lens,
+                                 intrinsics=K, distortion=dist, camera_height_sigma_m=camera_height_sigma_m, **kw)
     det = detect_corners(frame, K, dist, estimate_lens=estimate_lens)
     quad, edge_rms, kappa = det.corners, det.edge_rms, det.kappa
     if det.edge == "noses":
