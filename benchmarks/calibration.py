@@ -33,6 +33,13 @@ With ``--focal`` (``--tilts 2,2.5,3``, ``--seeds``, ``--rendered``): the
 focal length ``calibrate_frame`` writes at small tilts, its source and its
 error against its stated one.
 
+With ``--clicked`` (``--cameras H,T,K1;...``, ``--corner-px 1``, ``--modes
+corners,intrinsics``): corners clicked that far off (a new draw per shot),
+calibrated as ``calibrate --corners`` does (:func:`calibrate_clicked`: the
+bow from the drawn frame's edges, f by the one rule with its still balls,
+or the lens known); per camera the real v0 and R w0 errors beside the stated
+ones with the calibration's share, their RMS z and the coverage.
+
 With ``--diagnose`` (``--height 2 --tilt 0 --k1 -0.25``): the automatic
 camera's v0 error split into its parts (corners, k1, focal length), each
 camera built from the true values but one.
