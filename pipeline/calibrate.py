@@ -1514,8 +1514,12 @@ def calibrate_clicked(corners_px, size, table: Table = Table(), *, frame=None, u
             and not kw.get("kappa"):
         bow = edges_bow(frame, cal.corners_px)
     if bow is not None:
+        try:
+            cal = calibrate_corners(corners_px, size, table, **dict(kw, kappa=bow[0]))
+        except CalibrationError:            # no plausible camera through that bow: the clicks as they are
+            bow = None
+    if bow is not None:
         kw["kappa"] = bow[0]
-        cal = calibrate_corners(corners_px, size, table, **kw)
         if bow[1] > 0:
             moves = np.vstack([moves, np.append(np.zeros(8), bow[1])])
     cal = _focal_and_errors(cal, size, table, kw, moves, frame=frame if use_balls else None,
