@@ -231,7 +231,8 @@ def auto(args):
 
 def boot(*rows, n: int = 2000, seed: int = 0) -> str:
     """A 95% bootstrap interval of the coverage, shots resampled within each row
-    (a shot's four components share its calibration and its track)."""
+    (a shot's four components share its calibration and its track, so a shot,
+    not a component, is one draw; the rows must not share draws)."""
     rng = np.random.default_rng(seed)
     rows = [np.asarray(r, dtype=float).reshape(len(r), -1) for r in rows if len(r)]
     if not rows:
@@ -311,21 +312,25 @@ def clicked(args):
     sigma = args.corner_px
     cams = [tuple(float(v) for v in c.split(",")) for c in (args.cameras or "2,2,0;2,3,0;2,10,0;2,2,-0.25;"
                                                              "2,3,-0.25;2,10,-0.25").split(";")]
-    print(f"corners {sigma} px off, {args.n} shots per camera (one corner draw each), tracker {args.track_px} px")
+    print(f"corners {sigma} px off, {args.n} shots per camera (each its own shot, clicks and track noise, seeded "
+          f"[{args.seed}, camera, shot]), tracker {args.track_px} px")
     print("height tilt    k1 mode       | n focal_from (f err mean, stated mean) | v0 RMS real / stated (fit-only) "
           "| v0 RMS z, cover95 | R w0 RMS real / stated | R w0 RMS z, cover95 | both cover")
     pooled = {}
-    for height, tilt, k1 in cams:
+    draws = 0
+    for cam_idx, (height, tilt, k1) in enumerate(cams):
         true = Scene(physics=sample_shot(0)[1], camera=pinhole_camera(
             height_m=height, tilt_deg=tilt, k1=k1, size=SIZE, fps=FPS, roll_deg=ROLL_DEG)).camera
         frame = synthetic_table_frame(true, seed=int(10 * tilt + 100 * abs(k1)), cushion_m=0.05, pockets=True)
         exact = true.project(table_corners(Table()))
         for mode in args.modes.split(","):
             kw = {"intrinsics": true.K, "distortion": true.dist} if mode == "intrinsics" else {}
-            rng = np.random.default_rng(args.seed)
             rows, srcs, f_err = [], [], []
             for i in range(args.n):
-                shot, params = sample_shot(args.seed * 1000 + i, "random")
+                # Each (seed, camera, shot) its own shot, clicks and track noise: a shot's four
+                # components share one draw, so the draws, not the components, are the sample.
+                shot, params = sample_shot(np.random.default_rng([args.seed, cam_idx, i, 1]), "random")
+                rng = np.random.default_rng([args.seed, cam_idx, i])
                 c = exact + rng.normal(0.0, sigma, exact.shape)
                 try:
                     cal = clicked_calibration(c, frame, sigma, fps=FPS, R_nominal=params.R, **kw)
@@ -333,7 +338,7 @@ def clicked(args):
                     print(f"  shot {i}: refused: {exc}")
                     continue
                 tr = Scene(physics=params, camera=true).camera
-                uv = track_pixels(shot, params, tr, np.random.default_rng(i), args.track_px)
+                uv = track_pixels(shot, params, tr, rng, args.track_px)
                 r = through(shot, params, cal.camera, *uv)
                 if r is None:
                     continue
@@ -347,6 +352,9 @@ def clicked(args):
                 rows.append((dv, dw, np.sqrt(sv**2 + extra_v), np.sqrt(sw**2 + extra_w), sv))
                 srcs.append(cal.focal_source)
                 f_err.append((cal.camera.K[0, 0] / true.K[0, 0] - 1, getattr(cal, "focal_sigma", None) or 0.0))
+                z = np.concatenate([dv / rows[-1][2], dw / rows[-1][3]])
+                print(f"  {height:g},{tilt:g},{k1:+.2f} {mode} shot {i}: f {f_err[-1][0]:+.2%} z "
+                      + " ".join(f"{v:+.2f}" for v in z), flush=True)
             if not rows:
                 print(f"{height:6.1f} {tilt:4.0f} {k1:+.2f} {mode:10s} | 0")
                 continue
@@ -354,6 +362,7 @@ def clicked(args):
             zv, zw = dv / sv, dw / sw
             inside = np.abs(np.concatenate([zv, zw], axis=1)) < 1.96
             pooled.setdefault(mode, []).append(inside)
+            draws += len(rows)
             fe = np.array(f_err)
             src = max(set(srcs), key=srcs.count)
             rms = lambda a: float(np.sqrt(np.mean(a**2)))  # noqa: E731
@@ -361,9 +370,10 @@ def clicked(args):
                   f"{fe[:, 1].mean():.1%}) | {rms(dv):.2e} / {rms(sv):.2e} ({rms(sf):.1e}) | {rms(zv):.2f}, "
                   f"{np.mean(np.abs(zv) < 1.96):.0%}{boot(np.abs(zv) < 1.96)} | {rms(dw):.2e} / {rms(sw):.2e} | "
                   f"{rms(zw):.2f}, {np.mean(np.abs(zw) < 1.96):.0%} | {inside.mean():.0%}{boot(inside)}", flush=True)
+    print(f"{draws} independent draws (shot, clicks, track noise), 4 components each")
     for mode, ins in pooled.items():
-        print(f"pooled {mode}: cover95 (v0 and R w0) {np.concatenate([x.ravel() for x in ins]).mean():.1%}"
-              f"{boot(*ins)}")
+        print(f"pooled {mode}: {sum(len(x) for x in ins)} draws, cover95 (v0 and R w0) "
+              f"{np.concatenate([x.ravel() for x in ins]).mean():.1%}{boot(*ins)} (draws resampled)")
 
 
 def focal(args):

@@ -1463,14 +1463,22 @@ def edges_bow(frame: np.ndarray, corners_px):
     ``(kappa, its standard error)`` (px^-2, :class:`Detection`), or None when
     no outline is found there or it is not the table of ``corners_px``
     (``CLICKED_BOW_MATCH``)."""
+    return _edges_bow(frame, corners_px)[0]
+
+
+def _edges_bow(frame: np.ndarray, corners_px):
+    """:func:`edges_bow` and, when it is None, why (a phrase for the user)."""
     c = np.asarray(corners_px, dtype=float).reshape(4, 2)
     try:
         det = detect_corners(frame)
     except (CalibrationError, cv2.error, np.linalg.LinAlgError):
-        return None
+        return None, "no table outline found in the video"
     side = float(np.linalg.norm(np.roll(c, -1, axis=0) - c, axis=1).min())
     off = min(float(np.abs(np.roll(det.corners, -s, axis=0) - c).max()) for s in range(4))
-    return (float(det.kappa), float(det.kappa_sigma)) if off <= CLICKED_BOW_MATCH * side else None
+    if off > CLICKED_BOW_MATCH * side:
+        return None, (f"the table outline found in the video lies {off:.0f} px from the clicked corners, over "
+                      f"{CLICKED_BOW_MATCH:.0%} of the table's shorter side")
+    return (float(det.kappa), float(det.kappa_sigma)), ""
 
 
 def calibrate_clicked(corners_px, size, table: Table = Table(), *, frame=None, use_balls: bool = True,
@@ -1509,14 +1517,17 @@ def calibrate_clicked(corners_px, size, table: Table = Table(), *, frame=None, u
     kw.setdefault("fps", 30.0)
     cal = calibrate_corners(corners_px, size, table, **kw)      # the checks, the order as given
     moves = np.hstack([kw["corner_sigma_px"] * np.eye(8), np.zeros((8, 1))])
-    bow = None
+    bow, straight = None, ""
     if frame is not None and estimate_lens and kw.get("intrinsics") is None and not kw.get("homography") \
             and not kw.get("kappa"):
-        bow = edges_bow(frame, cal.corners_px)
+        bow, straight = _edges_bow(frame, cal.corners_px)
     if bow is not None:
         try:
             cal = calibrate_corners(corners_px, size, table, **dict(kw, kappa=bow[0]))
         except CalibrationError:            # no plausible camera through that bow: the clicks as they are
+            f = float(cal.camera.K[0, 0])
+            straight = (f"the bow from the table's edges in the video, k1 = {bow[0] * f * f:+.3f}, leaves no "
+                        "plausible camera through the clicked corners")
             bow = None
     if bow is not None:
         kw["kappa"] = bow[0]
@@ -1524,10 +1535,13 @@ def calibrate_clicked(corners_px, size, table: Table = Table(), *, frame=None, u
             moves = np.vstack([moves, np.append(np.zeros(8), bow[1])])
     cal = _focal_and_errors(cal, size, table, kw, moves, frame=frame if use_balls else None,
                             camera_height_sigma_m=camera_height_sigma_m)
+    if straight:        # said, not silent: a wide lens taken as straight bends every line (v0 16x off at k1 -0.25)
+        cal = replace(cal, notes=[f"the lens taken as straight ({straight}): give --intrinsics for a wide lens"]
+                      + list(cal.notes))
     if bow is not None:
         f = float(cal.camera.K[0, 0])
         cal = replace(cal, notes=[f"the lens's bow from the table's edges in the video: k1 = {bow[0] * f * f:+.3f} "
-                                  f"+/- {bow[1] * f * f:.3f} at f = {f:.0f} px"] + list(cal.notes))
+                                  f"+/- {bow[1] * f * f:.2g} at f = {f:.0f} px"] + list(cal.notes))
     return cal
 
 
