@@ -1452,9 +1452,12 @@ def _focal_by_rule(same: dict) -> bool:
 # Clicked corners take the lens's bow from the table's edges in the frame
 # (:func:`detect_corners`) when the outline found there is the table they
 # were clicked on: every found corner within this share of the clicked
-# quadrilateral's shorter side of a clicked one (a felt-coloured outline
-# beyond cloth-covered cushions lies some 5% of the width out; a wrong
-# outline, far off).
+# quadrilateral's shorter side of a clicked one.  Measured on the drawn and
+# the renderer's realistic tables (2 m at 0, 3, 10 degrees, 1.5 m at 15,
+# k1 -0.25..+0.25; benchmarks/bowmatch.py): the noses' outline 0.0-0.1% off
+# the playing surface, the felt's outline beyond the cushions (noses=False)
+# 3.3-5.6%; 0.15 is 2.7 times the felt's worst, clicks 1 px off move it
+# 0.2%, and an outline 20% off is another table's.
 CLICKED_BOW_MATCH = 0.15
 
 
