@@ -325,7 +325,7 @@ def clicked(args):
         exact = true.project(table_corners(Table()))
         for mode in args.modes.split(","):
             kw = {"intrinsics": true.K, "distortion": true.dist} if mode == "intrinsics" else {}
-            rows, srcs, f_err = [], [], []
+            rows, srcs, f_err, failed = [], [], [], 0
             for i in range(args.n):
                 # Each (seed, camera, shot) its own shot, clicks and track noise: a shot's four
                 # components share one draw, so the draws, not the components, are the sample.
@@ -349,6 +349,8 @@ def clicked(args):
                     if rk is not None:
                         extra_v += (rk[0] - dv) ** 2
                         extra_w += (rk[1] - dw) ** 2
+                    else:                           # its share left out: counted, said
+                        failed += 1
                 rows.append((dv, dw, np.sqrt(sv**2 + extra_v), np.sqrt(sw**2 + extra_w), sv))
                 srcs.append(cal.focal_source)
                 f_err.append((cal.camera.K[0, 0] / true.K[0, 0] - 1, getattr(cal, "focal_sigma", None) or 0.0))
@@ -358,6 +360,8 @@ def clicked(args):
             if not rows:
                 print(f"{height:6.1f} {tilt:4.0f} {k1:+.2f} {mode:10s} | 0")
                 continue
+            if failed:
+                print(f"  {failed} perturbed cameras' fits failed (their share left out)")
             dv, dw, sv, sw, sf = (np.array([r[k] for r in rows]) for k in range(5))
             zv, zw = dv / sv, dw / sw
             inside = np.abs(np.concatenate([zv, zw], axis=1)) < 1.96
