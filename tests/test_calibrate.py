@@ -543,8 +543,8 @@ def test_clicked_corners_state_the_focal_lengths_error(drawn_10deg):
     # and state its error the same way: each coordinate moved by the click's
     # error (1 px) moves the corners' share of f in its perturbed camera, one
     # more carries the balls'.  Measured on drawn frames tilted 10 degrees,
-    # corners 1 px off (benchmarks/calibration.py --clicked): f 0.7-2.3% off,
-    # stated 5.6-5.8% (z under 0.5 on 3 draws).
+    # corners 1 px off (benchmarks/calibration.py --clicked, 35 independent
+    # draws): f 4.0% RMS off (-9.9..+8.0%), stated 5.9%.
     from cuespin.pipeline.calibrate import calibrate_clicked
 
     true, img = drawn_10deg
@@ -592,8 +592,8 @@ def test_clicked_corners_on_a_distorting_lens_take_the_bow_from_the_edges():
     # parameters and f): without it, clicks 1 px off on a k1 -0.25 lens tilted
     # 10 degrees put f 37-40% off (stated 5.7%).  The bow is read from the
     # table's edges in the frame (edges_bow, the automatic path's fit) when the
-    # outline found there is the clicked table: f 1.0-2.9% off, stated 5.9%
-    # (3 draws, benchmarks/calibration.py --clicked).
+    # outline found there is the clicked table: f 4.6% RMS off (-11.7..+9.3%),
+    # stated 6.0-6.3% (28 independent draws, benchmarks/calibration.py --clicked).
     from cuespin.pipeline.calibrate import _edges_bow, calibrate_clicked
 
     true = pinhole_camera(height_m=2.0, tilt_deg=10.0, k1=-0.25, R=R, size=SIZE, fps=240.0, roll_deg=1.0)
