@@ -623,6 +623,8 @@ class FrameRenderer:
         # OpenCV's saturating conversion: np.rint (half to even), then clip to 0-255.
         self.background = cv2.addWeighted(blur, 1.0, blur, 0.0, 0.0, dtype=cv2.CV_8U)
         self._frac = np.subtract(blur, self.background, dtype=np.float32)   # what 8 bits rounded off
+        self._frac_tiles = tile_view(self._frac, TILE_PX)
+        self._tiles_hw = self._frac_tiles.shape[:2]      # the tiles wholly inside the frame
         self._noise = sensor_noise(self.sigma)
         # The background in int16 only for the noise drawn as integers (large sigma).
         self._bg16 = self.background.astype(np.int16) if isinstance(self._noise, NoiseSampler) else None
@@ -1156,13 +1158,28 @@ class FrameRenderer:
         # change to the unrounded value keeps it round(blur + delta + n).
         # OpenCV's float32 sums in numpy's order ((f + frac) + acc) and its
         # saturating conversion (round half to even, as np.rint, then clip):
-        # the same pixels as numpy's five passes in two calls a tile.
+        # the same pixels as numpy's five passes.  The tiles wholly inside
+        # the frame are gathered into one stack and added in two calls (two
+        # calls a tile cost ~0.4 ms a frame in calls alone); the frame's
+        # partial edge tiles one by one, the same arithmetic.
         T = TILE_PX
-        for (ty, tx), acc in tiles.items():
-            sl = (slice(ty * T, ty * T + T), slice(tx * T, tx * T + T))
-            f = frame[sl]
-            clean = cv2.add(f, self._frac[sl], dtype=cv2.CV_32F)
-            frame[sl] = cv2.add(clean, acc[:f.shape[0], :f.shape[1]], dtype=cv2.CV_8U)
+        full = [(key, acc) for key, acc in tiles.items() if key[0] < self._tiles_hw[0] and key[1] < self._tiles_hw[1]]
+        if full:
+            ty = np.array([key[0] for key, _ in full])
+            tx = np.array([key[1] for key, _ in full])
+            view = tile_view(frame, T)
+            clean = cv2.add(view[ty, tx].reshape(-1, T, 3), self._frac_tiles[ty, tx].reshape(-1, T, 3),
+                            dtype=cv2.CV_32F)
+            acc = np.concatenate([a for _, a in full])
+            view[ty, tx] = cv2.add(clean, acc, dtype=cv2.CV_8U).reshape(-1, T, T, 3)
+        if len(full) < len(tiles):
+            for (ty, tx), acc in tiles.items():
+                if ty < self._tiles_hw[0] and tx < self._tiles_hw[1]:
+                    continue
+                sl = (slice(ty * T, ty * T + T), slice(tx * T, tx * T + T))
+                f = frame[sl]
+                clean = cv2.add(f, self._frac[sl], dtype=cv2.CV_32F)
+                frame[sl] = cv2.add(clean, acc[:f.shape[0], :f.shape[1]], dtype=cv2.CV_8U)
         return frame
 
     def render(self, k: int, rng: np.random.Generator) -> np.ndarray:
@@ -1251,6 +1268,15 @@ def add_to_tiles(tiles: dict, delta: np.ndarray, u0: int, v0: int) -> dict:
                                                                           a0 - u0:a1 - u0]
             tiles[(ty, tx)] = tile
     return tiles
+
+
+def tile_view(img: np.ndarray, T: int) -> np.ndarray:
+    """The ``T x T`` tiles wholly inside a C-contiguous ``img`` (h, w, ...) as a
+    writeable view, shape (h // T, w // T, T, T, ...): tile ``(ty, tx)`` is
+    ``img[ty T:ty T + T, tx T:tx T + T]``."""
+    s0, s1 = img.strides[:2]
+    return np.lib.stride_tricks.as_strided(img, (img.shape[0] // T, img.shape[1] // T, T, T) + img.shape[2:],
+                                           (T * s0, T * s1, s0, s1) + img.strides[2:])
 
 
 def gaussian(img: np.ndarray, sigma: float, constant: bool = False) -> np.ndarray:
