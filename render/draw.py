@@ -635,6 +635,7 @@ class FrameRenderer:
         self._rot_block = (0, np.empty((0,)))
         self._win_block = (0, [])
         self._last_delta = None
+        self._stack = None      # the last frame's cue, ball, tiles and their stack
 
     def _ray_map(self) -> np.ndarray:
         """Unit directions (table frame) of the rays through every pixel of the
@@ -1052,12 +1053,12 @@ class FrameRenderer:
         (:func:`add_to_tiles`): one patch per stretch of the cue (each pixel
         belongs to one stretch, so overlapping patches add exactly)."""
         if not self.settings["cue"]:
-            return {}
+            return _NO_TILES
         tr = self.scene.truth
         v0 = np.asarray(tr.v0)
         speed = float(np.hypot(*v0))
         if speed <= 0:
-            return {}
+            return _NO_TILES
         d = v0 / speed
         nrm = np.array([-d[1], d[0]])
         R = self.scene.physics.R
@@ -1146,14 +1147,27 @@ class FrameRenderer:
                 frame = cv2.add(self._noise.draw(fast, self._bg16.shape), self._bg16, dtype=cv2.CV_8U)
         else:
             frame = self.background.copy()
-        tiles = dict(self._cue_tiles(k))
-        for xy, uv, albedo in self._struck.values():
-            delta, u0, v0 = self._delta_of(uv[k], xy[k], albedo, None)
+        cue, ball = self._cue_tiles(k), self._ball_delta(k)
+        last = self._stack
+        if not self._struck and last is not None and last[0] is cue and last[1] is ball:
+            # Cue and ball as in the last frame (both drawn once while
+            # still): its tiles and their stack again, not rebuilt.
+            tiles, full, ty, tx, acc = last[2:]
+        else:
+            tiles = dict(cue)
+            for xy, uv, albedo in self._struck.values():
+                delta, u0, v0 = self._delta_of(uv[k], xy[k], albedo, None)
+                if delta is not None:
+                    add_to_tiles(tiles, delta, u0, v0)
+            delta, u0, v0 = ball
             if delta is not None:
                 add_to_tiles(tiles, delta, u0, v0)
-        delta, u0, v0 = self._ball_delta(k)
-        if delta is not None:
-            add_to_tiles(tiles, delta, u0, v0)
+            full = [(key, acc) for key, acc in tiles.items()
+                    if key[0] < self._tiles_hw[0] and key[1] < self._tiles_hw[1]]
+            ty = np.array([key[0] for key, _ in full], dtype=np.intp)
+            tx = np.array([key[1] for key, _ in full], dtype=np.intp)
+            acc = np.concatenate([a for _, a in full]) if full else None
+            self._stack = (cue, ball, tiles, full, ty, tx, acc)
         # The frame is round(blur + n) with integer noise n: adding the
         # change to the unrounded value keeps it round(blur + delta + n).
         # OpenCV's float32 sums in numpy's order ((f + frac) + acc) and its
@@ -1163,14 +1177,10 @@ class FrameRenderer:
         # calls a tile cost ~0.4 ms a frame in calls alone); the frame's
         # partial edge tiles one by one, the same arithmetic.
         T = TILE_PX
-        full = [(key, acc) for key, acc in tiles.items() if key[0] < self._tiles_hw[0] and key[1] < self._tiles_hw[1]]
         if full:
-            ty = np.array([key[0] for key, _ in full])
-            tx = np.array([key[1] for key, _ in full])
             view = tile_view(frame, T)
             clean = cv2.add(view[ty, tx].reshape(-1, T, 3), self._frac_tiles[ty, tx].reshape(-1, T, 3),
                             dtype=cv2.CV_32F)
-            acc = np.concatenate([a for _, a in full])
             view[ty, tx] = cv2.add(clean, acc, dtype=cv2.CV_8U).reshape(-1, T, T, 3)
         if len(full) < len(tiles):
             for (ty, tx), acc in tiles.items():
@@ -1250,6 +1260,9 @@ _CUE_COLS = np.array([c for _, c in CUE_PARTS], dtype=np.float32)
 
 
 TILE_PX = 32
+# No cue: one shared empty set of tiles (never changed: frames copy it), so a
+# frame's stack can be reused while the ball is still.
+_NO_TILES: dict = {}
 
 
 def add_to_tiles(tiles: dict, delta: np.ndarray, u0: int, v0: int) -> dict:

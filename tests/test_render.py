@@ -487,6 +487,21 @@ def test_tiles_composited_as_one_stack_are_the_tile_by_tile_sums():
     assert np.array_equal(got, want)
 
 
+def test_frames_reusing_the_last_stack_are_drawn_afresh():
+    # While ball and cue are still, a frame reuses the last frame's tiles
+    # and their stack: each frame is what a fresh renderer draws for it.
+    scene = realistic(noise=3.0, cue=False, balls=[], markings="dots")
+    r = FrameRenderer(scene, n_frames=4)
+    assert scene.truth.t0 > 4 / scene.camera.fps, "the ball moves in these frames: nothing is reused"
+    got, stacks = [], []
+    for k in range(4):
+        got.append(r.render(k, np.random.default_rng(k)))
+        stacks.append(r._stack)
+    assert all(s is stacks[0] for s in stacks) and stacks[0][6] is not None
+    for k in (0, 3):
+        assert np.array_equal(FrameRenderer(scene, n_frames=4).render(k, np.random.default_rng(k)), got[k])
+
+
 def test_markings_move_with_spin():
     # A rolling ball's top moves at 2 v: the marks seen from above run ahead
     # of the centre in the direction of motion, and a still ball's do not move.
