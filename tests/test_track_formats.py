@@ -158,3 +158,42 @@ def test_realistic_look_found_without_false_positives(tmp_path, seed):
     # frames a slid-off look-ahead gave up before the strike not counted).
     after = truth.t > scene.truth.t0 + 0.02
     assert res.ok[after].mean() > 0.95, res.status_counts()
+
+
+@pytest.mark.parametrize("codec", ["MJPG", "H264"])
+def test_planar_windows_are_opencvs_frames(tmp_path, codec):
+    # A 4:2:0 video is read as its planes and converted to BGR by window
+    # (track.reader.PlanarFrame): each window is exactly that part of the
+    # whole frame's conversion (the background is learnt from whole frames,
+    # the ball fitted in windows), and within BGR_LEVELS_TOL of OpenCV's own
+    # decoding of the file (the renderer's writers: OpenCV's MJPG, PyAV's x264).
+    import cv2
+
+    from cuespin.render import render_video
+    from cuespin.track.reader import BGR_LEVELS_TOL, FrameSource, PlanarFrame, probe
+
+    shot, params = sample_shot(2, "case3")
+    scene = make_scene(Shot(shot.x0, shot.v0, shot.w0, t0=0.02), params, fps=120.0, px_per_m=200.0,
+                       render={"duration": 0.1, "noise_sigma": 3.0, "codec": codec, "look": "realistic",
+                               "ball_colour": list(YELLOW)})
+    video = tmp_path / ("v.mp4" if codec == "H264" else "v.avi")
+    render_video(scene, video)
+    cap = cv2.VideoCapture(str(video), cv2.CAP_FFMPEG)
+    rng = np.random.default_rng(4)
+    n = 0
+    for frame in FrameSource(video, probe(video)):
+        ok, ref = cap.read()
+        assert ok and isinstance(frame, PlanarFrame)
+        h, w = frame.shape[:2]
+        wins = [(int(v0), int(v0 + dv), int(u0), int(u0 + du)) for v0, u0, dv, du in
+                zip(rng.integers(0, h - 20, 8), rng.integers(0, w - 30, 8), rng.integers(1, 20, 8),
+                    rng.integers(1, 30, 8))]
+        v0, v1, u0, u1 = wins[0]
+        wins.append((v0 + 1, max(v1 - 1, v0 + 1), u0 + 1, max(u1 - 2, u0 + 1)))  # within the last one converted
+        parts = [frame[v0:v1, u0:u1] for v0, v1, u0, u1 in wins]  # before the whole frame is kept
+        whole = np.asarray(frame)
+        assert np.abs(whole.astype(int) - ref).max() <= BGR_LEVELS_TOL
+        for (v0, v1, u0, u1), part in zip(wins, parts):
+            np.testing.assert_array_equal(part, whole[v0:v1, u0:u1])
+        n += 1
+    assert n == int(0.1 * 120.0) and not cap.read()[0]

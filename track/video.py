@@ -390,7 +390,8 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         first = pull()
         if first is None:
             raise TrackError(f"{path}: the video has no frames that decode")
-        ahead = max(LOOKAHEAD_MIN_FRAMES, LOOKAHEAD_BYTES // first.nbytes)
+        # Counted as decoded 8-bit frames (a PlanarFrame holds half of that).
+        ahead = max(LOOKAHEAD_MIN_FRAMES, LOOKAHEAD_BYTES // int(np.prod(first.shape)))
         buf = [first]
         while len(buf) < ahead and (img := pull()) is not None:
             buf.append(img)
