@@ -167,21 +167,12 @@ def test_planar_windows_are_opencvs_frames(tmp_path, codec):
     # whole frame's conversion (the background is learnt from whole frames,
     # the ball fitted in windows), and within BGR_LEVELS_TOL of OpenCV's own
     # decoding of the file (the renderer's writers: OpenCV's MJPG, PyAV's x264).
-    import cv2
+    from cuespin.track.reader import BGR_LEVELS_TOL, PlanarFrame
 
-    from cuespin.render import render_video
-    from cuespin.track.reader import BGR_LEVELS_TOL, FrameSource, PlanarFrame, probe
-
-    shot, params = sample_shot(2, "case3")
-    scene = make_scene(Shot(shot.x0, shot.v0, shot.w0, t0=0.02), params, fps=120.0, px_per_m=200.0,
-                       render={"duration": 0.1, "noise_sigma": 3.0, "codec": codec, "look": "realistic",
-                               "ball_colour": list(YELLOW)})
-    video = tmp_path / ("v.mp4" if codec == "H264" else "v.avi")
-    render_video(scene, video)
-    cap = cv2.VideoCapture(str(video), cv2.CAP_FFMPEG)
+    video, frames, cap = planar_video(tmp_path, codec, {"look": "realistic", "ball_colour": list(YELLOW)})
     rng = np.random.default_rng(4)
     n = 0
-    for frame in FrameSource(video, probe(video)):
+    for frame in frames:
         ok, ref = cap.read()
         assert ok and isinstance(frame, PlanarFrame)
         h, w = frame.shape[:2]
@@ -196,4 +187,34 @@ def test_planar_windows_are_opencvs_frames(tmp_path, codec):
         for (v0, v1, u0, u1), part in zip(wins, parts):
             np.testing.assert_array_equal(part, whole[v0:v1, u0:u1])
         n += 1
-    assert n == int(0.1 * 120.0) and not cap.read()[0]
+    assert n == 12 and not cap.read()[0]
+
+
+@pytest.mark.parametrize("codec,tol", [("MJPG", 0), ("H264", 1)])
+def test_planar_grey_frames_are_opencvs(tmp_path, codec, tol):
+    # Grey frames (neutral chroma: the plain look) arrive as one channel
+    # from the Y plane: OpenCV's levels exactly at full range (MJPG), within
+    # swscale's rounding against cv2.cvtColor's at BT.601's (measured 1).
+    video, frames, cap = planar_video(tmp_path, codec, {})
+    n = 0
+    for frame in frames:
+        ok, ref = cap.read()
+        assert ok and frame.ndim == 2 and isinstance(frame, np.ndarray)
+        assert np.abs(frame.astype(int) - ref[..., 1]).max() <= tol
+        n += 1
+    assert n == 12
+
+
+def planar_video(tmp_path, codec, look):
+    """12 frames written by the renderer: (path, FrameSource, cv2.VideoCapture)."""
+    import cv2
+
+    from cuespin.render import render_video
+    from cuespin.track.reader import FrameSource, probe
+
+    shot, params = sample_shot(2, "case3")
+    scene = make_scene(Shot(shot.x0, shot.v0, shot.w0, t0=0.02), params, fps=120.0, px_per_m=200.0,
+                       render={"duration": 0.1, "noise_sigma": 3.0, "codec": codec, **look})
+    video = tmp_path / ("v.mp4" if codec == "H264" else "v.avi")
+    render_video(scene, video)
+    return video, FrameSource(video, probe(video)), cv2.VideoCapture(str(video), cv2.CAP_FFMPEG)

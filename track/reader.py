@@ -51,6 +51,11 @@ PLANAR_PIX_FMTS = {"yuv420p": False, "yuvj420p": True}
 # against that exact conversion (the rounding, times BT.601's gains; measured).
 FULL_TO_VIDEO_Y = np.clip(np.rint(16 + np.arange(256) * 219 / 255), 0, 255).astype(np.uint8)
 FULL_TO_VIDEO_C = np.clip(np.rint(128 + (np.arange(256) - 128) * 224 / 255), 0, 255).astype(np.uint8)
+# BT.601's grey level of each luma level with neutral chroma: what
+# cv2.cvtColor's 4:2:0 conversion gives (a frame of the 256 levels converted).
+VIDEO_Y_TO_GREY = cv2.cvtColor(np.concatenate([np.tile(np.arange(256, dtype=np.uint8), (2, 1)),
+                                               np.full((1, 256), 128, np.uint8)]),
+                               cv2.COLOR_YUV2BGR_I420)[0, :, 1].copy()
 # Most a PlanarFrame's BGR level departs from OpenCV's decoding of the same
 # frame (FFmpeg's swscale, whose fixed-point path comes out ~1 level lower
 # than cv2.cvtColor's rounding, B, G and R alike: mean 0.7-1.7): 3 on H.264,
@@ -282,6 +287,14 @@ class PlanarFrame:
         self._last = (a0, a1, b0, b1, bgr)
         return bgr[v0 - a0:v1 - a0, u0 - b0:u1 - b0]
 
+    def grey(self) -> np.ndarray:
+        """The frame's grey levels (h, w) when its chroma is neutral: the Y
+        plane itself at full range (OpenCV's decoding of grey MJPG, to the
+        level), else BT.601's gain on it (:data:`VIDEO_Y_TO_GREY`)."""
+        if self.full_range:
+            return self._y.copy()
+        return cv2.LUT(self._y, VIDEO_Y_TO_GREY)
+
     def __getitem__(self, key):
         if isinstance(key, tuple) and len(key) == 2 and all(isinstance(k, slice) and k.step in (None, 1)
                                                              for k in key):
@@ -386,7 +399,7 @@ class FrameSource:
                     self.grey = self._grey_content(np.asarray(frame))
                     self._decided = True
                 # a grey video: one channel, as the other paths give it
-                yield cv2.extractChannel(np.asarray(frame), 1) if self.grey else frame
+                yield frame.grey() if self.grey else frame
         except av.error.FFmpegError as exc:
             raise TrackError(str(exc)) from None
         finally:
