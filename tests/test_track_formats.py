@@ -217,4 +217,4 @@ def planar_video(tmp_path, codec, look):
                        render={"duration": 0.1, "noise_sigma": 3.0, "codec": codec, **look})
     video = tmp_path / ("v.mp4" if codec == "H264" else "v.avi")
     render_video(scene, video)
-    return video, FrameSource(video, probe(video)), cv2.VideoCapture(str(video), cv2.CAP_FFMPEG)
+    return video, FrameSource(video, probe(video), planes=True), cv2.VideoCapture(str(video), cv2.CAP_FFMPEG)

@@ -7,11 +7,12 @@ planes that all agree) is read as one channel.  PyAV reads what OpenCV
 cannot open, and gives the container's presentation timestamps, from a
 pass over the packets (no decoding: a few ms per thousand frames).
 
-A 4:2:0 stream (``yuv420p``, ``yuvj420p``: MJPG, H.264, mp4v) is decoded by
-PyAV and handed over as its planes (:class:`PlanarFrame`): the tracker
-looks at most frames through a window around the ball, and the YUV to BGR
-conversion of the whole frame was about half of decoding's CPU (H.264,
-tspeed10); the windows are converted on demand.
+For the tracker (``FrameSource(planes=True)``) a 4:2:0 stream (``yuv420p``,
+``yuvj420p``: MJPG, H.264, mp4v) is decoded by PyAV and handed over as its
+planes (:class:`PlanarFrame`): the tracker looks at most frames through a
+window around the ball, and the YUV to BGR conversion of the whole frame
+was about half of decoding's CPU (H.264, tspeed10); the windows are
+converted on demand.
 """
 
 from __future__ import annotations
@@ -96,7 +97,9 @@ class VideoInfo:
     time_base : Fraction or None
         Unit of the presentation timestamps (s).
     backend : str
-        ``cv2`` or ``av``: which decoder reads the frames.
+        ``cv2`` or ``av``: which decoder gives the frames in BGR (``cv2``
+        whenever OpenCV opens the file).  A 4:2:0 stream PyAV opens is read
+        as planes by PyAV whatever this says (:attr:`FrameSource.planar`).
     """
 
     width: int
@@ -314,17 +317,18 @@ class PlanarFrame:
 class FrameSource:
     """Frames of a video in order: 8-bit BGR (h, w, 3), or (h, w) when the video is grey.
 
-    A 4:2:0 colour stream PyAV opens arrives as :class:`PlanarFrame` (BGR by
-    window).  Iterate it once; a decoding failure is raised from the iterator.
+    With ``planes``, a 4:2:0 colour stream PyAV opens arrives as
+    :class:`PlanarFrame` (BGR by window, the tracker's reading).  Iterate it
+    once; a decoding failure is raised from the iterator.
     """
 
-    def __init__(self, path, info: VideoInfo):
+    def __init__(self, path, info: VideoInfo, planes: bool = False):
         self.path = Path(path)
         self.info = info
         self.grey = info.pix_fmt in GREY_PIX_FMTS
         self._decided = self.grey  # grey-by-content is decided on the first frame
         # PyAV opened the file (probe read its stream) and the planes split evenly.
-        self.planar = (info.pix_fmt in PLANAR_PIX_FMTS and info.time_base is not None
+        self.planar = (planes and info.pix_fmt in PLANAR_PIX_FMTS and info.time_base is not None
                        and info.width % 2 == 0 and info.height % 2 == 0)
 
     def _grey_content(self, img) -> bool:
