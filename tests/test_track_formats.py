@@ -55,6 +55,21 @@ def test_colour_pixel_formats(tmp_path, codec, pix_fmt, ext):
     np.testing.assert_allclose(res.t, np.arange(res.n_frames) / scene.camera.fps)
 
 
+def test_planes_track_a_yuv420p_video(tmp_path):
+    # The tracker reading the planes (TrackerConfig(planes=True)) finds the
+    # same ball to the same tolerance in a 4:2:0 video.
+    from cuespin.track.tracker import TrackerConfig
+
+    scene = small_scene()
+    truth = FrameRenderer(scene).truth
+    video = tmp_path / "v.avi"
+    write_av(colour_frames(scene, YELLOW, GREY_FELT, noise=2.0, seed=1), video, "ffv1", "yuv420p",
+             scene.camera.fps)
+    res = track_video(video, scene, TrackerConfig(planes=True))
+    assert res.projection.w is not None
+    check_track(res, scene, truth.uv)
+
+
 def test_grey_pixel_format(tmp_path):
     scene = small_scene()
     truth = FrameRenderer(scene).truth
