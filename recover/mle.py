@@ -47,25 +47,21 @@ MAX_CHI2_PER_DOF = 100.0
 MAX_REL_STDERR_V0 = 0.5
 # Convergence tolerances of the Levenberg-Marquardt fit (see fit_model).
 LM_TOL = 1e-7
-# The fits' iterations follow the model's exact Jacobian
-# (physics.motion.positions_jacobian); the covariance is from a forward
-# difference at the optimum with this relative step, as before the exact
-# one (scipy's diff_step): where the track does not determine the slip's
-# size (it ends before sliding does) the exact information matrix is
-# singular, while the difference's round-off leaves the other parameters'
-# errors as stated before (v0's, with w0 withheld: degenerate).  One
-# Jacobian per fit, not one per iteration.
+# The fits follow the model's exact Jacobian
+# (physics.motion.positions_jacobian), except where it is rank deficient
+# (the slip's size while the ball slides past the track's end: only its
+# direction shows, eq. 9; or no slip at all, u0 = 0): there a forward
+# difference of this relative step (scipy's diff_step before) steps and
+# states the errors, as before.  MINPACK takes the exact Jacobian's
+# round-off pivot (smallest eigenvalue of its unit-column Gram matrix
+# 1e-30-1e-14) as nonsingular, and its Gauss-Newton step ran along the
+# undetermined direction (w0 to 7e4 rad/s on stats9's seed 5 shot 21,
+# MJPG); the difference's round-off keeps those steps short, and leaves
+# the other parameters' errors (v0's, w0 withheld: degenerate) as main
+# stated them.  Tracks that determine every parameter measured 1e-12 and
+# above (stats9's cached tracks of seeds 5 and 6: 982 Jacobians, none
+# between 1e-14 and 1e-12).
 FD_REL_STEP = 1e-7
-# Where the exact Jacobian is rank deficient (the slip's size while the
-# ball slides past the track's end: only its direction shows, eq. 9), the
-# fit's steps follow the forward difference instead: MINPACK takes the
-# exact one's round-off pivot (smallest eigenvalue of its unit-column Gram
-# matrix 1e-30-1e-14) as nonsingular and its Gauss-Newton step ran along
-# the undetermined direction (w0 to 7e4 rad/s on seed 5's shot 21, MJPG),
-# where the step test stopped it short (chi2 0.13 above).  The
-# difference's round-off keeps those steps short, as before.  Tracks that
-# determine every parameter measured 1e-12 and above (stats9's cached
-# tracks of seeds 5 and 6: 982 Jacobians, none between 1e-14 and 1e-12).
 RANK_DEFICIENT_EIG = 1e-13
 # An inter-frame codec's error (H.264: motion-compensated prediction from
 # earlier frames) is shared by neighbouring frames: the correlation of its
@@ -386,9 +382,6 @@ def fit_model(meas: Measurements, params: BallParams, start, exposure_s: float, 
         # shots, both codecs), in 25% less time.
         r = least_squares(resid, p0, jac=jac, x_scale=x_scale, method="lm",
                           xtol=LM_TOL, ftol=LM_TOL, gtol=LM_TOL, max_nfev=100)
-        # The covariance's Jacobian stays the forward difference at the
-        # optimum (see FD_REL_STEP).
-        r.jac = forward_jacobian(resid, r.x, r.fun)
     shot, pr = _unpack(r.x, rolling, fit_friction, params)
     # The AR(1) coefficient was estimated from the same residuals: one
     # parameter more.
