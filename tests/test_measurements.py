@@ -288,6 +288,36 @@ def test_paper_states_errors_that_cover():
     assert np.sqrt(np.mean(np.square(zs))) < 2.5, np.sqrt(np.mean(np.square(zs)))
 
 
+def test_linear_covariance_is_the_fits_measurement_model():
+    # The paper's inputs' errors come from the same measurement model as the
+    # fit's (recover.measurements.linear_covariance): a rest's mean gets its
+    # measurement's covariance exactly, on a lossy codec's rest (a shared
+    # share) and on a lossless one; a single frame its own covariance; two
+    # frames of one rest f C between them.
+    from cuespin.recover.measurements import group_shares, group_scatter, linear_covariance
+    rng = np.random.default_rng(4)
+    t = np.arange(60) / 120.0
+    xy = np.c_[np.where(t < 0.2, 0.0, 0.3 * (t - 0.2)), np.zeros(60)] + 1e-4 * rng.standard_normal((60, 2))
+    cov = np.full(60, 1e-4)
+    for shared in (True, False):
+        meas = build_measurements(t, xy, cov, t0=0.2, frame_dt=1 / 120.0, shared_rest=shared)
+        rest = np.flatnonzero(meas.group == 0)
+        assert len(rest) >= 10
+        W = np.zeros((3, 60))
+        W[0, rest] = 1.0 / len(rest)
+        W[1, 40] = 1.0
+        W[2, rest[0]] = W[2, rest[1]] = 0.5
+        C = linear_covariance(meas, W)
+        mean_cov = np.linalg.inv(meas.W[0].T @ meas.W[0])
+        assert np.allclose(C[0:2, 0:2], mean_cov, rtol=1e-9)
+        assert np.allclose(C[2:4, 2:4], meas.cov[40], rtol=1e-12)
+        used = meas.used
+        c, f = group_shares(meas.cov[used], meas.group[used], meas.n,
+                            group_scatter(meas.xy, meas.group, meas.rest_scatter), meas.rest_min_share)
+        assert (f[0] >= 0.06) == shared
+        assert np.allclose(C[4:6, 4:6], 0.5 * (meas.cov[rest[0]] + meas.cov[rest[1]]) / 2 + 0.5 * f[0] * c[0])
+
+
 def paper_coverage(n, seed, lossless=True):
     """The paper's answers' components (v0, w0) within 1.96 stated errors,
     and their RMS error in stated errors, on ``n`` simulated sliding tracks."""
