@@ -32,6 +32,16 @@ from cuespin.physics.parabola import Parabola
 # position-noise sigmas of the measured one (the measured x1 is itself an
 # estimate; callers add a frame's travel); every candidate within it is kept.
 CONSISTENCY_SIGMAS = 6.0
+
+# The line method's premise, x1 on the line from x0 to x2, is refused past
+# this many of the offset's standard errors (recover.paper.line_offset, a
+# normal variate on a straight path).  Measured |offset| / error: straight
+# answers at most 1.5 (cases 1, 2, 3 on MJPG; 0.09-1.48 on fresh MJPG seeds
+# 5 + 9), bending short slides 4.7 (seed 21 realistic shot 13, its answer
+# 37 stated errors off: the slide 4 frames, its curvature not testable),
+# 9.7, 14, 35, 570, 600.  4: a straight path's false refusal 6e-5 when its
+# errors are as stated.  (Was CONSISTENCY_SIGMAS, 6, eq. 37's tolerance.)
+LINE_OFFSET_SIGMAS = 4.0
 # Roots that reproduce the geometry equally well are told apart by their
 # sliding time t1 - t0 = 2 |u0| / (7 mu_s g) (eq. 10) against the one the
 # segmentation measured (eq. 26): a root is kept only within this many
@@ -495,7 +505,7 @@ def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, n
         # two MJPG shots (the line's answers 540 and 1300 stated errors off),
         # at most 1.5 on the straight ones (cases 1, 2, 3).
         off, sd = line_offset(seg.x0, seg.x1, seg.x2, geo)
-        if abs(off) > CONSISTENCY_SIGMAS * sd:
+        if abs(off) > LINE_OFFSET_SIGMAS * sd:
             return PaperResult("failed", f"x1 lies {abs(off) * 1e3:.2f} mm ({abs(off) / sd:.0f} of its errors) off "
                                "the line from x0 to x2: the path is not straight, and the line method needs "
                                f"it ({why_line})", "line", x0=seg.x0, x1=seg.x1, x2=seg.x2)
@@ -522,19 +532,6 @@ def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, n
         idx = np.r_[0:2, 4:6]
         x = np.r_[seg.x0, seg.x2]
         return replace(with_stderr(solve_case2(x), solve_case2, x, geo[np.ix_(idx, idx)], params), stop_apart=False)
-    if seg.t1 <= seg.t0:
-        # Rolling from the strike (case 4): x1 is x0 by construction, so the
-        # errors move them together; x1 perturbed alone makes a slide of
-        # 0.1 of its errors that no hypothesis of eq. 43 (or two of them)
-        # reproduces, and the answer had no stated errors (seed 21's
-        # realistic shot 14).
-        def solve_rolling(x):
-            return nearest_root(recover_line(x[0:2], x[0:2], x[2:4], params, tol, heading, tau1, tau1_tol),
-                                near, params)
-
-        idx = np.r_[0:2, 4:6]
-        x = np.r_[seg.x0, seg.x2]
-        return with_stderr(solve_rolling(x), solve_rolling, x, geo[np.ix_(idx, idx)], params)
     x = np.r_[seg.x0, seg.x1, seg.x2]
     return with_stderr(solve_line(x), solve_line, x, geo, params)
 
