@@ -36,10 +36,10 @@ CONSISTENCY_SIGMAS = 6.0
 # The line method's premise, x1 on the line from x0 to x2, is refused past
 # this many of the offset's standard errors (recover.paper.line_offset, a
 # normal variate on a straight path).  Measured |offset| / error: straight
-# answers at most 1.5 (cases 1, 2, 3 on MJPG; 0.09-1.48 on fresh MJPG seeds
-# 5 + 9), bending short slides 4.7 (seed 21 realistic shot 13, its answer
-# 37 stated errors off: the slide 4 frames, its curvature not testable),
-# 9.7, 14, 35, 570, 600.  4: a straight path's false refusal 6e-5 when its
+# answers at most 1.5 (cases 1, 2, 3 on MJPG; 0.09, 0.97, 1.48 on fresh
+# MJPG seed 5), bending short slides 4.7 (seed 21 realistic shot 13, its
+# answer 33 stated errors off: the slide 4 frames, its curvature not
+# testable), 9.7, 14, 35, 92, 277, 570, 600.  4: a straight path's false refusal 6e-5 when its
 # errors are as stated.  (Was CONSISTENCY_SIGMAS, 6, eq. 37's tolerance.)
 LINE_OFFSET_SIGMAS = 4.0
 # Roots that reproduce the geometry equally well are told apart by their
