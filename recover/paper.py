@@ -32,6 +32,16 @@ from cuespin.physics.parabola import Parabola
 # position-noise sigmas of the measured one (the measured x1 is itself an
 # estimate; callers add a frame's travel); every candidate within it is kept.
 CONSISTENCY_SIGMAS = 6.0
+
+# The line method's premise, x1 on the line from x0 to x2, is refused past
+# this many of the offset's standard errors (recover.paper.line_offset, a
+# normal variate on a straight path).  Measured |offset| / error: straight
+# answers at most 1.5 (cases 1, 2, 3 on MJPG; 0.09, 0.97, 1.48 on fresh
+# MJPG seed 5), bending short slides 4.7 (seed 21 realistic shot 13, its
+# answer 33 stated errors off: the slide 4 frames, its curvature not
+# testable), 9.7, 14, 35, 92, 277, 570, 600.  4: a straight path's false refusal 6e-5 when its
+# errors are as stated.  (Was CONSISTENCY_SIGMAS, 6, eq. 37's tolerance.)
+LINE_OFFSET_SIGMAS = 4.0
 # Roots that reproduce the geometry equally well are told apart by their
 # sliding time t1 - t0 = 2 |u0| / (7 mu_s g) (eq. 10) against the one the
 # segmentation measured (eq. 26): a root is kept only within this many
@@ -251,25 +261,27 @@ def segment_weights(seg, n: int) -> dict | None:
     return out
 
 
-def inputs_covariance(seg, meas, names) -> np.ndarray | None:
+def inputs_covariance(seg, meas, names, noise=(0.0, 1.0)) -> np.ndarray | None:
     """Covariance (m^2) of the segmentation's estimates
     ``names`` (of :func:`segment_weights`), shape (2k, 2k), under the
     errors the track's measurements ``meas`` state (each frame's covariance
     with the codec's share, a rest's frames sharing theirs as the
     maximum-likelihood fit has them: recover.measurements.linear_covariance),
-    plus the breakpoint's own share in ``x1``; None without the weights."""
+    plus the breakpoint's own share in ``x1``; None without the weights.
+    ``noise``: the maximum-likelihood fit's ``(ar1, scale)``, its errors'
+    lag-1 correlation and ``max(1, chi2/dof)`` (linear_covariance)."""
     from cuespin.recover.measurements import linear_covariance
     w = segment_weights(seg, len(meas.t)) if meas is not None else None
     if w is None or any(k not in w for k in names):
         return None
-    C = linear_covariance(meas, np.stack([w[k] for k in names]))
+    C = linear_covariance(meas, np.stack([w[k] for k in names]), *noise)
     if "x1" in names:
         k = 2 * list(names).index("x1")
         C[k:k + 2, k:k + 2] += seg.geometry_cov.get("x1_t1", np.zeros((2, 2)))
     return C
 
 
-def geometry_covariance(seg, sigma: float, lossless: bool, meas=None) -> np.ndarray:
+def geometry_covariance(seg, sigma: float, lossless: bool, meas=None, noise=(0.0, 1.0)) -> np.ndarray:
     """Covariance (m^2) of ``(x0, x1, x2)``, shape (6, 6).
 
     With the track's measurements ``meas`` (recover.measurements, the ones
@@ -284,7 +296,7 @@ def geometry_covariance(seg, sigma: float, lossless: bool, meas=None) -> np.ndar
     g = seg.geometry_cov or {}
     one = sigma**2 * np.eye(2)
     has_rest = g.get("rest") is not None and len(g["rest"]) > 0
-    C = inputs_covariance(seg, meas, ("x0", "x1", "x2") if has_rest else ("x0", "x1"))
+    C = inputs_covariance(seg, meas, ("x0", "x1", "x2") if has_rest else ("x0", "x1"), noise)
     if C is not None:
         out = np.zeros((6, 6))
         out[:len(C), :len(C)] = C
@@ -360,7 +372,7 @@ def path_shape(seg, xy, params: BallParams, curved: bool | None = None):
 
 def paper_from_segments(seg, t, xy, params: BallParams, sigma: float, frame_dt: float,
                         strike_seen: bool = True, lossless: bool = True, curved: bool | None = None,
-                        near=None, apart: bool | None = None, meas=None) -> PaperResult:
+                        near=None, apart: bool | None = None, meas=None, noise=(0.0, 1.0)) -> PaperResult:
     """The paper's method on a segmented track (the segmentation the
     decisions chose): parabola or line by fit.decide.curved, the sliding
     time breaking ties, with the status and reason CONVENTIONS.md asks for.
@@ -395,8 +407,13 @@ def paper_from_segments(seg, t, xy, params: BallParams, sigma: float, frame_dt: 
         the same ``t``, as the maximum-likelihood fit uses them): the errors
         of ``x0``, ``x1`` and ``x2`` follow from its per-frame covariances
         and rests (:func:`geometry_covariance`); without it, from ``sigma``.
+    noise : tuple of float
+        ``(ar1, scale)``: the maximum-likelihood fit's error model over
+        ``meas``, its errors' lag-1 correlation between frames and
+        ``max(1, chi2/dof)``; the paper's inputs are measured by the same
+        frames, so their errors follow the same model.
     """
-    return _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, near, apart, meas)
+    return _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, near, apart, meas, noise)
 
 
 def nearest_root(res: PaperResult, near, params: BallParams) -> PaperResult:
@@ -411,7 +428,7 @@ def nearest_root(res: PaperResult, near, params: BallParams) -> PaperResult:
 
 
 def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, near=None,
-           apart=None, meas=None) -> PaperResult:
+           apart=None, meas=None, noise=(0.0, 1.0)) -> PaperResult:
     """paper_from_segments; the root nearest ``near`` is chosen inside each
     solve, so a root chosen that way gets its standard errors too."""
     if not seg:
@@ -426,7 +443,7 @@ def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, n
     # forward check are held to that, not to the pixel noise alone.
     tol = CONSISTENCY_SIGMAS * sigma + np.hypot(*seg.v1) * frame_dt
     tau1, tau1_tol = seg.t1 - seg.t0, TIE_T1_FRAMES * frame_dt
-    geo = geometry_covariance(seg, sigma, lossless, meas)
+    geo = geometry_covariance(seg, sigma, lossless, meas, noise)
     shape = path_shape(seg, xy, params, curved)
     if shape is not None:
         if shape.curved:
@@ -471,18 +488,28 @@ def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, n
         return nearest_root(recover_line(x[0:2], x[2:4], x[4:6], params, tol, heading, tau1, tau1_tol),
                             near, params)
 
-    if not ran_into_rest(seg):
+    case2 = ran_into_rest(seg)
+    if not case2 and seg.t1 > seg.t0:
+        # A stopping point x1 within its errors of the rest x2 (the same
+        # decision, fit.decide.stop_apart) is case 2 as far as the track can
+        # tell: the line's eq. 39 at x2 - x1 about zero turns x1's error
+        # into w0's through a square root.  (Seed 21's realistic shot 27:
+        # the breakpoint 7 of its errors early, x1 1.8 mm short of the rest,
+        # the line's w0 6.8 stated errors off; case 2's answer within 0.02
+        # rad/s.)
+        case2 = not (stop_apart(case2_distance(seg, geo)).yes if apart is None else bool(apart))
+    if not case2:
         # The line method's premise: x0, x1, x2 on one line.  A sliding arc
         # too short to test for a parabola (5 frames or fewer) can still
         # bend the path: x1 was 13.8 and 570 of its errors off the line on
         # two MJPG shots (the line's answers 540 and 1300 stated errors off),
         # at most 1.5 on the straight ones (cases 1, 2, 3).
         off, sd = line_offset(seg.x0, seg.x1, seg.x2, geo)
-        if abs(off) > CONSISTENCY_SIGMAS * sd:
+        if abs(off) > LINE_OFFSET_SIGMAS * sd:
             return PaperResult("failed", f"x1 lies {abs(off) * 1e3:.2f} mm ({abs(off) / sd:.0f} of its errors) off "
                                "the line from x0 to x2: the path is not straight, and the line method needs "
                                f"it ({why_line})", "line", x0=seg.x0, x1=seg.x1, x2=seg.x2)
-    if ran_into_rest(seg):
+    if case2:
         # Case 2: sliding ends at the rest (eq. 29), so x1 is x2, the rest's
         # mean; the breakpoint's own x1, extrapolated to where the sliding
         # velocity vanishes, sat 2-4 of its errors off the rest on MJPG, and

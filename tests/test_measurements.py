@@ -318,6 +318,40 @@ def test_linear_covariance_is_the_fits_measurement_model():
         assert np.allclose(C[4:6, 4:6], 0.5 * (meas.cov[rest[0]] + meas.cov[rest[1]]) / 2 + 0.5 * f[0] * c[0])
 
 
+def test_linear_covariance_carries_the_fits_ar1_errors_and_scale():
+    # The paper's inputs are measured by the frames the MLE fits; when the
+    # fit models their errors as AR(1) (recover.mle.ar1_prewhiten) and
+    # scales them by chi2/dof, so must the inputs' covariance (seed 21's
+    # realistic shots: rho up to 0.92).  Checked against the full frame
+    # covariance, rho^|i - j| L_i L_j^T between the moving frames, built
+    # by brute force: an average, a single frame, and weights of both signs.
+    from cuespin.recover.measurements import linear_covariance
+    rng = np.random.default_rng(5)
+    t = np.arange(60) / 120.0
+    xy = np.c_[np.where(t < 0.2, 0.0, 0.3 * (t - 0.2)), np.zeros(60)] + 1e-4 * rng.standard_normal((60, 2))
+    cov = rng.uniform(0.5e-4, 2e-4, 60)
+    meas = build_measurements(t, xy, cov, t0=0.2, frame_dt=1 / 120.0)
+    one = np.flatnonzero(meas.used)
+    one = one[meas.single[meas.group[one]]]
+    assert len(one) >= 20
+    W = np.zeros((3, 60))
+    W[0, one] = 1.0 / len(one)
+    W[1, one[5]] = 1.0
+    W[2, one] = np.linspace(-1.0, 1.0, len(one)) / len(one)
+    rho, scale = 0.6, 2.5
+    base = linear_covariance(meas, W)
+    L = np.linalg.cholesky(meas.cov[one])
+    k = np.rint((meas.t[one] - meas.t[one[0]]) * 120.0).astype(int)
+    R = rho ** np.abs(k[:, None] - k[None, :]) - np.eye(len(one))
+    Y = np.einsum("ai,ijk->aijk", W[:, one], L)
+    extra = np.einsum("aipl,ij,bjql->apbq", Y, R, Y).reshape(6, 6)
+    got = linear_covariance(meas, W, rho, scale)
+    assert np.allclose(got, scale * (base + extra), rtol=1e-9, atol=1e-20)
+    # A mean of m frames under AR(1) is (1 + rho) / (1 - rho) times less
+    # precise than independent frames, to within end effects.
+    assert got[0, 0] / (scale * base[0, 0]) > 0.8 * (1 + rho) / (1 - rho)
+
+
 def paper_coverage(n, seed, lossless=True):
     """The paper's answers' components (v0, w0) within 1.96 stated errors,
     and their RMS error in stated errors, on ``n`` simulated sliding tracks."""
