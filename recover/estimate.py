@@ -313,7 +313,8 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         # The paper's errors are propagated from the same per-frame noise the
         # fit weights by: the tracker's, with the codec's measured share.
         paper_sigma = math.sqrt(sigma**2 + max(meas.codec_m2(codec_var), 0.0))
-        paper = paper_from_segments(chosen, t, xy, params, paper_sigma, frame_dt, strike_seen, independent)
+        paper = paper_from_segments(chosen, t, xy, params, paper_sigma, frame_dt, strike_seen, independent,
+                                    meas=meas, noise=mle_noise(mle))
         shape = paper.trajectory == "parabola" if paper.trajectory else None
     seen = decisions.get("sliding_seen")
     fit = None if seen is None else (full if seen else roll)
@@ -359,9 +360,20 @@ def _refit(keep: Decided, seg, t, xy, params, exposure_s, fit_friction, run_pape
     elif run_paper and seg:
         paper_sigma = math.sqrt(sigma**2 + max(meas.codec_m2(keep.codec_var), 0.0))
         paper = paper_from_segments(chosen, t, xy, params, paper_sigma, frame_dt, keep.strike_seen, independent,
-                                    curved=keep.curved, near=keep.paper, apart=keep.stop_apart)
+                                    curved=keep.curved, near=keep.paper, apart=keep.stop_apart, meas=meas)
     return Estimate(chosen or seg, paper, mle, meas, keep.codec_var, decisions,
                     {"fit": t_fit, "recover": time.perf_counter() - clock}, keep)
+
+
+def mle_noise(mle) -> tuple[float, float]:
+    """The maximum-likelihood fit's error model for the paper's inputs:
+    ``(ar1, scale)``, its errors' lag-1 correlation and ``max(1,
+    chi2/dof)`` (its own errors are scaled so); ``(0, 1)`` without a fit."""
+    if mle is None or mle.status != "ok":
+        return 0.0, 1.0
+    ar1 = float(getattr(mle, "ar1", 0.0) or 0.0)
+    chi2 = getattr(mle, "chi2", float("nan")) / max(getattr(mle, "dof", 0), 1)
+    return (ar1 if np.isfinite(ar1) else 0.0), (max(1.0, chi2) if np.isfinite(chi2) else 1.0)
 
 
 def runs_to_end(seg) -> bool:

@@ -407,10 +407,23 @@ def group_covariance(frame_cov_used, g, m: int, scatter, min_share: float = 0.0,
     ``l / scale`` lies below the :data:`REST_SHARED_LEVEL` point of
     independent frames' (``F(2(n - 1), scale_dof)``), else 0.  Where the
     scatter is not measured, ``C`` (one shared error)."""
+    c, f = group_shares(frame_cov_used, g, m, scatter, min_share, scale, scale_dof)
+    n = np.bincount(g, minlength=m).astype(float)
+    return c * ((1.0 - f) / n + f)[:, None, None]
+
+
+def group_shares(frame_cov_used, g, m: int, scatter, min_share: float = 0.0, scale: float = 1.0,
+                 scale_dof: float = float("inf")) -> tuple[np.ndarray, np.ndarray]:
+    """Each measurement's frames' mean stated covariance ``C`` (m^2, shape
+    (m, 2, 2)) and the share ``f`` of it they have in common (shape (m,): 0
+    for a single frame), as :func:`group_covariance` has them (the same
+    arguments): two frames of one rest have covariance ``f C``."""
     cnt = np.bincount(g, minlength=m)
     c = np.zeros((m, 2, 2))
     np.add.at(c, g, frame_cov_used)
     c /= np.maximum(cnt, 1)[:, None, None]
+    share = np.zeros(m)
+    share[cnt > 1] = 1.0  # a scatter not measured: one shared error
     rest = (cnt > 1) & np.all(np.isfinite(scatter.reshape(m, -1)), axis=1)
     if rest.any():
         n = cnt[rest].astype(float)
@@ -422,8 +435,85 @@ def group_covariance(frame_cov_used, g, m: int, scatter, min_share: float = 0.0,
             r = lam / scale
             q = chi2.ppf(REST_SHARED_LEVEL, k) / k if np.isinf(scale_dof) else f_dist.ppf(REST_SHARED_LEVEL, k, scale_dof)
             f = np.where(r < q, 1.0 - r, 0.0)
-        c[rest] = c[rest] * ((1.0 - f) / n + f)[:, None, None]
-    return c
+        share[rest] = f
+    return c, share
+
+
+def linear_covariance(meas: Measurements, weights, ar1: float = 0.0, scale: float = 1.0) -> np.ndarray:
+    """Covariance (m^2) of estimates linear in the track's centres, ``x_a =
+    sum_i weights[a, i] xy[i]`` (the same weights on both axes), under the
+    errors ``meas`` states: each frame's covariance (the codec's share
+    included), and between two frames of one rest their share of it
+    (:func:`group_shares`, as the fit has them); frames in no measurement
+    (the strike's) independent.  With ``ar1``, the moving ball's frames
+    (measured one by one) correlated as the maximum-likelihood fit has them
+    (recover.mle.ar1_prewhiten: ``ar1^k`` between frames ``k`` apart, in
+    their whitened errors); all of it times ``scale`` (the fit's
+    ``max(1, chi2/dof)``).
+
+    Parameters
+    ----------
+    meas : Measurements
+    weights : ndarray, shape (k, n)
+        Per estimate, its weight on each of the track's ``n`` frames.
+    ar1 : float
+        The errors' lag-1 correlation between neighbouring frames (0: independent).
+    scale : float
+        Factor on the stated variances (the fit's residuals' own, when larger).
+
+    Returns
+    -------
+    ndarray, shape (2k, 2k)
+        Ordered ``(x_0, y_0, x_1, y_1, ...)``.
+    """
+    Wt = np.asarray(weights, dtype=float)
+    k = len(Wt)
+    # Every frame's own covariance: sum_i w_a,i w_b,i C_i.
+    out = np.einsum("ai,bi,ijk->ajbk", Wt, Wt, meas.cov)
+    used = meas.used
+    if used.any():
+        g = meas.group[used]
+        m = meas.n
+        c, f = group_shares(meas.cov[used], g, m, group_scatter(meas.xy, meas.group, meas.rest_scatter),
+                            meas.rest_min_share, meas.rest_scale, meas.rest_scale_dof)
+        # Pairs of frames within one rest: f C (S_a S_b - sum_i w_a,i w_b,i) per rest.
+        Wu = Wt[:, used]
+        S = np.zeros((k, m))
+        for a in range(k):
+            S[a] = np.bincount(g, weights=Wu[a], minlength=m)
+        P = np.zeros((k, k, m))
+        for a in range(k):
+            for b in range(k):
+                P[a, b] = S[a] * S[b] - np.bincount(g, weights=Wu[a] * Wu[b], minlength=m)
+        out += np.einsum("abm,m,mjk->ajbk", P, f, c)
+        if ar1 > 0:
+            out += _ar1_extra(meas, Wt, float(ar1))
+    return scale * out.reshape(2 * k, 2 * k)
+
+
+def _ar1_extra(meas: Measurements, Wt, rho: float) -> np.ndarray:
+    """What AR(1) errors of lag-1 ``rho`` along the single-frame measurements
+    add to :func:`linear_covariance`'s independent sum, shape (k, 2, k, 2):
+    ``sum_(i != j) rho^|k_i - k_j| (w_a,i L_i)(w_b,j L_j)^T`` with ``L_i``
+    each frame's Cholesky factor, over the frame lattice as
+    recover.mle._ar1_cov_times sums it (a forward and a backward filter)."""
+    from scipy.signal import lfilter
+    used = np.flatnonzero(meas.used)
+    one = used[meas.single[meas.group[used]]]
+    if len(one) < 2:
+        return 0.0
+    ts = meas.t[one]
+    dt = float(np.median(np.diff(ts)))
+    steps = np.maximum(np.rint(np.diff(ts) / dt), 1.0) if dt > 0 else np.ones(len(ts) - 1)
+    pos = np.r_[0, np.cumsum(steps)].astype(int)
+    L = np.linalg.cholesky(meas.cov[one] + 1e-30 * np.eye(2))
+    Y = np.einsum("ai,ijk->iajk", Wt[:, one], L)  # (frames, k, 2, 2): estimate a's share of frame i's errors
+    lattice = np.zeros((pos[-1] + 1,) + Y.shape[1:])
+    lattice[pos] = Y
+    fwd = lfilter([1.0], [1.0, -rho], lattice, axis=0)
+    bwd = lfilter([1.0], [1.0, -rho], lattice[::-1], axis=0)[::-1]
+    S = (fwd + bwd - 2 * lattice)[pos]  # sum over j != i of rho^|i - j| Y_j
+    return np.einsum("iajl,ibkl->ajbk", Y, S)
 
 
 def _make(t, xy, cov, group, px_to_m=None, rest_scatter: bool = False, rest_min_share: float = 0.0,
