@@ -225,39 +225,42 @@ def wilson(k: int, n: int, z: float = 1.959964):
     return c - h, c + h
 
 
-def intervals(rows, n_boot: int = 4000, seed: int = 0):
-    """The MLE's coverage, RMS error in stated errors and RMS error / bound
+def intervals(rows, n_boot: int = 4000, seed: int = 0, m: str = "mle"):
+    """The MLE's (``m``; the paper's method: ``paper``, without the bound)
+    coverage, RMS error in stated errors and RMS error / bound
     per noise band, with 95% intervals: coverage counts each component of
     v0 and w0 (each its own interval, estimate +/- 1.96 stated errors);
     Wilson's interval treats the components as independent (too narrow: a
     shot's v0 and w0 errors are strongly correlated), the bootstrap
     resamples shots (percentile interval, ``n_boot`` draws)."""
     rng = np.random.default_rng(seed)
-    print("\nMLE with 95% intervals (components of v0, w0; bootstrap over shots)")
+    print(f"\n{'MLE' if m == 'mle' else m} with 95% intervals (components of v0, w0; bootstrap over shots)")
     # Free slip apart: a rolling answer's errors hold the bound of a slip too
     # short to see (recover.mle.unseen_slip), not a standard error, so its
     # components sit near 0 stated errors and pull the RMS of "all" down.
     for band, sel in (("all", lambda r: True), ("noise < 0.5", lambda r: r["noise"] < 0.5),
                       ("noise >= 0.5", lambda r: r["noise"] >= 0.5),
                       ("free slip answers", lambda r: r.get("mle_model") == "full")):
-        ok = [r for r in rows if r["mle_status"] == "ok" and sel(r) and f"mle_z_{COMPONENTS[0]}" in r
-              and np.isfinite(r[f"mle_z_{COMPONENTS[0]}"])]
+        ok = [r for r in rows if r[f"{m}_status"] == "ok" and sel(r) and f"{m}_z_{COMPONENTS[0]}" in r
+              and np.isfinite(r[f"{m}_z_{COMPONENTS[0]}"])]
         if len(ok) < 2:
             continue
-        Z = np.array([[r[f"mle_z_{c}"] for c in COMPONENTS] for r in ok], float)
-        K = np.array([[r.get(f"mle_crb_{c}", np.nan) for c in COMPONENTS] for r in ok], float)
+        Z = np.array([[r[f"{m}_z_{c}"] for c in COMPONENTS] for r in ok], float)
+        K = np.array([[r.get(f"mle_crb_{c}", np.nan) if m == "mle" else np.nan for c in COMPONENTS] for r in ok],
+                     float)
         hit = np.abs(Z) < 1.959964
-        k, m = int(hit.sum()), Z.size
+        k, n = int(hit.sum()), Z.size
         idx = rng.integers(0, len(ok), (n_boot, len(ok)))
         boot = {name: np.percentile([f(A[i]) for i in idx], [2.5, 97.5]) for name, f, A in (
             ("cover", lambda a: np.mean(np.abs(a) < 1.959964), Z),
-            ("rms", lambda a: np.sqrt(np.nanmean(a * a)), Z), ("crb", lambda a: np.sqrt(np.nanmean(a * a)), K))}
-        lo, hi = wilson(k, m)
-        print(f"  {band}: {len(ok)} ok; coverage {k}/{m} = {k / m:.1%} (Wilson {lo:.1%}-{hi:.1%}, "
+            ("rms", lambda a: np.sqrt(np.nanmean(a * a)), Z), ("crb", lambda a: np.sqrt(np.nanmean(a * a)), K))
+            if name != "crb" or m == "mle"}
+        lo, hi = wilson(k, n)
+        print(f"  {band}: {len(ok)} ok; coverage {k}/{n} = {k / n:.1%} (Wilson {lo:.1%}-{hi:.1%}, "
               f"bootstrap {boot['cover'][0]:.1%}-{boot['cover'][1]:.1%}); RMS / stated error "
-              f"{np.sqrt(np.mean(Z * Z)):.2f} ({boot['rms'][0]:.2f}-{boot['rms'][1]:.2f}); RMS / bound "
-              f"{np.sqrt(np.nanmean(K * K)):.2f} ({boot['crb'][0]:.2f}-{boot['crb'][1]:.2f}); chi2/dof median "
-              f"{np.nanmedian([r['chi2_per_dof'] for r in ok]):.2f}")
+              f"{np.sqrt(np.mean(Z * Z)):.2f} ({boot['rms'][0]:.2f}-{boot['rms'][1]:.2f})"
+              + (f"; RMS / bound {np.sqrt(np.nanmean(K * K)):.2f} ({boot['crb'][0]:.2f}-{boot['crb'][1]:.2f}); "
+                 f"chi2/dof median {np.nanmedian([r['chi2_per_dof'] for r in ok]):.2f}" if m == "mle" else ""))
 
 
 def pct(x, q):
@@ -366,6 +369,7 @@ def summarize(rows, seed=0):
                       f"(target {target}); RMS error / own stderr "
                       f"{np.sqrt(np.mean(np.square([r[f'{m}_z'] for r in zs]))):.2f} (target 0.9-1.1); {len(zs)} shots")
     intervals(rows)
+    intervals(rows, m="paper")
     rolling = [r for r in rows if r.get("preset") == "case4" and r["mle_status"] == "ok"]
     if rolling:
         slip = [r for r in rolling if r.get("mle_model") == "full"]

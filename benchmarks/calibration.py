@@ -33,6 +33,13 @@ With ``--focal`` (``--tilts 2,2.5,3``, ``--seeds``, ``--rendered``): the
 focal length ``calibrate_frame`` writes at small tilts, its source and its
 error against its stated one.
 
+With ``--clicked`` (``--cameras H,T,K1;...``, ``--corner-px 1``, ``--modes
+corners,intrinsics``): corners clicked that far off (a new draw per shot),
+calibrated as ``calibrate --corners`` does (:func:`calibrate_clicked`: the
+bow from the drawn frame's edges, f by the one rule with its still balls,
+or the lens known); per camera the real v0 and R w0 errors beside the stated
+ones with the calibration's share, their RMS z and the coverage.
+
 With ``--diagnose`` (``--height 2 --tilt 0 --k1 -0.25``): the automatic
 camera's v0 error split into its parts (corners, k1, focal length), each
 camera built from the true values but one.
@@ -283,6 +290,82 @@ def stated(args):
             row(f"realistic {label} s{sd}", img, truth)
 
 
+def clicked_calibration(corners_px, frame, sigma, **kw):
+    """What ``cuespin calibrate --corners`` writes for these corners
+    (:func:`calibrate_clicked`, the still balls read in ``frame``)."""
+    from cuespin.pipeline.calibrate import calibrate_clicked
+
+    return calibrate_clicked(corners_px, SIZE, Table(), frame=frame, corner_sigma_px=sigma, **kw)
+
+
+def clicked(args):
+    """Corners clicked ``--corner-px`` off (Gaussian per coordinate, a new draw
+    per shot, seeded), calibrated as ``calibrate --corners`` does (the focal
+    length by the one rule, the drawn frame's still balls; or the lens known,
+    ``intrinsics``): per camera (``--cameras H,T,K1;...``), the real v0 and
+    R w0 errors beside the stated ones with the calibration's share (the
+    same track refitted through the perturbed cameras), their RMS z and the
+    coverage of the stated 95% intervals with a 95% bootstrap interval."""
+    from cuespin.pipeline.calibrate import synthetic_table_frame
+
+    sigma = args.corner_px
+    cams = [tuple(float(v) for v in c.split(",")) for c in (args.cameras or "2,2,0;2,3,0;2,10,0;2,2,-0.25;"
+                                                             "2,3,-0.25;2,10,-0.25").split(";")]
+    print(f"corners {sigma} px off, {args.n} shots per camera (one corner draw each), tracker {args.track_px} px")
+    print("height tilt    k1 mode       | n focal_from (f err mean, stated mean) | v0 RMS real / stated (fit-only) "
+          "| v0 RMS z, cover95 | R w0 RMS real / stated | R w0 RMS z, cover95 | both cover")
+    pooled = {}
+    for height, tilt, k1 in cams:
+        true = Scene(physics=sample_shot(0)[1], camera=pinhole_camera(
+            height_m=height, tilt_deg=tilt, k1=k1, size=SIZE, fps=FPS, roll_deg=ROLL_DEG)).camera
+        frame = synthetic_table_frame(true, seed=int(10 * tilt + 100 * abs(k1)), cushion_m=0.05, pockets=True)
+        exact = true.project(table_corners(Table()))
+        for mode in args.modes.split(","):
+            kw = {"intrinsics": true.K, "distortion": true.dist} if mode == "intrinsics" else {}
+            rng = np.random.default_rng(args.seed)
+            rows, srcs, f_err = [], [], []
+            for i in range(args.n):
+                shot, params = sample_shot(args.seed * 1000 + i, "random")
+                c = exact + rng.normal(0.0, sigma, exact.shape)
+                try:
+                    cal = clicked_calibration(c, frame, sigma, fps=FPS, R_nominal=params.R, **kw)
+                except CalibrationError as exc:
+                    print(f"  shot {i}: refused: {exc}")
+                    continue
+                tr = Scene(physics=params, camera=true).camera
+                uv = track_pixels(shot, params, tr, np.random.default_rng(i), args.track_px)
+                r = through(shot, params, cal.camera, *uv)
+                if r is None:
+                    continue
+                dv, dw, sv, sw = r
+                extra_v, extra_w = np.zeros(2), np.zeros(2)
+                for cam in cal.perturbed:           # the calibration's share, as the recovery adds it
+                    rk = through(shot, params, cam, *uv)
+                    if rk is not None:
+                        extra_v += (rk[0] - dv) ** 2
+                        extra_w += (rk[1] - dw) ** 2
+                rows.append((dv, dw, np.sqrt(sv**2 + extra_v), np.sqrt(sw**2 + extra_w), sv))
+                srcs.append(cal.focal_source)
+                f_err.append((cal.camera.K[0, 0] / true.K[0, 0] - 1, getattr(cal, "focal_sigma", None) or 0.0))
+            if not rows:
+                print(f"{height:6.1f} {tilt:4.0f} {k1:+.2f} {mode:10s} | 0")
+                continue
+            dv, dw, sv, sw, sf = (np.array([r[k] for r in rows]) for k in range(5))
+            zv, zw = dv / sv, dw / sw
+            inside = np.abs(np.concatenate([zv, zw], axis=1)) < 1.96
+            pooled.setdefault(mode, []).append(inside)
+            fe = np.array(f_err)
+            src = max(set(srcs), key=srcs.count)
+            rms = lambda a: float(np.sqrt(np.mean(a**2)))  # noqa: E731
+            print(f"{height:6.1f} {tilt:4.0f} {k1:+.2f} {mode:10s} | {len(rows)} {src} ({fe[:, 0].mean():+.1%}, "
+                  f"{fe[:, 1].mean():.1%}) | {rms(dv):.2e} / {rms(sv):.2e} ({rms(sf):.1e}) | {rms(zv):.2f}, "
+                  f"{np.mean(np.abs(zv) < 1.96):.0%}{boot(np.abs(zv) < 1.96)} | {rms(dw):.2e} / {rms(sw):.2e} | "
+                  f"{rms(zw):.2f}, {np.mean(np.abs(zw) < 1.96):.0%} | {inside.mean():.0%}{boot(inside)}", flush=True)
+    for mode, ins in pooled.items():
+        print(f"pooled {mode}: cover95 (v0 and R w0) {np.concatenate([x.ravel() for x in ins]).mean():.1%}"
+              f"{boot(*ins)}")
+
+
 def focal(args):
     """The focal length ``calibrate_frame`` writes at small tilts (``--tilts``,
     2 m, k1 0 and -0.25), its source and its error against its stated one:
@@ -457,11 +540,19 @@ def main():
                     help="the balls' focal length on the renderer's shaded ball, light and blur one at a time")
     ap.add_argument("--focal", action="store_true",
                     help="the focal length written at small tilts and its error against its stated one")
+    ap.add_argument("--clicked", action="store_true",
+                    help="corners clicked --corner-px off, calibrated as calibrate --corners does: real and "
+                         "stated v0, w0 errors per camera (--cameras, --modes)")
+    ap.add_argument("--corner-px", type=float, default=1.0, help="--clicked: the clicks' error (px per coordinate)")
+    ap.add_argument("--modes", default="corners,intrinsics",
+                    help="--clicked: corners (the focal length by the rule) and/or intrinsics (the lens known)")
     ap.add_argument("--tilts", default="2,2.5,3", help="--focal: tilts (deg)")
     ap.add_argument("--rendered", action="store_true", help="--focal: on the renderer's realistic table")
     ap.add_argument("--ball-at", default="2.40,1.15", metavar="X,Y", help="--shaded: the ball's table position (m)")
     ap.add_argument("--ball-floor", type=float, default=None, help="--shaded: BALL_SHAPE_FLOOR instead of calibrate's")
     args = ap.parse_args()
+    if args.clicked:
+        return clicked(args)
     if args.shaded:
         return shaded(args)
     if args.focal:

@@ -144,7 +144,7 @@ def parabola_jacobian(par: Parabola, p) -> np.ndarray:
     return np.stack([-a * x * x * ny, nx * Y - ny * X, -(c * nx - s * ny), -(s * nx + c * ny)], axis=-1)
 
 
-def fit_parabola(p, start: Parabola) -> ParabolaFit:
+def fit_parabola(p, start: Parabola, max_nfev: int = PARABOLA_MAX_NFEV) -> ParabolaFit:
     """Orthogonal-distance fit of Theorem 1's parabola to points (m).
 
     Parameters
@@ -153,6 +153,9 @@ def fit_parabola(p, start: Parabola) -> ParabolaFit:
         Points on the sliding path (m).
     start : Parabola
         Starting parabola (e.g. from the time-based segmentation).
+    max_nfev : int
+        Residual evaluations allowed (:data:`PARABOLA_MAX_NFEV` for the
+        path's shape; recover.paper runs its answer's fit to convergence).
 
     Returns
     -------
@@ -178,7 +181,7 @@ def fit_parabola(p, start: Parabola) -> ParabolaFit:
     try:
         # A straight path sends a towards 0, where the fit wanders: cap the
         # effort (PARABOLA_MAX_NFEV).
-        r = least_squares(resid, q0, jac=jac, method="lm", xtol=1e-12, ftol=1e-12, max_nfev=PARABOLA_MAX_NFEV)
+        r = least_squares(resid, q0, jac=jac, method="lm", xtol=1e-12, ftol=1e-12, max_nfev=max_nfev)
     except (ValueError, FloatingPointError) as exc:
         return ParabolaFit(False, f"parabola fit failed: {exc}")
     if not np.all(np.isfinite(r.x)):

@@ -63,8 +63,12 @@ class Segments:
     ``rest_k`` the first frame of the final rest (None: no rest in view).
     ``geometry_cov`` holds the covariances (m^2, 2x2) of ``x0``, ``x1``,
     their cross term and ``x2`` (keys ``x0``, ``x1``, ``x0x1``, ``x2``), with
-    every frame's error independent at ``sigma`` (callers floor the rests'
-    for a lossy codec, whose still frames share one error).
+    every frame's error independent at ``sigma``; and, for their covariance
+    under the track's own errors (recover.paper.geometry_covariance: a lossy
+    codec's still frames share theirs), the estimates' weights: ``x0 =
+    sum_k w[k, 0] xy[frames_k]`` (``v0``, ``a_slide``: columns 1 and 2),
+    ``x1`` likewise by ``w1`` (plus the breakpoint's share ``x1_t1``), and
+    ``x2`` the mean of ``xy[rest]``.
     """
 
     ok: bool
@@ -431,6 +435,11 @@ def _finish(t, xy, tf, xf, t0, t1, beyond, decel, rest_k, k_end, k_move, dof, **
             rest = after
     geometry_cov = _geometry_cov(tf, xf, t0, min(t1, beyond), beyond, decel, v1,
                                  sse / dof, None if rest is None else len(rest))
+    # The estimates' weights on the track's frames, for a covariance under
+    # another error model than independent frames at ``sse / dof``
+    # (recover.paper.geometry_covariance: a lossy codec's rests share errors).
+    geometry_cov["frames"] = np.searchsorted(t, tf)
+    geometry_cov["rest"] = rest
     if rest_k is not None:
         x2 = np.mean(xy[rest], axis=0)
         # The rolling deceleration is along -v1: v = 0 when |v1| = |a_r| (t - t1).
@@ -451,7 +460,10 @@ def _geometry_cov(tf, xf, t0, t1, beyond, decel, v1, s2, n_rest):
     ``x0`` and ``x1 = x0 + v0 tau1 + a_s tau1^2 / 2`` have covariance
     ``s2 c^T (A^T A)^-1 c``; the breakpoint's own error moves ``x1`` along
     ``v1``, with ``var(t1) = 2 s2 / (d^2 SSE / d t1^2)`` from the profile's
-    curvature a frame either side.
+    curvature a frame either side (kept apart as ``x1_t1``).  ``w`` holds
+    the coefficients' ``(x0, v0, a_s)`` weights on the fitted frames,
+    ``A (A^T A)^-1`` (shape (n, 3); ``x0 = sum_i w[i, 0] xf_i``), and ``w1``
+    x1's, ``A (A^T A)^-1 c1``, for their covariance under other errors.
     """
     tau = np.maximum(tf - t0, 0.0)
     tau1 = max(t1 - t0, 0.0)
@@ -464,7 +476,8 @@ def _geometry_cov(tf, xf, t0, t1, beyond, decel, v1, s2, n_rest):
     c1 = np.r_[1.0, tau1, 0.5 * tau1**2][:len(cols)]
     I2 = np.eye(2)
     out = {"x0": s2 * float(c0 @ M @ c0) * I2, "x1": s2 * float(c1 @ M @ c1) * I2,
-           "x0x1": s2 * float(c0 @ M @ c1) * I2, "x2": None}
+           "x0x1": s2 * float(c0 @ M @ c1) * I2, "x2": None,
+           "w": A @ M, "w1": A @ (M @ c1), "x1_t1": np.zeros((2, 2))}
     if 0 < tau1 and t1 < beyond:
         # The Hessian of the profile over (t0, t1), a frame either side: t1's
         # marginal variance, with t0 free too (they trade off).
@@ -476,7 +489,8 @@ def _geometry_cov(tf, xf, t0, t1, beyond, decel, v1, s2, n_rest):
         H[1, 0] = H[0, 1]
         if np.linalg.det(H) > 0 and H[0, 0] > 0:
             var_t1 = 2 * s2 * np.linalg.inv(H)[1, 1]
-            out["x1"] = out["x1"] + var_t1 * np.outer(v1, v1)
+            out["x1_t1"] = var_t1 * np.outer(v1, v1)
+            out["x1"] = out["x1"] + out["x1_t1"]
     if n_rest:
         out["x2"] = s2 / n_rest * I2
     return out

@@ -290,6 +290,94 @@ def positions(shot: Shot, params: BallParams, t, ph: Phases | None = None) -> np
     return _positions(ph, params, t, *_phase_masks(ph, t))
 
 
+def positions_jacobian(shot: Shot, params: BallParams, t, rolling: bool = False,
+                       ph: Phases | None = None) -> np.ndarray:
+    """Derivatives of :func:`positions` with respect to the shot, shape (n, 2, p).
+
+    The parameters are ``(x0x, x0y, t0, v0x, v0y, w0x, w0y)`` (p = 7), or
+    with ``rolling`` ``(x0x, x0y, t0, v0x, v0y)`` (p = 5) for the shot
+    rolling from the strike, ``w0 = z_hat x v0 / R`` (paper case 4).  Each
+    phase's position is a polynomial in time whose coefficients depend on the
+    shot through eq. 2 and 10-19, so the derivatives are exact (the fits'
+    Jacobians: a finite difference cost six residual evaluations more per
+    iteration).  At a phase boundary the derivative is the later phase's.
+
+    Parameters
+    ----------
+    shot : Shot
+        Initial conditions (with ``rolling``, ``w0`` must be ``z_hat x v0 / R``).
+    params : BallParams
+        Ball and cloth constants.
+    t : array_like, shape (n,)
+        Absolute times (s).
+    rolling : bool
+        Differentiate the rolling-from-the-strike model (w0 tied to v0).
+    ph : Phases, optional
+        Precomputed ``phases(shot, params)``.
+
+    Returns
+    -------
+    ndarray, shape (n, 2, p)
+        ``d x(t) / d p`` (m per unit of each parameter: m, s, m/s, rad/s).
+    """
+    if ph is None:
+        ph = phases(shot, params)
+    t = np.atleast_1d(np.asarray(t, dtype=float))
+    R, mu_g, mu_r, g = params.R, params.mu_s * params.g, params.mu_r, params.g
+    n_par = 5 if rolling else 7
+    eye = np.eye(2)
+    zc = np.array([[0.0, -1.0], [1.0, 0.0]])  # z_hat x: a matrix
+    d_x0 = np.zeros((2, n_par))
+    d_x0[:, 0:2] = eye
+    d_t0 = np.zeros(n_par)
+    d_t0[2] = 1.0
+    d_v0 = np.zeros((2, n_par))
+    d_v0[:, 3:5] = eye
+    if rolling:
+        d_w0 = zc @ d_v0 / R  # w0 = z x v0 / R
+    else:
+        d_w0 = np.zeros((2, n_par))
+        d_w0[:, 5:7] = eye
+    d_u0 = d_v0 + R * zc @ d_w0  # eq. 2: zero when rolling
+    speed_u0 = float(np.hypot(*ph.u0))
+    tau1 = ph.t1 - ph.t0
+    if speed_u0 > SLIP_ZERO:
+        d_uhat = (eye - np.outer(ph.u_hat, ph.u_hat)) / speed_u0 @ d_u0
+        d_tau1 = 2.0 / (7.0 * mu_g) * ph.u_hat @ d_u0  # eq. 10
+    else:
+        d_uhat, d_tau1 = np.zeros((2, n_par)), np.zeros(n_par)
+    v1 = ph.v0 - mu_g * tau1 * ph.u_hat  # eq. 11, before any zeroing of a stop
+    d_v1 = d_v0 - mu_g * np.outer(ph.u_hat, d_tau1) - mu_g * tau1 * d_uhat
+    d_x1 = d_x0 + tau1 * d_v0 + np.outer(v1, d_tau1) - 0.5 * mu_g * tau1**2 * d_uhat  # eq. 13
+    speed_v1 = float(np.hypot(*v1))
+    # Each phase's position is a quadratic in its own time; so are its
+    # derivatives: rows (1, s, s^2) times three (2, p) coefficients.
+    out = np.empty((t.shape[0], 2 * n_par))
+    before, sliding, rolls, rest = _phase_masks(ph, t)
+    out[before] = d_x0.ravel()
+    # eq. 9: x0 + v0 s - 1/2 mu_s g s^2 u_hat, s = t - t0 (d s / d t0 = -1,
+    # times the velocity v0 - mu_s g s u_hat, eq. 7)
+    C = np.stack([d_x0 - np.outer(ph.v0, d_t0), d_v0 + mu_g * np.outer(ph.u_hat, d_t0), -0.5 * mu_g * d_uhat])
+    s = t[sliding] - ph.t0
+    out[sliding] = np.stack([np.ones_like(s), s, s * s], axis=1) @ C.reshape(3, -1)
+    if rolls.any():
+        a_r = 5.0 / 7.0 * mu_r * g  # eq. 16
+        v1_hat = v1 / speed_v1
+        d_v1hat = (eye - np.outer(v1_hat, v1_hat)) / speed_v1 @ d_v1
+        d_r = d_t0 + d_tau1  # r = t - t0 - tau1
+        # eq. 18: x1 + v1 r - 1/2 a_r r^2 v1_hat (velocity v1 - a_r r v1_hat)
+        C = np.stack([d_x1 - np.outer(v1, d_r), d_v1 + a_r * np.outer(v1_hat, d_r), -0.5 * a_r * d_v1hat])
+        r = t[rolls] - ph.t1
+        out[rolls] = np.stack([np.ones_like(r), r, r * r], axis=1) @ C.reshape(3, -1)
+    if rest.any():
+        if speed_v1 <= SPEED_ZERO:  # stopped as sliding ended (case 2): x2 = x1
+            out[rest] = d_x1.ravel()
+        else:  # eq. 19: x2 = x1 + 7/10 |v1| v1 / (mu_r g)
+            c = 0.7 / (mu_r * g)
+            out[rest] = (d_x1 + c * (speed_v1 * eye + np.outer(v1, v1 / speed_v1)) @ d_v1).ravel()
+    return out.reshape(-1, 2, n_par)
+
+
 def kinetic_energy(v, w, R):
     """Kinetic energy per unit mass, ``|v|^2/2 + (1/5) R^2 |w|^2`` (J/kg).
 

@@ -104,17 +104,21 @@ class Calibration:
         jackknife error, :func:`corner_covariance`).
     perturbed : tuple of Camera
         The cameras of the calibration's sensitivity set (:func:`perturbed_cameras`):
-        with a corner error given, each of the 8 corner coordinates moved by
-        ``corner_sigma_px`` in turn (and one for k1's error); for automatic
-        corners, the 9 joint moves of the corners and k1 whose outer products
-        sum to their jackknife covariance (:func:`covariance_moves`); then one
-        for the focal length's error where it was not fixed by the corners.
+        with a corner error given (clicked corners, or ``corner_sigma_px``),
+        each of the 8 corner coordinates moved by ``corner_sigma_px`` in turn
+        (and, with the lens's bow estimated, one for k1's error with the
+        corners it gives); for automatic corners, the 9 joint moves of the
+        corners and k1 whose outer products sum to their jackknife covariance
+        (:func:`covariance_moves`); each with the corners' share of the focal
+        length moved with them; then one for the rest of the focal length's
+        error (the balls', the nominal one's, the measured height's).
         Written to the scene file's ``calibration.perturbed`` for the
         recovery's errors.
     focal_sigma : float or None
-        Automatic calibration without a lens, focal length or height given:
-        the focal length's stated relative error (the corners', the balls',
-        their combination's, :func:`choose_focal`, or ``NOMINAL_FOCAL_SIGMA``).
+        Without a lens, focal length or height given (corners found or
+        clicked): the focal length's stated relative error (the corners', the
+        balls', their combination's, :func:`choose_focal`, or
+        ``NOMINAL_FOCAL_SIGMA``).
     """
 
     camera: Camera
@@ -1405,12 +1409,14 @@ def focal_from_balls(balls, corners_px, size, table: Table = Table(), *, R: floa
 
 def calibrate_video(path, table: Table = Table(), corners=None, *, intrinsics=None, distortion=None,
                     felt_margin_m: float = 0.0, felt_height_m: float = 0.0, nose_height_m: float = 0.0,
-                    camera_height_sigma_m: float = 0.0, **kw) -> Calibration:
+                    camera_height_sigma_m: float = 0.0, use_balls: bool = True, **kw) -> Calibration:
     """A video's camera: from given corners, or from the table found in its median frame.
 
     Automatic: the cushions' noses when they show (the playing surface's edge,
     at ``nose_height_m`` above the cloth), else the felt-coloured outline (the
-    surface grown by ``felt_margin_m`` at ``felt_height_m``).
+    surface grown by ``felt_margin_m`` at ``felt_height_m``).  Given corners
+    take the same focal-length rule (:func:`calibrate_clicked`), the still
+    balls read from the same median frame.
     """
     from cuespin.videoio import quiet_native_stderr
 
@@ -1426,32 +1432,196 @@ def calibrate_video(path, table: Table = Table(), corners=None, *, intrinsics=No
     K = None if intrinsics is None else np.asarray(intrinsics, dtype=float)
     dist = None if distortion is None else np.asarray(distortion, dtype=float).ravel()
     if corners is not None:
-        cal = calibrate_corners(corners, size, table, intrinsics=K, distortion=dist, fps=fps, **kw)
-        return _with_perturbed(cal, size, table, intrinsics=K, distortion=dist, fps=fps,
-                               height_sigma_m=camera_height_sigma_m, **kw)
+        # the median frame where the edges' bow or the still balls are read
+        frame = reference_frame(path) if K is None and not kw.get("homography") else None
+        return calibrate_clicked(corners, size, table, frame=frame, intrinsics=K, distortion=dist, fps=fps,
+                                 camera_height_sigma_m=camera_height_sigma_m, use_balls=use_balls, **kw)
     return calibrate_frame(reference_frame(path), table, intrinsics=K, distortion=dist, fps=fps,
                            felt_margin_m=felt_margin_m, felt_height_m=felt_height_m,
-                           nose_height_m=nose_height_m, camera_height_sigma_m=camera_height_sigma_m, **kw)
+                           nose_height_m=nose_height_m, camera_height_sigma_m=camera_height_sigma_m,
+                           use_balls=use_balls, **kw)
 
 
-def calibrate_frame(frame: np.ndarray, table: Table = Table(), *, intrinsics=None, distortion=None,
-                    felt_margin_m: float = 0.0, felt_height_m: float = 0.0, nose_height_m: float = 0.0,
-                    camera_height_sigma_m: float = 0.0, use_balls: bool = True, **kw) -> Calibration:
+def _focal_by_rule(same: dict) -> bool:
+    """Whether the focal length is left to :func:`choose_focal`: no lens, focal
+    length or height given, and a pose (not ``homography``)."""
+    return (same.get("intrinsics") is None and same.get("focal_px") is None
+            and same.get("camera_height_m") is None and not same.get("homography"))
+
+
+# Clicked corners take the lens's bow from the table's edges in the frame
+# (:func:`detect_corners`) when the outline found there is the table they
+# were clicked on: every found corner within this share of the clicked
+# quadrilateral's shorter side of a clicked one (a felt-coloured outline
+# beyond cloth-covered cushions lies some 5% of the width out; a wrong
+# outline, far off).
+CLICKED_BOW_MATCH = 0.15
+
+
+def edges_bow(frame: np.ndarray, corners_px):
+    """The lens's bow from the table's edges in ``frame`` (no lens known):
+    ``(kappa, its standard error)`` (px^-2, :class:`Detection`), or None when
+    no outline is found there or it is not the table of ``corners_px``
+    (``CLICKED_BOW_MATCH``)."""
+    c = np.asarray(corners_px, dtype=float).reshape(4, 2)
+    try:
+        det = detect_corners(frame)
+    except (CalibrationError, cv2.error, np.linalg.LinAlgError):
+        return None
+    side = float(np.linalg.norm(np.roll(c, -1, axis=0) - c, axis=1).min())
+    off = min(float(np.abs(np.roll(det.corners, -s, axis=0) - c).max()) for s in range(4))
+    return (float(det.kappa), float(det.kappa_sigma)) if off <= CLICKED_BOW_MATCH * side else None
+
+
+def calibrate_clicked(corners_px, size, table: Table = Table(), *, frame=None, use_balls: bool = True,
+                      estimate_lens: bool = True, camera_height_sigma_m: float = 0.0, **kw) -> Calibration:
+    """The camera from given (clicked) corners, by the automatic path's rules.
+
+    The corners are taken in the order given (:func:`calibrate_corners`'
+    checks), each coordinate with the error ``corner_sigma_px`` (default 1 px,
+    independent).  With no lens given, the lens's bow comes from the table's
+    edges in ``frame`` (:func:`edges_bow`), its error one more move; the
+    focal length from the one rule (:func:`choose_focal`: the corners'
+    perspective, the still balls' shapes in ``frame``, or the nominal focal
+    length); the perturbed cameras move each coordinate in turn, with the
+    corners' share of f.  The same as :func:`calibrate_frame` writes for
+    corners found with that error, but for the corners' move with the bow
+    (clicked corners do not follow the edges).
+
+    Parameters
+    ----------
+    corners_px : array_like, shape (4, 2)
+        As for :func:`calibrate_corners`.
+    size : (int, int)
+        Frame ``(width, height)`` (px).
+    frame : ndarray, optional
+        A frame of the table without the moving ball: the edges' bow and the
+        still balls' f.
+    use_balls, estimate_lens : bool
+        Read the still balls' shapes, the edges' bow, in ``frame``.
+    camera_height_sigma_m : float
+        Error of ``camera_height_m`` (m), carried by one more camera.
+    **kw
+        As for :func:`calibrate_corners`.
+    """
+    size = (int(size[0]), int(size[1]))
+    kw.setdefault("corner_sigma_px", 1.0)
+    kw.setdefault("fps", 30.0)
+    cal = calibrate_corners(corners_px, size, table, **kw)      # the checks, the order as given
+    moves = np.hstack([kw["corner_sigma_px"] * np.eye(8), np.zeros((8, 1))])
+    bow = None
+    if frame is not None and estimate_lens and kw.get("intrinsics") is None and not kw.get("homography") \
+            and not kw.get("kappa"):
+        bow = edges_bow(frame, cal.corners_px)
+    if bow is not None:
+        try:
+            cal = calibrate_corners(corners_px, size, table, **dict(kw, kappa=bow[0]))
+        except CalibrationError:            # no plausible camera through that bow: the clicks as they are
+            bow = None
+    if bow is not None:
+        kw["kappa"] = bow[0]
+        if bow[1] > 0:
+            moves = np.vstack([moves, np.append(np.zeros(8), bow[1])])
+    cal = _focal_and_errors(cal, size, table, kw, moves, frame=frame if use_balls else None,
+                            camera_height_sigma_m=camera_height_sigma_m)
+    if bow is not None:
+        f = float(cal.camera.K[0, 0])
+        cal = replace(cal, notes=[f"the lens's bow from the table's edges in the video: k1 = {bow[0] * f * f:+.3f} "
+                                  f"+/- {bow[1] * f * f:.3f} at f = {f:.0f} px"] + list(cal.notes))
+    return cal
+
+
+def _focal_and_errors(cal: Calibration, size, table: Table, same: dict, moves: np.ndarray, *, frame=None,
+                      camera_height_sigma_m: float = 0.0) -> Calibration:
+    """The focal length by the one rule and the perturbed cameras, for corners
+    found or given alike (:func:`calibrate_frame`, :func:`calibrate_clicked`).
+
+    ``cal``: the corners' camera in table order, solved with ``same`` (the
+    keywords of :func:`calibrate_corners`); ``moves`` (m, 9): the corners' and
+    the bow's error as joint moves (the jackknife's :func:`covariance_moves`,
+    or one coordinate at a time by a given error, with the bow's own row);
+    ``frame``: where the still balls are read (None: not read).
+
+    With no lens, focal length or height given (:func:`_focal_by_rule`), f
+    is the corners' (:func:`corner_focal`, refitted along each move), the
+    balls' (:func:`focal_from_balls`) or both weighted by their errors when
+    under ``NOMINAL_FOCAL_SIGMA`` (:func:`choose_focal`), else the nominal
+    one; it is then held as ``focal_px`` in every perturbed camera, each
+    corner move moving the corners' share of it, one more camera carrying the
+    rest (the balls' or the nominal one's error).
+    """
+    same = dict(same)
+    notes = list(cal.notes)
+    focal_sigma = 0.0
+    focal_moves = None
+    if _focal_by_rule(same):
+        margin, height = same.get("margin_m", 0.0), same.get("corner_height_m", 0.0)
+        fc = corner_focal(cal.corners_px, size, table, moves, kappa=same.get("kappa", 0.0), margin_m=margin,
+                          corner_height_m=height)
+        fb = None
+        if frame is not None:
+            R = float(same.get("R_nominal", 0.028575))
+            scale = math.sqrt(abs(signed_area(cal.corners_px)) / (table.length * table.width))   # px per m, roughly
+            fb = focal_from_balls(ball_images(frame, cal.corners_px, R * scale), cal.corners_px, size, table, R=R,
+                                  **same)
+        pick = choose_focal(fc[:2], fb)
+        if pick is None:
+            # neither the corners nor a ball under the nominal error: a phone's main camera, with its error
+            f = NOMINAL_FOCAL * max(size)
+            source, sigma, w = "nominal", NOMINAL_FOCAL_SIGMA * f, 0.0
+            focal_sigma = NOMINAL_FOCAL_SIGMA
+        else:
+            source, f, sigma, w = pick
+            if w < 1:                       # the balls' share: one camera with it one (weighted) error longer
+                focal_sigma = (1.0 - w) * fb[1] / f
+        same["focal_px"] = f
+        if w > 0:                           # the corners' share of f moves with them in each perturbed camera
+            focal_moves = f + w * (fc[2] - fc[0])
+        cal = replace(calibrate_corners(cal.corners_px, size, table, **same), focal_source=source,
+                      focal_sigma=sigma / f, edge_rms_px=cal.edge_rms_px, edge=cal.edge)
+        corners_say = (f"{fc[0]:.0f} px +/- {100 * fc[1] / fc[0]:.1f}%" if math.isfinite(fc[1])
+                       else "nothing (camera nearly overhead)")
+        if source == "corners+balls":
+            notes = [f"f = {f:.0f} px +/- {100 * sigma / f:.1f}% from the corners' perspective ({corners_say}) "
+                     f"and the still balls' shapes ({fb[0]:.0f} px +/- {100 * fb[1] / fb[0]:.1f}%), weighted by "
+                     f"their stated errors; camera {cal.height_m:.2f} m above the cloth"]
+        elif source == "balls":
+            notes = [f"the corners do not fix the focal length ({corners_say}); f = {f:.0f} px "
+                     f"+/- {100 * sigma / f:.1f}% from the still balls' shapes (a sphere's image stretches "
+                     f"away from the optical axis), camera {cal.height_m:.2f} m above the cloth"]
+        elif source == "nominal":
+            notes = [f"the corners do not fix the focal length ({corners_say}) and no still ball does; assumed "
+                     f"f = {f:.0f} px +/- {100 * NOMINAL_FOCAL_SIGMA:.0f}% (a phone's main camera), camera "
+                     f"{cal.height_m:.2f} m above the cloth: give --camera-height or --intrinsics"]
+        else:
+            notes = []
+    cal = replace(cal, notes=notes)
+    return _with_perturbed(cal, size, table, height_sigma_m=camera_height_sigma_m, focal_sigma=focal_sigma,
+                           moves=moves, focal_moves=focal_moves, **same)
+
+
+def calibrate_frame(frame: np.ndarray, table: Table = Table(), *, corners=None, intrinsics=None,
+                    distortion=None, felt_margin_m: float = 0.0, felt_height_m: float = 0.0,
+                    nose_height_m: float = 0.0, camera_height_sigma_m: float = 0.0, use_balls: bool = True,
+                    estimate_lens: bool = True, **kw) -> Calibration:
     """The camera found in one frame of the table (``calibrate_video``'s automatic
     path): the corners and the lens's bow from :func:`detect_corners`, the
-    corners' order from :func:`assign_corners`, and, with no lens, height or
-    focal length given, the focal length by one rule (:func:`choose_focal`):
-    the corners' perspective (:func:`corner_focal`) and the still balls'
-    shapes (:func:`focal_from_balls`, ``use_balls``), whichever states the
-    smaller error, or both weighted by their errors, when under the nominal
-    one's ``NOMINAL_FOCAL_SIGMA``; then the perturbed cameras, each with the
-    corners' share of f moved with the corners, and one for the balls' share
-    (one weighted error longer).  ``kw`` as for :func:`calibrate_corners`."""
+    corners' order from :func:`assign_corners`, their error (the edges'
+    jackknife, or ``corner_sigma_px`` a coordinate with the bow's own), then
+    the focal length by one rule and the perturbed cameras
+    (:func:`_focal_and_errors`, as for clicked corners).  With ``corners``
+    given: :func:`calibrate_clicked` on them (the bow and the balls read in
+    ``frame``).  ``estimate_lens=False``: the lens taken as undistorted (no
+    bow fitted).
+    ``kw`` as for :func:`calibrate_corners`."""
     h, w = frame.shape[:2]
     size = (int(w), int(h))
     K = None if intrinsics is None else np.asarray(intrinsics, dtype=float)
     dist = None if distortion is None else np.asarray(distortion, dtype=float).ravel()
-    det = detect_corners(frame, K, dist)
+    if corners is not None:
+        return calibrate_clicked(corners, size, table, frame=frame, use_balls=use_balls, estimate_lens=estimate_lens,
+                                 intrinsics=K, distortion=dist, camera_height_sigma_m=camera_height_sigma_m, **kw)
+    det = detect_corners(frame, K, dist, estimate_lens=estimate_lens)
     quad, edge_rms, kappa = det.corners, det.edge_rms, det.kappa
     if det.edge == "noses":
         felt_margin_m, felt_height_m = 0.0, nose_height_m
@@ -1459,81 +1629,28 @@ def calibrate_frame(frame: np.ndarray, table: Table = Table(), *, intrinsics=Non
     # with them): stated/real 0.6-1.8 on drawn and rendered tables, where the
     # points' scatter over their number gave 0.2-0.8 (docs/calibration.md,
     # section 6).  A corner error given (``corner_sigma_px``) is taken instead,
-    # one coordinate at a time, and the bow's with its own camera.
-    moves = None
-    if "corner_sigma_px" not in kw:
+    # one coordinate at a time, and the bow's error as one more joint move.
+    given = "corner_sigma_px" in kw
+    if not given:
         kw["corner_sigma_px"] = float(math.sqrt(np.trace(det.corner_cov[:8, :8]) / 8.0))
-        moves = det.corner_cov
     same = dict(intrinsics=K, distortion=dist, fps=kw.pop("fps", 30.0), kappa=kappa, margin_m=felt_margin_m,
                 corner_height_m=felt_height_m, **kw)
     cal = assign_corners(quad, size, table, **same)
-    # the corners refitted with kappa one standard error larger, in the order assigned
+    # corner j of the assigned order is the detection's (j + s) % 4
     s = int(np.argmin([np.abs(np.roll(quad, -k, axis=0) - cal.corners_px).max() for k in range(4)]))
-    kappa_corners = None if det.corners_kappa is None else np.roll(det.corners_kappa, -s, axis=0)
-    kappa_sigma = det.kappa_sigma
-    if moves is not None:
-        # the covariance in the assigned order: corner j is the detection's (j + s) % 4
+    if given:
+        moves = np.hstack([kw["corner_sigma_px"] * np.eye(8), np.zeros((8, 1))])
+        if det.corners_kappa is not None and det.kappa_sigma > 0:
+            # the bow's own error: kappa one standard error larger and the corners
+            # the edges then give, as one more joint move (its share of f with it)
+            kc = np.roll(det.corners_kappa, -s, axis=0)
+            moves = np.vstack([moves, np.append((kc - cal.corners_px).ravel(), det.kappa_sigma)])
+    else:
         idx = [2 * ((j + s) % 4) + c for j in range(4) for c in (0, 1)] + [8]
-        moves = covariance_moves(moves[np.ix_(idx, idx)])
-        kappa_sigma = 0.0                   # the bow's error is in the joint moves
-    notes = list(cal.notes)
-    focal_sigma = 0.0
-    focal_moves = None
-    if K is None and same.get("focal_px") is None and same.get("camera_height_m") is None and not same.get(
-            "homography"):
-        # One rule for the focal length at every tilt (choose_focal): the
-        # corners' perspective, the still balls' shapes, or both weighted by
-        # their stated errors; the nominal one when neither is under its 15%.
-        steps = moves if moves is not None else np.hstack([kw["corner_sigma_px"] * np.eye(8), np.zeros((8, 1))])
-        fc = corner_focal(cal.corners_px, size, table, steps, kappa=kappa, margin_m=felt_margin_m,
-                          corner_height_m=felt_height_m)
-        fb = None
-        if use_balls:
-            R = float(kw.get("R_nominal", 0.028575))
-            scale = math.sqrt(abs(signed_area(quad)) / (table.length * table.width))   # px per m, roughly
-            fb = focal_from_balls(ball_images(frame, quad, R * scale), cal.corners_px, size, table, R=R, **same)
-        pick = choose_focal(fc[:2], fb)
-        if pick is not None:
-            source, f, sigma, w = pick
-            same["focal_px"] = f
-            if w > 0:                       # the corners' share of f moves with them in each perturbed camera
-                focal_moves = f + w * (fc[2] - fc[0])
-            if w < 1:                       # the balls' share: one camera with it one (weighted) error longer
-                focal_sigma = (1.0 - w) * fb[1] / f
-            cal = replace(calibrate_corners(cal.corners_px, size, table, **same), focal_source=source,
-                          focal_sigma=sigma / f)
-            if source == "corners+balls":
-                notes = [f"f = {f:.0f} px +/- {100 * sigma / f:.1f}% from the corners' perspective ({fc[0]:.0f} px "
-                         f"+/- {100 * fc[1] / fc[0]:.1f}%) and the still balls' shapes ({fb[0]:.0f} px +/- "
-                         f"{100 * fb[1] / fb[0]:.1f}%), weighted by their stated errors; camera "
-                         f"{cal.height_m:.2f} m above the cloth"]
-            elif source == "balls":
-                notes = [f"the corners do not fix the focal length (camera nearly overhead); f = {f:.0f} px "
-                         f"+/- {100 * sigma / f:.1f}% from the still balls' shapes (a sphere's image stretches "
-                         f"away from the optical axis), camera {cal.height_m:.2f} m above the cloth"]
-            else:
-                notes = []
-        elif cal.focal_source == "corners":
-            # the corners' own spread says more than the nominal 15%: the nominal one, with its error
-            same["focal_px"] = NOMINAL_FOCAL * max(size)
-            focal_sigma = NOMINAL_FOCAL_SIGMA
-            cal = replace(calibrate_corners(cal.corners_px, size, table, **same), focal_source="nominal",
-                          focal_sigma=NOMINAL_FOCAL_SIGMA)
-            notes = [f"the corners do not fix the focal length (+/- {100 * fc[1] / fc[0]:.0f}%); assumed f = "
-                     f"{same['focal_px']:.0f} px (a phone's main camera), camera {cal.height_m:.2f} m above the "
-                     f"cloth: give --camera-height or --intrinsics"]
-        else:
-            # Already the nominal one: held fixed in the perturbed cameras too,
-            # with its error carried by one of them, as in the branch above
-            # (left free, each perturbed camera re-ran the corners' own rule
-            # on its moved corners and could take a corner-derived f: review7).
-            same["focal_px"] = float(cal.camera.K[0, 0])
-            focal_sigma = NOMINAL_FOCAL_SIGMA
-            cal = replace(cal, focal_sigma=NOMINAL_FOCAL_SIGMA)
-    cal = replace(cal, notes=notes, edge_rms_px=edge_rms, edge=det.edge)
-    return _with_perturbed(cal, size, table, height_sigma_m=camera_height_sigma_m, focal_sigma=focal_sigma,
-                           kappa_sigma=kappa_sigma, kappa_corners=kappa_corners, moves=moves,
-                           focal_moves=focal_moves, **same)
+        moves = covariance_moves(det.corner_cov[np.ix_(idx, idx)])
+    cal = replace(cal, edge_rms_px=edge_rms, edge=det.edge)
+    return _focal_and_errors(cal, size, table, same, moves, frame=frame if use_balls else None,
+                             camera_height_sigma_m=camera_height_sigma_m)
 
 
 def _with_perturbed(cal: Calibration, size, table: Table, **kw) -> Calibration:

@@ -313,7 +313,8 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         # The paper's errors are propagated from the same per-frame noise the
         # fit weights by: the tracker's, with the codec's measured share.
         paper_sigma = math.sqrt(sigma**2 + max(meas.codec_m2(codec_var), 0.0))
-        paper = paper_from_segments(chosen, t, xy, params, paper_sigma, frame_dt, strike_seen, independent)
+        paper = paper_from_segments(chosen, t, xy, params, paper_sigma, frame_dt, strike_seen, independent,
+                                    meas=meas)
         shape = paper.trajectory == "parabola" if paper.trajectory else None
     seen = decisions.get("sliding_seen")
     fit = None if seen is None else (full if seen else roll)
@@ -359,7 +360,7 @@ def _refit(keep: Decided, seg, t, xy, params, exposure_s, fit_friction, run_pape
     elif run_paper and seg:
         paper_sigma = math.sqrt(sigma**2 + max(meas.codec_m2(keep.codec_var), 0.0))
         paper = paper_from_segments(chosen, t, xy, params, paper_sigma, frame_dt, keep.strike_seen, independent,
-                                    curved=keep.curved, near=keep.paper, apart=keep.stop_apart)
+                                    curved=keep.curved, near=keep.paper, apart=keep.stop_apart, meas=meas)
     return Estimate(chosen or seg, paper, mle, meas, keep.codec_var, decisions,
                     {"fit": t_fit, "recover": time.perf_counter() - clock}, keep)
 

@@ -407,10 +407,23 @@ def group_covariance(frame_cov_used, g, m: int, scatter, min_share: float = 0.0,
     ``l / scale`` lies below the :data:`REST_SHARED_LEVEL` point of
     independent frames' (``F(2(n - 1), scale_dof)``), else 0.  Where the
     scatter is not measured, ``C`` (one shared error)."""
+    c, f = group_shares(frame_cov_used, g, m, scatter, min_share, scale, scale_dof)
+    n = np.bincount(g, minlength=m).astype(float)
+    return c * ((1.0 - f) / n + f)[:, None, None]
+
+
+def group_shares(frame_cov_used, g, m: int, scatter, min_share: float = 0.0, scale: float = 1.0,
+                 scale_dof: float = float("inf")) -> tuple[np.ndarray, np.ndarray]:
+    """Each measurement's frames' mean stated covariance ``C`` (m^2, shape
+    (m, 2, 2)) and the share ``f`` of it they have in common (shape (m,): 0
+    for a single frame), as :func:`group_covariance` has them (the same
+    arguments): two frames of one rest have covariance ``f C``."""
     cnt = np.bincount(g, minlength=m)
     c = np.zeros((m, 2, 2))
     np.add.at(c, g, frame_cov_used)
     c /= np.maximum(cnt, 1)[:, None, None]
+    share = np.zeros(m)
+    share[cnt > 1] = 1.0  # a scatter not measured: one shared error
     rest = (cnt > 1) & np.all(np.isfinite(scatter.reshape(m, -1)), axis=1)
     if rest.any():
         n = cnt[rest].astype(float)
@@ -422,8 +435,50 @@ def group_covariance(frame_cov_used, g, m: int, scatter, min_share: float = 0.0,
             r = lam / scale
             q = chi2.ppf(REST_SHARED_LEVEL, k) / k if np.isinf(scale_dof) else f_dist.ppf(REST_SHARED_LEVEL, k, scale_dof)
             f = np.where(r < q, 1.0 - r, 0.0)
-        c[rest] = c[rest] * ((1.0 - f) / n + f)[:, None, None]
-    return c
+        share[rest] = f
+    return c, share
+
+
+def linear_covariance(meas: Measurements, weights) -> np.ndarray:
+    """Covariance (m^2) of estimates linear in the track's centres, ``x_a =
+    sum_i weights[a, i] xy[i]`` (the same weights on both axes), under the
+    errors ``meas`` states: each frame's covariance (the codec's share
+    included), and between two frames of one rest their share of it
+    (:func:`group_shares`, as the fit has them); frames in no measurement
+    (the strike's) independent.
+
+    Parameters
+    ----------
+    meas : Measurements
+    weights : ndarray, shape (k, n)
+        Per estimate, its weight on each of the track's ``n`` frames.
+
+    Returns
+    -------
+    ndarray, shape (2k, 2k)
+        Ordered ``(x_0, y_0, x_1, y_1, ...)``.
+    """
+    Wt = np.asarray(weights, dtype=float)
+    k = len(Wt)
+    # Every frame's own covariance: sum_i w_a,i w_b,i C_i.
+    out = np.einsum("ai,bi,ijk->ajbk", Wt, Wt, meas.cov)
+    used = meas.used
+    if used.any():
+        g = meas.group[used]
+        m = meas.n
+        c, f = group_shares(meas.cov[used], g, m, group_scatter(meas.xy, meas.group, meas.rest_scatter),
+                            meas.rest_min_share, meas.rest_scale, meas.rest_scale_dof)
+        # Pairs of frames within one rest: f C (S_a S_b - sum_i w_a,i w_b,i) per rest.
+        Wu = Wt[:, used]
+        S = np.zeros((k, m))
+        for a in range(k):
+            S[a] = np.bincount(g, weights=Wu[a], minlength=m)
+        P = np.zeros((k, k, m))
+        for a in range(k):
+            for b in range(k):
+                P[a, b] = S[a] * S[b] - np.bincount(g, weights=Wu[a] * Wu[b], minlength=m)
+        out += np.einsum("abm,m,mjk->ajbk", P, f, c)
+    return out.reshape(2 * k, 2 * k)
 
 
 def _make(t, xy, cov, group, px_to_m=None, rest_scatter: bool = False, rest_min_share: float = 0.0,

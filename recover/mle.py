@@ -28,9 +28,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import brentq, least_squares
+from scipy.sparse import csr_array
 
 from cuespin.fit.decide import autocorrelated
-from cuespin.physics.motion import BallParams, Shot, phases, positions, z_cross
+from cuespin.physics.motion import BallParams, Shot, phases, positions, positions_jacobian, z_cross
 from cuespin.recover.measurements import Measurements, build_measurements
 
 # A fit whose residuals are this many times the stated variance does not
@@ -46,6 +47,22 @@ MAX_CHI2_PER_DOF = 100.0
 MAX_REL_STDERR_V0 = 0.5
 # Convergence tolerances of the Levenberg-Marquardt fit (see fit_model).
 LM_TOL = 1e-7
+# The fits follow the model's exact Jacobian
+# (physics.motion.positions_jacobian), except where it is rank deficient
+# (the slip's size while the ball slides past the track's end: only its
+# direction shows, eq. 9; or no slip at all, u0 = 0): there a forward
+# difference of this relative step (scipy's diff_step before) steps and
+# states the errors, as before.  MINPACK takes the exact Jacobian's
+# round-off pivot (smallest eigenvalue of its unit-column Gram matrix
+# 1e-30-1e-14) as nonsingular, and its Gauss-Newton step ran along the
+# undetermined direction (w0 to 7e4 rad/s on stats9's seed 5 shot 21,
+# MJPG); the difference's round-off keeps those steps short, and leaves
+# the other parameters' errors (v0's, w0 withheld: degenerate) as main
+# stated them.  Tracks that determine every parameter measured 1e-12 and
+# above (stats9's cached tracks of seeds 5 and 6: 982 Jacobians, none
+# between 1e-14 and 1e-12).
+FD_REL_STEP = 1e-7
+RANK_DEFICIENT_EIG = 1e-13
 # An inter-frame codec's error (H.264: motion-compensated prediction from
 # earlier frames) is shared by neighbouring frames: the correlation of its
 # per-axis error between frames k apart, rho(k) = a exp(-k / tau_long) +
@@ -224,25 +241,93 @@ def model_track(shot: Shot, params: BallParams, t, exposure_s: float = 0.0):
     return np.einsum("k,nkd->nd", 0.5 * _GL_W, x)
 
 
+def _rank_deficient(J) -> bool:
+    """Whether a Jacobian's columns, scaled to unit length, are dependent to
+    round-off (:data:`RANK_DEFICIENT_EIG`)."""
+    Js = J / _column_norms(J)
+    return bool(np.linalg.eigvalsh(Js.T @ Js)[0] < RANK_DEFICIENT_EIG)
+
+
+def forward_jacobian(resid, p, f0, rel_step: float = FD_REL_STEP) -> np.ndarray:
+    """Forward-difference Jacobian of ``resid`` at ``p`` (``f0 = resid(p)``),
+    shape (len(f0), len(p)), with scipy's 2-point steps (``rel_step max(1,
+    |p_i|)``, signed as ``p_i``)."""
+    p = np.asarray(p, dtype=float)
+    h = rel_step * np.where(p >= 0, 1.0, -1.0) * np.maximum(1.0, np.abs(p))
+    J = np.empty((len(f0), len(p)))
+    for i in range(len(p)):
+        q = p.copy()
+        q[i] = p[i] + h[i]
+        J[:, i] = (resid(q) - f0) / (q[i] - p[i])
+    return J
+
+
+def model_track_jacobian(shot: Shot, params: BallParams, t, exposure_s: float = 0.0,
+                         rolling: bool = False) -> np.ndarray:
+    """Derivatives of :func:`model_track` with respect to the shot's
+    parameters (physics.motion.positions_jacobian's order), shape (n, 2, p):
+    the exposure's average of the position's derivatives."""
+    t = np.asarray(t, dtype=float)
+    if exposure_s <= 0:
+        return positions_jacobian(shot, params, t, rolling)
+    nodes = t[:, None] + 0.5 * exposure_s * _GL_T[None, :]
+    d = positions_jacobian(shot, params, nodes.ravel(), rolling)
+    p = d.shape[2]
+    return ((0.5 * _GL_W) @ d.reshape(len(t), len(_GL_T), 2 * p)).reshape(len(t), 2, p)
+
+
+def jacobian_map(meas: Measurements, ar1: float = 0.0):
+    """The Jacobian of the fits' residuals (``ar1_prewhiten`` of
+    ``meas.whiten``) from the model's derivatives at the used frames: a
+    function of ``d_model`` (k, 2, p) giving (2m, p), made once per fit
+    (both maps are linear, and the residual is observed less model)."""
+    g = meas.group[meas.used]
+    m, k = meas.n, len(g)
+    cnt = np.bincount(g, minlength=m).astype(float)
+    # Each frame's derivative averaged into its measurement (Measurements._means), as one sparse product.
+    average = csr_array((1.0 / cnt[g], (g, np.arange(k))), shape=(m, k))
+    prewhiten = prewhitener(meas, ar1)
+    W = meas.W
+
+    def jac(d_model) -> np.ndarray:
+        d_model = np.asarray(d_model, dtype=float)
+        p = d_model.shape[2]
+        means = (average @ d_model.reshape(k, 2 * p)).reshape(m, 2, p)
+        return -prewhiten(W @ means).reshape(2 * m, p)
+    return jac
+
+
+def prewhitener(meas: Measurements, rho: float):
+    """:func:`ar1_prewhiten` for one set of measurements and ``rho``, its
+    filter made once (a fit applies it at every iteration): a function of
+    ``r`` (m, 2, ...)."""
+    single = np.flatnonzero(meas.single) if rho else np.zeros(0, int)
+    if len(single) < 2:
+        return lambda r: np.asarray(r, dtype=float)
+    ts = meas.t_means[single]
+    dt = float(np.median(np.diff(ts)))
+    k = np.maximum(np.rint(np.diff(ts) / dt), 1.0) if dt > 0 else np.ones(len(ts) - 1)
+    phi = rho ** k
+    norm = np.sqrt(1.0 - phi**2)
+    now, prev = single[1:], single[:-1]
+
+    def apply(r) -> np.ndarray:
+        r = np.asarray(r, dtype=float)
+        shape = (-1,) + (1,) * (r.ndim - 1)
+        out = r.copy()
+        out[now] = (r[now] - phi.reshape(shape) * r[prev]) / norm.reshape(shape)
+        return out
+    return apply
+
+
 def ar1_prewhiten(meas: Measurements, r, rho: float) -> np.ndarray:
     """Whitened residuals ``r`` (m, 2) under AR(1) errors of lag-1
     correlation ``rho`` between neighbouring frames: along the single-frame
     measurements in time order, ``(r_i - phi r_(i-1)) / sqrt(1 - phi^2)``
     with ``phi = rho^k`` for measurements ``k`` frames apart (a masked
-    strike between them lowers it); the first, and rests, unchanged."""
-    r = np.asarray(r, dtype=float)
-    if not rho:
-        return r
-    single = np.flatnonzero(meas.single)
-    if len(single) < 2:
-        return r
-    ts = meas.t_means[single]
-    dt = float(np.median(np.diff(ts)))
-    k = np.maximum(np.rint(np.diff(ts) / dt), 1.0) if dt > 0 else np.ones(len(ts) - 1)
-    phi = rho ** k
-    out = r.copy()
-    out[single[1:]] = (r[single[1:]] - phi[:, None] * r[single[:-1]]) / np.sqrt(1.0 - phi**2)[:, None]
-    return out
+    strike between them lowers it); the first, and rests, unchanged.
+    ``r`` may carry trailing axes (m, 2, ...): a Jacobian's columns."""
+    return prewhitener(meas, rho)(r)
 
 
 def fit_model(meas: Measurements, params: BallParams, start, exposure_s: float, rolling: bool,
@@ -262,9 +347,17 @@ def fit_model(meas: Measurements, params: BallParams, start, exposure_s: float, 
     if fit_friction:
         p0 = np.r_[p0, [params.mu_r] if rolling else [params.mu_s, params.mu_r]]
 
+    prewhiten = prewhitener(meas, ar1)
+    whitened_jacobian = jacobian_map(meas, ar1)
+
     def resid(p):
         shot, pr = _unpack(p, rolling, fit_friction, params)
-        return ar1_prewhiten(meas, meas.whiten(model_track(shot, pr, t, exposure_s)), ar1).ravel()
+        return prewhiten(meas.whiten(model_track(shot, pr, t, exposure_s))).ravel()
+
+    def jac(p):  # exact (physics.motion.positions_jacobian): no residual evaluations for it
+        shot, pr = _unpack(p, rolling, fit_friction, params)
+        J = whitened_jacobian(model_track_jacobian(shot, pr, t, exposure_s, rolling))
+        return forward_jacobian(resid, p, resid(p)) if _rank_deficient(J) else J
 
     lo = np.full(len(p0), -np.inf)
     hi = np.full(len(p0), np.inf)
@@ -287,7 +380,7 @@ def fit_model(meas: Measurements, params: BallParams, start, exposure_s: float, 
         # iterations, plenty from the segmentation's start.  Tolerances 1e-7:
         # answers within 5e-6 standard errors of those at 1e-10 (10 benchmark
         # shots, both codecs), in 25% less time.
-        r = least_squares(resid, p0, x_scale=x_scale, method="lm", diff_step=1e-7,
+        r = least_squares(resid, p0, jac=jac, x_scale=x_scale, method="lm",
                           xtol=LM_TOL, ftol=LM_TOL, gtol=LM_TOL, max_nfev=100)
     shot, pr = _unpack(r.x, rolling, fit_friction, params)
     # The AR(1) coefficient was estimated from the same residuals: one
@@ -867,13 +960,22 @@ def profile_chi2(fit: ModelFit, meas: Measurements, exposure_s: float, delta: fl
     w_base = np.asarray(shot.w0, float) + delta * e
     t = meas.t_used
 
+    prewhiten = prewhitener(meas, fit.ar1)
+    whitened_jacobian = jacobian_map(meas, fit.ar1)
+
     def resid(q):
         s = Shot(x0=q[0:2], v0=q[3:5], w0=w_base + q[5] * f, t0=float(q[2]))
-        return ar1_prewhiten(meas, meas.whiten(model_track(s, pr, t, exposure_s)), fit.ar1).ravel()
+        return prewhiten(meas.whiten(model_track(s, pr, t, exposure_s))).ravel()
+
+    def jac(q):  # the free-slip model's, its w0 columns along f
+        s = Shot(x0=q[0:2], v0=q[3:5], w0=w_base + q[5] * f, t0=float(q[2]))
+        d = model_track_jacobian(s, pr, t, exposure_s)
+        J = whitened_jacobian(np.concatenate([d[:, :, :5], d[:, :, 5:7] @ f[:, None]], axis=2))
+        return forward_jacobian(resid, q, resid(q)) if _rank_deficient(J) else J
 
     q0 = np.r_[shot.x0, shot.t0, shot.v0, 0.0]
-    r = least_squares(resid, q0, x_scale=np.r_[1e-3, 1e-3, 1e-3, 1e-2, 1e-2, 1.0], method="lm",
-                      diff_step=1e-7, xtol=LM_TOL, ftol=LM_TOL, gtol=LM_TOL, max_nfev=100)
+    r = least_squares(resid, q0, jac=jac, x_scale=np.r_[1e-3, 1e-3, 1e-3, 1e-2, 1e-2, 1.0], method="lm",
+                      xtol=LM_TOL, ftol=LM_TOL, gtol=LM_TOL, max_nfev=100)
     return float(2 * r.cost)
 
 

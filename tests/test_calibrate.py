@@ -176,8 +176,14 @@ def test_cli_calibrate_automatic_and_with_corners(tmp_path, capsys):
     assert 0.005 < calib["corner_sigma_px"] < 0.1 and len(calib["perturbed"]) == 10, calib["corner_sigma_px"]
     # clicked corners, rounded to whole pixels as a click is
     c = np.round(true_corners(true), 0).ravel()
-    code, _, err_txt = run_main(capsys, "calibrate", video, "-o", out, "--corners", ",".join(f"{v:g}" for v in c))
+    code, out_txt, err_txt = run_main(capsys, "calibrate", video, "-o", out, "--corners", ",".join(f"{v:g}" for v in c))
     assert code == 0, err_txt
+    # the same rule for f as found corners, its error stated, 8 cameras and one for the balls' share
+    calib = json.loads(out.read_text())["calibration"]
+    assert calib["focal_from"] == "corners+balls" and "% (from corners+balls)" in out_txt, out_txt
+    # (and one for the lens's bow, read from the table's edges in the video)
+    assert calib["corner_sigma_px"] == 1.0 and len(calib["perturbed"]) == 10
+    assert "bow from the table's edges" in err_txt
     # mirrored: refused, one line, exit 2
     cm = np.round(true_corners(true)[::-1], 0).ravel()
     code, _, err_txt = run_main(capsys, "calibrate", video, "-o", out, "--corners", ",".join(f"{v:g}" for v in cm))
@@ -521,3 +527,74 @@ def test_stray_edge_points_do_not_inflate_the_corners_stated_error():
     assert 0.5 < stated / real < 2.0, (stated, real)
     kept = detect_corners(img, robust=False)                  # as before: the strays kept
     assert math.sqrt(np.trace(kept.corner_cov[:8, :8]) / 8.0) > 3.0 * real
+
+
+def test_clicked_corners_state_the_focal_lengths_error():
+    # Clicked corners (no lens given) take the automatic path's rule for f
+    # (choose_focal: the corners' perspective and the frame's still balls)
+    # and state its error the same way: each coordinate moved by the click's
+    # error (1 px) moves the corners' share of f in its perturbed camera, one
+    # more carries the balls'.  Measured on drawn frames tilted 10 degrees,
+    # corners 1 px off (benchmarks/calibration.py --clicked): f 0.7-2.3% off,
+    # stated 5.6-5.8% (z under 0.5 on 3 draws).
+    from cuespin.pipeline.calibrate import calibrate_clicked
+
+    true = pinhole_camera(height_m=2.0, tilt_deg=10.0, R=R, size=SIZE, fps=240.0, roll_deg=1.0)
+    img = synthetic_table_frame(true, seed=100, cushion_m=0.05, pockets=True)
+    c = true_corners(true) + np.random.default_rng(7).normal(0.0, 1.0, (4, 2))
+    cal = calibrate_clicked(c, SIZE, TABLE, frame=img, corner_sigma_px=1.0, fps=240.0, R_nominal=R)
+    assert cal.focal_source == "corners+balls" and 0.02 < cal.focal_sigma < 0.1, (cal.focal_source, cal.focal_sigma)
+    f = cal.camera.K[0, 0]
+    assert abs(f / true.K[0, 0] - 1.0) < 2.0 * cal.focal_sigma, (f / true.K[0, 0] - 1.0, cal.focal_sigma)
+    assert len(cal.perturbed) == 10        # 8 coordinates, the edges' bow, the balls' share of f
+    spread = np.sqrt(np.sum([(p.K[0, 0] / f - 1.0) ** 2 for p in cal.perturbed]))
+    assert spread == pytest.approx(cal.focal_sigma, rel=1e-3), (spread, cal.focal_sigma)
+    # without the frame: the corners alone, no bow (stated over 5%: the balls' 10% weighed in above)
+    alone = calibrate_clicked(c, SIZE, TABLE, corner_sigma_px=1.0, fps=240.0, R_nominal=R)
+    assert alone.focal_source == "corners" and alone.focal_sigma > cal.focal_sigma and len(alone.perturbed) == 8
+    assert abs(alone.camera.K[0, 0] / true.K[0, 0] - 1.0) < 2.0 * alone.focal_sigma
+    # overhead, nothing fixes f: the nominal one with its 15%, carried by a ninth camera
+    top = pinhole_camera(height_m=2.0, tilt_deg=0.0, R=R, size=SIZE, fps=240.0, roll_deg=1.0)
+    nom = calibrate_clicked(true_corners(top), SIZE, TABLE, fps=240.0)
+    assert nom.focal_source == "nominal" and nom.focal_sigma == pytest.approx(0.15) and len(nom.perturbed) == 9
+
+
+def test_found_and_given_corners_give_the_same_camera():
+    # One path after the corners (calibrate_frame with corners given, as
+    # `calibrate --corners` runs it): the automatic corners given back with
+    # the same error give the same camera, focal length, stated error and
+    # perturbed cameras (the lens taken as undistorted in both).
+    from cuespin.pipeline.calibrate import calibrate_frame
+
+    true = pinhole_camera(height_m=2.0, tilt_deg=10.0, R=R, size=SIZE, fps=240.0, roll_deg=1.0)
+    img = synthetic_table_frame(true, seed=100, cushion_m=0.05, pockets=True)
+    kw = dict(corner_sigma_px=1.0, fps=240.0, R_nominal=R)
+    found = calibrate_frame(img, TABLE, estimate_lens=False, **kw)
+    given = calibrate_frame(img, TABLE, corners=found.corners_px, estimate_lens=False, **kw)
+    assert found.focal_source == given.focal_source == "corners+balls"
+    assert given.focal_sigma == pytest.approx(found.focal_sigma, rel=1e-9)
+    assert len(found.perturbed) == len(given.perturbed) == 9
+    for a, b in zip((found.camera,) + found.perturbed, (given.camera,) + given.perturbed):
+        assert np.allclose(a.K, b.K, rtol=1e-9) and np.allclose(a.rvec, b.rvec, atol=1e-9)
+        assert np.allclose(a.tvec, b.tvec, atol=1e-9)
+
+
+def test_clicked_corners_on_a_distorting_lens_take_the_bow_from_the_edges():
+    # Four clicked corners cannot show the lens's bow (8 numbers, 6 pose
+    # parameters and f): without it, clicks 1 px off on a k1 -0.25 lens tilted
+    # 10 degrees put f 37-40% off (stated 5.7%).  The bow is read from the
+    # table's edges in the frame (edges_bow, the automatic path's fit) when the
+    # outline found there is the clicked table: f 1.0-2.9% off, stated 5.9%
+    # (3 draws, benchmarks/calibration.py --clicked).
+    from cuespin.pipeline.calibrate import calibrate_clicked, edges_bow
+
+    true = pinhole_camera(height_m=2.0, tilt_deg=10.0, k1=-0.25, R=R, size=SIZE, fps=240.0, roll_deg=1.0)
+    img = synthetic_table_frame(true, seed=125, cushion_m=0.05, pockets=True)
+    c = true_corners(true) + np.random.default_rng(7).normal(0.0, 1.0, (4, 2))
+    cal = calibrate_clicked(c, SIZE, TABLE, frame=img, corner_sigma_px=1.0, fps=240.0, R_nominal=R)
+    assert "bow from the table's edges" in cal.notes[0]
+    f = cal.camera.K[0, 0]
+    assert abs(f / true.K[0, 0] - 1.0) < 2.0 * cal.focal_sigma < 0.2, (f / true.K[0, 0] - 1.0, cal.focal_sigma)
+    assert abs(cal.camera.dist[0] / f**2 * true.K[0, 0] ** 2 + 0.25) < 0.01     # k1 at the true f
+    # an outline that is not the clicked table's gives no bow
+    assert edges_bow(img, c + [0.0, 0.2 * (c[0, 1] - c[3, 1])]) is None

@@ -288,6 +288,67 @@ def test_paper_states_errors_that_cover():
     assert np.sqrt(np.mean(np.square(zs))) < 2.5, np.sqrt(np.mean(np.square(zs)))
 
 
+def test_linear_covariance_is_the_fits_measurement_model():
+    # The paper's inputs' errors come from the same measurement model as the
+    # fit's (recover.measurements.linear_covariance): a rest's mean gets its
+    # measurement's covariance exactly, on a lossy codec's rest (a shared
+    # share) and on a lossless one; a single frame its own covariance; two
+    # frames of one rest f C between them.
+    from cuespin.recover.measurements import group_shares, group_scatter, linear_covariance
+    rng = np.random.default_rng(4)
+    t = np.arange(60) / 120.0
+    xy = np.c_[np.where(t < 0.2, 0.0, 0.3 * (t - 0.2)), np.zeros(60)] + 1e-4 * rng.standard_normal((60, 2))
+    cov = np.full(60, 1e-4)
+    for shared in (True, False):
+        meas = build_measurements(t, xy, cov, t0=0.2, frame_dt=1 / 120.0, shared_rest=shared)
+        rest = np.flatnonzero(meas.group == 0)
+        assert len(rest) >= 10
+        W = np.zeros((3, 60))
+        W[0, rest] = 1.0 / len(rest)
+        W[1, 40] = 1.0
+        W[2, rest[0]] = W[2, rest[1]] = 0.5
+        C = linear_covariance(meas, W)
+        mean_cov = np.linalg.inv(meas.W[0].T @ meas.W[0])
+        assert np.allclose(C[0:2, 0:2], mean_cov, rtol=1e-9)
+        assert np.allclose(C[2:4, 2:4], meas.cov[40], rtol=1e-12)
+        used = meas.used
+        c, f = group_shares(meas.cov[used], meas.group[used], meas.n,
+                            group_scatter(meas.xy, meas.group, meas.rest_scatter), meas.rest_min_share)
+        assert (f[0] >= 0.06) == shared
+        assert np.allclose(C[4:6, 4:6], 0.5 * (meas.cov[rest[0]] + meas.cov[rest[1]]) / 2 + 0.5 * f[0] * c[0])
+
+
+def paper_coverage(n, seed, lossless=True):
+    """The paper's answers' components (v0, w0) within 1.96 stated errors,
+    and their RMS error in stated errors, on ``n`` simulated sliding tracks."""
+    from cuespin.recover.simulate import sliding_tracks
+    zs = []
+    for tr in sliding_tracks(n, seed):
+        pp = recover_track(tr.t, tr.xy, np.ones(len(tr.t), bool), np.full(len(tr.t), tr.sigma), tr.params,
+                           tr.exposure_s, "all", lossless=lossless)["methods"]["paper"]
+        if pp["status"] == "ok" and pp.get("stderr"):
+            zs.append((np.r_[pp["v0"], pp["w0"]] - np.r_[tr.shot.v0, tr.shot.w0])
+                      / np.r_[pp["stderr"]["v0"], pp["stderr"]["w0"]])
+    z = np.ravel(zs)
+    return int(np.sum(np.abs(z) < 1.96)), len(z), float(np.sqrt(np.mean(z * z)))
+
+
+@pytest.mark.slow
+def test_paper_coverage_on_simulated_sliding_tracks():
+    # Issue 11: the paper's stated errors cover its errors 90-97% of the
+    # time.  Simulated sliding tracks (recover.simulate.sliding_tracks: the
+    # sampler's presets over the frame-rate and noise grid, each frame's
+    # error exactly independent), every ok answer's four components within
+    # 1.96 stated errors: seed 1 measured 257 of 284 (90.5%, 71 answers of
+    # 200 tracks; RMS error 1.07 stated; 92.6%, 0.98 with the parabola fit
+    # capped), seed 2 272 of 288 (94.4%).  Held within 3 binomial standard
+    # errors of 95% over the answers, not the components: an answer's four
+    # are strongly correlated (benchmarks/accuracy.py's intervals).
+    hit, n, rms = paper_coverage(200, 1)
+    margin = 3 * np.sqrt(0.95 * 0.05 / (n / 4))
+    assert n >= 200 and abs(hit / n - 0.95) < margin, (hit, n, rms)
+
+
 def test_codec_error_in_pixels_through_the_camera():
     # A codec's error lives in the image: one variance in px^2, seen on the
     # table through the camera's Jacobian at each frame (issue 11).  Under a

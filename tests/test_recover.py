@@ -121,6 +121,43 @@ def test_mle_rolling_from_the_strike():
     assert z.max() < MLE_Z_MAX
 
 
+@pytest.mark.parametrize("rolling,ar1,seed", [(False, 0.0, 1), (True, 0.0, 2), (False, 0.6, 3), (True, 0.6, 4),
+                                               (False, 0.0, 5), (True, 0.3, 6)])
+def test_fit_jacobian_is_the_residuals_derivative(rolling, ar1, seed):
+    # The fits' exact Jacobian (physics.motion.positions_jacobian through the
+    # exposure's average, the measurements' whitening and the AR(1)
+    # prewhitening) against central differences of the residuals, at random
+    # parameters near a shot that slides, rolls and rests in view (both
+    # rests one measurement each, the strike's frame masked).
+    from cuespin.recover.mle import ar1_prewhiten, jacobian_map, model_track, model_track_jacobian
+    from cuespin.recover.measurements import build_measurements
+    from cuespin.physics.motion import z_cross
+    rng = np.random.default_rng(seed)
+    shot, p = sample_shot(seed, "case4" if rolling else "random")
+    ph = phases(shot, p)
+    t, xy = synthetic(shot, p, fps=120.0, seed=seed, t_cut=min(ph.t2 + 0.3, shot.t0 + 3.0))
+    exposure = 1 / 240.0
+    meas = build_measurements(t, xy, 2e-5, t0=shot.t0, t_rest=ph.t2, exposure_s=exposure, frame_dt=1 / 120.0,
+                              shared_rest=True)
+    q = np.r_[shot.x0, shot.t0, shot.v0] if rolling else np.r_[shot.x0, shot.t0, shot.v0, shot.w0]
+    q = q + rng.normal(0.0, [1e-3, 1e-3, 2e-3, 2e-2, 2e-2, 1.0, 1.0][:len(q)])
+
+    def shot_of(q):
+        return Shot(q[0:2], q[3:5], z_cross(q[3:5]) / p.R if rolling else q[5:7], q[2])
+
+    def resid(q):
+        return ar1_prewhiten(meas, meas.whiten(model_track(shot_of(q), p, meas.t_used, exposure)), ar1).ravel()
+
+    J = jacobian_map(meas, ar1)(model_track_jacobian(shot_of(q), p, meas.t_used, exposure, rolling))
+    assert J.shape == (2 * meas.n, len(q))
+    for i in range(len(q)):
+        h = 1e-7 * max(1.0, abs(q[i]))
+        dq = np.zeros_like(q)
+        dq[i] = h
+        num = (resid(q + dq) - resid(q - dq)) / (2 * h)
+        assert np.max(np.abs(num - J[:, i])) < 1e-6 * np.max(np.abs(J[:, i])), i
+
+
 def test_mle_degenerate_when_track_ends_while_sliding():
     shot, p = sample_shot(11, "masse")
     ph = phases(shot, p)

@@ -55,6 +55,21 @@ def test_colour_pixel_formats(tmp_path, codec, pix_fmt, ext):
     np.testing.assert_allclose(res.t, np.arange(res.n_frames) / scene.camera.fps)
 
 
+def test_planes_track_a_yuv420p_video(tmp_path):
+    # The tracker reading the planes (TrackerConfig(planes=True)) finds the
+    # same ball to the same tolerance in a 4:2:0 video.
+    from cuespin.track.tracker import TrackerConfig
+
+    scene = small_scene()
+    truth = FrameRenderer(scene).truth
+    video = tmp_path / "v.avi"
+    write_av(colour_frames(scene, YELLOW, GREY_FELT, noise=2.0, seed=1), video, "ffv1", "yuv420p",
+             scene.camera.fps)
+    res = track_video(video, scene, TrackerConfig(planes=True))
+    assert res.projection.w is not None
+    check_track(res, scene, truth.uv)
+
+
 def test_grey_pixel_format(tmp_path):
     scene = small_scene()
     truth = FrameRenderer(scene).truth
@@ -158,3 +173,63 @@ def test_realistic_look_found_without_false_positives(tmp_path, seed):
     # frames a slid-off look-ahead gave up before the strike not counted).
     after = truth.t > scene.truth.t0 + 0.02
     assert res.ok[after].mean() > 0.95, res.status_counts()
+
+
+@pytest.mark.parametrize("codec", ["MJPG", "H264"])
+def test_planar_windows_are_opencvs_frames(tmp_path, codec):
+    # A 4:2:0 video is read as its planes and converted to BGR by window
+    # (track.reader.PlanarFrame): each window is exactly that part of the
+    # whole frame's conversion (the background is learnt from whole frames,
+    # the ball fitted in windows), and within BGR_LEVELS_TOL of OpenCV's own
+    # decoding of the file (the renderer's writers: OpenCV's MJPG, PyAV's x264).
+    from cuespin.track.reader import BGR_LEVELS_TOL, PlanarFrame
+
+    video, frames, cap = planar_video(tmp_path, codec, {"look": "realistic", "ball_colour": list(YELLOW)})
+    rng = np.random.default_rng(4)
+    n = 0
+    for frame in frames:
+        ok, ref = cap.read()
+        assert ok and isinstance(frame, PlanarFrame)
+        h, w = frame.shape[:2]
+        wins = [(int(v0), int(v0 + dv), int(u0), int(u0 + du)) for v0, u0, dv, du in
+                zip(rng.integers(0, h - 20, 8), rng.integers(0, w - 30, 8), rng.integers(1, 20, 8),
+                    rng.integers(1, 30, 8))]
+        v0, v1, u0, u1 = wins[0]
+        wins.append((v0 + 1, max(v1 - 1, v0 + 1), u0 + 1, max(u1 - 2, u0 + 1)))  # within the last one converted
+        parts = [frame[v0:v1, u0:u1] for v0, v1, u0, u1 in wins]  # before the whole frame is kept
+        whole = np.asarray(frame)
+        assert np.abs(whole.astype(int) - ref).max() <= BGR_LEVELS_TOL
+        for (v0, v1, u0, u1), part in zip(wins, parts):
+            np.testing.assert_array_equal(part, whole[v0:v1, u0:u1])
+        n += 1
+    assert n == 12 and not cap.read()[0]
+
+
+@pytest.mark.parametrize("codec,tol", [("MJPG", 0), ("H264", 1)])
+def test_planar_grey_frames_are_opencvs(tmp_path, codec, tol):
+    # Grey frames (neutral chroma: the plain look) arrive as one channel
+    # from the Y plane: OpenCV's levels exactly at full range (MJPG), within
+    # swscale's rounding against cv2.cvtColor's at BT.601's (measured 1).
+    video, frames, cap = planar_video(tmp_path, codec, {})
+    n = 0
+    for frame in frames:
+        ok, ref = cap.read()
+        assert ok and frame.ndim == 2 and isinstance(frame, np.ndarray)
+        assert np.abs(frame.astype(int) - ref[..., 1]).max() <= tol
+        n += 1
+    assert n == 12
+
+
+def planar_video(tmp_path, codec, look):
+    """12 frames written by the renderer: (path, FrameSource, cv2.VideoCapture)."""
+    import cv2
+
+    from cuespin.render import render_video
+    from cuespin.track.reader import FrameSource, probe
+
+    shot, params = sample_shot(2, "case3")
+    scene = make_scene(Shot(shot.x0, shot.v0, shot.w0, t0=0.02), params, fps=120.0, px_per_m=200.0,
+                       render={"duration": 0.1, "noise_sigma": 3.0, "codec": codec, **look})
+    video = tmp_path / ("v.mp4" if codec == "H264" else "v.avi")
+    render_video(scene, video)
+    return video, FrameSource(video, probe(video), planes=True), cv2.VideoCapture(str(video), cv2.CAP_FFMPEG)

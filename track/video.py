@@ -351,7 +351,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     if radii.r_max > radius_px:
         mask = search_mask(cam, scene.table, R, (h, w), grow_px=radii.r_max)
 
-    source = FrameSource(path, info)
+    source = FrameSource(path, info, planes=config.planes)
     frame_bytes = max(w * h * 3, 1)
     feed = ThreadedFrames(source, QUEUE_BYTES // frame_bytes) if config.threaded else source
     if config.threaded and config.refine == "fit":
@@ -390,7 +390,8 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         first = pull()
         if first is None:
             raise TrackError(f"{path}: the video has no frames that decode")
-        ahead = max(LOOKAHEAD_MIN_FRAMES, LOOKAHEAD_BYTES // first.nbytes)
+        # Counted as decoded 8-bit frames (a PlanarFrame holds half of that).
+        ahead = max(LOOKAHEAD_MIN_FRAMES, LOOKAHEAD_BYTES // int(np.prod(first.shape)))
         buf = [first]
         while len(buf) < ahead and (img := pull()) is not None:
             buf.append(img)
@@ -437,7 +438,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         buf.reverse()  # pop() from the end: the oldest first, each dropped once tracked
         # The frames slid past (a long rest before the strike) from a second
         # pass over the video's start: they are tracked like any other.
-        again = iter(FrameSource(path, info)) if n_dropped else None
+        again = iter(FrameSource(path, info, planes=config.planes)) if n_dropped else None
         while True:
             if k < n_dropped:
                 item = next(again, None)
