@@ -423,6 +423,85 @@ def test_static_labels_computed_only_off_the_cloth_are_the_full_maps(turn, tilt)
     assert np.array_equal(x, xy[..., 0].ravel()) and np.array_equal(y, xy[..., 1].ravel())
 
 
+def test_mark_mask_skips_only_points_no_mark_covers():
+    # The arc cosine is taken only near each mark: the mask is the full
+    # formula's bit for bit, on random normals and on normals straddling the
+    # far end of each mark's antialiased edge (a + 0.5 / radius) by 1e-9 to 1e-5 rad.
+    from cuespin.render import look as lk
+
+    rng = np.random.default_rng(4)
+    for kind, radius_px in (("dots", 12.0), ("logo", 7.5), ("dots", 40.0)):
+        n = [rng.normal(size=(20000, 3))]
+        for c, a in lk.marks(kind):
+            e = np.cross(c, [0.3, 0.5, 0.8])
+            e /= np.linalg.norm(e)
+            ang = a + 0.5 / radius_px + rng.choice([-1, 1], 2000) * 10.0 ** rng.uniform(-9, -5, 2000)
+            n.append(np.cos(ang)[:, None] * c + np.sin(ang)[:, None] * e)
+        n = np.concatenate(n)
+        n /= np.linalg.norm(n, axis=-1, keepdims=True)
+        n = n.reshape(-1, 40, 3)
+        want = np.zeros(n.shape[:-1])
+        for c, a in lk.marks(kind):
+            ang = np.arccos(np.clip(n @ c, -1.0, 1.0))
+            want = np.maximum(want, np.clip((a - ang) * radius_px + 0.5, 0.0, 1.0))
+        got = lk.mark_mask(n, kind, radius_px)
+        assert np.array_equal(got, want)
+        assert 0 < (got > 0).mean() < 0.5
+
+
+def test_lookup_colours_is_the_palettes_rows():
+    from cuespin.render.draw import lookup_colours
+
+    rng = np.random.default_rng(6)
+    palette = rng.uniform(0, 255, (6, 3)).astype(np.float32)
+    for shape in ((37, 53), (500, 16)):
+        labels = rng.integers(0, 6, shape).astype(np.uint8)
+        got = lookup_colours(palette, labels)
+        assert got.dtype == np.float32 and np.array_equal(got, palette[labels])
+
+
+def test_tiles_composited_as_one_stack_are_the_tile_by_tile_sums():
+    # Tiles inside the frame go through one stacked pair of OpenCV calls,
+    # the frame's partial edge tiles one by one: every pixel is numpy's
+    # rint((f + frac) + acc) in float32, clipped, as tile by tile.
+    from cuespin.render.draw import TILE_PX as T
+
+    scene = realistic(noise=3.0, cue=False, balls=[])
+    r = FrameRenderer(scene, n_frames=2)
+    h, w = r.cam.height, r.cam.width
+    rng = np.random.default_rng(5)
+    rows, cols = -(-h // T), -(-w // T)
+    keys = set(zip(rng.integers(0, rows, 40).tolist(), rng.integers(0, cols, 40).tolist()))
+    keys |= {(rows - 1, cols - 1), (rows - 1, 0), (0, cols - 1)}
+    tiles = {k: rng.normal(0, 40, (T, T, 3)).astype(np.float32) for k in keys}
+    r._cue_tiles = lambda k: tiles
+    r._ball_delta = lambda k: (None, 0, 0)
+    got = r._render_realistic(0, np.random.default_rng(9))
+    want = r._noise.add_to(r.background, np.random.default_rng(9))
+    for (ty, tx), acc in tiles.items():
+        sl = (slice(ty * T, ty * T + T), slice(tx * T, tx * T + T))
+        f = want[sl]
+        clean = (f.astype(np.float32) + r._frac[sl]) + acc[:f.shape[0], :f.shape[1]]
+        want[sl] = np.clip(np.rint(clean), 0, 255).astype(np.uint8)
+    assert h % T or w % T, "the scene's frame has no partial edge tiles: the test does not test them"
+    assert np.array_equal(got, want)
+
+
+def test_frames_reusing_the_last_stack_are_drawn_afresh():
+    # While ball and cue are still, a frame reuses the last frame's tiles
+    # and their stack: each frame is what a fresh renderer draws for it.
+    scene = realistic(noise=3.0, cue=False, balls=[], markings="dots")
+    r = FrameRenderer(scene, n_frames=4)
+    assert scene.truth.t0 > 4 / scene.camera.fps, "the ball moves in these frames: nothing is reused"
+    got, stacks = [], []
+    for k in range(4):
+        got.append(r.render(k, np.random.default_rng(k)))
+        stacks.append(r._stack)
+    assert all(s is stacks[0] for s in stacks) and stacks[0][6] is not None
+    for k in (0, 3):
+        assert np.array_equal(FrameRenderer(scene, n_frames=4).render(k, np.random.default_rng(k)), got[k])
+
+
 def test_markings_move_with_spin():
     # A rolling ball's top moves at 2 v: the marks seen from above run ahead
     # of the centre in the direction of motion, and a still ball's do not move.
