@@ -162,3 +162,53 @@ def test_label_table_is_isin():
     n, labels = cv2.connectedComponents(img, connectivity=8)
     pick = rng.choice(n, size=max(n // 3, 1), replace=False)
     assert np.array_equal(_members(n, pick)[labels], np.isin(labels, pick))
+
+
+def test_departure_width_tells_a_ball_from_a_cue():
+    """departure_width: a ball's disc, its crescents (a ball that moved a
+    third of a radius) and a cue's band (0.7 radii wide, 2 long: the cue's
+    departing stretch of sample_scenes(1, 6, realistic)[0]) under noise
+    sigma 6, projected on their colour: the disc and crescents at or over
+    WIDE_MIN, the band under it, each by the margin the shapes' second
+    moments give (disc 0.25, band (0.7)^2 / 12 + blur)."""
+    from cuespin.track.colour import WIDE_MIN, departure_width
+
+    rng = np.random.default_rng(8)
+    R, H, W = 8.0, 64, 64
+    yy, xx = np.mgrid[:H, :W]
+    rest = np.full((4, H, W, 3), 100, np.uint8)  # the samples' median: the felt
+    Li = np.eye(3) / 6.0
+    zhat = np.array([[0.0, -0.6, 0.8]])
+    ball = np.array([0.0, -18.0, 24.0])  # 30 levels along zhat: 5 noise sigmas a pixel
+    cue = np.array([0.0, -60.0, 80.0])   # the cue departs more, as in the clip
+
+    def frame(cover):
+        f = 100.0 + cover + rng.normal(0, 6, (H, W, 3))
+        return np.clip(np.rint(f), 0, 255).astype(np.uint8)
+
+    def width(cover):
+        samples = np.concatenate([frame(cover)[None], rest])
+        return departure_width(samples, 0, np.array([32]), np.array([32]), zhat, int(R), Li)[0]
+
+    disc = (np.hypot(xx - 32, yy - 32) <= R)[..., None] * ball
+    moved = ((np.hypot(xx - 32 - R / 3, yy - 32) <= R).astype(float) - (np.hypot(xx - 32, yy - 32) <= R))[..., None] * ball
+    band = ((np.abs(yy - 32) <= 0.35 * R) & (np.abs(xx - 32) <= R))[..., None] * cue
+    assert width(disc) >= WIDE_MIN + 0.05
+    assert width(moved) >= WIDE_MIN
+    assert width(band) <= WIDE_MIN - 0.05
+
+
+def test_box_noise_scale_is_one_on_independent_noise():
+    """box_noise_scale: ~1 where the noise is independent between pixels
+    (the box mean's noise is the pixel's over k), several where it is
+    shared by blocks (an 8 x 8 block's common error, as MJPG's)."""
+    from cuespin.track.colour import box_noise_scale
+
+    rng = np.random.default_rng(9)
+    a = np.clip(np.rint(100 + rng.normal(0, 5, (240, 320, 3))), 0, 255).astype(np.uint8)
+    b = np.clip(np.rint(100 + rng.normal(0, 5, (240, 320, 3))), 0, 255).astype(np.uint8)
+    L = np.linalg.cholesky(np.eye(3) * 2 * 25 / 2 + np.eye(3) / 12)  # per-pixel covariance of one frame's noise
+    assert 0.85 < box_noise_scale(a, b, 11, L) < 1.2
+    blocks = np.kron(rng.normal(0, 3, (30, 40, 3)), np.ones((8, 8, 1)))
+    c = np.clip(np.rint(100 + rng.normal(0, 5, (240, 320, 3)) + blocks), 0, 255).astype(np.uint8)
+    assert box_noise_scale(a, c, 11, L) > 2.0

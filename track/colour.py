@@ -33,6 +33,37 @@ BALL_SIGMAS = 6.0
 # A box position votes on the ball's colour when its departure is at least
 # this fraction of the largest in its sample (the ball's whole box).
 PEAK_FRACTION = 0.5
+# A sample whose largest departure is narrower than a ball votes on the
+# ball's colour with its positions as wide as a ball, where there are
+# enough of them (:func:`wide_votes`).  Width: the smaller eigenvalue of
+# the central second moments of the departure's size along the position's
+# colour, over a window of the ball's radius each side, in squared radii
+# (a uniform disc 0.25, a band of width w w^2 / 12).
+# Measured (/tmp/cue5/why.py) on sample_scenes(1, 6, realistic, FFV1)[0]
+# cut to 0.8 s (a blue ball with dots on blue felt, a tan cue in view in 7
+# of 9 samples) and its MJPG transcode: the cue's departing stretch (the
+# part of the shaft away from where it lies in most samples, ~2 radii long
+# and 0.7 wide) 0.04-0.14 where it departs most (67-70 levels in box means,
+# the ball's 23-30: the channel was the cue's, R - B, and 31 of 97 frames
+# were found), the ball 0.19-0.25 where it departs most; seed 7 shot 1
+# (480 fps, MJPG), the ball leaving its rest slowly (two crescents of
+# opposite sign: hence the departure's size, not its signed mass) 0.20-0.24.
+WIDE_MIN = 0.15
+# A narrow sample's ball-wide positions vote where they number at least
+# this share of the ball's area (pi r^2 positions): fewer are a fragment
+# (seed 7 shot 4, 480 fps: 8-14 positions by the cue, and the channel from
+# them lost half the frames on MJPG), and the sample votes as before (the
+# cue-tip shot, sample_scene(3): 58-59 of the 67 needed in two samples).
+# Measured on the clip: 36-211 in its narrow samples (48 needed).
+WIDE_COUNT = 0.25
+# The width's window half-width in ball radii: the ball's disc in it.
+WIDE_RADII = 1.0
+# Every this many pixels of the window (each way) enter its moments: a
+# disc's or a band's width is kept, at a quarter of the cost.
+WIDE_STEP = 2
+# The chi distribution's (3 degrees of freedom) 99th percentile: a whitened
+# box mean's noise norm, were the codec's error independent between pixels.
+CHI3_P99 = 3.368
 # Pixels the noise covariance is estimated from: its variances' relative
 # error is sqrt(2 / n), 0.4%, and the medians over a whole 1280 x 720 frame
 # cost ~1.5 s, more than tracking a short shot.
@@ -199,6 +230,110 @@ def departure_box_means(samples: np.ndarray, on: np.ndarray, ys: np.ndarray, xs:
     return out
 
 
+def departure_width(samples: np.ndarray, s: int, ys: np.ndarray, xs: np.ndarray, zhat: np.ndarray,
+                    h: int, Li: np.ndarray) -> np.ndarray:
+    """How wide a sample's departure from the samples' per-pixel median is
+    around the positions ``ys``, ``xs`` (float, shape (m,), in units of
+    ``h``^2: a uniform disc of radius ``h`` 0.25, a band of width ``w``
+    about (w / h)^2 / 12; 0 where nothing departs).
+
+    ``samples``: the samples (n, h, w, 3), uint8; ``s``: the one judged.
+    The departure from the samples' median (:func:`median_u8`, over the
+    windows' pixels only) is
+    whitened (``Li``: the noise's inverse Cholesky factor), projected on the
+    position's unit colour ``zhat`` (m, 3) and taken in size over the
+    (2h + 1)^2 window around it (every ``WIDE_STEP`` pixels); the width is
+    the smaller eigenvalue of its central second moments (about its own
+    centroid, so that a band off the window's centre is still a band).  In
+    size, not signed: a ball that moved less than its diameter between the
+    median's frames and this one departs as two crescents of opposite sign.
+    """
+    H, W = samples.shape[1:3]
+    d = np.arange(-h, h + 1, WIDE_STEP)
+    Y = np.clip(ys[:, None, None] + d[None, :, None], 0, H - 1)
+    X = np.clip(xs[:, None, None] + d[None, None, :], 0, W - 1)
+    win = samples[:, Y, X]                                   # (n, m, K, K, 3)
+    D = win[s].astype(np.float32) - median_u8(win)
+    p = np.abs(np.einsum("mklc,mc->mkl", D, (zhat @ Li).astype(np.float32)).reshape(len(ys), -1))
+    cy, cx = np.meshgrid(d, d, indexing="ij")
+    cx, cy = cx.ravel().astype(np.float32), cy.ravel().astype(np.float32)
+    basis = np.stack([np.ones_like(cx), cx, cy, cx * cx, cy * cy, cx * cy], axis=1)
+    m0, sx, sy, sxx, syy, sxy = (p @ basis).astype(np.float64).T   # the window's moments
+    ok = m0 > 0
+    m0 = np.where(ok, m0, 1.0)
+    mx, my = sx / m0, sy / m0
+    sxx, syy, sxy = sxx / m0 - mx * mx, syy / m0 - my * my, sxy / m0 - mx * my
+    half = 0.5 * (sxx + syy)
+    lmin = half - np.sqrt(np.maximum(half * half - (sxx * syy - sxy * sxy), 0.0))
+    return np.where(ok, lmin / float(h * h), 0.0)
+
+
+def box_noise_scale(a: np.ndarray, b: np.ndarray, k: int, L: np.ndarray) -> float:
+    """How many times the whitened k x k box means' noise exceeds what the
+    per-pixel noise (``L``, its Cholesky factor) gives (float, >= 1): the
+    99th percentile of the norm of two frames' box means' difference
+    (whitened, over sqrt 2; on a 4-pixel grid) over the chi-3's.
+
+    ~1 on lossless video (measured 1.08, sample_scenes(1, 6, realistic,
+    FFV1)[0]); a lossy codec's error is correlated over its blocks and a
+    box mean does not average it away (MJPG: 4.2-5.0, its departures of
+    resting frames reaching 20-22 box sigmas, realistic seed 0 shot 3).
+    """
+    d = cv2.blur(a.astype(np.float32) - b.astype(np.float32), (k, k))[::4, ::4].reshape(-1, 3)
+    z = np.linalg.solve(L, d.T.astype(np.float64)) * (k / np.sqrt(2.0))
+    return max(float(np.percentile(np.sqrt(np.einsum("ij,ij->j", z, z)), 99)) / CHI3_P99, 1.0)
+
+
+def wide_votes(samples: np.ndarray, Z: np.ndarray, norm2: np.ndarray, big: np.ndarray, ys: np.ndarray,
+               xs: np.ndarray, radius_px: float, L: np.ndarray, k: int) -> np.ndarray:
+    """The box positions that vote on the ball's colour (bool, (n, m)):
+    ``big`` (each sample's candidates within ``PEAK_FRACTION`` of its
+    largest; squared whitened box means ``norm2``), except in a sample
+    whose largest departs narrower than a ball (:func:`departure_width`
+    under ``WIDE_MIN``) and beyond the codec's noise (over ``BALL_SIGMAS``
+    of the k x k box means' noise, :func:`box_noise_scale`; within it there
+    is nothing to tell apart) and that holds at least ``WIDE_COUNT`` pi r^2
+    candidates as wide as a ball within ``PEAK_FRACTION`` of the largest of
+    those: there those vote (something else departs most, and the ball
+    departs too).  Judged from each sample's largest down, a few hundred at
+    a time, until the first as wide as a ball and those near it.
+    """
+    n = len(samples)
+    h = max(int(round(WIDE_RADII * radius_px)), 1)
+    Li = np.linalg.inv(L)
+    out = big.copy()
+    cand = norm2 > BALL_SIGMAS**2
+    floor2 = None
+    for s in range(n):
+        o = np.flatnonzero(cand[s])
+        if not len(o):
+            continue
+        o = o[np.argsort(-norm2[s, o], kind="stable")]
+        if departure_width(samples, s, ys[o[:1]], xs[o[:1]], Z[s, o[:1]] / np.sqrt(norm2[s, o[0]]), h, Li)[0] \
+                >= WIDE_MIN:
+            continue
+        if floor2 is None:
+            floor2 = (BALL_SIGMAS * box_noise_scale(samples[0], samples[n // 2], k, L)) ** 2
+        if norm2[s, o[0]] <= floor2:
+            continue
+        wide = np.zeros(len(ys), bool)
+        peak2 = None
+        for i in range(1, len(o), 256):
+            j = o[i:i + 256]
+            if peak2 is not None:
+                j = j[norm2[s, j] > PEAK_FRACTION**2 * peak2]
+            if not len(j):
+                break
+            w = departure_width(samples, s, ys[j], xs[j], Z[s, j] / np.sqrt(norm2[s, j])[:, None], h, Li) >= WIDE_MIN
+            if peak2 is None and w.any():
+                peak2 = norm2[s, j[np.argmax(w)]]
+                w &= norm2[s, j] > PEAK_FRACTION**2 * peak2
+            wide[j] = w
+        if wide.sum() >= WIDE_COUNT * np.pi * radius_px**2:
+            out[s] = wide
+    return out
+
+
 def ball_direction(samples: np.ndarray, ys: np.ndarray, xs: np.ndarray, radius_px,
                    L: np.ndarray) -> np.ndarray | None:
     """The whitened colour direction (unit, shape (3,)) in which the samples
@@ -234,6 +369,11 @@ def ball_direction(samples: np.ndarray, ys: np.ndarray, xs: np.ndarray, radius_p
     # against the ball's 430, and the direction was the codec's).
     peak2 = norm2.max(axis=1, keepdims=True)
     big = (norm2 > BALL_SIGMAS**2) & (norm2 > PEAK_FRACTION**2 * peak2)
+    # Where the largest departure is narrower than a ball and the ball
+    # departs too, the ball's positions vote: a cue's departing stretch, a
+    # band, departs more than a ball close to the felt's colour (WIDE_MIN),
+    # and PEAK_FRACTION then leaves the ball out of its sample.
+    big = wide_votes(samples, Z, norm2, big, ys, xs, as_radius_map(radius_px, (H, W)).r_min, L, k)
     if big.sum() < 10:
         return None
     # One vote per sample (its unit vectors' mean outer product): the ball
