@@ -360,7 +360,8 @@ def _refit(keep: Decided, seg, t, xy, params, exposure_s, fit_friction, run_pape
     elif run_paper and seg:
         paper_sigma = math.sqrt(sigma**2 + max(meas.codec_m2(keep.codec_var), 0.0))
         paper = paper_from_segments(chosen, t, xy, params, paper_sigma, frame_dt, keep.strike_seen, independent,
-                                    curved=keep.curved, near=keep.paper, apart=keep.stop_apart, meas=meas)
+                                    curved=keep.curved, near=keep.paper, apart=keep.stop_apart, meas=meas,
+                                    noise=mle_noise(mle))
     return Estimate(chosen or seg, paper, mle, meas, keep.codec_var, decisions,
                     {"fit": t_fit, "recover": time.perf_counter() - clock}, keep)
 

@@ -110,3 +110,20 @@ def test_no_hac_on_top_of_the_ar1_model(monkeypatch):
     est = estimate(tr.t, tr.xy, sig, tr.params, 0.0)
     assert "autocorrelated" in est.decisions and not calls
     assert est.mle.hac is False and est.decided.hac is False
+
+
+def test_refit_states_the_first_recoverys_paper_errors():
+    # A refit keeping the first recovery's decisions on the SAME track and
+    # camera states the same paper errors: both take the MLE's error model
+    # (AR(1), scale; recover.estimate.mle_noise).  Before, the refit dropped
+    # it and stated 0.38-1.0 of the first's errors on AR(1) tracks.
+    from cuespin.recover.simulate import sliding_tracks
+
+    tr = list(sliding_tracks(6, 1, rho=0.8))[5]
+    sig = np.full(len(tr.t), tr.sigma)
+    first = estimate(tr.t, tr.xy, sig, tr.params, tr.exposure_s, ar1_floor=0.5)
+    assert first.decided.ar1 > 0.5 and first.paper.status == "ok"
+    again = estimate(tr.t, tr.xy, sig, tr.params, tr.exposure_s, ar1_floor=0.5, keep=first.decided)
+    assert again.paper.status == "ok"
+    for key in ("v0", "w0"):
+        assert np.allclose(again.paper.stderr[key], first.paper.stderr[key], rtol=1e-6)
