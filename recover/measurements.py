@@ -441,21 +441,23 @@ def group_shares(frame_cov_used, g, m: int, scatter, min_share: float = 0.0, sca
 
 def linear_covariance(meas: Measurements, weights, ar1: float = 0.0, scale: float = 1.0) -> np.ndarray:
     """Covariance (m^2) of estimates linear in the track's centres, ``x_a =
-    sum_i weights[a, i] xy[i]`` (the same weights on both axes), under the
-    errors ``meas`` states: each frame's covariance (the codec's share
-    included), and between two frames of one rest their share of it
-    (:func:`group_shares`, as the fit has them); frames in no measurement
-    (the strike's) independent.  With ``ar1``, the moving ball's frames
-    (measured one by one) correlated as the maximum-likelihood fit has them
-    (recover.mle.ar1_prewhiten: ``ar1^k`` between frames ``k`` apart, in
-    their whitened errors); all of it times ``scale`` (the fit's
+    sum_i weights[a, i] xy[i]`` (the same weights on both axes), or with
+    per-axis weights (shape (k, n, 2)) the scalars ``q_a = sum_i weights[a,
+    i] . xy[i]``, under the errors ``meas`` states: each frame's covariance
+    (the codec's share included), and between two frames of one rest their
+    share of it (:func:`group_shares`, as the fit has them); frames in no
+    measurement (the strike's) independent.  With ``ar1``, the moving
+    ball's frames (measured one by one) correlated as the maximum-likelihood
+    fit has them (recover.mle.ar1_prewhiten: ``ar1^k`` between frames ``k``
+    apart, in their whitened errors); all of it times ``scale`` (the fit's
     ``max(1, chi2/dof)``).
 
     Parameters
     ----------
     meas : Measurements
-    weights : ndarray, shape (k, n)
-        Per estimate, its weight on each of the track's ``n`` frames.
+    weights : ndarray, shape (k, n) or (k, n, 2)
+        Per estimate, its weight on each of the track's ``n`` frames (both
+        axes alike), or per axis (a scalar estimate).
     ar1 : float
         The errors' lag-1 correlation between neighbouring frames (0: independent).
     scale : float
@@ -463,57 +465,68 @@ def linear_covariance(meas: Measurements, weights, ar1: float = 0.0, scale: floa
 
     Returns
     -------
-    ndarray, shape (2k, 2k)
-        Ordered ``(x_0, y_0, x_1, y_1, ...)``.
+    ndarray, shape (2k, 2k) or (k, k)
+        Ordered ``(x_0, y_0, x_1, y_1, ...)``; per-axis weights: ``(q_0, q_1, ...)``.
     """
     Wt = np.asarray(weights, dtype=float)
-    k = len(Wt)
-    # Every frame's own covariance: sum_i w_a,i w_b,i C_i.
-    out = np.einsum("ai,bi,ijk->ajbk", Wt, Wt, meas.cov)
+    if Wt.ndim == 2:
+        # Both axes alike: estimate a's x and y as two scalars (2a, 2a + 1).
+        G = np.zeros((2 * len(Wt), Wt.shape[1], 2))
+        G[0::2, :, 0] = G[1::2, :, 1] = Wt
+    else:
+        G = Wt
+    # Every frame's own covariance: sum_i G_a,i^T C_i G_b,i.
+    out = np.einsum("aij,ijk,bik->ab", G, meas.cov, G)
     used = meas.used
     if used.any():
         g = meas.group[used]
         m = meas.n
         c, f = group_shares(meas.cov[used], g, m, group_scatter(meas.xy, meas.group, meas.rest_scatter),
                             meas.rest_min_share, meas.rest_scale, meas.rest_scale_dof)
-        # Pairs of frames within one rest: f C (S_a S_b - sum_i w_a,i w_b,i) per rest.
-        Wu = Wt[:, used]
-        S = np.zeros((k, m))
-        for a in range(k):
-            S[a] = np.bincount(g, weights=Wu[a], minlength=m)
-        P = np.zeros((k, k, m))
-        for a in range(k):
-            for b in range(k):
-                P[a, b] = S[a] * S[b] - np.bincount(g, weights=Wu[a] * Wu[b], minlength=m)
-        out += np.einsum("abm,m,mjk->ajbk", P, f, c)
+        # Pairs of frames within one rest: f (S_a^T C S_b - sum_i G_a,i^T C G_b,i) per rest.
+        Gu = G[:, used]
+        S = np.stack([np.stack([np.bincount(g, weights=Gu[a, :, j], minlength=m) for j in range(2)], -1)
+                      for a in range(len(G))])
+        fc = f[:, None, None] * c
+        out += np.einsum("amj,mjk,bmk->ab", S, fc, S) - np.einsum("aij,ijk,bik->ab", Gu, fc[g], Gu)
         if ar1 > 0:
-            out += _ar1_extra(meas, Wt, float(ar1))
-    return scale * out.reshape(2 * k, 2 * k)
+            out += _ar1_extra(meas, G, float(ar1))
+    return scale * out
 
 
-def _ar1_extra(meas: Measurements, Wt, rho: float) -> np.ndarray:
+def _ar1_extra(meas: Measurements, G, rho: float) -> np.ndarray:
     """What AR(1) errors of lag-1 ``rho`` along the single-frame measurements
-    add to :func:`linear_covariance`'s independent sum, shape (k, 2, k, 2):
-    ``sum_(i != j) rho^|k_i - k_j| (w_a,i L_i)(w_b,j L_j)^T`` with ``L_i``
-    each frame's Cholesky factor, over the frame lattice as
+    add to :func:`linear_covariance`'s independent sum, shape (k, k):
+    ``sum_(i != j) rho^|k_i - k_j| (L_i^T G_a,i) . (L_j^T G_b,j)`` with
+    ``L_i`` each frame's Cholesky factor, over the frame lattice as
     recover.mle._ar1_cov_times sums it (a forward and a backward filter)."""
     from scipy.signal import lfilter
     used = np.flatnonzero(meas.used)
     one = used[meas.single[meas.group[used]]]
     if len(one) < 2:
         return 0.0
-    ts = meas.t[one]
-    dt = float(np.median(np.diff(ts)))
-    steps = np.maximum(np.rint(np.diff(ts) / dt), 1.0) if dt > 0 else np.ones(len(ts) - 1)
-    pos = np.r_[0, np.cumsum(steps)].astype(int)
+    pos = frame_lattice(meas.t[one])
     L = np.linalg.cholesky(meas.cov[one] + 1e-30 * np.eye(2))
-    Y = np.einsum("ai,ijk->iajk", Wt[:, one], L)  # (frames, k, 2, 2): estimate a's share of frame i's errors
+    Y = np.einsum("aij,ijl->ial", G[:, one], L)  # (frames, k, 2): estimate a's share of frame i's whitened errors
     lattice = np.zeros((pos[-1] + 1,) + Y.shape[1:])
     lattice[pos] = Y
     fwd = lfilter([1.0], [1.0, -rho], lattice, axis=0)
     bwd = lfilter([1.0], [1.0, -rho], lattice[::-1], axis=0)[::-1]
     S = (fwd + bwd - 2 * lattice)[pos]  # sum over j != i of rho^|i - j| Y_j
-    return np.einsum("iajl,ibkl->ajbk", Y, S)
+    return np.einsum("ial,ibl->ab", Y, S)
+
+
+def frame_lattice(ts) -> np.ndarray:
+    """Each frame's place on the frame lattice (int, the first at 0): its
+    time in median frame steps from the one before, rounded, at least 1 (a
+    dropped frame leaves a gap; recover.mle's AR(1) model and
+    :func:`linear_covariance` count lags on it)."""
+    ts = np.asarray(ts, dtype=float)
+    if len(ts) < 2:
+        return np.zeros(len(ts), dtype=int)
+    dt = float(np.median(np.diff(ts)))
+    steps = np.maximum(np.rint(np.diff(ts) / dt), 1.0) if dt > 0 else np.ones(len(ts) - 1)
+    return np.r_[0, np.cumsum(steps)].astype(int)
 
 
 def _make(t, xy, cov, group, px_to_m=None, rest_scatter: bool = False, rest_min_share: float = 0.0,

@@ -281,6 +281,44 @@ def inputs_covariance(seg, meas, names, noise=(0.0, 1.0)) -> np.ndarray | None:
     return C
 
 
+def parabola_weights(par: Parabola, p) -> np.ndarray:
+    """The converged orthogonal fit's ``(log a, theta, vertex)`` as per-axis
+    weights on its points ``p`` (m), shape (4, n, 2): the fit is locally
+    linear in them, ``dq = -(J^T J)^-1 J^T N dp`` with ``J`` the distances'
+    Jacobian (fit.conics.parabola_jacobian) and ``N`` each point's unit
+    normal (minus its vertex columns)."""
+    from cuespin.fit.conics import parabola_jacobian
+    J = parabola_jacobian(par, p)
+    M = np.linalg.solve(J.T @ J, J.T)  # (4, n)
+    return M[:, :, None] * J[None, :, 2:4]
+
+
+def parabola_inputs_covariance(seg, xy, par: Parabola, meas, noise=(0.0, 1.0)) -> np.ndarray | None:
+    """Covariance of the parabola method's inputs ``(log a, theta, vertex,
+    x0, x1)``, shape (8, 8), all under the track's measurements' errors in
+    one call (recover.measurements.linear_covariance: AR(1), the fit's
+    scale, the terms between the parabola and the end points), plus the
+    breakpoint's own share in ``x1``; None without the segmentation's
+    weights.  (The parabola fit's own covariance takes its frames as
+    independent: on AR(1) tracks of lag-1 0.8 the paper's answers covered
+    59.2% in 95% intervals, RMS z 3.33.)"""
+    from cuespin.recover.measurements import linear_covariance
+    n = len(meas.t) if meas is not None else 0
+    w = segment_weights(seg, n) if meas is not None else None
+    if w is None or len(xy) != n:
+        return None
+    G = np.zeros((8, n, 2))
+    try:
+        G[:4, seg.slide] = parabola_weights(par, np.asarray(xy)[seg.slide])
+    except np.linalg.LinAlgError:
+        return None
+    for k, name in ((4, "x0"), (6, "x1")):
+        G[k, :, 0] = G[k + 1, :, 1] = w[name]
+    C = linear_covariance(meas, G, *noise)
+    C[6:8, 6:8] += seg.geometry_cov.get("x1_t1", np.zeros((2, 2)))
+    return C
+
+
 def geometry_covariance(seg, sigma: float, lossless: bool, meas=None, noise=(0.0, 1.0)) -> np.ndarray:
     """Covariance (m^2) of ``(x0, x1, x2)``, shape (6, 6).
 
@@ -468,8 +506,8 @@ def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, n
                                     near, params)
 
             x = np.r_[np.log(par.parabola.a), par.parabola.theta, par.parabola.vertex, seg.x0, seg.x1]
-            C = None
-            if par.cov is not None:
+            C = parabola_inputs_covariance(seg, xy, par.parabola, meas, noise)
+            if C is None and par.cov is not None:
                 C = np.zeros((8, 8))
                 C[:4, :4] = par.cov
                 C[4:, 4:] = geo[:4, :4]
