@@ -82,3 +82,13 @@ def test_ar1_estimate_unbiased_on_short_tracks():
         fitted.append(est.mle.ar1)
     assert np.mean(fitted) == pytest.approx(RHO, abs=0.055)
     assert np.mean(raw) < RHO - 0.04  # what is corrected: measured 0.589 on 40
+
+
+def test_one_frame_lattice_for_the_fit_and_the_paper():
+    # recover.measurements.frame_lattice: the AR(1) lags the MLE's
+    # prewhitener and the paper's inputs' covariance both count (a dropped
+    # frame a gap of two steps, jitter rounded, a repeated time one step).
+    from cuespin.recover.measurements import frame_lattice
+    t = np.array([0.0, 1.0, 2.02, 4.0, 5.0, 5.0, 6.0]) / 120.0
+    assert frame_lattice(t).tolist() == [0, 1, 2, 4, 5, 6, 7]
+    assert frame_lattice(t[:1]).tolist() == [0]
