@@ -267,18 +267,33 @@ def inputs_covariance(seg, meas, names, noise=(0.0, 1.0)) -> np.ndarray | None:
     errors the track's measurements ``meas`` state (each frame's covariance
     with the codec's share, a rest's frames sharing theirs as the
     maximum-likelihood fit has them: recover.measurements.linear_covariance),
-    plus the breakpoint's own share in ``x1``; None without the weights.
-    ``noise``: the maximum-likelihood fit's ``(ar1, scale)``, its errors'
+    plus the breakpoints' own shares (:func:`breakpoint_shares`); None
+    without the weights.  ``noise``: the maximum-likelihood fit's ``(ar1, scale)``, its errors'
     lag-1 correlation and ``max(1, chi2/dof)`` (linear_covariance)."""
     from cuespin.recover.measurements import linear_covariance
     w = segment_weights(seg, len(meas.t)) if meas is not None else None
     if w is None or any(k not in w for k in names):
         return None
-    C = linear_covariance(meas, np.stack([w[k] for k in names]), *noise)
-    if "x1" in names:
-        k = 2 * list(names).index("x1")
-        C[k:k + 2, k:k + 2] += seg.geometry_cov.get("x1_t1", np.zeros((2, 2)))
-    return C
+    return linear_covariance(meas, np.stack([w[k] for k in names]), *noise) + breakpoint_shares(seg, names)
+
+
+def breakpoint_shares(seg, names) -> np.ndarray:
+    """What the breakpoints' own errors add to the covariance of the
+    segmentation's estimates ``names`` (fit.segment: t0 moves ``x0`` along
+    ``v0``, t1 moves ``x1`` along ``v1``), shape (2k, 2k), ordered as
+    ``names``; beside their weights' share (linear in the frames)."""
+    g = seg.geometry_cov or {}
+    zero = np.zeros((2, 2))
+    out = np.zeros((2 * len(names), 2 * len(names)))
+    at = {k: 2 * i for i, k in enumerate(names)}
+    if "x0" in at:
+        out[at["x0"]:at["x0"] + 2, at["x0"]:at["x0"] + 2] = g.get("x0_t0", zero)
+    if "x1" in at:
+        out[at["x1"]:at["x1"] + 2, at["x1"]:at["x1"] + 2] = g.get("x1_t1", zero)
+    if "x0" in at and "x1" in at:
+        out[at["x0"]:at["x0"] + 2, at["x1"]:at["x1"] + 2] = g.get("x0x1_t", zero)
+        out[at["x1"]:at["x1"] + 2, at["x0"]:at["x0"] + 2] = g.get("x0x1_t", zero).T
+    return out
 
 
 def parabola_weights(par: Parabola, p) -> np.ndarray:
@@ -298,7 +313,7 @@ def parabola_inputs_covariance(seg, xy, par: Parabola, meas, noise=(0.0, 1.0)) -
     x0, x1)``, shape (8, 8), all under the track's measurements' errors in
     one call (recover.measurements.linear_covariance: AR(1), the fit's
     scale, the terms between the parabola and the end points), plus the
-    breakpoint's own share in ``x1``; None without the segmentation's
+    breakpoints' own shares (:func:`breakpoint_shares`); None without the segmentation's
     weights.  (The parabola fit's own covariance takes its frames as
     independent: on AR(1) tracks of lag-1 0.8 the paper's answers covered
     59.2% in 95% intervals, RMS z 3.33.)"""
@@ -315,7 +330,7 @@ def parabola_inputs_covariance(seg, xy, par: Parabola, meas, noise=(0.0, 1.0)) -
     for k, name in ((4, "x0"), (6, "x1")):
         G[k, :, 0] = G[k + 1, :, 1] = w[name]
     C = linear_covariance(meas, G, *noise)
-    C[6:8, 6:8] += seg.geometry_cov.get("x1_t1", np.zeros((2, 2)))
+    C[4:, 4:] += breakpoint_shares(seg, ("x0", "x1"))
     return C
 
 
