@@ -187,26 +187,32 @@ def test_false_stop_apart_rate_400():
     assert total >= 400 and hits <= allowed(total), (hits, total)
 
 
-def test_case2_refused_when_the_stop_is_apart_from_the_rest():
-    # The paper's case 2 takes x1 = x2 only when they agree: a rest moved
-    # 5 mm from where sliding stopped answers failed, never case 2's x1 = x2.
-    from dataclasses import replace
-
-    from cuespin.recover.paper import paper_from_segments, ran_into_rest
+def first_case2_run_into_rest():
+    """The first of ``case2_tracks(8, 23)`` whose segmentation ran sliding
+    into the rest: (track, its segments, frame interval), or a test failure."""
+    from cuespin.recover.paper import ran_into_rest
     from cuespin.recover.simulate import case2_tracks
     for tr in case2_tracks(8, 23):
         p = tr.params
         seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, tr.sigma, tr.exposure_s)
         s = seg if ran_into_rest(seg) else seg.unended
-        if s is None or not ran_into_rest(s):
-            continue
-        dt = float(np.median(np.diff(tr.t)))
-        kept = paper_from_segments(s, tr.t, tr.xy, p, tr.sigma, dt)
-        assert kept.status != "failed" or "run into the rest" not in kept.reason
-        moved = paper_from_segments(replace(s, x2=s.x2 + np.array([5e-3, 0.0])), tr.t, tr.xy, p, tr.sigma, dt)
-        assert moved.status == "failed" and "did not run into the rest" in moved.reason, moved.reason
-        return
+        if s is not None and ran_into_rest(s):
+            return tr, s, float(np.median(np.diff(tr.t)))
     pytest.fail("no case-2 track ran into the rest")
+
+
+def test_case2_refused_when_the_stop_is_apart_from_the_rest():
+    # The paper's case 2 takes x1 = x2 only when they agree: a rest moved
+    # 5 mm from where sliding stopped answers failed, never case 2's x1 = x2.
+    from dataclasses import replace
+
+    from cuespin.recover.paper import paper_from_segments
+    tr, s, dt = first_case2_run_into_rest()
+    p = tr.params
+    kept = paper_from_segments(s, tr.t, tr.xy, p, tr.sigma, dt)
+    assert kept.status != "failed" or "run into the rest" not in kept.reason
+    moved = paper_from_segments(replace(s, x2=s.x2 + np.array([5e-3, 0.0])), tr.t, tr.xy, p, tr.sigma, dt)
+    assert moved.status == "failed" and "did not run into the rest" in moved.reason, moved.reason
 
 
 def test_case2_when_the_stop_is_within_its_errors_of_the_rest():
@@ -218,26 +224,18 @@ def test_case2_when_the_stop_is_within_its_errors_of_the_rest():
     from dataclasses import replace
 
     from cuespin.recover.paper import paper_from_segments, ran_into_rest
-    from cuespin.recover.simulate import case2_tracks
-    for tr in case2_tracks(8, 23):
-        p = tr.params
-        seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, tr.sigma, tr.exposure_s)
-        s = seg if ran_into_rest(seg) else seg.unended
-        if s is None or not ran_into_rest(s):
-            continue
-        dt = float(np.median(np.diff(tr.t)))
-        case2 = paper_from_segments(s, tr.t, tr.xy, p, tr.sigma, dt)
-        assert case2.status == "ok", case2.reason
-        along = (s.x2 - s.x0) / np.hypot(*(s.x2 - s.x0))
-        sd = float(np.sqrt(np.trace(s.geometry_cov["x1"]) / 2))
-        for short, same in ((0.5 * sd, True), (5e-3, False)):
-            early = replace(s, x1=s.x2 - short * along, v1=0.01 * along, t1=s.t2 - 2 * dt)
-            assert not ran_into_rest(early)
-            got = paper_from_segments(early, tr.t, tr.xy, p, tr.sigma, dt)
-            if same:
-                assert got.status == "ok" and got.stop_apart is False, got.reason
-                assert np.allclose(got.v0, case2.v0, rtol=0.05) and np.allclose(got.w0, case2.w0, rtol=0.05, atol=0.1)
-            else:
-                assert got.stop_apart is not False and (got.status != "ok" or not np.allclose(got.w0, case2.w0, rtol=0.05))
-        return
-    pytest.fail("no case-2 track ran into the rest")
+    tr, s, dt = first_case2_run_into_rest()
+    p = tr.params
+    case2 = paper_from_segments(s, tr.t, tr.xy, p, tr.sigma, dt)
+    assert case2.status == "ok", case2.reason
+    along = (s.x2 - s.x0) / np.hypot(*(s.x2 - s.x0))
+    sd = float(np.sqrt(np.trace(s.geometry_cov["x1"]) / 2))
+    for short, same in ((0.5 * sd, True), (5e-3, False)):
+        early = replace(s, x1=s.x2 - short * along, v1=0.01 * along, t1=s.t2 - 2 * dt)
+        assert not ran_into_rest(early)
+        got = paper_from_segments(early, tr.t, tr.xy, p, tr.sigma, dt)
+        if same:
+            assert got.status == "ok" and got.stop_apart is False, got.reason
+            assert np.allclose(got.v0, case2.v0, rtol=0.05) and np.allclose(got.w0, case2.w0, rtol=0.05, atol=0.1)
+        else:
+            assert got.stop_apart is not False and (got.status != "ok" or not np.allclose(got.w0, case2.w0, rtol=0.05))
