@@ -238,9 +238,12 @@ def intervals(rows, n_boot: int = 4000, seed: int = 0, m: str = "mle"):
     # Free slip apart: a rolling answer's errors hold the bound of a slip too
     # short to see (recover.mle.unseen_slip), not a standard error, so its
     # components sit near 0 stated errors and pull the RMS of "all" down.
-    for band, sel in (("all", lambda r: True), ("noise < 0.5", lambda r: r["noise"] < 0.5),
-                      ("noise >= 0.5", lambda r: r["noise"] >= 0.5),
-                      ("free slip answers", lambda r: r.get("mle_model") == "full")):
+    # The paper's method has no free slip / rolling choice: that band is the MLE's.
+    bands = (("all", lambda r: True), ("noise < 0.5", lambda r: r["noise"] < 0.5),
+             ("noise >= 0.5", lambda r: r["noise"] >= 0.5))
+    if m == "mle":
+        bands += (("free slip answers", lambda r: r.get("mle_model") == "full"),)
+    for band, sel in bands:
         ok = [r for r in rows if r[f"{m}_status"] == "ok" and sel(r) and f"{m}_z_{COMPONENTS[0]}" in r
               and np.isfinite(r[f"{m}_z_{COMPONENTS[0]}"])]
         if len(ok) < 2:
