@@ -95,7 +95,8 @@ def mle_bound(scene: Scene, track, mle: dict | None = None, independent: bool = 
         When the information matrix is singular.
     """
     from cuespin.physics import contact_velocity
-    from cuespin.recover.measurements import Measurements, build_measurements, pixel_to_table, table_covariance
+    from cuespin.recover.measurements import (Measurements, build_measurements, pixel_to_table, stated_frames,
+                                              table_covariance)
     from cuespin.recover.mle import crb_covariance
 
     truth, p, cam = scene.truth, scene.physics, scene.camera
@@ -105,8 +106,9 @@ def mle_bound(scene: Scene, track, mle: dict | None = None, independent: bool = 
         if independent:
             meas = build_measurements(meas.t, meas.xy, meas.cov)
     else:
-        t, xy = track.t[track.ok], track.xy[track.ok]
-        cov = table_covariance(cam, xy, track.cov_px[track.ok])
+        cov = table_covariance(cam, track.xy, track.cov_px)
+        ok = track.ok & stated_frames(cov)  # the frames recover_track fits
+        t, xy, cov = track.t[ok], track.xy[ok], cov[ok]
         mle = mle or {}
         if independent or mle.get("t0") is None:
             meas = build_measurements(t, xy, cov)

@@ -13,6 +13,7 @@ import numpy as np
 
 from cuespin.physics.motion import BallParams, Shot, phases
 from cuespin.recover.estimate import Estimate, estimate
+from cuespin.recover.measurements import stated_frames
 
 METHODS = ("paper", "mle", "all")
 
@@ -94,7 +95,8 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
         raise ValueError(f"method must be one of {', '.join(METHODS)}, not {method!r}")
     t = np.asarray(t, dtype=float)
     xy = np.asarray(xy, dtype=float)
-    ok = np.asarray(ok, dtype=bool) & np.all(np.isfinite(xy), axis=1) & np.isfinite(t)
+    # A frame without a stated error is no measurement: left out, as one without a centre.
+    ok = np.asarray(ok, dtype=bool) & np.all(np.isfinite(xy), axis=1) & np.isfinite(t) & stated_frames(stderr_m)
     cov = np.asarray(stderr_m, dtype=float)[ok]
     est = estimate(t[ok], xy[ok], cov, params, exposure_s, lossless, fit_friction,
                    run_paper=method in ("paper", "all"), inter_frame=inter_frame,

@@ -166,6 +166,20 @@ def as_covariance(stderr_or_cov, n: int) -> np.ndarray:
     return cov
 
 
+def stated_frames(stderr_or_cov) -> np.ndarray:
+    """Which frames state their error, shape (n,) bool: a finite, positive
+    definite covariance (or finite positive per-axis errors).  The others
+    carry no measurement and are left out (masked), never weighted: an
+    indefinite one made the measurements' Cholesky fail (a tracker's
+    relearnt fits, seed 22 realistic shot 16, FFV1, before the tracker
+    checked them too)."""
+    a = np.asarray(stderr_or_cov, dtype=float)
+    c = as_covariance(a, len(a))
+    with np.errstate(invalid="ignore"):
+        return (np.all(np.isfinite(c), axis=(1, 2)) & (c[:, 0, 0] > 0) & (c[:, 1, 1] > 0)
+                & (c[:, 0, 0] * c[:, 1, 1] - c[:, 0, 1] * c[:, 1, 0] > 0))
+
+
 def table_covariance(camera, xy, stderr_px) -> np.ndarray:
     """Per-frame covariance in table metres (m^2), shape (n, 2, 2), from the
     tracker's per-axis pixel errors (n, 2) or pixel covariances (n, 2, 2),

@@ -931,7 +931,7 @@ class BallTracker:
         for s, f, lf in self._look_fits:
             g = fit_disc(s.patch, s.felt, s.u0, s.v0, s.c, self.r, s.G, b0=s.b, fit_blur=s.fit_blur, shade=look,
                          valid=s.valid, outline=self.outline, block=self.block)
-            if g:
+            if g and g.stated:  # else the frame keeps its first fit, which stated its error
                 diffuse.append(g.shade[0])
                 f.c[:], f.stderr[:], f.cov[:] = g.c, g.stderr, g.cov
                 if lf is not None:
@@ -1128,7 +1128,7 @@ class BallTracker:
                 again = self._refine(frame, f.c, f.b, recentre=False)
                 if again.status == OK:
                     return again
-            if not (np.all(np.isfinite(f.cov)) and f.cov[0, 0] > 0 and f.cov[1, 1] > 0 and np.linalg.det(f.cov) > 0):
+            if not f.stated:
                 # No stated error is no measurement: a zero covariance would
                 # weigh the frame infinitely downstream (9 frames of seed 0
                 # shot 12 of the realistic benchmark, MJPG, a highlighted

@@ -514,7 +514,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
             if look is not None and kk in patches:
                 g = fit_disc(patches[kk], new, pu, pv, c, radius_px, G, b0=b, fit_blur=fb, shade=look,
                              valid=valid, outline=outline, block=tracker.block)
-            if g:
+            if g and g.stated:  # else shifted: its first fit stated its error
                 uv[kk], cov[kk], rms[kk] = g.c, g.cov, g.rms
             else:
                 uv[kk] = c + refit_shift(old, new, pu, pv, c, b, G, radius_px, fb, shade, outline, valid,
