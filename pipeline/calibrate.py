@@ -1463,14 +1463,9 @@ CLICKED_BOW_MATCH = 0.15
 
 def edges_bow(frame: np.ndarray, corners_px):
     """The lens's bow from the table's edges in ``frame`` (no lens known):
-    ``(kappa, its standard error)`` (px^-2, :class:`Detection`), or None when
-    no outline is found there or it is not the table of ``corners_px``
-    (``CLICKED_BOW_MATCH``)."""
-    return _edges_bow(frame, corners_px)[0]
-
-
-def _edges_bow(frame: np.ndarray, corners_px):
-    """:func:`edges_bow` and, when it is None, why (a phrase for the user)."""
+    ``((kappa, its standard error), "")`` (px^-2, :class:`Detection`), or
+    ``(None, why)`` when no outline is found there or it is not the table
+    of ``corners_px`` (``CLICKED_BOW_MATCH``; ``why`` a phrase for the user)."""
     c = np.asarray(corners_px, dtype=float).reshape(4, 2)
     try:
         det = detect_corners(frame)
@@ -1523,7 +1518,7 @@ def calibrate_clicked(corners_px, size, table: Table = Table(), *, frame=None, u
     bow, straight = None, ""
     if frame is not None and estimate_lens and kw.get("intrinsics") is None and not kw.get("homography") \
             and not kw.get("kappa"):
-        bow, straight = _edges_bow(frame, cal.corners_px)
+        bow, straight = edges_bow(frame, cal.corners_px)
     if bow is not None:
         try:
             cal = calibrate_corners(corners_px, size, table, **dict(kw, kappa=bow[0]))

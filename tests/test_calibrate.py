@@ -594,7 +594,7 @@ def test_clicked_corners_on_a_distorting_lens_take_the_bow_from_the_edges():
     # table's edges in the frame (edges_bow, the automatic path's fit) when the
     # outline found there is the clicked table: f 4.6% RMS off (-11.7..+9.3%),
     # stated 6.0-6.3% (28 independent draws, benchmarks/calibration.py --clicked).
-    from cuespin.pipeline.calibrate import _edges_bow, calibrate_clicked
+    from cuespin.pipeline.calibrate import calibrate_clicked, edges_bow
 
     true = pinhole_camera(height_m=2.0, tilt_deg=10.0, k1=-0.25, R=R, size=SIZE, fps=240.0, roll_deg=1.0)
     img = synthetic_table_frame(true, seed=125, cushion_m=0.05, pockets=True)
@@ -607,7 +607,7 @@ def test_clicked_corners_on_a_distorting_lens_take_the_bow_from_the_edges():
     k1_sigma = float(cal.notes[0].split("+/- ")[1].split()[0])
     assert abs(cal.camera.dist[0] / f**2 * true.K[0, 0] ** 2 + 0.25) < 3.0 * k1_sigma, (cal.camera.dist, k1_sigma)
     # an outline that is not the clicked table's gives no bow, and says why
-    bow, why = _edges_bow(img, c + [0.0, 0.2 * (c[0, 1] - c[3, 1])])
+    bow, why = edges_bow(img, c + [0.0, 0.2 * (c[0, 1] - c[3, 1])])
     assert bow is None and "from the clicked corners" in why, why
 
 

@@ -298,5 +298,5 @@ def test_every_found_frame_states_a_positive_definite_error(tmp_path):
     render_video(scene, video)
     tr = track_video(video, scene, TrackerConfig())
     c = tr.cov_px[tr.ok]
-    assert tr.ok.sum() >= 0.97 * len(tr.ok)  # measured 728 of 736
+    assert tr.ok.sum() >= 0.97 * len(tr.ok)  # measured 728 of 736 (0.989); the refits taken unchecked: 713 (0.969)
     assert np.all(np.isfinite(c)) and np.all(c[:, 0, 0] > 0) and np.all(np.linalg.det(c) > 0)

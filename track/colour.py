@@ -355,7 +355,8 @@ def ball_direction(samples: np.ndarray, ys: np.ndarray, xs: np.ndarray, radius_p
     n, H, W, _ = samples.shape
     # One box for the whole image, the smallest ball's, so that the ball
     # fills it wherever it is (a radius map under perspective).
-    k = box_size(as_radius_map(radius_px, (H, W)).r_min)
+    r_min = as_radius_map(radius_px, (H, W)).r_min
+    k = box_size(r_min)
     on = np.zeros((H, W), np.uint8)
     on[ys, xs] = 1
     on = cv2.dilate(on, np.ones((k, k), np.uint8))
@@ -373,7 +374,7 @@ def ball_direction(samples: np.ndarray, ys: np.ndarray, xs: np.ndarray, radius_p
     # departs too, the ball's positions vote: a cue's departing stretch, a
     # band, departs more than a ball close to the felt's colour (WIDE_MIN),
     # and PEAK_FRACTION then leaves the ball out of its sample.
-    big = wide_votes(samples, Z, norm2, big, ys, xs, as_radius_map(radius_px, (H, W)).r_min, L, k)
+    big = wide_votes(samples, Z, norm2, big, ys, xs, r_min, L, k)
     if big.sum() < 10:
         return None
     # One vote per sample (its unit vectors' mean outer product): the ball
