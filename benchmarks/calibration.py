@@ -69,6 +69,7 @@ from cuespin.physics.motion import phases, positions
 from cuespin.physics.scene import Scene, Table
 from cuespin.pipeline.calibrate import CalibrationError, calibrate_corners, perturbed_cameras, table_corners
 from cuespin.recover.api import recover_track
+from cuespin.recover.calibration import add_calibration_error
 
 SIZE = (1280, 720)
 FPS = 240.0
@@ -88,17 +89,9 @@ def one(shot, params, true, corners_px, mode, rng, track_px, sigma=0.0, propagat
     except CalibrationError:
         return None
     uv = track_pixels(shot, params, true, rng, track_px)
-    r = through(shot, params, cal.camera, *uv)
-    if r is None or not propagate or sigma == 0:
-        return r
-    dv, dw, sv, sw = r
-    extra_v, extra_w = np.zeros(2), np.zeros(2)
-    for cam in perturbed_cameras(corners_px, sigma, SIZE, Table(), fps=FPS, **kw):
-        rk = through(shot, params, cam, *uv)
-        if rk is not None:
-            extra_v += (rk[0] - dv) ** 2
-            extra_w += (rk[1] - dw) ** 2
-    return dv, dw, np.sqrt(sv**2 + extra_v), np.sqrt(sw**2 + extra_w)
+    cams = perturbed_cameras(corners_px, sigma, SIZE, Table(), fps=FPS, **kw) if propagate and sigma else ()
+    r = through(shot, params, cal.camera, *uv, perturbed=cams)
+    return None if r is None else r[:4]
 
 
 def track_pixels(shot, params, true, rng, track_px):
@@ -116,21 +109,44 @@ def track_pixels(shot, params, true, rng, track_px):
     return t, true.to_pixels(xy) + rng.normal(0.0, track_px, (len(t), 2)), track_px
 
 
-def through(shot, params, camera, t, uv, track_px):
-    """Pixels read back through ``camera`` and fitted: errors and stated errors."""
+def fitted(params, camera, t, uv, track_px, keep=None):
+    """The MLE's answer (``recover_track``'s method dict) and its decisions for
+    the pixels read back through ``camera``; ``keep``: an earlier fit's
+    decisions (recover.estimate.Decided), kept as ``cuespin recover`` keeps
+    them in its refits through the perturbed cameras."""
     cam = Scene(physics=params, camera=camera).camera
     xy_m = cam.to_table(uv)
     cov = cam.cov_to_table(xy_m, np.broadcast_to(np.eye(2) * track_px**2, (len(t), 2, 2)))
     se = np.sqrt(np.stack([cov[:, 0, 0], cov[:, 1, 1]], axis=1))
-    out = recover_track(t, xy_m, np.ones(len(t), bool), se, params, 0.0, "mle", False, lossless=True)
-    m = out["methods"]["mle"]
+    out, est = recover_track(t, xy_m, np.ones(len(t), bool), se, params, 0.0, "mle", False, lossless=True,
+                             keep=keep, return_estimate=True)
+    return out["methods"]["mle"], est.decided
+
+
+def through(shot, params, camera, t, uv, track_px, perturbed=(), free=False):
+    """Pixels read back through ``camera`` and fitted: errors and stated errors
+    ``(dv, dw, sv, sw, sv_fit, sw_fit, ar1)`` (2-vectors, m/s; R w0's;
+    ``_fit`` the fit's share alone; ``ar1`` the lag-1 correlation of the
+    AR(1) errors the fit took, 0: none), or None when the
+    fit gave no w0.  With ``perturbed`` (the calibration's cameras) the stated
+    errors carry the calibration's share as ``cuespin recover`` adds it
+    (recover.calibration.add_calibration_error, each refit keeping this
+    fit's decisions; NaN when a refit gave no answer: the share unknown);
+    ``free``: each refit re-deciding (the fit's AR(1) model, segmentation,
+    ...), as this benchmark did before clicked13 (not what the recovery does:
+    measured, docs/measurements.md)."""
+    m, decided = fitted(params, camera, t, uv, track_px)
     if m["status"] != "ok" or m.get("w0") is None:
         return None
+    if perturbed:
+        add_calibration_error({"mle": m}, lambda c: {"mle": fitted(params, c, t, uv, track_px,
+                                                                    None if free else decided)[0]}, perturbed)
+    se = {k: np.nan * np.ones(2) if v is None else np.array(v, dtype=float) for k, v in m["stderr"].items()}
+    fit = m.get("stderr_fit") or m["stderr"]
     dv = np.array(m["v0"]) - shot.v0
     dw = params.R * (np.array(m["w0"]) - shot.w0)
-    sv = np.array(m["stderr"]["v0"])
-    sw = params.R * np.array(m["stderr"]["w0"])
-    return dv, dw, sv, sw
+    return (dv, dw, se["v0"], params.R * se["w0"], np.array(fit["v0"], float), params.R * np.array(fit["w0"], float),
+            decided.ar1)
 
 
 def auto(args):
@@ -184,22 +200,17 @@ def auto(args):
             shot, params = sample_shot(args.seed * 1000 + i, "random")
             tr = Scene(physics=params, camera=true).camera
             uv = track_pixels(shot, params, tr, np.random.default_rng(i), args.track_px)
-            r = {name: through(shot, params, c, *uv) for name, c in (("exact", true), ("auto", cal.camera))}
-            if r["exact"] is None or r["auto"] is None:
+            r = {"exact": through(shot, params, true, *uv),
+                 "auto": through(shot, params, cal.camera, *uv, perturbed=pert)}   # the share as the recovery adds it
+            if r["exact"] is None or r["auto"] is None or np.isnan(r["auto"][2]).any():
                 continue                    # paired: the same shots in both columns
-            res["exact"].append(r["exact"])
-            dv, dw, sv, sw = r["auto"]
-            extra_v, extra_w = np.zeros(2), np.zeros(2)
-            for c in pert:                  # the calibration's share, as the recovery adds it
-                rk = through(shot, params, c, *uv)
-                if rk is not None:
-                    extra_v += (rk[0] - dv) ** 2
-                    extra_w += (rk[1] - dw) ** 2
-            res["auto"].append((dv, dw, np.sqrt(sv**2 + extra_v), np.sqrt(sw**2 + extra_w)))
+            res["exact"].append(r["exact"][:4])
+            dv, dw, sv, sw, sfv, sfw, _ = r["auto"]
+            res["auto"].append((dv, dw, sv, sw))
             # the calibration's own error (the answer's move from the exact camera's, the same
             # track) in units of the share it states: the fit's own error left out
-            cal_z.append(np.concatenate([(dv - r["exact"][0]) / np.sqrt(extra_v),
-                                         (dw - r["exact"][1]) / np.sqrt(extra_w)]))
+            cal_z.append(np.concatenate([(dv - r["exact"][0]) / np.sqrt(sv**2 - sfv**2),
+                                         (dw - r["exact"][1]) / np.sqrt(sw**2 - sfw**2)]))
             f_err.append((cal.camera.K[0, 0] / true.K[0, 0] - 1, getattr(cal, "focal_sigma", None) or 0.0))
         rv = {k: np.sqrt(np.mean([np.sum(r[0] ** 2) / 2 for r in v])) for k, v in res.items()}
         rw = {k: np.sqrt(np.mean([np.sum(r[1] ** 2) / 2 for r in v])) for k, v in res.items()}
@@ -305,7 +316,8 @@ def clicked(args):
     length by the one rule, the drawn frame's still balls; or the lens known,
     ``intrinsics``): per camera (``--cameras H,T,K1;...``), the real v0 and
     R w0 errors beside the stated ones with the calibration's share (the
-    same track refitted through the perturbed cameras), their RMS z and the
+    same track refitted through the perturbed cameras, keeping the fit's
+    decisions, as ``cuespin recover`` does), their RMS z and the
     coverage of the stated 95% intervals with a 95% bootstrap interval."""
     from cuespin.pipeline.calibrate import synthetic_table_frame
 
@@ -339,29 +351,31 @@ def clicked(args):
                     continue
                 tr = Scene(physics=params, camera=true).camera
                 uv = track_pixels(shot, params, tr, rng, args.track_px)
-                r = through(shot, params, cal.camera, *uv)
+                r = through(shot, params, cal.camera, *uv, perturbed=cal.perturbed)
                 if r is None:
                     continue
-                dv, dw, sv, sw = r
-                extra_v, extra_w = np.zeros(2), np.zeros(2)
-                for cam in cal.perturbed:           # the calibration's share, as the recovery adds it
-                    rk = through(shot, params, cam, *uv)
-                    if rk is not None:
-                        extra_v += (rk[0] - dv) ** 2
-                        extra_w += (rk[1] - dw) ** 2
-                    else:                           # its share left out: counted, said
-                        failed += 1
-                rows.append((dv, dw, np.sqrt(sv**2 + extra_v), np.sqrt(sw**2 + extra_w), sv))
+                dv, dw, sv, sw, sf, _, ar1 = r
+                if np.isnan(sv).any() or np.isnan(sw).any():   # a refit without an answer: no stated error
+                    failed += 1
+                    continue
+                rows.append((dv, dw, sv, sw, sf))
                 srcs.append(cal.focal_source)
                 f_err.append((cal.camera.K[0, 0] / true.K[0, 0] - 1, getattr(cal, "focal_sigma", None) or 0.0))
                 z = np.concatenate([dv / rows[-1][2], dw / rows[-1][3]])
                 print(f"  {height:g},{tilt:g},{k1:+.2f} {mode} shot {i}: f {f_err[-1][0]:+.2%} z "
-                      + " ".join(f"{v:+.2f}" for v in z), flush=True)
+                      + " ".join(f"{v:+.2f}" for v in z) + f" ar1 {ar1:.2f}", flush=True)
+                if args.also_free:      # the same draw, the refits re-deciding (before clicked13): its own line
+                    rf = through(shot, params, cal.camera, *uv, perturbed=cal.perturbed, free=True)
+                    if not np.isnan(rf[2]).any() and not np.isnan(rf[3]).any():
+                        print(f"  {height:g},{tilt:g},{k1:+.2f} {mode}-free shot {i}: f {f_err[-1][0]:+.2%} z "
+                              + " ".join(f"{v:+.2f}" for v in np.concatenate([rf[0] / rf[2], rf[1] / rf[3]]))
+                              + f" ar1 {rf[6]:.2f}", flush=True)
             if not rows:
                 print(f"{height:6.1f} {tilt:4.0f} {k1:+.2f} {mode:10s} | 0")
                 continue
             if failed:
-                print(f"  {failed} perturbed cameras' fits failed (their share left out)")
+                print(f"  {failed} draws without a stated error (a refit through a perturbed camera gave no "
+                      "answer: the recovery then states the calibration's share unknown)")
             dv, dw, sv, sw, sf = (np.array([r[k] for r in rows]) for k in range(5))
             zv, zw = dv / sv, dw / sw
             inside = np.abs(np.concatenate([zv, zw], axis=1)) < 1.96
@@ -558,6 +572,9 @@ def main():
                     help="corners clicked --corner-px off, calibrated as calibrate --corners does: real and "
                          "stated v0, w0 errors per camera (--cameras, --modes)")
     ap.add_argument("--corner-px", type=float, default=1.0, help="--clicked: the clicks' error (px per coordinate)")
+    ap.add_argument("--also-free", action="store_true",
+                    help="--clicked: also each draw with the refits re-deciding (the fit's AR(1) model, ...), "
+                         "as this benchmark did before clicked13, on its own line (mode MODE-free)")
     ap.add_argument("--modes", default="corners,intrinsics",
                     help="--clicked: corners (the focal length by the rule) and/or intrinsics (the lens known)")
     ap.add_argument("--tilts", default="2,2.5,3", help="--focal: tilts (deg)")
