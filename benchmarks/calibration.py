@@ -110,17 +110,18 @@ def track_pixels(shot, params, true, rng, track_px):
 
 
 def fitted(params, camera, t, uv, track_px, keep=None):
-    """The MLE's answer (``recover_track``'s method dict) and its decisions for
-    the pixels read back through ``camera``; ``keep``: an earlier fit's
-    decisions (recover.estimate.Decided), kept as ``cuespin recover`` keeps
-    them in its refits through the perturbed cameras."""
+    """The MLE's answer (``recover_track``'s method dict) and the estimate
+    (its decisions, its fit's whitened residuals) for the pixels read back
+    through ``camera``; ``keep``: an earlier fit's decisions
+    (recover.estimate.Decided), kept as ``cuespin recover`` keeps them in its
+    refits through the perturbed cameras."""
     cam = Scene(physics=params, camera=camera).camera
     xy_m = cam.to_table(uv)
     cov = cam.cov_to_table(xy_m, np.broadcast_to(np.eye(2) * track_px**2, (len(t), 2, 2)))
     se = np.sqrt(np.stack([cov[:, 0, 0], cov[:, 1, 1]], axis=1))
     out, est = recover_track(t, xy_m, np.ones(len(t), bool), se, params, 0.0, "mle", False, lossless=True,
                              keep=keep, return_estimate=True)
-    return out["methods"]["mle"], est.decided
+    return out["methods"]["mle"], est
 
 
 def through(shot, params, camera, t, uv, track_px, perturbed=(), free=False):
@@ -135,7 +136,8 @@ def through(shot, params, camera, t, uv, track_px, perturbed=(), free=False):
     ``free``: each refit re-deciding (the fit's AR(1) model, segmentation,
     ...), as this benchmark did before clicked13 (not what the recovery does:
     measured, docs/measurements.md)."""
-    m, decided = fitted(params, camera, t, uv, track_px)
+    m, est = fitted(params, camera, t, uv, track_px)
+    decided = est.decided
     if m["status"] != "ok" or m.get("w0") is None:
         return None
     if perturbed:
@@ -147,6 +149,34 @@ def through(shot, params, camera, t, uv, track_px, perturbed=(), free=False):
     dw = params.R * (np.array(m["w0"]) - shot.w0)
     return (dv, dw, se["v0"], params.R * se["w0"], np.array(fit["v0"], float), params.R * np.array(fit["w0"], float),
             decided.ar1)
+
+
+def joint_z(shot, params, camera, perturbed, t, uv, track_px):
+    """z (v0, R w0) of the answer corrected by what the track says about the
+    calibration (recover.calibration.track_posterior: one Gauss-Newton step
+    on the perturbed cameras' moves under their prior, from the refits'
+    whitened residuals), against the fit's error and the calibration's
+    remaining one; None when a fit or refit gives no answer."""
+    from cuespin.recover.calibration import track_posterior
+
+    def answer(m):
+        ok = m["status"] == "ok" and m.get("w0") is not None
+        return np.r_[m["v0"], params.R * np.asarray(m["w0"])] if ok else None
+
+    m, est = fitted(params, camera, t, uv, track_px)
+    q = answer(m)
+    if q is None or est.mle.residuals is None:
+        return None
+    r = est.mle.residuals.ravel()
+    refits = [fitted(params, c, t, uv, track_px, keep=est.decided) for c in perturbed]
+    shifts = [answer(mk) for mk, _ in refits]
+    if any(a is None for a in shifts) or any(e.mle.residuals is None or e.mle.residuals.size != r.size
+                                              for _, e in refits):
+        return None
+    corr, var = track_posterior(np.array(shifts) - q, [e.mle.residuals.ravel() - r for _, e in refits], r)
+    sf = np.r_[m["stderr"]["v0"], params.R * np.asarray(m["stderr"]["w0"])]
+    truth = np.r_[shot.v0, params.R * np.asarray(shot.w0)]
+    return (q + corr - truth) / np.sqrt(sf**2 + var)
 
 
 def auto(args):
@@ -364,6 +394,11 @@ def clicked(args):
                 z = np.concatenate([dv / rows[-1][2], dw / rows[-1][3]])
                 print(f"  {height:g},{tilt:g},{k1:+.2f} {mode} shot {i}: f {f_err[-1][0]:+.2%} z "
                       + " ".join(f"{v:+.2f}" for v in z) + f" ar1 {ar1:.2f}", flush=True)
+                if args.joint:          # the same draw, the answer corrected by what the track says: its own line
+                    zj = joint_z(shot, params, cal.camera, cal.perturbed, *uv)
+                    if zj is not None:
+                        print(f"  {height:g},{tilt:g},{k1:+.2f} {mode}-joint shot {i}: f {f_err[-1][0]:+.2%} z "
+                              + " ".join(f"{v:+.2f}" for v in zj) + f" ar1 {ar1:.2f}", flush=True)
                 if args.also_free:      # the same draw, the refits re-deciding (before clicked13): its own line
                     rf = through(shot, params, cal.camera, *uv, perturbed=cal.perturbed, free=True)
                     if not np.isnan(rf[2]).any() and not np.isnan(rf[3]).any():
@@ -572,6 +607,9 @@ def main():
                     help="corners clicked --corner-px off, calibrated as calibrate --corners does: real and "
                          "stated v0, w0 errors per camera (--cameras, --modes)")
     ap.add_argument("--corner-px", type=float, default=1.0, help="--clicked: the clicks' error (px per coordinate)")
+    ap.add_argument("--joint", action="store_true",
+                    help="--clicked: also each draw corrected by what the track says about the camera "
+                         "(recover.calibration.track_posterior), on its own line (mode MODE-joint)")
     ap.add_argument("--also-free", action="store_true",
                     help="--clicked: also each draw with the refits re-deciding (the fit's AR(1) model, ...), "
                          "as this benchmark did before clicked13, on its own line (mode MODE-free)")

@@ -107,3 +107,42 @@ def add_calibration_error(methods: dict, refit: Callable[[object], dict], camera
                 continue
             se[key] = np.sqrt(np.square(se[key]) + np.asarray(v)).tolist()
         m["stderr"] = se
+
+
+def track_posterior(shifts, residual_shifts, residuals) -> tuple[np.ndarray, np.ndarray]:
+    """What the track itself says about the calibration (not used by the
+    recovery yet: measured offline, docs/measurements.md, clicked13).
+
+    Each perturbed camera is a one-standard-error move of one independent
+    unit of the calibration's error (a corner coordinate, f's or the bow's
+    share), so the moves' prior is N(0, I).  Refitted with the main fit's
+    decisions, camera k moves the answer by ``shifts[k]`` and the fit's
+    whitened residuals by ``residual_shifts[k]``; to first order the main
+    fit's residuals are ``r = B eps + noise`` (unit, white) with ``eps`` the
+    calibration's actual error in those units.  One Gauss-Newton step under
+    the prior: ``eps = (B'B + I)^-1 B' r``, the answer's correction
+    ``-J eps`` and the calibration's remaining variance ``diag(J (B'B +
+    I)^-1 J')``.
+
+    Parameters
+    ----------
+    shifts : array_like, shape (m, p)
+        ``q_k - q`` of the p answers (any units) for the m cameras.
+    residual_shifts : array_like, shape (m, n)
+        The refits' whitened residuals minus the main fit's (flattened).
+    residuals : array_like, shape (n,)
+        The main fit's whitened residuals.
+
+    Returns
+    -------
+    correction : ndarray, shape (p,)
+        ``-J eps``, to add to the answer.
+    variance : ndarray, shape (p,)
+        The calibration's variance of each answer given the track (<= the
+        prior's ``sum_k (q_k - q)^2``).
+    """
+    J = np.asarray(shifts, dtype=float).T
+    B = np.asarray(residual_shifts, dtype=float).T
+    P = np.linalg.inv(B.T @ B + np.eye(B.shape[1]))
+    eps = P @ (B.T @ np.asarray(residuals, dtype=float))
+    return -J @ eps, np.einsum("ij,jk,ik->i", J, P, J)

@@ -196,3 +196,23 @@ def test_clicked_corners_share_is_first_order(seed):
     one_sided = np.sqrt(np.sum((plus - q) ** 2, axis=0))
     central = np.sqrt(np.sum(((plus - minus) / 2) ** 2, axis=0))
     assert np.all(np.abs(one_sided / central - 1.0) < FIRST_ORDER_TOL), one_sided / central
+
+
+def test_track_posterior_recovers_a_seen_calibration_error():
+    """A calibration error the residuals see (r = B eps + unit noise): the
+    posterior's correction brings the answer within 3 of its stated errors
+    of the truth, its variance under the prior's; one the residuals do not
+    see (B = 0) leaves the answer and the prior's variance."""
+    from cuespin.recover.calibration import track_posterior
+    rng = np.random.default_rng(3)
+    m, n, p = 8, 400, 4
+    J = rng.normal(0.0, 1.0, (m, p))
+    B = rng.normal(0.0, 0.5, (m, n))
+    eps = rng.normal(0.0, 1.0, m)
+    r = eps @ B + rng.normal(0.0, 1.0, n)
+    shift, var = track_posterior(J, B, r)
+    err = J.T @ eps + shift                     # the answer's calibration error after the correction
+    assert np.all(np.abs(err) < 3.0 * np.sqrt(var)), (err, np.sqrt(var))
+    assert np.all(var < np.sum(J**2, axis=0))
+    shift0, var0 = track_posterior(J, np.zeros((m, n)), r)
+    assert np.allclose(shift0, 0.0) and np.allclose(var0, np.sum(J**2, axis=0))
