@@ -27,7 +27,7 @@ from cuespin.videoio import quiet_native_stderr
 from cuespin.track.background import Background, FeltAccumulator, learn_background
 from cuespin.track.colour import GREY, Projection, learn_projection
 from cuespin.track.projection import projected_centres
-from cuespin.track.misfit import LookMisfit, error_ar1, look_misfit
+from cuespin.track.misfit import LookMisfit, codec_variance, error_ar1, look_misfit
 from cuespin.track.path import off_path
 from cuespin.track.radius import RadiusMap
 from cuespin.track.model import SphereLook, fit_disc, refit_shift, warm_up
@@ -570,6 +570,10 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     # k1 +0.25: factor ~900, stated errors 30 times the real ones).  Table
     # metres at the image centre's scale, so that the misfit's thresholds
     # stay in px (a similarity camera: the same numbers as in px).
+    # MJPG's chroma blocks' error over the whole JPEG block, which each
+    # frame's sandwich leaves out (track.misfit.JPEG_CHROMA_VAR): before the
+    # look's factor, so that the track does not measure it a second time.
+    cov[ok] *= codec_variance(info.lossless, info.inter_frame, tracker.block)
     misfit = LookMisfit()
     if bg.polarity and tracker.shade is not False and ok.any():
         s = cam.px_per_m(center)
