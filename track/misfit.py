@@ -114,13 +114,13 @@ EDGE_FRAMES = 2
 # frames stated smallest err most (mean squared err/se by the track's own
 # terciles of stated error 1.05-3.3, 0.5-2.0, 0.3-1.0 on 14 shots), so the
 # stated variance falls short on the whole.  The value: the median over
-# the 16 luma-blind MJPG shots of `benchmarks/track.py realistic --n 20
-# --seconds 0.8 --seed 0` (shot 12 missing) of each shot's mean squared
-# err/se over its moving frames before the look's factor, 1.47 (shots of
-# even index 1.35, odd 1.49); err/se there median 1.21 -> 1.01, within
-# 0.8-1.25 10 -> 13 of 16 (two uniform balls already stated too large,
-# 0.60 and 0.85, go to 0.50 and 0.71).  Every blocks' fit's covariance on
-# such a video is multiplied by it.
+# the 17 luma-blind MJPG shots of `benchmarks/track.py realistic --n 20
+# --seconds 0.8 --seed 0` of each shot's mean squared err/se over its
+# moving frames before the look's factor, 1.47 (shots of even index 1.41,
+# odd 1.49); err/se there median 1.21 -> 1.01, within 0.8-1.25 10 -> 14 of
+# 17 (two uniform balls already stated too large, 0.60 and 0.85, go to
+# 0.50 and 0.71).  Every blocks' fit's covariance on such a video is
+# multiplied by it.
 JPEG_CHROMA_VAR = 1.45
 
 
