@@ -362,7 +362,6 @@ __all__ = ["JPEG_CHROMA_VAR", "LookMisfit", "codec_variance", "look_misfit", "re
            "third_difference_weights", "variance_ratios"]
 
 
-
 def codec_variance(lossless: bool, inter_frame: bool, block: int) -> float:
     """What a frame's stated covariance is multiplied by for the codec's
     error it leaves out: ``JPEG_CHROMA_VAR`` for fits on the chroma's blocks

@@ -554,6 +554,11 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         why = (" (the ball never moved, or is not in view; do physics.R and the camera "
                "match the video?)")
         error = f"no ball found in any of {k} frames" + (f"; {error}" if error else why)
+    # The share of MJPG's error on the chroma's blocks that each frame's
+    # sandwich leaves out (track.misfit.JPEG_CHROMA_VAR, measured against the
+    # truth): before the look's factor, so that the track does not measure
+    # it a second time.
+    cov[ok] *= codec_variance(info.lossless, info.inter_frame, tracker.block)
     # What the ball's model misses, seen along the track (its stated errors
     # are the per-frame fits' own; see track.misfit).  Only where the fits
     # modelled the look (shaded: the first frames showed the disc does not
@@ -570,10 +575,6 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     # k1 +0.25: factor ~900, stated errors 30 times the real ones).  Table
     # metres at the image centre's scale, so that the misfit's thresholds
     # stay in px (a similarity camera: the same numbers as in px).
-    # MJPG's chroma blocks' error over the whole JPEG block, which each
-    # frame's sandwich leaves out (track.misfit.JPEG_CHROMA_VAR): before the
-    # look's factor, so that the track does not measure it a second time.
-    cov[ok] *= codec_variance(info.lossless, info.inter_frame, tracker.block)
     misfit = LookMisfit()
     if bg.polarity and tracker.shade is not False and ok.any():
         s = cam.px_per_m(center)
