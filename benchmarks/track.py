@@ -41,6 +41,7 @@ realistic: per look of the realistic renderer (uniform, shaded, highlight,
 Usage: python benchmarks/track.py [speed] [memory] [colour] [accuracy] [realistic] [--quick] [--frames 1000 10000]
                                   [--repeat 3] [--threads]
                                   [--n 60] [--seed 0] [--workers 2] [--seconds 0.6] [--csv out.csv]
+                                  [--shots I ...] [--frames-out DIR] [--codecs ffv1 mjpg grey]
        python benchmarks/track.py realistic --summarize out.csv
 """
 
@@ -371,7 +372,7 @@ def _track_stats(res, tuv, t, t0, r, cam):
 
 def realistic_shot(args):
     """Render, transcode, track three ways and bound one realistic shot: one CSV row."""
-    i, seed, seconds, tmp = args
+    i, seed, seconds, tmp, frames_dir, codecs = args
     import pandas as pd
 
     from cuespin.render import render_video
@@ -407,10 +408,23 @@ def realistic_shot(args):
     cfg = TrackerConfig(threaded=False)
     goods = {}
     for name, video in (("ffv1", path), ("mjpg", mj), ("grey", grey)):
+        if name not in codecs:
+            continue
         res = track_video(video, scene, cfg)
         stats, goods[name] = _track_stats(res, tuv, t, scene.truth.t0, res.radius_px, cam)
         row.update({f"{name}_{k}": v for k, v in stats.items()})
+        if frames_dir:
+            n = min(res.n_frames, len(tuv))
+            np.savez(Path(frames_dir) / f"shot{i}_{name}.npz", t=t[:n], tuv=tuv[:n], uv=res.uv[:n],
+                     cov=res.cov_px[:n], good=goods[name], factor=res.look_factor, rho=res.look_rho,
+                     fit_rms=res.fit_rms[:n] if res.fit_rms is not None else np.full(n, np.nan),
+                     radius=res.radius_px, t0=scene.truth.t0, lossless=res.lossless,
+                     luma_blind=bool(res.projection.luma_blind), shaded=res.look_shaded)
+    for video in (path, mj, grey):
         video.unlink()
+    if "ffv1" not in goods:  # the bound goes with the full table only
+        row["bound"] = row["bound_grey"] = float("nan")
+        return row
     r = FrameRenderer(scene)
     moving = np.flatnonzero(goods["ffv1"]) if goods["ffv1"].any() else np.flatnonzero(t > scene.truth.t0 + 0.02)
     b_col, b_grey = [], []
@@ -431,7 +445,8 @@ def realistic(args):
 
     rows = []
     with tempfile.TemporaryDirectory() as tmp, Pool(args.workers) as pool:
-        jobs = [(i, args.seed, args.seconds, tmp) for i in range(args.n)]
+        shots = args.shots if args.shots else range(args.n)
+        jobs = [(i, args.seed, args.seconds, tmp, args.frames_out, args.codecs) for i in shots]
         out = None
         for row in pool.imap_unordered(realistic_shot, jobs):
             rows.append(row)
@@ -445,7 +460,8 @@ def realistic(args):
                     w.writeheader()
                 w.writerow(row)
                 out.flush()
-    realistic_table(rows)
+    if set(args.codecs) == {"ffv1", "mjpg", "grey"}:
+        realistic_table(rows)
 
 
 def realistic_table(rows):
@@ -481,6 +497,12 @@ def main():
     ap.add_argument("--workers", type=int, default=2, help="realistic: worker processes")
     ap.add_argument("--seconds", type=float, default=0.6, help="realistic: video length cap (s)")
     ap.add_argument("--csv", default=None, help="realistic: write every shot's row here")
+    ap.add_argument("--shots", type=int, nargs="+", default=None,
+                    help="realistic: only these shots (indices of the --n set's sample)")
+    ap.add_argument("--frames-out", default=None,
+                    help="realistic: a directory to write each shot's per-frame track (npz) into")
+    ap.add_argument("--codecs", nargs="+", default=["ffv1", "mjpg", "grey"], choices=["ffv1", "mjpg", "grey"],
+                    help="realistic: track only these (the table needs all three; the CSV has what was tracked)")
     ap.add_argument("--summarize", default=None, help="realistic: only print the table of a CSV written before")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--threads", action="store_true", help="speed: each run's CPU by thread (Linux)")

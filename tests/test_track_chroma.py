@@ -6,6 +6,7 @@ from cuespin.data_gen.sampler import sample_scenes
 from cuespin.render.draw import FrameRenderer
 from cuespin.render.video import encode_frames
 from cuespin.track.colour import learn_projection
+from cuespin.track.misfit import JPEG_CHROMA_VAR, codec_variance
 from cuespin.track.model import fit_disc, streak_model
 from cuespin.track.reader import FrameSource, probe
 from cuespin.track.tracker import FIT_BLUR_PX
@@ -120,3 +121,23 @@ def test_blocks_stated_error_independent_noise():
         assert f.ok
         z.append((f.c - c) / f.stderr)
     assert 0.93 < np.sqrt(np.mean(np.square(z))) < 1.35
+
+
+def test_codec_variance_only_on_an_intra_frame_lossy_codecs_blocks():
+    assert codec_variance(lossless=False, inter_frame=False, block=2) == JPEG_CHROMA_VAR > 1
+    assert codec_variance(lossless=True, inter_frame=False, block=2) == 1.0  # FFV1 yuv420p: no quantisation
+    assert codec_variance(lossless=False, inter_frame=True, block=2) == 1.0  # H.264: recover.mle.INTER_CODEC_ACF
+    assert codec_variance(lossless=False, inter_frame=False, block=1) == 1.0  # grey, or a projection seeing luma
+
+
+def test_blocks_stated_error_on_mjpg_with_the_codec_term(shot7):
+    # The same 48 frames' blocks' fits with the covariance the tracker
+    # states on MJPG (track.misfit.codec_variance from the probed stream):
+    # err/se 1.334 without it (test_blocks_stated_error_on_mjpg; u 1.65,
+    # v 0.91), 1.108 with it (codecerr12).  Band: 1 +- 3 standard errors of
+    # an RMS of 96 values (0.072): 1.334 is above it.
+    proj, info, out, uv = shot7
+    V = codec_variance(info.lossless, info.inter_frame, 2)
+    z = out[:, 1, 1:3] / (out[:, 1, 3:5] * np.sqrt(V))
+    assert V == JPEG_CHROMA_VAR
+    assert 1 - 3 * 0.072 < np.sqrt(np.mean(z**2)) < 1 + 3 * 0.072

@@ -103,6 +103,26 @@ KINK_GRID = 48
 # Frames dropped at each end of a run of moving frames (see variance_ratios).
 EDGE_FRAMES = 2
 
+# An intra-frame lossy codec's (MJPG's) share of a chroma blocks' fit's
+# error that its stated error leaves out.  Measured (codecerr12,
+# docs/measurements.md): on the chroma's blocks the codec's error is most of
+# the centre's (one shot's frames fitted from the true centre: RMSE
+# 0.033-0.037 px on MJPG against 0.002-0.009 px on FFV1 at noise 0.5-8, and
+# the same at every noise: the quantisation of the ball's own image), and
+# the fit states it from its residuals (the jackknife's sandwich on a few
+# clusters of blocks, track.model._jackknife_cov): within every track the
+# frames stated smallest err most (mean squared err/se by the track's own
+# terciles of stated error 1.05-3.3, 0.5-2.0, 0.3-1.0 on 14 shots), so the
+# stated variance falls short on the whole.  The value: the median over
+# the 17 luma-blind MJPG shots of `benchmarks/track.py realistic --n 20
+# --seconds 0.8 --seed 0` of each shot's mean squared err/se over its
+# moving frames before the look's factor, 1.47 (shots of even index 1.41,
+# odd 1.49); err/se there median 1.21 -> 1.01, within 0.8-1.25 10 -> 14 of
+# 17 (two uniform balls already stated too large, 0.60 and 0.85, go to
+# 0.50 and 0.71).  Every blocks' fit's covariance on such a video is
+# multiplied by it.
+JPEG_CHROMA_VAR = 1.45
+
 
 @dataclass(frozen=True)
 class LookMisfit:
@@ -338,8 +358,21 @@ def look_misfit(uv, cov, ok, t=None) -> LookMisfit:
     return LookMisfit(factor=1.0 + c, rho=float(rho), ratios=ratios, z=z)
 
 
-__all__ = ["LookMisfit", "look_misfit", "remove_kink", "third_difference_weights", "variance_ratios"]
+__all__ = ["JPEG_CHROMA_VAR", "LookMisfit", "codec_variance", "look_misfit", "remove_kink",
+           "third_difference_weights", "variance_ratios"]
 
+
+def codec_variance(lossless: bool, inter_frame: bool, block: int) -> float:
+    """What a frame's stated covariance is multiplied by for the codec's
+    error it leaves out: ``JPEG_CHROMA_VAR`` for fits on the chroma's blocks
+    (``block`` > 1, track.model.fit_disc) of a lossy codec that codes every
+    frame on its own (MJPG); 1 otherwise.  A lossless 4:2:0 stream's blocks
+    carry no quantisation; an inter-frame codec's error is modelled in the
+    recovery (recover.mle.INTER_CODEC_ACF, measured with the tracker's
+    stated variance taken off); pixels' fits (grey, or a projection seeing
+    luma) are left as stated.
+    """
+    return JPEG_CHROMA_VAR if (not lossless and not inter_frame and block > 1) else 1.0
 
 
 def error_ar1(factor: float, rho: float) -> float:

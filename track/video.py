@@ -27,7 +27,7 @@ from cuespin.videoio import quiet_native_stderr
 from cuespin.track.background import Background, FeltAccumulator, learn_background
 from cuespin.track.colour import GREY, Projection, learn_projection
 from cuespin.track.projection import projected_centres
-from cuespin.track.misfit import LookMisfit, error_ar1, look_misfit
+from cuespin.track.misfit import LookMisfit, codec_variance, error_ar1, look_misfit
 from cuespin.track.path import off_path
 from cuespin.track.radius import RadiusMap
 from cuespin.track.model import SphereLook, fit_disc, refit_shift, warm_up
@@ -554,6 +554,11 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         why = (" (the ball never moved, or is not in view; do physics.R and the camera "
                "match the video?)")
         error = f"no ball found in any of {k} frames" + (f"; {error}" if error else why)
+    # The share of MJPG's error on the chroma's blocks that each frame's
+    # sandwich leaves out (track.misfit.JPEG_CHROMA_VAR, measured against the
+    # truth): before the look's factor, so that the track does not measure
+    # it a second time.
+    cov[ok] *= codec_variance(info.lossless, info.inter_frame, tracker.block)
     # What the ball's model misses, seen along the track (its stated errors
     # are the per-frame fits' own; see track.misfit).  Only where the fits
     # modelled the look (shaded: the first frames showed the disc does not
