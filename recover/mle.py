@@ -231,14 +231,37 @@ def _names(rolling: bool, fit_friction: bool) -> tuple:
         ((("mu_r",) if rolling else ("mu_s", "mu_r")) if fit_friction else ())
 
 
+class TrackModel:
+    """:func:`model_track` and :func:`model_track_jacobian` at fixed frame
+    times and exposure: the exposure's nodes, and whether they are in time
+    order (then each phase's frames are a slice, physics.motion), found once
+    for a fit's every evaluation."""
+
+    def __init__(self, t, exposure_s: float = 0.0):
+        self.t = np.asarray(t, dtype=float)
+        self.exposure_s = exposure_s
+        self.nodes = self.t if exposure_s <= 0 else (self.t[:, None] + 0.5 * exposure_s * _GL_T[None, :]).ravel()
+        self.ordered = bool(np.all(self.nodes[1:] >= self.nodes[:-1]))
+
+    def __call__(self, shot: Shot, params: BallParams) -> np.ndarray:
+        """Observed centre (m) at the frame times, shape (n, 2)."""
+        if self.exposure_s <= 0:
+            return positions(shot, params, self.t, ordered=self.ordered)
+        x = positions(shot, params, self.nodes, ordered=self.ordered).reshape(len(self.t), len(_GL_T), 2)
+        return np.einsum("k,nkd->nd", 0.5 * _GL_W, x)
+
+    def jacobian(self, shot: Shot, params: BallParams, rolling: bool = False) -> np.ndarray:
+        """Its derivatives with respect to the shot's parameters, shape (n, 2, p)."""
+        if self.exposure_s <= 0:
+            return positions_jacobian(shot, params, self.t, rolling, ordered=self.ordered)
+        d = positions_jacobian(shot, params, self.nodes, rolling, ordered=self.ordered)
+        p = d.shape[2]
+        return ((0.5 * _GL_W) @ d.reshape(len(self.t), len(_GL_T), 2 * p)).reshape(len(self.t), 2, p)
+
+
 def model_track(shot: Shot, params: BallParams, t, exposure_s: float = 0.0):
     """Observed centre (m) at frame times: the position averaged over the exposure."""
-    t = np.asarray(t, dtype=float)
-    if exposure_s <= 0:
-        return positions(shot, params, t)
-    nodes = t[:, None] + 0.5 * exposure_s * _GL_T[None, :]
-    x = positions(shot, params, nodes.ravel()).reshape(len(t), len(_GL_T), 2)
-    return np.einsum("k,nkd->nd", 0.5 * _GL_W, x)
+    return TrackModel(t, exposure_s)(shot, params)
 
 
 def _rank_deficient(J) -> bool:
@@ -262,18 +285,30 @@ def forward_jacobian(resid, p, f0, rel_step: float = FD_REL_STEP) -> np.ndarray:
     return J
 
 
+def remember_last(resid):
+    """``resid`` that keeps its last point's value: least_squares evaluates
+    the start twice (its own check, then MINPACK's first call), and a
+    forward-difference Jacobian (:func:`forward_jacobian`) starts from the
+    residual MINPACK has just evaluated at the same point.  The value is
+    the same array of numbers either way (a copy); only the work is saved."""
+    last = []
+
+    def cached(p):
+        p = np.asarray(p, dtype=float)
+        if last and np.array_equal(last[0], p):
+            return last[1].copy()
+        value = resid(p)
+        last[:] = [p.copy(), value.copy()]
+        return value
+    return cached
+
+
 def model_track_jacobian(shot: Shot, params: BallParams, t, exposure_s: float = 0.0,
                          rolling: bool = False) -> np.ndarray:
     """Derivatives of :func:`model_track` with respect to the shot's
     parameters (physics.motion.positions_jacobian's order), shape (n, 2, p):
     the exposure's average of the position's derivatives."""
-    t = np.asarray(t, dtype=float)
-    if exposure_s <= 0:
-        return positions_jacobian(shot, params, t, rolling)
-    nodes = t[:, None] + 0.5 * exposure_s * _GL_T[None, :]
-    d = positions_jacobian(shot, params, nodes.ravel(), rolling)
-    p = d.shape[2]
-    return ((0.5 * _GL_W) @ d.reshape(len(t), len(_GL_T), 2 * p)).reshape(len(t), 2, p)
+    return TrackModel(t, exposure_s).jacobian(shot, params, rolling)
 
 
 def jacobian_map(meas: Measurements, ar1: float = 0.0):
@@ -347,14 +382,16 @@ def fit_model(meas: Measurements, params: BallParams, start, exposure_s: float, 
 
     prewhiten = prewhitener(meas, ar1)
     whitened_jacobian = jacobian_map(meas, ar1)
+    model = TrackModel(t, exposure_s)
 
+    @remember_last
     def resid(p):
         shot, pr = _unpack(p, rolling, fit_friction, params)
-        return prewhiten(meas.whiten(model_track(shot, pr, t, exposure_s))).ravel()
+        return prewhiten(meas.whiten(model(shot, pr))).ravel()
 
     def jac(p):  # exact (physics.motion.positions_jacobian): no residual evaluations for it
         shot, pr = _unpack(p, rolling, fit_friction, params)
-        J = whitened_jacobian(model_track_jacobian(shot, pr, t, exposure_s, rolling))
+        J = whitened_jacobian(model.jacobian(shot, pr, rolling))
         return forward_jacobian(resid, p, resid(p)) if _rank_deficient(J) else J
 
     lo = np.full(len(p0), -np.inf)
@@ -958,14 +995,16 @@ def profile_chi2(fit: ModelFit, meas: Measurements, exposure_s: float, delta: fl
 
     prewhiten = prewhitener(meas, fit.ar1)
     whitened_jacobian = jacobian_map(meas, fit.ar1)
+    model = TrackModel(t, exposure_s)
 
+    @remember_last
     def resid(q):
         s = Shot(x0=q[0:2], v0=q[3:5], w0=w_base + q[5] * f, t0=float(q[2]))
-        return prewhiten(meas.whiten(model_track(s, pr, t, exposure_s))).ravel()
+        return prewhiten(meas.whiten(model(s, pr))).ravel()
 
     def jac(q):  # the free-slip model's, its w0 columns along f
         s = Shot(x0=q[0:2], v0=q[3:5], w0=w_base + q[5] * f, t0=float(q[2]))
-        d = model_track_jacobian(s, pr, t, exposure_s)
+        d = model.jacobian(s, pr)
         J = whitened_jacobian(np.concatenate([d[:, :, :5], d[:, :, 5:7] @ f[:, None]], axis=2))
         return forward_jacobian(resid, q, resid(q)) if _rank_deficient(J) else J
 
