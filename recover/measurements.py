@@ -306,6 +306,19 @@ class Measurements:
         d = self._means(self._grouping[2] - np.asarray(model_used, dtype=float))
         return np.einsum("mij,mj->mi", self.W, d)
 
+    def whiten_many(self, models_used) -> np.ndarray:
+        """:meth:`whiten` of several models, shape (P, k, 2) -> (P, m, 2):
+        the same numbers (each measurement's sums in frame order, as
+        bincount takes them; the whitener's products summed as einsum does)."""
+        g, cnt, xy = self._grouping
+        m = self.n
+        v = xy[None] - np.asarray(models_used, dtype=float)
+        P = v.shape[0]
+        index = (g[None, :] + m * np.arange(P)[:, None]).ravel()
+        d = [np.bincount(index, weights=v[:, :, k].ravel(), minlength=P * m).reshape(P, m) / cnt for k in (0, 1)]
+        W = self.W
+        return np.stack([W[:, i, 0] * d[0] + W[:, i, 1] * d[1] for i in (0, 1)], axis=-1)
+
     def whiten_delta(self, delta_used) -> np.ndarray:
         """The whitened measurements' change, shape (m, 2), when the model
         at the used frames changes by ``delta_used`` (linear; for Jacobians)."""

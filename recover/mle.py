@@ -250,6 +250,17 @@ class TrackModel:
         x = positions(shot, params, self.nodes, ordered=self.ordered).reshape(len(self.t), len(_GL_T), 2)
         return np.einsum("k,nkd->nd", 0.5 * _GL_W, x)
 
+    def many(self, shots, params: BallParams) -> np.ndarray:
+        """:meth:`__call__` of several shots, shape (P, n, 2): the same
+        numbers, the exposure's average taken for all at once (in einsum's
+        order: the first two nodes' terms, then the third's)."""
+        x = np.stack([positions(s, params, self.nodes, ordered=self.ordered) for s in shots])
+        if self.exposure_s <= 0:
+            return x
+        x = x.reshape(len(shots), len(self.t), len(_GL_T), 2)
+        w = 0.5 * _GL_W
+        return (w[0] * x[:, :, 0] + w[1] * x[:, :, 1]) + w[2] * x[:, :, 2]
+
     def jacobian(self, shot: Shot, params: BallParams, rolling: bool = False) -> np.ndarray:
         """Its derivatives with respect to the shot's parameters, shape (n, 2, p)."""
         if self.exposure_s <= 0:
@@ -271,18 +282,29 @@ def _rank_deficient(J) -> bool:
     return bool(np.linalg.eigvalsh(Js.T @ Js)[0] < RANK_DEFICIENT_EIG)
 
 
-def forward_jacobian(resid, p, f0, rel_step: float = FD_REL_STEP) -> np.ndarray:
+def forward_jacobian(resid, p, f0, rel_step: float = FD_REL_STEP, many=None) -> np.ndarray:
     """Forward-difference Jacobian of ``resid`` at ``p`` (``f0 = resid(p)``),
     shape (len(f0), len(p)), with scipy's 2-point steps (``rel_step max(1,
-    |p_i|)``, signed as ``p_i``)."""
+    |p_i|)``, signed as ``p_i``).  ``many``: ``resid`` of several points
+    at once, rows of an array (the same numbers, in one call)."""
     p = np.asarray(p, dtype=float)
     h = rel_step * np.where(p >= 0, 1.0, -1.0) * np.maximum(1.0, np.abs(p))
+    Q = np.tile(p, (len(p), 1))
+    Q[np.diag_indices(len(p))] = p + h
+    step = np.diagonal(Q) - p
+    if many is not None:
+        return np.ascontiguousarray(((many(Q) - f0) / step[:, None]).T)
     J = np.empty((len(f0), len(p)))
     for i in range(len(p)):
-        q = p.copy()
-        q[i] = p[i] + h[i]
-        J[:, i] = (resid(q) - f0) / (q[i] - p[i])
+        J[:, i] = (resid(Q[i]) - f0) / step[i]
     return J
+
+
+def residuals_many(meas: Measurements, model: TrackModel, prewhiten, shots, params: BallParams) -> np.ndarray:
+    """The fits' residuals (``prewhiten(meas.whiten(model(shot, params))).ravel()``)
+    of several shots, shape (P, 2m): the same numbers, in one pass."""
+    r = meas.whiten_many(model.many(shots, params))  # (P, m, 2)
+    return np.moveaxis(prewhiten(np.moveaxis(r, 0, -1)), -1, 0).reshape(len(shots), -1)
 
 
 def remember_last(resid):
@@ -389,10 +411,13 @@ def fit_model(meas: Measurements, params: BallParams, start, exposure_s: float, 
         shot, pr = _unpack(p, rolling, fit_friction, params)
         return prewhiten(meas.whiten(model(shot, pr))).ravel()
 
+    def many(Q):
+        return residuals_many(meas, model, prewhiten, [_unpack(q, rolling, False, params)[0] for q in Q], params)
+
     def jac(p):  # exact (physics.motion.positions_jacobian): no residual evaluations for it
         shot, pr = _unpack(p, rolling, fit_friction, params)
         J = whitened_jacobian(model.jacobian(shot, pr, rolling))
-        return forward_jacobian(resid, p, resid(p)) if _rank_deficient(J) else J
+        return forward_jacobian(resid, p, resid(p), many=many) if _rank_deficient(J) else J
 
     lo = np.full(len(p0), -np.inf)
     hi = np.full(len(p0), np.inf)
@@ -1002,11 +1027,15 @@ def profile_chi2(fit: ModelFit, meas: Measurements, exposure_s: float, delta: fl
         s = Shot(x0=q[0:2], v0=q[3:5], w0=w_base + q[5] * f, t0=float(q[2]))
         return prewhiten(meas.whiten(model(s, pr))).ravel()
 
+    def many(Q):
+        return residuals_many(meas, model, prewhiten, [Shot(x0=q[0:2], v0=q[3:5], w0=w_base + q[5] * f,
+                                                            t0=float(q[2])) for q in Q], pr)
+
     def jac(q):  # the free-slip model's, its w0 columns along f
         s = Shot(x0=q[0:2], v0=q[3:5], w0=w_base + q[5] * f, t0=float(q[2]))
         d = model.jacobian(s, pr)
         J = whitened_jacobian(np.concatenate([d[:, :, :5], d[:, :, 5:7] @ f[:, None]], axis=2))
-        return forward_jacobian(resid, q, resid(q)) if _rank_deficient(J) else J
+        return forward_jacobian(resid, q, resid(q), many=many) if _rank_deficient(J) else J
 
     q0 = np.r_[shot.x0, shot.t0, shot.v0, 0.0]
     r = least_squares(resid, q0, jac=jac, x_scale=np.r_[1e-3, 1e-3, 1e-3, 1e-2, 1e-2, 1.0], method="lm",
