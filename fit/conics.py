@@ -116,15 +116,16 @@ def _foot_points(par: Parabola, p):
     return X, Y, x
 
 
-def parabola_distances(par: Parabola, p) -> np.ndarray:
-    """Signed orthogonal distances (m) from points to a parabola (+ inside)."""
-    X, Y, x = _foot_points(par, p)
+def parabola_distances(par: Parabola, p, feet=None) -> np.ndarray:
+    """Signed orthogonal distances (m) from points to a parabola (+ inside);
+    ``feet``: :func:`_foot_points` of the same, when already found."""
+    X, Y, x = _foot_points(par, p) if feet is None else feet
     a = par.a
     d = np.hypot(x - X, a * x * x - Y)
     return np.where(Y >= a * X * X, d, -d)
 
 
-def parabola_jacobian(par: Parabola, p) -> np.ndarray:
+def parabola_jacobian(par: Parabola, p, feet=None) -> np.ndarray:
     """Derivatives of :func:`parabola_distances` with respect to ``(log a,
     theta, vertex_x, vertex_y)``, shape (n, 4).
 
@@ -134,9 +135,10 @@ def parabola_jacobian(par: Parabola, p) -> np.ndarray:
     are perpendicular to ``P - C``), so each derivative is the normal
     against the parameter's motion of the point relative to the curve:
     ``-a x^2 n_y`` for ``log a``, ``n . (Y, -X)`` for ``theta`` and minus
-    the normal in table axes for the vertex.
+    the normal in table axes for the vertex.  ``feet``: as for
+    :func:`parabola_distances`.
     """
-    X, Y, x = _foot_points(par, p)
+    X, Y, x = _foot_points(par, p) if feet is None else feet
     a = par.a
     norm = np.sqrt(1.0 + 4.0 * a * a * x * x)
     nx, ny = -2.0 * a * x / norm, 1.0 / norm
@@ -171,11 +173,25 @@ def fit_parabola(p, start: Parabola, max_nfev: int = PARABOLA_MAX_NFEV) -> Parab
         # log a is unbounded while the fit explores; keep exp finite.
         return Parabola(a=float(np.exp(np.clip(q[0], -60.0, 60.0))), theta=float(q[1]), vertex=np.array(q[2:4]))
 
+    last = {}
+
+    def feet(q):
+        # MINPACK asks for the Jacobian at the point whose distances it has
+        # just evaluated: the feet (a Newton solve a point) are found once.
+        key = np.asarray(q, dtype=float).tobytes()
+        if key not in last:
+            par = build(q)
+            last.clear()
+            last[key] = par, _foot_points(par, p)
+        return last[key]
+
     def resid(q):
-        return parabola_distances(build(q), p)
+        par, found = feet(q)
+        return parabola_distances(par, p, found)
 
     def jac(q):
-        return parabola_jacobian(build(q), p)
+        par, found = feet(q)
+        return parabola_jacobian(par, p, found)
 
     q0 = np.r_[np.log(start.a), start.theta, start.vertex]
     try:
@@ -186,8 +202,8 @@ def fit_parabola(p, start: Parabola, max_nfev: int = PARABOLA_MAX_NFEV) -> Parab
         return ParabolaFit(False, f"parabola fit failed: {exc}")
     if not np.all(np.isfinite(r.x)):
         return ParabolaFit(False, "parabola fit diverged")
-    par = build(r.x)
-    res = parabola_distances(par, p)
+    par, found = feet(r.x)
+    res = parabola_distances(par, p, found)
     try:
         cov = np.linalg.inv(r.jac.T @ r.jac) * float(res @ res) / max(len(p) - 4, 1)
     except np.linalg.LinAlgError:

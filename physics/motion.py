@@ -69,7 +69,7 @@ class Shot:
 
     def __post_init__(self):
         for name in ("x0", "v0", "w0"):
-            object.__setattr__(self, name, tuple(float(c) for c in getattr(self, name)))
+            object.__setattr__(self, name, tuple(map(float, getattr(self, name))))
         object.__setattr__(self, "t0", float(self.t0))
 
 
@@ -149,7 +149,10 @@ def cross(a, b):
 def z_cross(a):
     """``z_hat x a`` for planar vectors: rotate by +90 degrees (vectorised)."""
     a = np.asarray(a, dtype=float)
-    return np.stack([-a[..., 1], a[..., 0]], axis=-1)
+    out = np.empty(a.shape[:-1] + (2,))  # not np.stack: called in the fits' every residual
+    out[..., 0] = -a[..., 1]
+    out[..., 1] = a[..., 0]
+    return out
 
 
 def contact_velocity(v, w, R):
@@ -190,32 +193,35 @@ def phases(shot: Shot, params: BallParams) -> Phases:
         ``t1 == t0``; a ball that stops as sliding ends (case 2) has
         ``t2 == t1``.
     """
+    # Component by component in floats (the fits call this for every
+    # residual): the same operations, in the same order, as on 2-vectors.
     R, mu_s, mu_r, g = params.R, params.mu_s, params.mu_r, params.g
-    x0 = np.array(shot.x0)
-    v0 = np.array(shot.v0)
-    w0 = np.array(shot.w0)
-    u0 = contact_velocity(v0, w0, R)  # eq. 2
-    speed_u0 = float(np.hypot(*u0))
+    (x0x, x0y), (v0x, v0y), (w0x, w0y) = shot.x0, shot.v0, shot.w0
+    u0x, u0y = v0x + R * -w0y, v0y + R * w0x  # eq. 2, u0 = v0 + R z_hat x w0
+    speed_u0 = float(np.hypot(u0x, u0y))
     if speed_u0 > SLIP_ZERO:
-        u_hat = u0 / speed_u0
+        ux, uy = u0x / speed_u0, u0y / speed_u0
         tau1 = 2.0 / 7.0 * speed_u0 / (mu_s * g)  # eq. 10
     else:
-        u_hat = np.zeros(2)
-        tau1 = 0.0
-    v1 = v0 - mu_s * g * tau1 * u_hat  # eq. 7 at t1, = eq. 11
-    x1 = x0 + v0 * tau1 - 0.5 * mu_s * g * tau1**2 * u_hat  # eq. 9 at t1, = eq. 13
-    speed_v1 = float(np.hypot(*v1))
+        ux = uy = tau1 = 0.0
+    c = mu_s * g * tau1
+    v1x, v1y = v0x - c * ux, v0y - c * uy  # eq. 7 at t1, = eq. 11
+    c = 0.5 * mu_s * g * tau1**2
+    x1x, x1y = x0x + v0x * tau1 - c * ux, x0y + v0y * tau1 - c * uy  # eq. 9 at t1, = eq. 13
+    speed_v1 = float(np.hypot(v1x, v1y))
     if speed_v1 <= SPEED_ZERO:
-        v1 = np.zeros(2)
-        tau2, x2 = 0.0, x1.copy()
+        v1x = v1y = tau2 = 0.0
+        x2 = np.array([x1x, x1y])
     elif mu_r > 0:
         tau2 = 7.0 / 5.0 * speed_v1 / (mu_r * g)  # eq. 17
-        x2 = x1 + 7.0 / 10.0 * speed_v1 / (mu_r * g) * v1  # eq. 19
+        c = 7.0 / 10.0 * speed_v1 / (mu_r * g)
+        x2 = np.array([x1x + c * v1x, x1y + c * v1y])  # eq. 19
     else:
         tau2, x2 = np.inf, np.full(2, np.nan)
     t1 = shot.t0 + tau1
-    return Phases(u0=u0, u_hat=u_hat, t0=shot.t0, x0=x0, v0=v0, w0=w0,
-                  t1=t1, x1=x1, v1=v1, t2=t1 + tau2, x2=x2, params=params)
+    return Phases(u0=np.array([u0x, u0y]), u_hat=np.array([ux, uy]), t0=shot.t0, x0=np.array(shot.x0),
+                  v0=np.array(shot.v0), w0=np.array(shot.w0), t1=t1, x1=np.array([x1x, x1y]),
+                  v1=np.array([v1x, v1y]), t2=t1 + tau2, x2=x2, params=params)
 
 
 def evaluate(shot: Shot, params: BallParams, t, ph: Phases | None = None) -> State:
@@ -266,32 +272,59 @@ def _phase_masks(ph: Phases, t):
     return t < ph.t0, (t >= ph.t0) & (t < ph.t1), (t >= ph.t1) & (t < ph.t2), t >= ph.t2
 
 
+def _phase_index(ph: Phases, t, ordered: bool | None = None):
+    """:func:`_phase_masks` as four slices when ``t`` is in time order (the
+    fits' frame times and their exposure nodes): the same frames, found by
+    bisection instead of four passes and scattered copies; the masks when
+    ``t`` is not sorted or a phase boundary is NaN.  ``ordered``: whether
+    ``t`` is sorted, when the caller knows (checked here otherwise)."""
+    bounds = (ph.t0, ph.t1, ph.t2)
+    if any(b != b for b in bounds) or not (ordered if ordered is not None else np.all(t[1:] >= t[:-1])):
+        return _phase_masks(ph, t)
+    i0, i1, i2 = np.searchsorted(t, bounds, side="left")  # first frame at or after each boundary
+    return slice(0, i0), slice(i0, i1), slice(i1, i2), slice(i2, len(t))
+
+
+def _any(index) -> bool:
+    """Whether a phase's mask or slice selects any frame."""
+    return index.stop > index.start if isinstance(index, slice) else bool(index.any())
+
+
 def _positions(ph: Phases, params: BallParams, t, before, sliding, rolling, rest) -> np.ndarray:
     """Centre (m) at times ``t`` given the phase of each: eq. 9 and 18."""
     g, mu_s, mu_r = params.g, params.mu_s, params.mu_r
+    # An axis at a time: (k,) arrays, not (k, 1) ones broadcast against
+    # 2-vectors (numpy's inner loops are then two elements long), the same
+    # operations in the same order.
     x = np.empty((t.shape[0], 2))
     x[before] = ph.x0
-    s = (t[sliding] - ph.t0)[:, None]
-    x[sliding] = ph.x0 + ph.v0 * s - 0.5 * mu_s * g * s**2 * ph.u_hat  # eq. 9
-    if rolling.any():
+    s = t[sliding] - ph.t0
+    c = 0.5 * mu_s * g * s**2
+    for d in (0, 1):
+        x[sliding, d] = ph.x0[d] + ph.v0[d] * s - c * ph.u_hat[d]  # eq. 9
+    if _any(rolling):
         v1_hat = ph.v1 / np.hypot(*ph.v1)
-        r = (t[rolling] - ph.t1)[:, None]
-        x[rolling] = ph.x1 + ph.v1 * r - 0.5 * (5.0 / 7.0 * mu_r * g) * r**2 * v1_hat  # eq. 18
+        r = t[rolling] - ph.t1
+        c = 0.5 * (5.0 / 7.0 * mu_r * g) * r**2
+        for d in (0, 1):
+            x[rolling, d] = ph.x1[d] + ph.v1[d] * r - c * v1_hat[d]  # eq. 18
     x[rest] = ph.x2
     return x
 
 
-def positions(shot: Shot, params: BallParams, t, ph: Phases | None = None) -> np.ndarray:
+def positions(shot: Shot, params: BallParams, t, ph: Phases | None = None,
+              ordered: bool | None = None) -> np.ndarray:
     """Ball centre (m) at an array of times, shape (n, 2); see :func:`evaluate`
-    (the same equations, without velocities: the fits' inner loop)."""
+    (the same equations, without velocities: the fits' inner loop).
+    ``ordered``: whether ``t`` is sorted, when the caller knows."""
     if ph is None:
         ph = phases(shot, params)
     t = np.atleast_1d(np.asarray(t, dtype=float))
-    return _positions(ph, params, t, *_phase_masks(ph, t))
+    return _positions(ph, params, t, *_phase_index(ph, t, ordered))
 
 
 def positions_jacobian(shot: Shot, params: BallParams, t, rolling: bool = False,
-                       ph: Phases | None = None) -> np.ndarray:
+                       ph: Phases | None = None, ordered: bool | None = None) -> np.ndarray:
     """Derivatives of :func:`positions` with respect to the shot, shape (n, 2, p).
 
     The parameters are ``(x0x, x0y, t0, v0x, v0y, w0x, w0y)`` (p = 7), or
@@ -314,6 +347,8 @@ def positions_jacobian(shot: Shot, params: BallParams, t, rolling: bool = False,
         Differentiate the rolling-from-the-strike model (w0 tied to v0).
     ph : Phases, optional
         Precomputed ``phases(shot, params)``.
+    ordered : bool, optional
+        Whether ``t`` is sorted, when the caller knows.
 
     Returns
     -------
@@ -353,14 +388,14 @@ def positions_jacobian(shot: Shot, params: BallParams, t, rolling: bool = False,
     # Each phase's position is a quadratic in its own time; so are its
     # derivatives: rows (1, s, s^2) times three (2, p) coefficients.
     out = np.empty((t.shape[0], 2 * n_par))
-    before, sliding, rolls, rest = _phase_masks(ph, t)
+    before, sliding, rolls, rest = _phase_index(ph, t, ordered)
     out[before] = d_x0.ravel()
     # eq. 9: x0 + v0 s - 1/2 mu_s g s^2 u_hat, s = t - t0 (d s / d t0 = -1,
     # times the velocity v0 - mu_s g s u_hat, eq. 7)
     C = np.stack([d_x0 - np.outer(ph.v0, d_t0), d_v0 + mu_g * np.outer(ph.u_hat, d_t0), -0.5 * mu_g * d_uhat])
     s = t[sliding] - ph.t0
     out[sliding] = np.stack([np.ones_like(s), s, s * s], axis=1) @ C.reshape(3, -1)
-    if rolls.any():
+    if _any(rolls):
         a_r = 5.0 / 7.0 * mu_r * g  # eq. 16
         v1_hat = v1 / speed_v1
         d_v1hat = (eye - np.outer(v1_hat, v1_hat)) / speed_v1 @ d_v1
@@ -369,7 +404,7 @@ def positions_jacobian(shot: Shot, params: BallParams, t, rolling: bool = False,
         C = np.stack([d_x1 - np.outer(v1, d_r), d_v1 + a_r * np.outer(v1_hat, d_r), -0.5 * a_r * d_v1hat])
         r = t[rolls] - ph.t1
         out[rolls] = np.stack([np.ones_like(r), r, r * r], axis=1) @ C.reshape(3, -1)
-    if rest.any():
+    if _any(rest):
         if speed_v1 <= SPEED_ZERO:  # stopped as sliding ended (case 2): x2 = x1
             out[rest] = d_x1.ravel()
         else:  # eq. 19: x2 = x1 + 7/10 |v1| v1 / (mu_r g)

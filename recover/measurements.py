@@ -34,6 +34,7 @@ Pure functions of arrays.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy.optimize import brentq
@@ -271,10 +272,18 @@ class Measurements:
         """Mask of the frames that enter some measurement."""
         return self.group >= 0
 
-    @property
+    @cached_property
     def n(self) -> int:
         """Number of measurements (each a 2-vector)."""
         return int(self.group.max()) + 1 if len(self.group) and self.group.max() >= 0 else 0
+
+    @cached_property
+    def _grouping(self):
+        """The used frames' measurement, each measurement's frame count and
+        the used frames' centres: made once (the measurements are frozen),
+        for the fits' every residual (:meth:`whiten`)."""
+        g = self.group[self.used]
+        return g, np.bincount(g, minlength=self.n), self.xy[self.used]
 
     def dof(self, n_par: int) -> int:
         """Degrees of freedom of a fit of ``n_par`` parameters: 2 per measurement."""
@@ -285,17 +294,30 @@ class Measurements:
         return self.t[self.used]
 
     def _means(self, v):
-        g = self.group[self.used]
-        cnt = np.bincount(g, minlength=self.n)
-        return np.stack([np.bincount(g, weights=v[:, d], minlength=self.n) for d in (0, 1)], 1) / cnt[:, None]
+        g, cnt, _ = self._grouping
+        m = self.n
+        return np.stack([np.bincount(g, weights=v[:, d], minlength=m) for d in (0, 1)], 1) / cnt[:, None]
 
     def whiten(self, model_used) -> np.ndarray:
         """Whitened residuals, shape (m, 2), in measurement order (time order):
         ``L^-1 (mean observed - mean model)`` for each measurement, with
         ``L L^T`` its covariance; ``model_used`` is the model at the used
         frames (``t_used``), shape (k, 2)."""
-        d = self._means(self.xy[self.used] - np.asarray(model_used, dtype=float))
+        d = self._means(self._grouping[2] - np.asarray(model_used, dtype=float))
         return np.einsum("mij,mj->mi", self.W, d)
+
+    def whiten_many(self, models_used) -> np.ndarray:
+        """:meth:`whiten` of several models, shape (P, k, 2) -> (P, m, 2):
+        the same numbers (each measurement's sums in frame order, as
+        bincount takes them; the whitener's products summed as einsum does)."""
+        g, cnt, xy = self._grouping
+        m = self.n
+        v = xy[None] - np.asarray(models_used, dtype=float)
+        P = v.shape[0]
+        index = (g[None, :] + m * np.arange(P)[:, None]).ravel()
+        d = [np.bincount(index, weights=v[:, :, k].ravel(), minlength=P * m).reshape(P, m) / cnt for k in (0, 1)]
+        W = self.W
+        return np.stack([W[:, i, 0] * d[0] + W[:, i, 1] * d[1] for i in (0, 1)], axis=-1)
 
     def whiten_delta(self, delta_used) -> np.ndarray:
         """The whitened measurements' change, shape (m, 2), when the model

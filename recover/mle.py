@@ -231,14 +231,48 @@ def _names(rolling: bool, fit_friction: bool) -> tuple:
         ((("mu_r",) if rolling else ("mu_s", "mu_r")) if fit_friction else ())
 
 
+class TrackModel:
+    """:func:`model_track` and :func:`model_track_jacobian` at fixed frame
+    times and exposure: the exposure's nodes, and whether they are in time
+    order (then each phase's frames are a slice, physics.motion), found once
+    for a fit's every evaluation."""
+
+    def __init__(self, t, exposure_s: float = 0.0):
+        self.t = np.asarray(t, dtype=float)
+        self.exposure_s = exposure_s
+        self.nodes = self.t if exposure_s <= 0 else (self.t[:, None] + 0.5 * exposure_s * _GL_T[None, :]).ravel()
+        self.ordered = bool(np.all(self.nodes[1:] >= self.nodes[:-1]))
+
+    def __call__(self, shot: Shot, params: BallParams) -> np.ndarray:
+        """Observed centre (m) at the frame times, shape (n, 2)."""
+        if self.exposure_s <= 0:
+            return positions(shot, params, self.t, ordered=self.ordered)
+        x = positions(shot, params, self.nodes, ordered=self.ordered).reshape(len(self.t), len(_GL_T), 2)
+        return np.einsum("k,nkd->nd", 0.5 * _GL_W, x)
+
+    def many(self, shots, params: BallParams) -> np.ndarray:
+        """:meth:`__call__` of several shots, shape (P, n, 2): the same
+        numbers, the exposure's average taken for all at once (in einsum's
+        order: the first two nodes' terms, then the third's)."""
+        x = np.stack([positions(s, params, self.nodes, ordered=self.ordered) for s in shots])
+        if self.exposure_s <= 0:
+            return x
+        x = x.reshape(len(shots), len(self.t), len(_GL_T), 2)
+        w = 0.5 * _GL_W
+        return (w[0] * x[:, :, 0] + w[1] * x[:, :, 1]) + w[2] * x[:, :, 2]
+
+    def jacobian(self, shot: Shot, params: BallParams, rolling: bool = False) -> np.ndarray:
+        """Its derivatives with respect to the shot's parameters, shape (n, 2, p)."""
+        if self.exposure_s <= 0:
+            return positions_jacobian(shot, params, self.t, rolling, ordered=self.ordered)
+        d = positions_jacobian(shot, params, self.nodes, rolling, ordered=self.ordered)
+        p = d.shape[2]
+        return ((0.5 * _GL_W) @ d.reshape(len(self.t), len(_GL_T), 2 * p)).reshape(len(self.t), 2, p)
+
+
 def model_track(shot: Shot, params: BallParams, t, exposure_s: float = 0.0):
     """Observed centre (m) at frame times: the position averaged over the exposure."""
-    t = np.asarray(t, dtype=float)
-    if exposure_s <= 0:
-        return positions(shot, params, t)
-    nodes = t[:, None] + 0.5 * exposure_s * _GL_T[None, :]
-    x = positions(shot, params, nodes.ravel()).reshape(len(t), len(_GL_T), 2)
-    return np.einsum("k,nkd->nd", 0.5 * _GL_W, x)
+    return TrackModel(t, exposure_s)(shot, params)
 
 
 def _rank_deficient(J) -> bool:
@@ -248,18 +282,48 @@ def _rank_deficient(J) -> bool:
     return bool(np.linalg.eigvalsh(Js.T @ Js)[0] < RANK_DEFICIENT_EIG)
 
 
-def forward_jacobian(resid, p, f0, rel_step: float = FD_REL_STEP) -> np.ndarray:
+def forward_jacobian(resid, p, f0, rel_step: float = FD_REL_STEP, many=None) -> np.ndarray:
     """Forward-difference Jacobian of ``resid`` at ``p`` (``f0 = resid(p)``),
     shape (len(f0), len(p)), with scipy's 2-point steps (``rel_step max(1,
-    |p_i|)``, signed as ``p_i``)."""
+    |p_i|)``, signed as ``p_i``).  ``many``: ``resid`` of several points
+    at once, rows of an array (the same numbers, in one call)."""
     p = np.asarray(p, dtype=float)
     h = rel_step * np.where(p >= 0, 1.0, -1.0) * np.maximum(1.0, np.abs(p))
+    Q = np.tile(p, (len(p), 1))
+    Q[np.diag_indices(len(p))] = p + h
+    step = np.diagonal(Q) - p
+    if many is not None:
+        return np.ascontiguousarray(((many(Q) - f0) / step[:, None]).T)
     J = np.empty((len(f0), len(p)))
     for i in range(len(p)):
-        q = p.copy()
-        q[i] = p[i] + h[i]
-        J[:, i] = (resid(q) - f0) / (q[i] - p[i])
+        J[:, i] = (resid(Q[i]) - f0) / step[i]
     return J
+
+
+def residuals_many(meas: Measurements, model: TrackModel, prewhiten, shots, params: BallParams) -> np.ndarray:
+    """The fits' residuals (``prewhiten(meas.whiten(model(shot, params))).ravel()``)
+    of several shots, shape (P, 2m): the same numbers, in one pass."""
+    r = meas.whiten_many(model.many(shots, params))  # (P, m, 2)
+    return np.moveaxis(prewhiten(np.moveaxis(r, 0, -1)), -1, 0).reshape(len(shots), -1)
+
+
+def remember_last(resid):
+    """``resid`` that keeps its last point's value: least_squares evaluates
+    the start twice (its own check, then MINPACK's first call), and a
+    forward-difference Jacobian (:func:`forward_jacobian`) starts from the
+    residual MINPACK has just evaluated at the same point.  The value is
+    the same array of numbers either way (a copy); only the work is saved."""
+    last = []
+
+    def cached(p):
+        p = np.asarray(p, dtype=float)
+        key = p.tobytes()  # the same bits: the same point
+        if last and last[0] == key:
+            return last[1].copy()
+        value = resid(p)
+        last[:] = [key, value.copy()]
+        return value
+    return cached
 
 
 def model_track_jacobian(shot: Shot, params: BallParams, t, exposure_s: float = 0.0,
@@ -267,13 +331,7 @@ def model_track_jacobian(shot: Shot, params: BallParams, t, exposure_s: float = 
     """Derivatives of :func:`model_track` with respect to the shot's
     parameters (physics.motion.positions_jacobian's order), shape (n, 2, p):
     the exposure's average of the position's derivatives."""
-    t = np.asarray(t, dtype=float)
-    if exposure_s <= 0:
-        return positions_jacobian(shot, params, t, rolling)
-    nodes = t[:, None] + 0.5 * exposure_s * _GL_T[None, :]
-    d = positions_jacobian(shot, params, nodes.ravel(), rolling)
-    p = d.shape[2]
-    return ((0.5 * _GL_W) @ d.reshape(len(t), len(_GL_T), 2 * p)).reshape(len(t), 2, p)
+    return TrackModel(t, exposure_s).jacobian(shot, params, rolling)
 
 
 def jacobian_map(meas: Measurements, ar1: float = 0.0):
@@ -347,15 +405,20 @@ def fit_model(meas: Measurements, params: BallParams, start, exposure_s: float, 
 
     prewhiten = prewhitener(meas, ar1)
     whitened_jacobian = jacobian_map(meas, ar1)
+    model = TrackModel(t, exposure_s)
 
+    @remember_last
     def resid(p):
         shot, pr = _unpack(p, rolling, fit_friction, params)
-        return prewhiten(meas.whiten(model_track(shot, pr, t, exposure_s))).ravel()
+        return prewhiten(meas.whiten(model(shot, pr))).ravel()
+
+    def many(Q):
+        return residuals_many(meas, model, prewhiten, [_unpack(q, rolling, False, params)[0] for q in Q], params)
 
     def jac(p):  # exact (physics.motion.positions_jacobian): no residual evaluations for it
         shot, pr = _unpack(p, rolling, fit_friction, params)
-        J = whitened_jacobian(model_track_jacobian(shot, pr, t, exposure_s, rolling))
-        return forward_jacobian(resid, p, resid(p)) if _rank_deficient(J) else J
+        J = whitened_jacobian(model.jacobian(shot, pr, rolling))
+        return forward_jacobian(resid, p, resid(p), many=many) if _rank_deficient(J) else J
 
     lo = np.full(len(p0), -np.inf)
     hi = np.full(len(p0), np.inf)
@@ -958,16 +1021,22 @@ def profile_chi2(fit: ModelFit, meas: Measurements, exposure_s: float, delta: fl
 
     prewhiten = prewhitener(meas, fit.ar1)
     whitened_jacobian = jacobian_map(meas, fit.ar1)
+    model = TrackModel(t, exposure_s)
 
+    @remember_last
     def resid(q):
         s = Shot(x0=q[0:2], v0=q[3:5], w0=w_base + q[5] * f, t0=float(q[2]))
-        return prewhiten(meas.whiten(model_track(s, pr, t, exposure_s))).ravel()
+        return prewhiten(meas.whiten(model(s, pr))).ravel()
+
+    def many(Q):
+        return residuals_many(meas, model, prewhiten, [Shot(x0=q[0:2], v0=q[3:5], w0=w_base + q[5] * f,
+                                                            t0=float(q[2])) for q in Q], pr)
 
     def jac(q):  # the free-slip model's, its w0 columns along f
         s = Shot(x0=q[0:2], v0=q[3:5], w0=w_base + q[5] * f, t0=float(q[2]))
-        d = model_track_jacobian(s, pr, t, exposure_s)
+        d = model.jacobian(s, pr)
         J = whitened_jacobian(np.concatenate([d[:, :, :5], d[:, :, 5:7] @ f[:, None]], axis=2))
-        return forward_jacobian(resid, q, resid(q)) if _rank_deficient(J) else J
+        return forward_jacobian(resid, q, resid(q), many=many) if _rank_deficient(J) else J
 
     q0 = np.r_[shot.x0, shot.t0, shot.v0, 0.0]
     r = least_squares(resid, q0, jac=jac, x_scale=np.r_[1e-3, 1e-3, 1e-3, 1e-2, 1e-2, 1.0], method="lm",

@@ -158,6 +158,42 @@ def test_fit_jacobian_is_the_residuals_derivative(rolling, ar1, seed):
         assert np.max(np.abs(num - J[:, i])) < 1e-6 * np.max(np.abs(J[:, i])), i
 
 
+@pytest.mark.parametrize("rolling,ar1,seed,exposure", [(False, 0.0, 1, 1 / 240.0), (True, 0.6, 4, 1 / 240.0),
+                                                        (False, 0.3, 5, 0.0)])
+def test_fast_paths_give_the_same_numbers(rolling, ar1, seed, exposure):
+    # The fits' fast paths are exact rearrangements, not approximations: a
+    # sorted track's phases as slices against the masks (physics.motion),
+    # and the forward difference's shots in one pass against one at a time
+    # (recover.mle.forward_jacobian), bit for bit; the answers of 83af15c
+    # are kept to the last bit on recover_speed.py's shots this way.
+    from cuespin.physics.motion import evaluate, positions, positions_jacobian, z_cross
+    from cuespin.recover.measurements import build_measurements
+    from cuespin.recover.mle import TrackModel, forward_jacobian, prewhitener, residuals_many
+    shot, p = sample_shot(seed, "case4" if rolling else "random")
+    ph = phases(shot, p)
+    t, xy = synthetic(shot, p, fps=120.0, seed=seed, t_cut=min(ph.t2 + 0.3, shot.t0 + 3.0))
+    tt = np.sort(np.r_[t, ph.t1, ph.t2, shot.t0])  # boundaries on a frame: the later phase's
+    assert np.array_equal(positions(shot, p, tt), evaluate(shot, p, tt).x)
+    for r in (False, True):
+        assert np.array_equal(positions_jacobian(shot, p, tt, r, ordered=True),
+                              positions_jacobian(shot, p, tt, r, ordered=False))
+    meas = build_measurements(t, xy, 2e-5, t0=shot.t0, t_rest=ph.t2, exposure_s=exposure, frame_dt=1 / 120.0,
+                              shared_rest=True)
+    model, prewhiten = TrackModel(meas.t_used, exposure), prewhitener(meas, ar1)
+
+    def shot_of(q):
+        return Shot(q[0:2], q[3:5], z_cross(q[3:5]) / p.R if rolling else q[5:7], q[2])
+
+    def resid(q):
+        return prewhiten(meas.whiten(model(shot_of(q), p))).ravel()
+
+    q = np.r_[shot.x0, shot.t0, shot.v0] if rolling else np.r_[shot.x0, shot.t0, shot.v0, shot.w0]
+    loop = forward_jacobian(resid, q, resid(q))
+    many = forward_jacobian(resid, q, resid(q), many=lambda Q: residuals_many(meas, model, prewhiten,
+                                                                              [shot_of(r) for r in Q], p))
+    assert np.array_equal(loop, many)
+
+
 def test_mle_degenerate_when_track_ends_while_sliding():
     shot, p = sample_shot(11, "masse")
     ph = phases(shot, p)
