@@ -212,3 +212,85 @@ def test_box_noise_scale_is_one_on_independent_noise():
     blocks = np.kron(rng.normal(0, 3, (30, 40, 3)), np.ones((8, 8, 1)))
     c = np.clip(np.rint(100 + rng.normal(0, 5, (240, 320, 3)) + blocks), 0, 255).astype(np.uint8)
     assert box_noise_scale(a, c, 11, L) > 2.0
+
+
+def _jackknife_meat_numpy(JT, e, h, w, B, A):
+    """The jackknife's meat as model._jackknife_cov computed it before
+    (zero-padded clusters, einsum and batched solves)."""
+    k = JT.shape[0]
+    H, W = h + (-h % B), w + (-w % B)
+    Jp, ep = np.zeros((k, H, W)), np.zeros((H, W))
+    Jp[:, :h, :w], ep[:h, :w] = JT.reshape(k, h, w), e.reshape(h, w)
+    Jg = Jp.reshape(k, H // B, B, W // B, B).transpose(1, 3, 0, 2, 4).reshape(-1, k, B * B)
+    eg = ep.reshape(H // B, B, W // B, B).transpose(0, 2, 1, 3).reshape(-1, B * B)
+    Hgg = np.einsum("gki,kl,glj->gij", Jg, A, Jg)
+    eg = np.linalg.solve(np.eye(B * B) - Hgg, eg[..., None])[..., 0]
+    S = np.einsum("gki,gi->gk", Jg, eg)
+    return S.T @ S
+
+
+def test_cluster_meat_is_the_padded_numpy_form():
+    # Rounding only (sums in another order, elimination instead of LAPACK's
+    # LU): the covariance's 1e-10 relative is far below any stated error's
+    # digits (the tracks on the speed file agree to ~1e-13 relative).
+    rng = np.random.default_rng(6)
+    for _ in range(100):
+        h, w = (int(x) for x in rng.integers(6, 26, 2))
+        k = int(rng.choice([5, 6, 8]))
+        B = int(rng.choice([1, 2, 3]))
+        use = (rng.random(h * w) < 0.9).astype(float)
+        JT = rng.normal(0, 30, (k, h * w)) * use
+        e = rng.normal(0, 5, h * w) * use
+        A = np.linalg.inv(JT @ JT.T)
+        meat, ok = window.cluster_meat(JT, e, h, w, B, A)
+        ref = _jackknife_meat_numpy(JT, e, h, w, B, A)
+        assert ok
+        np.testing.assert_allclose(meat, ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.uint8])
+def test_block_means_are_numpys_bit_for_bit(dtype):
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        h, w = (int(x) for x in rng.integers(4, 50, 2))
+        big = rng.normal(100, 60, (h + 3, w + 3)).clip(0, 255).astype(dtype)
+        x = big[1:1 + h, 2:2 + w]  # cut from a larger image, as the felt is
+        block = int(rng.choice([2, 3]))
+        a, b = (int(v) for v in rng.integers(0, block, 2))
+        n, m = (h - b) // block, (w - a) // block
+        ref = x[b:b + n * block, a:a + m * block].reshape(n, block, m, block)
+        assert np.array_equal(window.block_means(x, a, b, n, m, block), ref.mean(axis=(1, 3), dtype=np.float64))
+        ok = x > 20
+        ref_ok = ok[b:b + n * block, a:a + m * block].reshape(n, block, m, block).all(axis=(1, 3))
+        assert np.array_equal(window.block_all(ok, a, b, n, m, block), ref_ok)
+
+
+@pytest.mark.parametrize("colour", [True, False])
+def test_hidden_pixels_are_add_frames_numpy_form(colour):
+    from cuespin.track.background import FeltAccumulator
+    from cuespin.track.colour import Projection
+    rng = np.random.default_rng(8)
+    shape = (60, 80, 3) if colour else (60, 80)
+    proj = Projection(w=np.array([0.3, -0.5, 0.2], np.float32), offset=20.0) if colour else None
+    acc, ref = FeltAccumulator(shape), FeltAccumulator(shape)
+    for _ in range(30):
+        frame = rng.integers(0, 256, shape, dtype=np.uint8)
+        felt = (proj(frame) if colour else frame.astype(np.float32)) + rng.normal(0, 4, shape[:2]).astype(np.float32)
+        centre, radius = rng.uniform(-10, 90, 2), float(rng.uniform(2, 12))
+        tol, reach = float(rng.uniform(1, 8)), float(rng.uniform(0, 30))
+        acc.add_frame(frame, centre, radius, felt, proj, tol, reach)
+        # add_frame's numpy form
+        np.add(ref._partial, frame, out=ref._partial)
+        H, W = shape[:2]
+        r = int(np.ceil(max(radius, reach))) + 1
+        u, v = int(round(centre[0])), int(round(centre[1]))
+        u0, v0, u1, v1 = max(u - r, 0), max(v - r, 0), min(u + r + 1, W), min(v + r + 1, H)
+        if u1 <= u0 or v1 <= v0:
+            continue
+        out = ref._disc(u0, v0, v1 - v0, u1 - u0, centre, radius)
+        P = proj(frame, v0, v1, u0, u1) if colour else frame[v0:v1, u0:u1]
+        out |= np.abs(P - felt[v0:v1, u0:u1]) > tol
+        ys, xs = np.nonzero(out)
+        ref._partial[v0:v1, u0:u1][ys, xs] -= frame[v0:v1, u0:u1][ys, xs]
+        ref.full_hidden[v0:v1, u0:u1] += out
+        assert np.array_equal(acc._partial, ref._partial) and np.array_equal(acc.full_hidden, ref.full_hidden)

@@ -489,6 +489,9 @@ def hidden_ball(image: np.ndarray, path: np.ndarray, polarity: int, contrast: fl
 FULL_CARRY = 257
 
 
+_NO_WINDOW = np.zeros((1, 1), np.float32)
+
+
 class FeltAccumulator:
     """Running mean of the felt over the tracked frames, the ball masked out.
 
@@ -565,12 +568,24 @@ class FeltAccumulator:
         u0, v0, u1, v1 = max(u - r, 0), max(v - r, 0), min(u + r + 1, W), min(v + r + 1, H)
         if u1 <= u0 or v1 <= v0:
             return
-        out = self._disc(u0, v0, v1 - v0, u1 - u0, centre, radius)
+        P = None
         if reference is not None:
             P = projection(frame, v0, v1, u0, u1) if projection is not None else frame[v0:v1, u0:u1]
-            out |= np.abs(P - reference[v0:v1, u0:u1]) > tolerance
         # Taken back out where the ball (or the cue) was: those pixels only,
         # from the 16-bit sum, which holds this frame's levels (no wrap-around).
+        if reference is None or reference.dtype == np.float32:
+            # Compiled: numpy's masks, nonzero and fancy indexing over the
+            # window of FOREIGN_REACH_RADII were ~1 ms a call (track.window).
+            from cuespin.track import window
+            img = np.asarray(frame)  # (a PlanarFrame converted whole once, as np.add above did)
+            three = (lambda a: a) if img.ndim == 3 else (lambda a: a[:, :, None])
+            window.hidden_pixels(three(self._partial), self.full_hidden, three(img),
+                                 _NO_WINDOW if P is None else P, P is not None,
+                                 _NO_WINDOW if reference is None else reference, float(tolerance),
+                                 u0, v0, u1, v1, float(centre[0]), float(centre[1]), float(radius))
+            return
+        out = self._disc(u0, v0, v1 - v0, u1 - u0, centre, radius)
+        out |= np.abs(P - reference[v0:v1, u0:u1]) > tolerance
         ys, xs = np.nonzero(out)
         self._partial[v0:v1, u0:u1][ys, xs] -= frame[v0:v1, u0:u1][ys, xs]
         self.full_hidden[v0:v1, u0:u1] += out

@@ -402,6 +402,8 @@ def stick_through(D: np.ndarray, u0: int, v0: int, c, r: float, thresh: float) -
     radius) of ``c`` reach the border, in a band under ``STICK_WIDTH_RADII``
     radii wide."""
     on = (D > thresh).astype(np.uint8)
+    if not (on[0].any() or on[-1].any() or on[:, 0].any() or on[:, -1].any()):
+        return False  # no blob reaches the border (most frames): the answer below, without labelling
     n, labels = cv2.connectedComponents(on, connectivity=8)
     if n < 2:
         return False

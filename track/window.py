@@ -221,6 +221,152 @@ def linear_fit(AT, y, sel):
     return theta, True
 
 
+@_jit()
+def cluster_meat(JT, e, h, w, B, A):
+    """The jackknife's meat over square clusters (CR3): for each ``B`` x
+    ``B`` cluster of a ``h`` x ``w`` window (row-major; the last row and
+    column of clusters cut at the window's edge), the cluster's residuals
+    ``e_g`` as had it been left out, ``(I - H_gg)^-1 e_g`` with ``H_gg =
+    J_g^T A J_g``, its score ``S_g = J_g (I - H_gg)^-1 e_g`` and the sum of
+    ``S_g S_g^T``.  ``JT`` (k, h*w): the Jacobian's rows, ``e`` (h*w,) the
+    residuals (both zero at pixels left out), ``A`` = ``(JT JT^T)^-1``.
+    :func:`cuespin.track.model._jackknife_cov`'s numpy form (einsum and
+    batched solves over zero-padded clusters) to rounding, in one call.
+    Returns (meat, ok); ok False when some ``I - H_gg`` is singular (an
+    exact zero pivot, where numpy's solve raises)."""
+    k = JT.shape[0]
+    nb = B * B
+    meat = np.zeros((k, k))
+    Jc = np.empty((k, nb))
+    AJ = np.empty((k, nb))
+    M = np.empty((nb, nb))
+    x = np.empty(nb)
+    S = np.empty(k)
+    for gi in range(0, h, B):
+        for gj in range(0, w, B):
+            n = 0
+            for a in range(gi, min(gi + B, h)):
+                for b in range(gj, min(gj + B, w)):
+                    p = a * w + b
+                    for q in range(k):
+                        Jc[q, n] = JT[q, p]
+                    x[n] = e[p]
+                    n += 1
+            for q in range(k):  # A J_g
+                for i in range(n):
+                    acc = 0.0
+                    for p2 in range(k):
+                        acc += A[q, p2] * Jc[p2, i]
+                    AJ[q, i] = acc
+            for i in range(n):  # I - J_g^T A J_g
+                for j in range(n):
+                    acc = 0.0
+                    for q in range(k):
+                        acc += Jc[q, i] * AJ[q, j]
+                    M[i, j] = (1.0 if i == j else 0.0) - acc
+            for c in range(n):  # Gaussian elimination, partial pivoting (LAPACK's gesv's rule)
+                piv = c
+                big = abs(M[c, c])
+                for i in range(c + 1, n):
+                    if abs(M[i, c]) > big:
+                        big, piv = abs(M[i, c]), i
+                if big == 0.0:
+                    return meat, False
+                if piv != c:
+                    for j in range(n):
+                        M[c, j], M[piv, j] = M[piv, j], M[c, j]
+                    x[c], x[piv] = x[piv], x[c]
+                for i in range(c + 1, n):
+                    f = M[i, c] / M[c, c]
+                    if f != 0.0:
+                        for j in range(c + 1, n):
+                            M[i, j] -= f * M[c, j]
+                        x[i] -= f * x[c]
+            for i in range(n - 1, -1, -1):
+                acc = x[i]
+                for j in range(i + 1, n):
+                    acc -= M[i, j] * x[j]
+                x[i] = acc / M[i, i]
+            for q in range(k):
+                acc = 0.0
+                for i in range(n):
+                    acc += Jc[q, i] * x[i]
+                S[q] = acc
+            for q in range(k):
+                for p2 in range(k):
+                    meat[q, p2] += S[q] * S[p2]
+    return meat, True
+
+
+@_jit()
+def block_means(x, a, b, n, m, block):
+    """The means (float64) of the ``n`` x ``m`` whole ``block`` x ``block``
+    blocks of ``x`` from row ``b``, column ``a``:
+    :func:`cuespin.track.model.block_patch`'s ``x.reshape(n, block, m,
+    block).mean(axis=(1, 3), dtype=np.float64)`` in one call instead of
+    numpy's ~0.1 ms of reductions: bit for bit wherever a block's sum is
+    exact in float64, whatever the order (float32 or uint8 levels whose
+    lowest bits lie within 53 of the largest's highest: a window's levels,
+    0-255 with float32's 24 bits, unless one is a nonzero level under
+    ~1e-6), and dividing by a power of two is exact; otherwise within an
+    ulp of it."""
+    out = np.empty((n, m))
+    for i in range(n):
+        for j in range(m):
+            acc = 0.0
+            for p in range(b + i * block, b + (i + 1) * block):
+                for q in range(a + j * block, a + (j + 1) * block):
+                    acc += float(x[p, q])
+            out[i, j] = acc / (block * block)
+    return out
+
+
+@_jit()
+def block_all(x, a, b, n, m, block):
+    """Whether every pixel of each whole block is True (``block_means``'
+    blocks): ``block_patch``'s ``x.all(axis=(1, 3))``."""
+    out = np.ones((n, m), np.bool_)
+    for i in range(n):
+        for j in range(m):
+            for p in range(b + i * block, b + (i + 1) * block):
+                for q in range(a + j * block, a + (j + 1) * block):
+                    if not x[p, q]:
+                        out[i, j] = False
+    return out
+
+
+@_jit()
+def hidden_pixels(partial, hidden, frame, P, has_P, reference, tolerance, u0, v0, u1, v1, cu, cv, radius):
+    """:meth:`cuespin.track.background.FeltAccumulator.add_frame`'s window,
+    in one pass: the pixels of rows ``v0:v1``, columns ``u0:u1`` within
+    ``radius`` of ``(cu, cv)`` (px), and with ``has_P`` those whose
+    projected level ``P`` (the window's, float32) departs from
+    ``reference`` (the frame's felt, float32) by more than ``tolerance``
+    (compared in float32, as numpy compares a float32 window with a Python
+    float), have their frame's levels taken back out of the 16-bit sum
+    ``partial`` and count once more in ``hidden``.  ``frame`` and
+    ``partial`` (h, w, c).  The same pixels and sums as numpy's masks,
+    ``nonzero`` and fancy indexing (the disc's squares in float64 as
+    ``FeltAccumulator._disc`` takes them)."""
+    r2 = radius * radius
+    t = np.float32(tolerance)
+    nc = frame.shape[2]
+    for i in range(v1 - v0):
+        v = v0 + i
+        dv = float(v) - cv
+        dv2 = dv * dv
+        for j in range(u1 - u0):
+            u = u0 + j
+            du = float(u) - cu
+            out = du * du + dv2 <= r2
+            if not out and has_P:
+                out = abs(np.float32(P[i, j]) - np.float32(reference[v, u])) > t
+            if out:
+                for c in range(nc):
+                    partial[v, u, c] -= frame[v, u, c]
+                hidden[v, u] += 1
+
+
 def warm_up() -> None:
     """Load (after an install, compile) each kernel for the arrays the
     tracker passes: float32 windows, contiguous or cut from the felt."""
@@ -231,6 +377,13 @@ def warm_up() -> None:
     foreign_count(D, 0, 0, 4.0, 4.0, 0.0, 0.0, 3.0, 1.0)
     AT = np.ones((6, 9))
     linear_fit(AT[2:6], np.ones(9), np.ones(9, bool))
+    cluster_meat(AT * 0.1, np.ones(9), 3, 3, 3, np.eye(6))
+    block_means(D, 0, 0, 4, 4, 2)
+    block_means(felt, 0, 0, 4, 4, 2)
+    block_all(np.ones((9, 9), bool), 0, 0, 4, 4, 2)
+    hidden_pixels(np.zeros((9, 9, 3), np.uint16), np.zeros((9, 9), np.int32), np.zeros((9, 9, 3), np.uint8), D, True,
+                  D, 1.0, 0, 0, 9, 9, 4.0, 4.0, 3.0)
 
 
-__all__ = ["centroid", "departure_centroid", "foreign_count", "linear_fit", "warm_up"]
+__all__ = ["block_all", "block_means", "centroid", "cluster_meat", "departure_centroid", "foreign_count",
+           "hidden_pixels", "linear_fit", "warm_up"]
