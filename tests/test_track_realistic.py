@@ -101,10 +101,6 @@ NOT_YET = {
                  "the set 97.98% of its frames on open cloth",
     (7, "FFV1"): "issue 10: shot 5 (red on red in a low light): 29 of 81 frames found, the set 97.59% of its "
                  "frames on open cloth",
-    (6, "FFV1"): "issue 10: shot 0 (the cue clip's shot, 2 s): frame 6 of the rest before the strike, the ball "
-                 "hidden by the still cue, is found on the stretch of cue beyond its tip, 5.40 radii off (the "
-                 "cue clip's [0] failure; since cue5's channel rule, which took the 0.8-s clip from 13 false "
-                 "frames to 0; before it the frame was refused as two blobs)",
 }
 
 

@@ -404,22 +404,25 @@ def foreign_near(D: np.ndarray, u0: int, v0: int, c, b, r_out: float, sigma: flo
 
 
 def stick_through(D: np.ndarray, u0: int, v0: int, c, r: float, thresh: float,
-                  still: np.ndarray | None = None) -> bool:
+                  felt: np.ndarray | None = None) -> bool:
     """Whether a ball-positive window ``D`` (top-left ``(u0, v0)``, its
     border where the ball can no longer reach) shows a stick through its
     blob at ``c`` (px; ``STICK_GAP_PX``'s rule): the pixels departing by
     more than ``thresh`` that join those within ``r`` (px, the ball's
     radius) of ``c`` reach the border, in a band under ``STICK_WIDTH_RADII``
-    radii wide.  ``still``: the felt's own ball-positive departure from its
-    level in the same window (a cue lying still that the felt learnt; the
-    comment at ``STICK_GAP_PX``): where the blob alone ends inside the
-    window, its pixels joined to the felt's departing ones are tried too."""
+    radii wide.  ``felt``: the felt in the same window (float32, times the
+    ball's polarity): where the blob alone ends inside the window, its pixels
+    joined to those of the felt departing from its median by more than
+    ``thresh`` (a cue lying still that the felt learnt; the comment at
+    ``STICK_GAP_PX``) are tried too."""
     on = D > thresh
     blob = _joined_blob(on, u0, v0, c, r)
     if blob is None:
         return False
-    if not _reaches_border(blob) and still is not None:
-        blob = _joined_blob(on | (still > thresh), u0, v0, c, r)
+    if not _reaches_border(blob) and felt is not None:
+        lo, hi = cv2.minMaxLoc(felt)[:2]
+        if hi - lo > thresh:  # else no felt pixel departs from its median by that: the same blob
+            blob = _joined_blob(on | (felt - np.median(felt) > thresh), u0, v0, c, r)
     if not _reaches_border(blob):
         return False  # the blob ends where a ball could: not a stick through it
     y, x = np.nonzero(blob)
@@ -651,10 +654,9 @@ class BallTracker:
         half = int(np.ceil(r + STICK_GAP_PX + (0.0 if blur is None else 0.5 * np.hypot(*blur))))
         u0, v0 = max(int(round(loc[0])) - half, 0), max(int(round(loc[1])) - half, 0)
         u1, v1 = min(int(round(loc[0])) + half + 1, self.W), min(int(round(loc[1])) + half + 1, self.H)
-        felt = self.bg.image[v0:v1, u0:u1]
-        D = self.pol * (self.proj(frame, v0, v1, u0, u1) - felt)
-        still = self.pol * (felt - np.median(felt))  # a cue the felt holds (STICK_GAP_PX's comment)
-        return stick_through(D, u0, v0, loc, r, foreign_threshold(self.bg.sigma, self.bg.contrast), still)
+        felt = self.pol * self.bg.image[v0:v1, u0:u1]
+        D = self.pol * self.proj(frame, v0, v1, u0, u1) - felt
+        return stick_through(D, u0, v0, loc, r, foreign_threshold(self.bg.sigma, self.bg.contrast), felt)
 
     def _full_search(self, frame, blur=None):
         """The most ball-like blob (:meth:`_score`) on the playing surface,
