@@ -356,3 +356,27 @@ def test_streak_fallback_keeps_the_strike_and_refuses_a_streak_across_the_rest_s
     assert leaves(f, f.c, f.b)
     # A streak under FIT_BLUR_PX is no streak (a sharp ball's fit): kept.
     assert leaves(replace(f, b=0.3 * f.b), f.c, np.zeros(2))
+
+
+def test_a_stretch_of_cue_beyond_the_felts_still_cue_is_a_stick():
+    # The cue clip's geometry (seed 6 shot 0, r = 7.8 px, foreign threshold
+    # 32): the felt holds the cue where it is held after the strike, so at
+    # address only the stretch reaching beyond it departs (1.9 radii long,
+    # 0.45 wide), ending inside the ball's window.  Joined to the felt's
+    # still cue it runs through the window: a stick.  A ball with that still
+    # cue at its rear stays a ball.
+    from cuespin.track.tracker import STICK_GAP_PX, stick_through
+
+    r, thresh = 7.8, 32.0
+    n = 2 * int(np.ceil(r + STICK_GAP_PX)) + 1
+    c = np.array([n // 2, n // 2], float)
+    felt = np.full((n, n), 100.0, np.float32)  # times the ball's polarity
+    felt[11:14, 20:] += 50.0  # the still cue, from the stretch's end to the window's border
+    stretch = np.zeros((n, n), np.float32)
+    stretch[11:14, 5:20] = 50.0
+    assert not stick_through(stretch, 0, 0, c, r, thresh)
+    assert not stick_through(stretch, 0, 0, c, r, thresh, np.full_like(felt, 100.0))  # a bare felt adds nothing
+    assert stick_through(stretch, 0, 0, c, r, thresh, felt)
+    yy, xx = np.mgrid[:n, :n]
+    ball = np.where(np.hypot(xx - c[0], yy - c[1]) <= r, 40.0, 0.0).astype(np.float32)
+    assert not stick_through(ball, 0, 0, c, r, thresh, felt)

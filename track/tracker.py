@@ -71,6 +71,15 @@ SCORE_FRACTION = 0.3
 # the felt learnt under the still-looking shaft left a 35 px stretch behind
 # the tip, 0.6 radii wide, departing 40-70 levels (threshold 32), tracked as
 # the ball for 52 frames, 5-9 radii off.
+# A cue lying still where the felt learnt it (held after the strike, in most
+# of the look-ahead's samples) departs only where the frame's cue reaches
+# beyond it: the 0.8-s clip of that shot, the cue at address 3.4 radii behind
+# the ball and held 5.2 radii behind it after the strike, left a stretch 1.9
+# radii long that ends inside the window, taken for the ball (5.4 radii off)
+# when the ball was hidden, and "two ball-like blobs" in frames 0-10 when not.
+# The felt's own departure from its level in the window (its median), the
+# ball's sign and the same threshold, is the still cue: the blob's pixels
+# joined to it run through the window in a band as the moving shaft's do.
 STICK_GAP_PX = 4.0
 STICK_WIDTH_RADII = 1.0
 # The full search looks past at most this many sticks for the ball.
@@ -394,34 +403,58 @@ def foreign_near(D: np.ndarray, u0: int, v0: int, c, b, r_out: float, sigma: flo
     return foreign_pixels(D, beyond_ball(D.shape, u0, v0, c, b, r_out), sigma, contrast)
 
 
-def stick_through(D: np.ndarray, u0: int, v0: int, c, r: float, thresh: float) -> bool:
+def stick_through(D: np.ndarray, u0: int, v0: int, c, r: float, thresh: float,
+                  felt: np.ndarray | None = None) -> bool:
     """Whether a ball-positive window ``D`` (top-left ``(u0, v0)``, its
     border where the ball can no longer reach) shows a stick through its
     blob at ``c`` (px; ``STICK_GAP_PX``'s rule): the pixels departing by
     more than ``thresh`` that join those within ``r`` (px, the ball's
     radius) of ``c`` reach the border, in a band under ``STICK_WIDTH_RADII``
-    radii wide."""
-    on = (D > thresh).astype(np.uint8)
-    if not (on[0].any() or on[-1].any() or on[:, 0].any() or on[:, -1].any()):
-        return False  # no blob reaches the border (most frames): the answer below, without labelling
-    n, labels = cv2.connectedComponents(on, connectivity=8)
-    if n < 2:
+    radii wide.  ``felt``: the felt in the same window (float32, times the
+    ball's polarity): where the blob alone ends inside the window, its pixels
+    joined to those of the felt departing from its median by more than
+    ``thresh`` (a cue lying still that the felt learnt; the comment at
+    ``STICK_GAP_PX``) are tried too."""
+    on = D > thresh
+    felt_departs = False
+    if felt is not None:
+        lo, hi = cv2.minMaxLoc(felt)[:2]
+        felt_departs = hi - lo > thresh  # else no felt pixel departs from its median by that: the same blob
+    if not felt_departs and not (on[0].any() or on[-1].any() or on[:, 0].any() or on[:, -1].any()):
+        return False  # no pixel over the threshold on the border (most frames): no blob reaches it
+    blob = _joined_blob(on, u0, v0, c, r)
+    if blob is None:
         return False
-    h, w = D.shape
-    # Open grids broadcast (no full index grids) and a label lookup table
-    # instead of np.isin (which sorts): the same pixels, ~0.2 ms less a frame.
-    ys, xs = np.ogrid[v0:v0 + h, u0:u0 + w]
-    core = labels[(np.hypot(xs - c[0], ys - c[1]) <= r) & (labels > 0)]
-    if not len(core):
-        return False
-    blob = _members(n, core)[labels]
-    if not (blob[0].any() or blob[-1].any() or blob[:, 0].any() or blob[:, -1].any()):
+    if not _reaches_border(blob) and felt_departs:
+        blob = _joined_blob(on | (felt - np.median(felt) > thresh), u0, v0, c, r)
+    if not _reaches_border(blob):
         return False  # the blob ends where a ball could: not a stick through it
     y, x = np.nonzero(blob)
     if len(x) < 3:
         return False
     lam = np.linalg.eigvalsh(np.cov(np.c_[x, y].T, bias=True))
     return bool(np.sqrt(12 * max(lam[0], 0.0)) < STICK_WIDTH_RADII * r)  # a uniform band's width
+
+
+def _joined_blob(on: np.ndarray, u0: int, v0: int, c, r: float) -> np.ndarray | None:
+    """The pixels of ``on`` (bool window, top-left ``(u0, v0)``) 8-connected
+    to those within ``r`` (px) of ``c``; None when none lie there."""
+    n, labels = cv2.connectedComponents(on.astype(np.uint8), connectivity=8)
+    if n < 2:
+        return None
+    h, w = on.shape
+    # Open grids broadcast (no full index grids) and a label lookup table
+    # instead of np.isin (which sorts): the same pixels, ~0.2 ms less a frame.
+    ys, xs = np.ogrid[v0:v0 + h, u0:u0 + w]
+    core = labels[(np.hypot(xs - c[0], ys - c[1]) <= r) & (labels > 0)]
+    if not len(core):
+        return None
+    return _members(n, core)[labels]
+
+
+def _reaches_border(blob: np.ndarray) -> bool:
+    return bool(blob[0].any() or blob[-1].any() or blob[:, 0].any() or blob[:, -1].any())
+
 
 def centroid(D: np.ndarray, u0: int, v0: int, c0, radius: float, n_iter: int = 3) -> np.ndarray:
     """:func:`cuespin.track.model.moments`, compiled
@@ -625,8 +658,9 @@ class BallTracker:
         half = int(np.ceil(r + STICK_GAP_PX + (0.0 if blur is None else 0.5 * np.hypot(*blur))))
         u0, v0 = max(int(round(loc[0])) - half, 0), max(int(round(loc[1])) - half, 0)
         u1, v1 = min(int(round(loc[0])) + half + 1, self.W), min(int(round(loc[1])) + half + 1, self.H)
-        D = self.pol * (self.proj(frame, v0, v1, u0, u1) - self.bg.image[v0:v1, u0:u1])
-        return stick_through(D, u0, v0, loc, r, foreign_threshold(self.bg.sigma, self.bg.contrast))
+        felt = self.pol * self.bg.image[v0:v1, u0:u1]
+        D = self.pol * self.proj(frame, v0, v1, u0, u1) - felt
+        return stick_through(D, u0, v0, loc, r, foreign_threshold(self.bg.sigma, self.bg.contrast), felt)
 
     def _full_search(self, frame, blur=None):
         """The most ball-like blob (:meth:`_score`) on the playing surface,
