@@ -684,6 +684,8 @@ def refit_shift(felt_old: np.ndarray, felt_new: np.ndarray, u0: int, v0: int, c,
     iG = 4 if fit_blur else 2
     _, D = _model_rows(c, b, 1.0, np.zeros_like(felt_old), r, u0, v0, taus, None, fit_blur, outline)
     df = (felt_new - felt_old).ravel()
+    cov = D[iG]
+    kept = df * (1.0 - cov)  # the residual's change the felt's makes, less the model's
     if shade is None:
         Jo, Jn = D.copy(), D
         Jo[:iG] *= (G - felt_old).ravel()
@@ -691,15 +693,25 @@ def refit_shift(felt_old: np.ndarray, felt_new: np.ndarray, u0: int, v0: int, c,
     else:
         _, Jo = _model_rows(c, b, G, felt_old, r, u0, v0, taus, shade, fit_blur, outline)
         Jn = Jo.copy()
-        Jn[:iG] -= D[:iG] * df
-    cov = D[iG]
+        moved = D[:iG] * df
+        psf = float(shade[kernel().PSF_AT]) if len(shade) > kernel().PSF_AT else 0.0
+        if psf > 0:
+            # The lit sphere's model is seen through the lens (SphereLook.psf):
+            # so is the felt's share of it.
+            h, w = felt_old.shape
+            moved = moved.reshape(-1, h, w)
+            kernel().psf_blur(moved, psf)
+            seen = (df * cov).reshape(1, h, w)
+            kernel().psf_blur(seen, psf)
+            moved, kept = moved.reshape(iG, -1), df - seen.ravel()
+        Jn[:iG] -= moved
     # Least squares, not solve: a blur fitted near zero length has (almost)
     # zero derivatives (the blur acts at second order there), which must not
     # stop the centre's correction.
     if valid is not None:  # the pixels the fit left out tell it nothing (rows form: a column per pixel)
         Jo = Jo * np.asarray(valid, float).reshape(1, -1)
     try:
-        step = -np.linalg.lstsq(Jo @ Jn.T, Jo @ (df * (1.0 - cov)), rcond=1e-9)[0]
+        step = -np.linalg.lstsq(Jo @ Jn.T, Jo @ kept, rcond=1e-9)[0]
     except np.linalg.LinAlgError:
         return np.zeros(2)
     return step[:2]
