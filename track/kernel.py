@@ -271,16 +271,19 @@ def psf_weights(sigma):
     return wts
 
 
-@_jit()
+@_jit(fastmath={"reassoc", "contract"})
 def psf_blur(planes, sigma):
     """Each of ``planes`` (k, h, w) convolved in place with the separable
     Gaussian of ``sigma`` (px), zero outside the window (the model is zero
-    off the ball, which the window holds with a margin).  Only the rows and
-    columns within the PSF's reach of the planes' non-zero box are
-    computed: the ball covers a third of its window."""
+    off the ball, which the window holds with a margin).  Only the box
+    within the PSF's reach of the planes' non-zero values is computed (the
+    ball covers a third of its window), through a zero-padded copy whose
+    taps have fixed bounds (the loops over a row vectorise; with bounds
+    per pixel a 37 x 37 window's nine planes took 0.25 ms)."""
     k, h, w = planes.shape
     wts = psf_weights(sigma)
-    rad = (wts.shape[0] - 1) // 2
+    n_w = wts.shape[0]
+    rad = (n_w - 1) // 2
     i_lo, i_hi, j_lo, j_hi = h, -1, w, -1
     for a in range(k):
         for i in range(h):
@@ -292,20 +295,28 @@ def psf_blur(planes, sigma):
         return
     i0, i1 = max(i_lo - rad, 0), min(i_hi + rad + 1, h)
     j0, j1 = max(j_lo - rad, 0), min(j_hi + rad + 1, w)
-    tmp = np.zeros((h, w))
+    H, W = i1 - i0, j1 - j0
+    # P[i + rad, j + rad] = planes[a, i0 + i, j0 + j] on the non-zero box, zero around it.
+    P = np.zeros((H + 2 * rad, W + 2 * rad))
+    T = np.zeros((H + 2 * rad, W))
     for a in range(k):
-        for i in range(i_lo, i_hi + 1):  # along the rows: only rows with a non-zero value
-            for j in range(j0, j1):
-                s = 0.0
-                for d in range(max(-rad, j_lo - j), min(rad, j_hi - j) + 1):
-                    s += wts[d + rad] * planes[a, i, j + d]
-                tmp[i, j] = s
-        for i in range(i0, i1):  # then down the columns
-            for j in range(j0, j1):
-                s = 0.0
-                for d in range(max(-rad, i_lo - i), min(rad, i_hi - i) + 1):
-                    s += wts[d + rad] * tmp[i + d, j]
-                planes[a, i, j] = s
+        for i in range(i_lo, i_hi + 1):
+            for j in range(j_lo, j_hi + 1):
+                P[i - i0 + rad, j - j0 + rad] = planes[a, i, j]
+        for ii in range(i_lo - i0 + rad, i_hi - i0 + rad + 1):  # along the rows holding a value
+            for j in range(W):
+                T[ii, j] = 0.0
+            for d in range(n_w):
+                wd = wts[d]
+                for j in range(W):
+                    T[ii, j] += wd * P[ii, j + d]
+        for i in range(H):  # then down the columns
+            for j in range(W):
+                planes[a, i0 + i, j0 + j] = 0.0
+            for d in range(n_w):
+                wd = wts[d]
+                for j in range(W):
+                    planes[a, i0 + i, j0 + j] += wd * T[i + d, j]
 
 
 @_jit()
