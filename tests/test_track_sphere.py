@@ -27,6 +27,19 @@ def lit_ball(seed: int, r: float = R_PX, shape=(H, W), c=C_TRUE):
     return rng, felt, streak_model(c, np.zeros(2), 150.0, felt, r, U0, V0, np.zeros(1), GEO)[0]
 
 
+def still_samples(rng, clean, felt, n: int = 12):
+    """``n`` noisy frames (noise 3) of the still ball ``clean`` fitted with
+    the quadratic look, as the tracker hands them to the lit sphere's
+    learning: (the Samples, the last fit, its frame)."""
+    samples = []
+    for _ in range(n):
+        img = clean + rng.normal(0, 3.0, clean.shape)
+        f = fit_disc(img, felt, U0, V0, C_TRUE + [0.3, -0.2], R_PX, 170.0, shade=True)
+        assert f
+        samples.append(Sample(img, felt, U0, V0, f.c, f.b, f.G, False, f.shade, None))
+    return samples, f, img
+
+
 def render_and_track(scene, path):
     """Render ``scene`` to ``path`` and track it as the command does:
     (the result, the truth sidecar's rows the track covers, their true
@@ -50,12 +63,7 @@ def test_learnt_geometry_pins_the_centre():
     rng, felt, ball = lit_ball(11)
     truth, c = TRUTH, C_TRUE
     clean = felt + ball
-    samples = []
-    for _ in range(12):
-        img = clean + rng.normal(0, 3.0, clean.shape)
-        f = fit_disc(img, felt, U0, V0, c + [0.3, -0.2], R_PX, 170.0, shade=True)
-        assert f
-        samples.append(Sample(img, felt, U0, V0, f.c, f.b, f.G, False, f.shade, None))
+    samples, f, img = still_samples(rng, clean, felt)
     quad = np.hypot(*(f.c - c)) / f.stderr.max()
     look, _ = learn_sphere(samples, R_PX)
     assert abs(np.angle(np.exp(1j * (look.azimuth - truth.azimuth)))) < 0.1
@@ -141,12 +149,7 @@ def test_lens_blur_learnt_with_the_light():
     rng, felt, ball = lit_ball(11)
     c, sigma = C_TRUE, 0.8
     clean = felt + gaussian(ball, sigma, constant=True)
-    samples = []
-    for _ in range(12):
-        img = clean + rng.normal(0, 3.0, clean.shape)
-        f = fit_disc(img, felt, U0, V0, c + [0.3, -0.2], R_PX, 170.0, shade=True)
-        assert f
-        samples.append(Sample(img, felt, U0, V0, f.c, f.b, f.G, False, f.shade, None))
+    samples, f, img = still_samples(rng, clean, felt)
     look, _ = learn_sphere(samples, R_PX)
     assert abs(look.psf - sigma) < 0.05
     e, z = [], []
