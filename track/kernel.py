@@ -63,7 +63,7 @@ def look_at(X, Y, shade):
     """The ball's look at ``(X, Y)`` (ball radii from its centre) less its
     level: value, its derivatives in ``X`` and ``Y``, and the three basis
     functions its coefficients ``shade[:3]`` multiply.  ``shade`` of 3: the
-    quadratic look ``gu X + gv Y + q Q``; of 11: the lit sphere's
+    quadratic look ``gu X + gv Y + q Q``; of 12: the lit sphere's
     ``a max(n.L, 0) + s max(n.H, 0)^p + q Q`` with ``shade[3:11] = (L, H, p,
     nz_min)``
     (:func:`cuespin.track.model.sphere_basis`, the numpy form).  ``Q = X^2 +
@@ -522,7 +522,7 @@ def fit(y, felt, use, has_valid, c, b, G, r, kind, geo, u0, v0, has_shade, look_
     ``look_geo`` the lit sphere's geometry (8: L, H, p, nz_min) or empty
     (the quadratic look, when ``has_shade``).
 
-    Returns (outcome, G, look (3, or 11 with the geometry), iterations,
+    Returns (outcome, G, look (3, or 12 with the geometry), iterations,
     stderr (2), cov (2, 2), rms).
     """
     h, w = felt.shape

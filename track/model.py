@@ -182,8 +182,9 @@ def sphere_basis(X, Y, g):
     ----------
     X, Y : ndarray
         Points, in ball radii from the centre (broadcast).
-    g : array_like, shape (11,)
-        The look (``g[3:11]`` = :meth:`SphereLook.geometry`).
+    g : array_like, shape (12,)
+        The look (``g[3:12]`` = :meth:`SphereLook.geometry`; its PSF,
+        ``g[11]``, acts on the model's pixels, not here).
 
     Returns
     -------
@@ -225,7 +226,7 @@ def look_value(X, Y, shade):
     """The look less its level at ``(X, Y)`` (ball radii): value, its
     derivatives in ``X`` and ``Y``, and the three basis functions
     ``shade[:3]`` multiplies (:func:`cuespin.track.kernel.look_at`'s numpy
-    form): the quadratic look (``shade`` of 3) or the lit sphere's (11)."""
+    form): the quadratic look (``shade`` of 3) or the lit sphere's (12)."""
     Q = X * X + Y * Y - 0.5
     if len(shade) < 11:
         gu, gv, q = shade[:3]
@@ -256,11 +257,12 @@ def streak_model(c, b, G, felt, r, u0, v0, taus, shade=None, blur_cols=True, out
     ``G + (gu X_u + gv X_v) / r + q (|X|^2 / r^2 - 1/2)``, a lit side and a
     rim darker or lighter than the middle (shading, a highlight's mean),
     taken at each pixel's centre within the exact coverage.  Three more
-    Jacobian columns then follow, ``d/dgu, d/dgv, d/dq``.  ``shade`` of 11,
+    Jacobian columns then follow, ``d/dgu, d/dgv, d/dq``.  ``shade`` of 12,
     ``(a, s, q)`` and a :class:`SphereLook`'s geometry, is the lit sphere's
     look ``G + a max(n.L, 0) + s max(n.H, 0)^p + q (|X|^2 / r^2 - 1/2)``
-    instead, its columns ``d/da, d/ds, d/dq``.  Either way the centre's
-    columns move the look with the ball.
+    instead, its columns ``d/da, d/ds, d/dq``, the model and every column
+    then convolved with its PSF when it has one (``shade[11]`` > 0).
+    Either way the centre's columns move the look with the ball.
 
     ``blur_cols`` False leaves the blur's columns ``d/dbu, d/dbv`` zero (a
     fit that holds the blur fixed never reads them: two tensor products
@@ -359,7 +361,7 @@ class DiscFit:
         Gauss-Newton iterations taken.
     shade : ndarray or None
         The look's fitted coefficients when it was fitted: shape (3,) for
-        the quadratic look, (11,) for a :class:`SphereLook` (its three
+        the quadratic look, (12,) for a :class:`SphereLook` (its three
         coefficients, then its geometry): either passes back to
         :func:`streak_model` and :func:`refit_shift` as their ``shade``.
     """
