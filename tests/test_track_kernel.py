@@ -30,10 +30,11 @@ STDERR_RTOL = 1e-7
 
 
 SPHERE = model.SphereLook(0.6, 1.0, 40.0)  # the lit sphere's look, the renderer's defaults (light from +u, +v)
+SPHERE_PSF = model.SphereLook(0.6, 1.0, 40.0, 0.8)  # the same through a lens's blur (PSF sigma 0.8 px)
 
 
 @pytest.mark.parametrize("blur", [0.0, 7.0])
-@pytest.mark.parametrize("shade", [False, True, "sphere"])
+@pytest.mark.parametrize("shade", [False, True, "sphere", "sphere_psf"])
 @pytest.mark.parametrize("ellipse", [False, True])
 def test_model_rows_are_the_references(blur, shade, ellipse):
     rng = np.random.default_rng(3)
@@ -41,8 +42,8 @@ def test_model_rows_are_the_references(blur, shade, ellipse):
     b = blur * np.array([0.8, 0.6])
     taus = model.blur_nodes(np.hypot(*b))
     look = (12.0, -7.0, -20.0) if shade is True else None
-    if shade == "sphere":
-        look = np.r_[60.0, 120.0, -5.0, SPHERE.geometry()]
+    if shade in ("sphere", "sphere_psf"):
+        look = np.r_[60.0, 120.0, -5.0, (SPHERE if shade == "sphere" else SPHERE_PSF).geometry()]
     for blur_rows in (False, True):
         args = ([518.27, 301.64], b, 210.0, felt, R_PX, U0, V0, taus, look, blur_rows, ELLIPSE if ellipse else None)
         m, JT = model._model_rows(*args)
@@ -68,7 +69,7 @@ def test_fits_are_the_references(blur, ellipse):
                                     (10.0, -6.0, -15.0), outline=outline)[0]
     img = img + rng.normal(0, 3.0, img.shape)
     n_ok = 0
-    for shade in (False, True, SPHERE):
+    for shade in (False, True, SPHERE, SPHERE_PSF):
         for fit_blur in (False, True):
             for valid in (None, rng.random((H, W)) > 0.1):
                 kw = dict(b0=1.1 * b, fit_blur=fit_blur, shade=shade, valid=valid, outline=outline)
@@ -85,7 +86,7 @@ def test_fits_are_the_references(blur, ellipse):
                     if shade:
                         assert np.allclose(f.shade, g.shade, rtol=1e-9, atol=1e-9)
     # A sharp ball's blur is not fitted (a fit of it fails in both forms).
-    assert n_ok == (12 if blur else 6)
+    assert n_ok == (16 if blur else 8)
 
 
 def test_failed_fits_fail_alike():

@@ -27,6 +27,19 @@ def lit_ball(seed: int, r: float = R_PX, shape=(H, W), c=C_TRUE):
     return rng, felt, streak_model(c, np.zeros(2), 150.0, felt, r, U0, V0, np.zeros(1), GEO)[0]
 
 
+def still_samples(rng, clean, felt, n: int = 12):
+    """``n`` noisy frames (noise 3) of the still ball ``clean`` fitted with
+    the quadratic look, as the tracker hands them to the lit sphere's
+    learning: (the Samples, the last fit, its frame)."""
+    samples = []
+    for _ in range(n):
+        img = clean + rng.normal(0, 3.0, clean.shape)
+        f = fit_disc(img, felt, U0, V0, C_TRUE + [0.3, -0.2], R_PX, 170.0, shade=True)
+        assert f
+        samples.append(Sample(img, felt, U0, V0, f.c, f.b, f.G, False, f.shade, None))
+    return samples, f, img
+
+
 def render_and_track(scene, path):
     """Render ``scene`` to ``path`` and track it as the command does:
     (the result, the truth sidecar's rows the track covers, their true
@@ -50,12 +63,7 @@ def test_learnt_geometry_pins_the_centre():
     rng, felt, ball = lit_ball(11)
     truth, c = TRUTH, C_TRUE
     clean = felt + ball
-    samples = []
-    for _ in range(12):
-        img = clean + rng.normal(0, 3.0, clean.shape)
-        f = fit_disc(img, felt, U0, V0, c + [0.3, -0.2], R_PX, 170.0, shade=True)
-        assert f
-        samples.append(Sample(img, felt, U0, V0, f.c, f.b, f.G, False, f.shade, None))
+    samples, f, img = still_samples(rng, clean, felt)
     quad = np.hypot(*(f.c - c)) / f.stderr.max()
     look, _ = learn_sphere(samples, R_PX)
     assert abs(np.angle(np.exp(1j * (look.azimuth - truth.azimuth)))) < 0.1
@@ -125,6 +133,34 @@ def test_markings_stay_out_of_the_lights_learning():
     assert abs(T.shade.elevation - truth.elevation) < 0.05
     err = np.array([np.hypot(*(f.c - c)) for f in fits])
     assert np.sqrt(np.mean(err ** 2)) < 2 * 0.0067
+
+
+def test_lens_blur_learnt_with_the_light():
+    # The still ball seen through a lens: its departure from the felt
+    # convolved with the renderer's Gaussian PSF (render.draw.gaussian, as
+    # FrameRenderer draws it), sigma 0.8 px, noise 3.  Learnt from twelve
+    # frames' quadratic fits, the PSF came out 0.803 px (measured, seed 11;
+    # sigma 0.5 and 1.0: 0.50 and 0.996, seeds 3, 4), and over 40 frames the
+    # sphere's fits with it were 0.0089 px off (RMS; err/se 0.97), with the
+    # same light but no PSF 0.050 px (err/se 2.5: a bias of 0.07 px).
+    # Asserted: the PSF within 0.05 px, the RMS within 2x the measured and
+    # err/se in the issue's 0.8-1.25 widened by 40 frames' spread (+-0.15).
+    from cuespin.render.draw import gaussian
+    rng, felt, ball = lit_ball(11)
+    c, sigma = C_TRUE, 0.8
+    clean = felt + gaussian(ball, sigma, constant=True)
+    samples, f, img = still_samples(rng, clean, felt)
+    look, _ = learn_sphere(samples, R_PX)
+    assert abs(look.psf - sigma) < 0.05
+    e, z = [], []
+    for _ in range(40):
+        img = clean + rng.normal(0, 3.0, clean.shape)
+        g = fit_disc(img, felt, U0, V0, c + [0.3, -0.2], R_PX, 170.0, shade=look)
+        assert g
+        e.append(g.c - c)
+        z.append((g.c - c) / g.stderr)
+    assert np.sqrt(np.mean(np.square(e))) < 2 * 0.0089
+    assert 0.65 <= np.sqrt(np.mean(np.square(z))) <= 1.4
 
 
 @pytest.mark.slow

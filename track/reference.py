@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from cuespin.track.kernel import PSF_AT, PSF_REACH
 from cuespin.track.model import (AITKEN_COS, AITKEN_RHO, CLUSTER_PX, DAMP_AFTER, MAX_ITER, NO_CONVERGENCE_SE,
                                  SPHERE_CLUSTER_PX, STEP_TOL_PX, STEP_TOL_SE, DiscFit, SphereLook, _failed,
                                  _fit_blocks, blur_nodes, coverage_with_gradient, look_value)
@@ -25,8 +26,29 @@ def model_rows(c, b, G, felt, r, u0, v0, taus, shade=None, blur_rows=True, outli
     one product, and the columns a fit does not read are never built.  A
     sharp ball (one node at 0) is computed on 2-D arrays, without the sums
     over nodes (measured: half of the evaluation's time went to overheads
-    of arrays this small).
+    of arrays this small).  With the lit sphere's lens blur (``shade[PSF_AT]``
+    > 0) the model and every row are convolved with its PSF (:func:`psf_blur`).
     """
+    m, JT = _sharp_rows(c, b, G, felt, r, u0, v0, taus, shade, blur_rows, outline)
+    if shade is not None and len(shade) > PSF_AT and shade[PSF_AT] > 0:
+        h, w = np.shape(felt)
+        m = psf_blur(m[None], shade[PSF_AT])[0]
+        JT = psf_blur(JT.reshape(-1, h, w), shade[PSF_AT]).reshape(JT.shape[0], -1)
+    return m, JT
+
+
+def psf_blur(planes, sigma: float) -> np.ndarray:
+    """``planes`` (k, h, w) each convolved with the sampled Gaussian of
+    ``sigma`` (px), zero outside: :func:`cuespin.track.kernel.psf_blur`."""
+    rad = int(np.ceil(PSF_REACH * sigma))
+    wts = np.exp(-0.5 * (np.arange(-rad, rad + 1) / sigma) ** 2)
+    wts /= wts.sum()
+    out = np.apply_along_axis(np.convolve, 2, planes, wts, mode="same")
+    return np.apply_along_axis(np.convolve, 1, out, wts, mode="same")
+
+
+def _sharp_rows(c, b, G, felt, r, u0, v0, taus, shade=None, blur_rows=True, outline=None):
+    """:func:`model_rows` before the lens's blur."""
     h, w = felt.shape
     taus = np.asarray(taus, float)
     n = len(taus)

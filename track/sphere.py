@@ -1,8 +1,9 @@
 """The lit sphere's geometry learnt from a video's frames (pure functions).
 
 :class:`cuespin.track.model.SphereLook` is the ball's look with its light
-direction and shininess fixed for the video, each frame fitting only its
-centre, blur and three linear coefficients.  Those three numbers are learnt
+direction, shininess and lens blur (the PSF) fixed for the video, each
+frame fitting only its centre, blur and three linear coefficients.  Those
+four numbers are learnt
 here, once, from the frames the tracker first fits (before the strike the
 ball rests: the same window many times, whose mean has the noise of one
 frame divided by their number), by minimising the fits' residual sum over
@@ -33,15 +34,21 @@ MAX_GROUPS = 3
 # may make the ball's diffuse term negative).
 START_ELEVATIONS = (0.9, 1.15, 1.4)
 START_SHININESS = (15.0, 40.0, 100.0)
-# Compass search: first steps (azimuth rad, elevation rad, log shininess),
-# halved when no move helps, until below this fraction of them.
-STEPS = (0.3, 0.12, 0.5)
+# Compass search: first steps (azimuth rad, elevation rad, log shininess,
+# the PSF's variance px^2), halved when no move helps, until below this
+# fraction of them.  The lens's blur is searched as its variance, from 0:
+# it acts on the image at second order in sigma, so a search in sigma
+# would start where nothing changes.
+STEPS = (0.3, 0.12, 0.5, 0.25)
 MIN_STEP_FRACTION = 1 / 64
 ELEVATION_RANGE = (0.05, np.pi / 2)
 # Below ~10 Blinn's lobe is as broad as the diffuse term and takes its
 # place: on a matte ball (benchmarks/track.py realistic shot 1, seed 0, light
 # at 1.38 rad) the search went to shininess 4.4 and elevation 1.48.
 SHININESS_RANGE = (10.0, 2000.0)
+# The PSF's variance (px^2): data_gen's lenses span sigma 0.5-1.0 px
+# (data_gen/sampler.py); up to 2 px, a lens out of focus.
+PSF_VAR_RANGE = (0.0, 4.0)
 
 
 class Sample(NamedTuple):
@@ -108,12 +115,13 @@ def _rss(groups, r: float, outline, look: SphereLook, block: int = 1) -> float:
 def _look(x) -> SphereLook:
     el = float(np.clip(x[1], *ELEVATION_RANGE))
     p = float(np.clip(np.exp(x[2]), *SHININESS_RANGE))
-    return SphereLook(float(np.mod(x[0], 2 * np.pi)), el, p)
+    return SphereLook(float(np.mod(x[0], 2 * np.pi)), el, p, float(np.sqrt(np.clip(x[3], *PSF_VAR_RANGE))))
 
 
 def learn_sphere(samples: list, r: float, outline=None, start: SphereLook | None = None, block: int = 1
                  ) -> tuple[SphereLook | None, float]:
-    """The light's direction and the shininess that explain the frames best.
+    """The light's direction, the shininess and the lens's blur that
+    explain the frames best.
 
     Parameters
     ----------
@@ -144,9 +152,9 @@ def learn_sphere(samples: list, r: float, outline=None, start: SphereLook | None
     az0 = float(np.arctan2(gv, gu))
     best, best_x = np.inf, None
     if start is not None:
-        starts = [np.array([start.azimuth, start.elevation, np.log(start.shininess)])]
+        starts = [np.array([start.azimuth, start.elevation, np.log(start.shininess), start.psf**2])]
     else:
-        starts = [np.array([az, el, np.log(p)]) for az in (az0, az0 + np.pi) for el in START_ELEVATIONS
+        starts = [np.array([az, el, np.log(p), 0.0]) for az in (az0, az0 + np.pi) for el in START_ELEVATIONS
                   for p in START_SHININESS]
     for x in starts:
         v = _rss(groups, r, outline, _look(x), block)
@@ -158,7 +166,7 @@ def learn_sphere(samples: list, r: float, outline=None, start: SphereLook | None
     x = best_x
     while np.all(step >= np.array(STEPS) * MIN_STEP_FRACTION):
         moved = False
-        for k in range(3):
+        for k in range(len(STEPS)):
             for sign in (1.0, -1.0):
                 y = x.copy()
                 y[k] += sign * step[k]
