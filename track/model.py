@@ -609,8 +609,8 @@ def _jackknife_cov(g: DiscFit, y, felt, U0, V0, r, fit_blur, shade, ok, outline)
     # (track.window.cluster_meat: numpy's einsum and batched solves over
     # zero-padded clusters were ~0.5 ms of a 1 ms fit; the same to rounding).
     from cuespin.track import window
-    meat, ok = window.cluster_meat(JT, e, h, w, B, A)
-    if not ok:  # a singular I - H_gg
+    meat, solved = window.cluster_meat(JT, e, h, w, B, A)
+    if not solved:  # a singular I - H_gg
         return g
     cov = (A @ meat @ A)[:2, :2]
     cov = 0.5 * (cov + cov.T)
