@@ -124,6 +124,12 @@ EDGE_FRAMES = 2
 # shots): err/se median 1.22 -> 1.09, in band 6 -> 8 of 11; seed 1 alone
 # would give 1.78 (bootstrap SE 0.22), not 1.47: the share differs between
 # samples of colour pairs, and 1.45-1.78 give the same in-band count there.
+# Review 9a: it is MJPG's whole excess on these fits, not the codec's alone
+# (the same shots' FFV1 tracks, lit sphere aside, state ~1.2 too little in
+# variance too: about 1.2 of it is the codec, 1.2 shared and uncorrected on
+# FFV1), and 1.45 rounds the seed-0 median 1.47 down to the pooled seeds'
+# side (1.52); the recovery still estimates a codec term of its own on top
+# (recover.estimate's codec_excess), which takes up most of it there.
 JPEG_CHROMA_VAR = 1.45
 
 
