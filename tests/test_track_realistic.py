@@ -262,7 +262,7 @@ def test_cue_shaft_is_not_the_ball(cue_shot, k):
     # ball) were "two ball-like blobs": the felt holds the cue where it is
     # held after the strike, and the stretch the address reaches beyond
     # that was the second blob.  Joined to the felt's still cue it runs
-    # through the ball's window (stick_through's ``still``): the ball alone.
+    # through the ball's window (stick_through's ``felt``): the ball alone.
     assert status == OK, (k, loc, status)
     assert np.hypot(*(loc - truth)) < 0.5 * r, (k, loc, status)  # a blob, refined later
     hidden = bg.image.copy()

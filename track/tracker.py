@@ -82,6 +82,16 @@ SCORE_FRACTION = 0.3
 # joined to it run through the window in a band as the moving shaft's do.
 STICK_GAP_PX = 4.0
 STICK_WIDTH_RADII = 1.0
+# The felt-joined pass (a stretch of cue joined to the felt's still cue) has
+# its own, narrower limit: a half-lit ball alone is 0.92 r wide (a half
+# disc's moments), a dim one's lit sliver less, so joined to a line, a
+# cushion or a still cue of its sign in the felt it fell under 1.  Simulated
+# (tests/test_track.py _felt_joined_cases, 2,000 pairs, seed 11; the cue
+# clip's stretch 0.35-0.7 r wide, measured 0.45): balls newly called a stick
+# 9.6% at 1.0, 4.7% at 0.92, 2.2% at 0.75, 1.5% at 0.7; stretches missed
+# 0.8% at 0.8 and above (joined below the threshold), 1.1% at 0.75, 3.2% at
+# 0.7, 12% at 0.65.
+STICK_JOINED_WIDTH_RADII = 0.75
 # The full search looks past at most this many sticks for the ball.
 STICK_SKIPS = 8
 # A fit is tried again from the centroid of the departure from the felt in
@@ -414,7 +424,8 @@ def stick_through(D: np.ndarray, u0: int, v0: int, c, r: float, thresh: float,
     ball's polarity): where the blob alone ends inside the window, its pixels
     joined to those of the felt departing from its median by more than
     ``thresh`` (a cue lying still that the felt learnt; the comment at
-    ``STICK_GAP_PX``) are tried too."""
+    ``STICK_GAP_PX``) are tried too, in a band under
+    ``STICK_JOINED_WIDTH_RADII`` radii wide."""
     on = D > thresh
     felt_departs = False
     if felt is not None:
@@ -425,15 +436,17 @@ def stick_through(D: np.ndarray, u0: int, v0: int, c, r: float, thresh: float,
     blob = _joined_blob(on, u0, v0, c, r)
     if blob is None:
         return False
+    limit = STICK_WIDTH_RADII
     if not _reaches_border(blob) and felt_departs:
         blob = _joined_blob(on | (felt - np.median(felt) > thresh), u0, v0, c, r)
+        limit = STICK_JOINED_WIDTH_RADII  # a half-lit ball is under STICK_WIDTH_RADII wide
     if not _reaches_border(blob):
         return False  # the blob ends where a ball could: not a stick through it
     y, x = np.nonzero(blob)
     if len(x) < 3:
         return False
     lam = np.linalg.eigvalsh(np.cov(np.c_[x, y].T, bias=True))
-    return bool(np.sqrt(12 * max(lam[0], 0.0)) < STICK_WIDTH_RADII * r)  # a uniform band's width
+    return bool(np.sqrt(12 * max(lam[0], 0.0)) < limit * r)  # a uniform band's width
 
 
 def _joined_blob(on: np.ndarray, u0: int, v0: int, c, r: float) -> np.ndarray | None:
