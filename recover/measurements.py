@@ -536,7 +536,6 @@ def _ar1_extra(meas: Measurements, G, rho: float) -> np.ndarray:
     ``sum_(i != j) rho^|k_i - k_j| (L_i^T G_a,i) . (L_j^T G_b,j)`` with
     ``L_i`` each frame's Cholesky factor, over the frame lattice as
     recover.mle._ar1_cov_times sums it (a forward and a backward filter)."""
-    from scipy.signal import lfilter
     used = np.flatnonzero(meas.used)
     one = used[meas.single[meas.group[used]]]
     if len(one) < 2:
@@ -544,12 +543,23 @@ def _ar1_extra(meas: Measurements, G, rho: float) -> np.ndarray:
     pos = frame_lattice(meas.t[one])
     L = np.linalg.cholesky(meas.cov[one] + 1e-30 * np.eye(2))
     Y = np.einsum("aij,ijl->ial", G[:, one], L)  # (frames, k, 2): estimate a's share of frame i's whitened errors
+    S = lattice_ar1_sums(pos, Y, rho, own=0)  # sum over j != i of rho^|i - j| Y_j
+    return np.einsum("ial,ibl->ab", Y, S)
+
+
+def lattice_ar1_sums(pos, Y, rho: float, own: int) -> np.ndarray:
+    """``sum_j rho^|k_i - k_j| Y_j`` for each row ``i`` of ``Y`` (rows at
+    frame-lattice places ``pos``, increasing: :func:`frame_lattice`), the
+    frame's own term counted ``own`` times (1: the AR(1) correlation
+    matrix times ``Y``; 0: its off-diagonal part), by a forward and a
+    backward first-order filter over the lattice (each holds the own term
+    once), O(lattice) instead of the pairs' O(n^2)."""
+    from scipy.signal import lfilter
     lattice = np.zeros((pos[-1] + 1,) + Y.shape[1:])
     lattice[pos] = Y
     fwd = lfilter([1.0], [1.0, -rho], lattice, axis=0)
     bwd = lfilter([1.0], [1.0, -rho], lattice[::-1], axis=0)[::-1]
-    S = (fwd + bwd - 2 * lattice)[pos]  # sum over j != i of rho^|i - j| Y_j
-    return np.einsum("ial,ibl->ab", Y, S)
+    return (fwd + bwd - (2 - own) * lattice)[pos]
 
 
 def frame_lattice(ts) -> np.ndarray:

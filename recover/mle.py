@@ -32,7 +32,7 @@ from scipy.sparse import csr_array
 
 from cuespin.fit.decide import autocorrelated
 from cuespin.physics.motion import BallParams, Shot, phases, positions, positions_jacobian, z_cross
-from cuespin.recover.measurements import Measurements, build_measurements, frame_lattice
+from cuespin.recover.measurements import Measurements, build_measurements, frame_lattice, lattice_ar1_sums
 
 # A fit whose residuals are this many times the stated variance does not
 # describe the track (it stopped far from the shot, or the track is not one
@@ -412,7 +412,7 @@ def fit_model(meas: Measurements, params: BallParams, start, exposure_s: float, 
         shot, pr = _unpack(p, rolling, fit_friction, params)
         return prewhiten(meas.whiten(model(shot, pr))).ravel()
 
-    def many(Q):
+    def many(Q):  # the lm branch's jac only (a friction fit is bounded, trf, and takes no jac): friction fixed
         return residuals_many(meas, model, prewhiten, [_unpack(q, rolling, False, params)[0] for q in Q], params)
 
     def jac(p):  # exact (physics.motion.positions_jacobian): no residual evaluations for it
@@ -576,19 +576,13 @@ def _ar1_cov_times(meas: Measurements, X, rho: float) -> np.ndarray:
     own, rests independent of everything) and ``X`` of shape (2m, q) in
     the residuals' order.  On the frame lattice ``rho^|i - j|`` is the sum
     of a forward and a backward first-order filter less the diagonal."""
-    from scipy.signal import lfilter
     m = meas.n
     X = np.asarray(X, dtype=float).reshape(m, 2, -1)
     out = X.copy()
     single = np.flatnonzero(meas.single)
     if len(single) < 2 or not rho:
         return out.reshape(2 * m, -1)
-    pos = frame_lattice(meas.t_means[single])
-    lattice = np.zeros((pos[-1] + 1,) + X.shape[1:])
-    lattice[pos] = X[single]
-    fwd = lfilter([1.0], [1.0, -rho], lattice, axis=0)
-    bwd = lfilter([1.0], [1.0, -rho], lattice[::-1], axis=0)[::-1]
-    out[single] = (fwd + bwd - lattice)[pos]
+    out[single] = lattice_ar1_sums(frame_lattice(meas.t_means[single]), X[single], rho, own=1)
     return out.reshape(2 * m, -1)
 
 
@@ -1028,7 +1022,7 @@ def profile_chi2(fit: ModelFit, meas: Measurements, exposure_s: float, delta: fl
         s = Shot(x0=q[0:2], v0=q[3:5], w0=w_base + q[5] * f, t0=float(q[2]))
         return prewhiten(meas.whiten(model(s, pr))).ravel()
 
-    def many(Q):
+    def many(Q):  # the lm branch's jac only (a friction fit is bounded, trf, and takes no jac): friction fixed
         return residuals_many(meas, model, prewhiten, [Shot(x0=q[0:2], v0=q[3:5], w0=w_base + q[5] * f,
                                                             t0=float(q[2])) for q in Q], pr)
 
@@ -1193,12 +1187,13 @@ def crb_covariance(shot: Shot, params: BallParams, meas: Measurements, exposure_
     t = meas.t_used
     p = np.r_[shot.x0, shot.t0, shot.v0] if rolling else np.r_[shot.x0, shot.t0, shot.v0, shot.w0]
     steps = np.r_[1e-7, 1e-7, 1e-8, 1e-7, 1e-7, 1e-5, 1e-5][:len(p)]
+    model = TrackModel(t, exposure_s)
     cols = []
     for i, h in enumerate(steps):
         dp = np.zeros_like(p)
         dp[i] = h
-        a = model_track(_unpack(p + dp, rolling, False, params)[0], params, t, exposure_s)
-        b = model_track(_unpack(p - dp, rolling, False, params)[0], params, t, exposure_s)
+        a = model(_unpack(p + dp, rolling, False, params)[0], params)
+        b = model(_unpack(p - dp, rolling, False, params)[0], params)
         cols.append(ar1_prewhiten(meas, meas.whiten_delta((a - b) / (2 * h)), ar1).ravel())
     J = np.stack(cols, axis=1)
     return info_inverse(J)

@@ -193,6 +193,7 @@ def test_departure_width_tells_a_ball_from_a_cue():
     disc = (np.hypot(xx - 32, yy - 32) <= R)[..., None] * ball
     moved = ((np.hypot(xx - 32 - R / 3, yy - 32) <= R).astype(float) - (np.hypot(xx - 32, yy - 32) <= R))[..., None] * ball
     band = ((np.abs(yy - 32) <= 0.35 * R) & (np.abs(xx - 32) <= R))[..., None] * cue
+    # Measured (seed 8): disc 0.275, the moved crescent 0.368, the band 0.087.
     assert width(disc) >= WIDE_MIN + 0.05
     assert width(moved) >= WIDE_MIN
     assert width(band) <= WIDE_MIN - 0.05
@@ -208,7 +209,7 @@ def test_box_noise_scale_is_one_on_independent_noise():
     a = np.clip(np.rint(100 + rng.normal(0, 5, (240, 320, 3))), 0, 255).astype(np.uint8)
     b = np.clip(np.rint(100 + rng.normal(0, 5, (240, 320, 3))), 0, 255).astype(np.uint8)
     L = np.linalg.cholesky(np.eye(3) * 2 * 25 / 2 + np.eye(3) / 12)  # per-pixel covariance of one frame's noise
-    assert 0.85 < box_noise_scale(a, b, 11, L) < 1.2
+    assert 0.85 < box_noise_scale(a, b, 11, L) < 1.2  # measured 1.0 (its floor: the upper bound is the test)
     blocks = np.kron(rng.normal(0, 3, (30, 40, 3)), np.ones((8, 8, 1)))
     c = np.clip(np.rint(100 + rng.normal(0, 5, (240, 320, 3)) + blocks), 0, 255).astype(np.uint8)
     assert box_noise_scale(a, c, 11, L) > 2.0

@@ -578,7 +578,7 @@ class FeltAccumulator:
             # window of FOREIGN_REACH_RADII were ~1 ms a call (track.window).
             from cuespin.track import window
             img = np.asarray(frame)  # (a PlanarFrame converted whole once, as np.add above did)
-            three = (lambda a: a) if img.ndim == 3 else (lambda a: a[:, :, None])
+            three = np.atleast_3d  # a grey frame and its sum as one channel (views, written through)
             window.hidden_pixels(three(self._partial), self.full_hidden, three(img),
                                  _NO_WINDOW if P is None else P, P is not None,
                                  _NO_WINDOW if reference is None else reference, float(tolerance),

@@ -251,11 +251,6 @@ class PlanarFrame:
         self._bgr = None  # the whole frame's BGR, once asked for
         self._last = None  # (v0, v1, u0, u1, BGR) of the last window converted
 
-    @property
-    def nbytes(self) -> int:
-        """Bytes the planes hold (half the BGR frame's)."""
-        return self._y.nbytes * 3 // 2
-
     def window(self, v0: int, v1: int, u0: int, u1: int) -> np.ndarray:
         """BGR of rows ``v0:v1`` and columns ``u0:u1`` (clipped to the frame), (v1 - v0, u1 - u0, 3)."""
         h, w = self.shape[:2]

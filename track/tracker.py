@@ -431,7 +431,7 @@ def stick_through(D: np.ndarray, u0: int, v0: int, c, r: float, thresh: float,
     if felt is not None:
         lo, hi = cv2.minMaxLoc(felt)[:2]
         felt_departs = hi - lo > thresh  # else no felt pixel departs from its median by that: the same blob
-    if not felt_departs and not (on[0].any() or on[-1].any() or on[:, 0].any() or on[:, -1].any()):
+    if not felt_departs and not _reaches_border(on):
         return False  # no pixel over the threshold on the border (most frames): no blob reaches it
     blob = _joined_blob(on, u0, v0, c, r)
     if blob is None:
@@ -994,7 +994,7 @@ class BallTracker:
                 if h and h.stated and (g is None or h.rms < g.rms):
                     g = h
             prev = g.c.copy() if g else None
-            if g and g.stated:  # else the frame keeps its first fit, which stated its error
+            if g:  # a refit that stated its error; else the frame keeps its first fit, which did
                 diffuse.append(g.shade[0])
                 f.c[:], f.stderr[:], f.cov[:] = g.c, g.stderr, g.cov
                 if lf is not None:
