@@ -175,14 +175,13 @@ def test_realistic_look_found_without_false_positives(tmp_path, seed):
     assert res.ok[after].mean() > 0.95, res.status_counts()
 
 
-@pytest.mark.parametrize("codec", ["MJPG", "H264"])
+@pytest.mark.parametrize("codec", ["MJPG", "H264", "mp4v"])
 def test_planar_windows_are_opencvs_frames(tmp_path, codec):
     # A 4:2:0 video is read as its planes and converted to BGR by window
-    # (track.reader.PlanarFrame): each window is exactly that part of the
-    # whole frame's conversion (the background is learnt from whole frames,
-    # the ball fitted in windows), and within BGR_LEVELS_TOL of OpenCV's own
-    # decoding of the file (the renderer's writers: OpenCV's MJPG, PyAV's x264).
-    from cuespin.track.reader import BGR_LEVELS_TOL, PlanarFrame
+    # (track.reader.PlanarFrame): each window, and the whole frame, is
+    # OpenCV's own decoding of the file to the bit (swscale's arithmetic;
+    # the renderer's writers: OpenCV's MJPG and mp4v, PyAV's x264).
+    from cuespin.track.reader import PlanarFrame
 
     video, frames, cap = planar_video(tmp_path, codec, {"look": "realistic", "ball_colour": list(YELLOW)})
     rng = np.random.default_rng(4)
@@ -197,27 +196,119 @@ def test_planar_windows_are_opencvs_frames(tmp_path, codec):
         v0, v1, u0, u1 = wins[0]
         wins.append((v0 + 1, max(v1 - 1, v0 + 1), u0 + 1, max(u1 - 2, u0 + 1)))  # within the last one converted
         parts = [frame[v0:v1, u0:u1] for v0, v1, u0, u1 in wins]  # before the whole frame is kept
-        whole = np.asarray(frame)
-        assert np.abs(whole.astype(int) - ref).max() <= BGR_LEVELS_TOL
+        np.testing.assert_array_equal(np.asarray(frame), ref)
         for (v0, v1, u0, u1), part in zip(wins, parts):
-            np.testing.assert_array_equal(part, whole[v0:v1, u0:u1])
+            np.testing.assert_array_equal(part, ref[v0:v1, u0:u1])
         n += 1
     assert n == 12 and not cap.read()[0]
 
 
-@pytest.mark.parametrize("codec,tol", [("MJPG", 0), ("H264", 1)])
-def test_planar_grey_frames_are_opencvs(tmp_path, codec, tol):
+@pytest.mark.parametrize("codec", ["MJPG", "H264"])
+def test_planar_grey_frames_are_opencvs(tmp_path, codec):
     # Grey frames (neutral chroma: the plain look) arrive as one channel
-    # from the Y plane: OpenCV's levels exactly at full range (MJPG), within
-    # swscale's rounding against cv2.cvtColor's at BT.601's (measured 1).
+    # from the Y plane: OpenCV's levels exactly, full range (MJPG) and
+    # BT.601's (H.264).
     video, frames, cap = planar_video(tmp_path, codec, {})
     n = 0
     for frame in frames:
         ok, ref = cap.read()
         assert ok and frame.ndim == 2 and isinstance(frame, np.ndarray)
-        assert np.abs(frame.astype(int) - ref[..., 1]).max() <= tol
+        np.testing.assert_array_equal(frame, ref[..., 1])
         n += 1
     assert n == 12
+
+
+def lossless_yuv420p(path, planes):
+    """Write (Y, U, V) planes, each frame's (h, w), (h / 2, w / 2) twice,
+    as a lossless yuv420p FFV1 file; OpenCV's BGR of each frame."""
+    import av
+    import cv2
+
+    c = av.open(str(path), "w")
+    s = c.add_stream("ffv1", rate=30)
+    s.height, s.width = planes[0][0].shape
+    s.pix_fmt = "yuv420p"
+    for y, u, v in planes:
+        w = y.shape[1]
+        fr = av.VideoFrame.from_ndarray(np.concatenate([y, u.reshape(-1, w), v.reshape(-1, w)]),
+                                        format="yuv420p")
+        for pk in s.encode(fr):
+            c.mux(pk)
+    for pk in s.encode():
+        c.mux(pk)
+    c.close()
+    cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
+    out = [cap.read()[1] for _ in planes]
+    cap.release()
+    return out
+
+
+def swscale_bgr(y, u, v):
+    """BGR of planes by track.reader.swscale_terms, in numpy."""
+    from cuespin.track.reader import swscale_terms
+
+    fy, bu, guv, rv = swscale_terms(False)
+    uu, vv = (np.repeat(np.repeat(c, 2, 0), 2, 1) for c in (u, v))
+    L = fy[y]
+    return np.clip(np.stack([L + bu[uu], L + guv[uu, vv], L + rv[vv]], axis=-1), 0, 255).astype(np.uint8)
+
+
+def test_swscale_terms_are_opencvs_levels(tmp_path):
+    # Random planes through OpenCV's decoding of a lossless yuv420p file:
+    # swscale_terms' arithmetic (numpy), the compiled window conversion at
+    # odd corners and PyAV's swscale give OpenCV's levels to the bit.
+    from cuespin.track.reader import FrameSource, PlanarFrame, probe
+
+    rng = np.random.default_rng(7)
+    h, w = 96, 160
+    planes = [(rng.integers(0, 256, (h, w), dtype=np.uint8), rng.integers(0, 256, (h // 2, w // 2), dtype=np.uint8),
+               rng.integers(0, 256, (h // 2, w // 2), dtype=np.uint8)) for _ in range(3)]
+    refs = lossless_yuv420p(tmp_path / "r.mkv", planes)
+    frames = list(FrameSource(tmp_path / "r.mkv", probe(tmp_path / "r.mkv"), planes=True))
+    for (y, u, v), ref, frame in zip(planes, refs, frames):
+        assert isinstance(frame, PlanarFrame)
+        np.testing.assert_array_equal(swscale_bgr(y, u, v), ref)
+        np.testing.assert_array_equal(frame[3:50, 7:101], ref[3:50, 7:101])
+        np.testing.assert_array_equal(np.asarray(frame), ref)
+
+
+@pytest.mark.slow
+def test_swscale_terms_every_level(tmp_path):
+    # Every one of the 2^24 (Y, U, V), each once (a 2 x 2 block's four Y
+    # levels share its U, V), through OpenCV's decoding of a lossless
+    # yuv420p file: swscale_terms' arithmetic to the bit.
+    n = 512  # 8 frames of 2048 x 1024: 2^19 blocks each
+    uv = np.arange(65536)
+    bu, bv, bk = np.repeat(uv // 256, 64), np.repeat(uv % 256, 64), np.tile(np.arange(64), 65536)
+    planes = []
+    for f in range(8):
+        sl = slice(f * 2 * n * n, (f + 1) * 2 * n * n)
+        u, v, k = (x[sl].reshape(n, 2 * n) for x in (bu, bv, bk))
+        y = np.empty((2 * n, 4 * n), np.uint8)
+        for dv in (0, 1):
+            for du in (0, 1):
+                y[dv::2, du::2] = 4 * k + 2 * dv + du
+        planes.append((y, u.astype(np.uint8), v.astype(np.uint8)))
+    refs = lossless_yuv420p(tmp_path / "all.mkv", planes)
+    for (y, u, v), ref in zip(planes, refs):
+        np.testing.assert_array_equal(swscale_bgr(y, u, v), ref)
+
+
+def test_planes_fall_back_to_opencv_where_it_disagrees(tmp_path, monkeypatch):
+    # A build whose conversion differs from swscale_terms' (here: terms
+    # off by a level) reads the video through OpenCV, every frame.
+    from cuespin.track import reader
+
+    terms = {r: (t[0] + 1,) + t[1:] for r, t in reader._TERMS.items()}
+    monkeypatch.setattr(reader, "_TERMS", terms)
+    video, frames, cap = planar_video(tmp_path, "H264", {"look": "realistic", "ball_colour": list(YELLOW)})
+    n = 0
+    for frame in frames:
+        ok, ref = cap.read()
+        assert ok and isinstance(frame, np.ndarray)
+        np.testing.assert_array_equal(frame, ref)
+        n += 1
+    assert n == 12 and not frames.planar
 
 
 def planar_video(tmp_path, codec, look):

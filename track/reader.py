@@ -45,24 +45,54 @@ CHROMA_420_PIX_FMTS = {"nv12", "nv21", "p010le", "p010be", "p016le", "p016be"}
 # 8-bit 4:2:0 planar formats read as planes (PlanarFrame), and whether their
 # levels are full range (JPEG's ``yuvj``) rather than BT.601's 16-235.
 PLANAR_PIX_FMTS = {"yuv420p": False, "yuvj420p": True}
-# Full-range (JPEG, ``yuvj``) levels mapped onto BT.601's 16-235 (Y) and
-# 16-240 (chroma), rounded, so that OpenCV's 4:2:0 converter takes them: a
-# whole 1280 x 640 frame ~3x cheaper than upsampling the chroma and
-# converting JPEG's YCrCb (cv2.COLOR_YCrCb2BGR), for at most 2 levels
-# against that exact conversion (the rounding, times BT.601's gains; measured).
-FULL_TO_VIDEO_Y = np.clip(np.rint(16 + np.arange(256) * 219 / 255), 0, 255).astype(np.uint8)
-FULL_TO_VIDEO_C = np.clip(np.rint(128 + (np.arange(256) - 128) * 224 / 255), 0, 255).astype(np.uint8)
-# BT.601's grey level of each luma level with neutral chroma: what
-# cv2.cvtColor's 4:2:0 conversion gives (a frame of the 256 levels converted).
-VIDEO_Y_TO_GREY = cv2.cvtColor(np.concatenate([np.tile(np.arange(256, dtype=np.uint8), (2, 1)),
-                                               np.full((1, 256), 128, np.uint8)]),
-                               cv2.COLOR_YUV2BGR_I420)[0, :, 1].copy()
-# Most a PlanarFrame's BGR level departs from OpenCV's decoding of the same
-# frame (FFmpeg's swscale, whose fixed-point path comes out ~1 level lower
-# than cv2.cvtColor's rounding, B, G and R alike: mean 0.7-1.7): 3 on H.264,
-# mp4v (yuv420p) and MJPG (yuvj420p), over 100 frames and 2,000 windows of
-# each of the speed benchmark's 1,000-frame files (1280 x 640; measured, yuv11).
-BGR_LEVELS_TOL = 3
+# Those read as planes unless told otherwise (FrameSource(planes=None)):
+# H.264's and mp4v's, where the planes save the whole frame's conversion.
+PLANAR_DEFAULT_PIX_FMTS = {"yuv420p"}
+# FFmpeg's BT.601 YUV -> RGB coefficients (libswscale/yuv2rgb.c,
+# ff_yuv2rgb_coeffs[SWS_CS_ITU601]: crv, cbu, cgu, cgv in 16.16 fixed
+# point), swscale's default and what OpenCV's decoding converts with.
+SWS_ITU601 = (104597, 132201, 25675, 53279)
+
+
+def swscale_terms(full_range: bool):
+    """Each channel's luma and chroma terms in FFmpeg swscale's unscaled
+    4:2:0 -> BGR24 conversion (what ``cv2.VideoCapture`` hands back): the
+    16-bit coefficients ``ff_yuv2rgb_c_init_tables`` derives (``roundToInt16``
+    of the 16.16 value times 2^13; limited range scales luma by 255/219 from
+    16, full range the chroma by 224/255) applied as the x86 SIMD path does
+    (``yuv_2_rgb.asm``: levels times 8, less the offset, ``pmulhw``, i.e.
+    the product's floor / 2^16).  B = sat(fy[Y] + bu[U]), G = sat(fy[Y] +
+    guv[U, V]), R = sat(fy[Y] + rv[V]), saturated to 0-255.  Equal to
+    OpenCV's decoding for every one of the 2^24 (Y, U, V) of a lossless
+    yuv420p file (``tests/test_track_formats.py``); a video is read as
+    planes only where its first frame agrees (:class:`FrameSource`).
+
+    Returns
+    -------
+    fy, bu, rv : ndarray, (256,) int32
+    guv : ndarray, (256, 256) int32, indexed [U, V]
+    """
+    crv, cbu, cgu, cgv = SWS_ITU601[0], SWS_ITU601[1], -SWS_ITU601[2], -SWS_ITU601[3]
+    if full_range:
+        cy, oy = 1 << 16, 0
+        # C's integer division truncates toward zero
+        crv, cbu, cgu, cgv = (int(np.trunc(x * 224 / 255)) for x in (crv, cbu, cgu, cgv))
+    else:
+        cy, oy = (1 << 16) * 255 // 219, 16 << 16
+
+    def r16(x):  # roundToInt16(x * 2^13)
+        return (int(x) * (1 << 13) + (1 << 15)) >> 16
+
+    lv = 8 * np.arange(256, dtype=np.int64)
+    c = lv - 1024  # chroma times 8, less 128 * 8
+    fy = ((lv - ((oy * 8 + (1 << 15)) >> 16)) * r16(cy)) >> 16
+    bu, gu, gv, rv = ((c * r16(k)) >> 16 for k in (cbu, cgu, cgv, crv))
+    return (fy.astype(np.int32), bu.astype(np.int32), (gu[:, None] + gv[None, :]).astype(np.int32),
+            rv.astype(np.int32))
+
+
+# 0-255 saturation of a channel's sum + 512 (its range: -19 + -271 to 278 + 271).
+SAT_512 = np.clip(np.arange(-512, 1024), 0, 255).astype(np.uint8)
 
 # A grey video's frames still decode to BGR when its stream is yuv (MJPG
 # with neutral chroma); after YUV to BGR conversion the three planes agree
@@ -219,19 +249,19 @@ def frame_times(path, info: VideoInfo, n: int, fps: float) -> np.ndarray:
 class PlanarFrame:
     """A decoded 4:2:0 frame held as its planes, read as 8-bit BGR (h, w, 3).
 
-    Indexing a window (``frame[v0:v1, u0:u1]``) converts that window only:
-    the planes cropped at even coordinates (each chroma sample covers a 2 x 2
-    block, repeated as OpenCV's decoder does) and converted by BT.601
-    (``cv2.cvtColor``, ``COLOR_YUV2BGR_I420``); full-range (JPEG) levels are
-    first mapped onto BT.601's (:data:`FULL_TO_VIDEO_Y`, ``_C``).
-    ``np.asarray(frame)`` converts the whole frame once and keeps it.  The
-    levels differ from OpenCV's decoding of the same file (FFmpeg's swscale)
-    by at most :data:`BGR_LEVELS_TOL`.
+    Indexing a window (``frame[v0:v1, u0:u1]``) converts that window only,
+    by swscale's arithmetic (:func:`swscale_terms`, compiled:
+    :func:`cuespin.track.window.yuv420_bgr`); ``np.asarray(frame)`` converts
+    the whole frame once (by PyAV's swscale when the frame is PyAV's, the
+    same levels) and keeps it.  The levels are OpenCV's decoding of the same
+    file, to the bit, wherever OpenCV converts with swscale's default
+    BT.601 arithmetic (:class:`FrameSource` checks a video's first frame).
 
     Parameters
     ----------
-    i420 : ndarray, shape (3 h / 2, w), uint8
-        The Y plane's rows, then U's and V's (PyAV's ``to_ndarray()``).
+    planes : av.VideoFrame or ndarray, shape (3 h / 2, w), uint8
+        PyAV's decoded frame (its planes read in place), or the Y plane's
+        rows, then U's and V's (PyAV's ``to_ndarray()``).
     full_range : bool
         Levels 0-255 (``yuvj420p``) rather than 16-235.
     """
@@ -239,21 +269,29 @@ class PlanarFrame:
     ndim = 3
     dtype = np.dtype(np.uint8)
 
-    def __init__(self, i420: np.ndarray, full_range: bool):
-        h, w = i420.shape[0] * 2 // 3, i420.shape[1]
-        self.shape = (h, w, 3)
+    def __init__(self, planes, full_range: bool):
         self.full_range = full_range
-        flat = i420.reshape(-1)
-        q = h * w // 4
-        self._y = i420[:h]
-        self._u = flat[h * w:h * w + q].reshape(h // 2, w // 2)
-        self._v = flat[h * w + q:].reshape(h // 2, w // 2)
+        if isinstance(planes, np.ndarray):
+            self._av = None
+            h, w = planes.shape[0] * 2 // 3, planes.shape[1]
+            flat = planes.reshape(-1)
+            q = h * w // 4
+            self._y = planes[:h]
+            self._u = flat[h * w:h * w + q].reshape(h // 2, w // 2)
+            self._v = flat[h * w + q:].reshape(h // 2, w // 2)
+        else:
+            self._av = planes
+            h, w = planes.height, planes.width
+            # Each plane's rows at their stride (C-contiguous: the compiled
+            # conversion indexes within the width).
+            self._y, self._u, self._v = (np.frombuffer(p, np.uint8).reshape(-1, p.line_size)
+                                         for p in planes.planes[:3])
+        self.shape = (h, w, 3)
         self._bgr = None  # the whole frame's BGR, once asked for
         self._last = None  # (v0, v1, u0, u1, BGR) of the last window converted
 
     def window(self, v0: int, v1: int, u0: int, u1: int) -> np.ndarray:
-        """BGR of rows ``v0:v1`` and columns ``u0:u1`` (clipped to the frame), (v1 - v0, u1 - u0, 3)."""
-        h, w = self.shape[:2]
+        """BGR of rows ``v0:v1`` and columns ``u0:u1`` (within the frame), (v1 - v0, u1 - u0, 3)."""
         if self._bgr is not None:
             return self._bgr[v0:v1, u0:u1]
         if self._last is not None:
@@ -263,35 +301,23 @@ class PlanarFrame:
             a0, a1, b0, b1, bgr = self._last
             if a0 <= v0 and v1 <= a1 and b0 <= u0 and u1 <= b1:
                 return bgr[v0 - a0:v1 - a0, u0 - b0:u1 - b0]
-        # Even corners: a chroma sample covers rows 2i, 2i+1 and columns 2j, 2j+1.
-        a0, b0 = v0 & ~1, u0 & ~1
-        a1, b1 = min(v1 + (v1 & 1), h), min(u1 + (u1 & 1), w)
-        y = self._y[a0:a1, b0:b1]
-        u = self._u[a0 // 2:a1 // 2, b0 // 2:b1 // 2]
-        v = self._v[a0 // 2:a1 // 2, b0 // 2:b1 // 2]
-        hh, ww = y.shape
-        n, q = hh * ww, hh * ww // 4
-        buf = np.empty((hh * 3 // 2, ww), np.uint8)  # OpenCV's I420 layout: Y, then U's and V's samples
-        flat = buf.reshape(-1)
-        if self.full_range:
-            buf[:hh] = cv2.LUT(y, FULL_TO_VIDEO_Y)
-            flat[n:n + q].reshape(hh // 2, ww // 2)[:] = cv2.LUT(u, FULL_TO_VIDEO_C)
-            flat[n + q:].reshape(hh // 2, ww // 2)[:] = cv2.LUT(v, FULL_TO_VIDEO_C)
-        else:
-            buf[:hh] = y
-            flat[n:n + q].reshape(hh // 2, ww // 2)[:] = u
-            flat[n + q:].reshape(hh // 2, ww // 2)[:] = v
-        bgr = cv2.cvtColor(buf, cv2.COLOR_YUV2BGR_I420)
-        self._last = (a0, a1, b0, b1, bgr)
-        return bgr[v0 - a0:v1 - a0, u0 - b0:u1 - b0]
+        from cuespin.track.window import yuv420_bgr
+
+        fy, bu, guv, rv = _TERMS[self.full_range]
+        bgr = yuv420_bgr(self._y, self._u, self._v, v0, u0, np.empty((v1 - v0, u1 - u0, 3), np.uint8),
+                         fy, bu, guv, rv, SAT_512)
+        self._last = (v0, v1, u0, u1, bgr)
+        return bgr
 
     def grey(self) -> np.ndarray:
-        """The frame's grey levels (h, w) when its chroma is neutral: the Y
-        plane itself at full range (OpenCV's decoding of grey MJPG, to the
-        level), else BT.601's gain on it (:data:`VIDEO_Y_TO_GREY`)."""
-        if self.full_range:
-            return self._y.copy()
-        return cv2.LUT(self._y, VIDEO_Y_TO_GREY)
+        """The frame's green channel (h, w), as OpenCV's decoding of a grey
+        video is read: by table from the Y plane when the chroma is
+        neutral (every chroma term 0), else the whole frame's."""
+        h, w = self.shape[:2]
+        u, v = self._u[:h // 2, :w // 2], self._v[:h // 2, :w // 2]
+        if not (np.all(u == 128) and np.all(v == 128)):
+            return cv2.extractChannel(np.asarray(self), 1)
+        return cv2.LUT(self._y[:h, :w], _GREY[self.full_range])
 
     def __getitem__(self, key):
         if isinstance(key, tuple) and len(key) == 2 and all(isinstance(k, slice) and k.step in (None, 1)
@@ -304,24 +330,37 @@ class PlanarFrame:
 
     def __array__(self, dtype=None, copy=None):
         if self._bgr is None:
-            self._bgr = self.window(0, self.shape[0], 0, self.shape[1])
+            if self._av is not None:
+                self._bgr = self._av.to_ndarray(format="bgr24")
+            else:
+                self._bgr = self.window(0, self.shape[0], 0, self.shape[1])
             self._last = None
         return self._bgr if dtype is None else self._bgr.astype(dtype)
+
+
+# swscale's terms, limited (False) and full range (True), and the grey level
+# of each luma level with neutral chroma.
+_TERMS = {r: swscale_terms(r) for r in (False, True)}
+_GREY = {r: np.clip(_TERMS[r][0], 0, 255).astype(np.uint8) for r in (False, True)}
 
 
 class FrameSource:
     """Frames of a video in order: 8-bit BGR (h, w, 3), or (h, w) when the video is grey.
 
     With ``planes``, a 4:2:0 colour stream PyAV opens arrives as
-    :class:`PlanarFrame` (BGR by window, the tracker's reading).  Iterate it
-    once; a decoding failure is raised from the iterator.
+    :class:`PlanarFrame` (BGR by window, the tracker's reading), OpenCV's
+    levels to the bit (else, checked on the first frame, OpenCV's decoding);
+    with ``planes=None``, those of :data:`PLANAR_DEFAULT_PIX_FMTS` only.
+    Iterate it once; a decoding failure is raised from the iterator.
     """
 
-    def __init__(self, path, info: VideoInfo, planes: bool = False):
+    def __init__(self, path, info: VideoInfo, planes: bool | None = False):
         self.path = Path(path)
         self.info = info
         self.grey = info.pix_fmt in GREY_PIX_FMTS
         self._decided = self.grey  # grey-by-content is decided on the first frame
+        if planes is None:
+            planes = info.pix_fmt in PLANAR_DEFAULT_PIX_FMTS
         # PyAV opened the file (probe read its stream) and the planes split evenly.
         self.planar = (planes and info.pix_fmt in PLANAR_PIX_FMTS and info.time_base is not None
                        and info.width % 2 == 0 and info.height % 2 == 0)
@@ -381,20 +420,43 @@ class FrameSource:
             c.close()
 
 
+    def _opencv_agrees(self, frame: PlanarFrame) -> bool:
+        """Whether OpenCV decodes the video's first frame to ``frame``'s
+        levels, whole (PyAV's swscale) and by window (the compiled
+        arithmetic), to the bit: else the video is read through OpenCV (a
+        build converting otherwise: another CPU's SIMD path, a colour matrix
+        or range OpenCV reads from the stream)."""
+        cap = _open_cv2(self.path)
+        if cap is None:
+            return False
+        try:
+            with quiet_native_stderr():
+                ok, ref = cap.read()
+        finally:
+            cap.release()
+        h, w = frame.shape[:2]
+        win = frame.window(0, h, 0, w)  # (before the whole frame is kept: windows would be sliced from it)
+        return bool(ok and ref is not None and ref.shape == frame.shape
+                    and np.array_equal(win, ref) and np.array_equal(np.asarray(frame), ref))
+
     def _iter_planes(self):
         import av
 
         full_range = PLANAR_PIX_FMTS[self.info.pix_fmt]
         with quiet_native_stderr():
             c = av.open(str(self.path))
+        agreed = False
         try:
             s = c.streams.video[0]
             for fr in c.decode(s):
                 if fr.format.name != self.info.pix_fmt:  # the stream changed format: BGR whole
                     yield self._emit(fr.to_ndarray(format="bgr24"))
                     continue
-                frame = PlanarFrame(fr.to_ndarray(), full_range)
+                frame = PlanarFrame(fr, full_range)
                 if not self._decided:
+                    if not self._opencv_agrees(PlanarFrame(fr, full_range)):
+                        break
+                    agreed = True
                     self.grey = self._grey_content(np.asarray(frame))
                     self._decided = True
                 # a grey video: one channel, as the other paths give it
@@ -403,6 +465,9 @@ class FrameSource:
             raise TrackError(str(exc)) from None
         finally:
             c.close()
+        if not agreed and not self._decided:  # OpenCV's levels differ: its own decoding throughout
+            self.planar = False
+            yield from (self._iter_cv2() if self.info.backend == "cv2" else self._iter_av())
 
 
 class ThreadedFrames:

@@ -213,16 +213,15 @@ class TrackerConfig:
         shininess are learnt from those frames (``sphere`` True, and the
         video lossless: :func:`cuespin.track.video.track_video` turns it off
         on a lossy codec); False keeps the quadratic look.
-    planes : bool
+    planes : bool or None
         Read a 4:2:0 video (MJPG, H.264, mp4v) as its planes and convert to
         BGR only the windows the tracker looks at
-        (:class:`cuespin.track.reader.PlanarFrame`): the tracking run's CPU
-        4.5 -> 3.4 s on the speed benchmark's 1,000-frame H.264 file, peak
-        memory 220 MB less.  Off: its levels differ from OpenCV's decoding by
-        up to 3 (cv2.cvtColor's rounding against swscale's), and a
-        low-contrast shot then tracked worse (sample_scene(14, realistic), a
-        red ball on red felt: H.264 median error 0.17 -> 0.88 px, MJPG 0.44
-        -> 0.53; measured, yuv11 in docs/measurements.md).
+        (:class:`cuespin.track.reader.PlanarFrame`), by swscale's arithmetic:
+        OpenCV's levels to the bit (checked on each video's first frame;
+        where they differ, OpenCV's decoding), so the same tracks, for less
+        CPU and memory (speed13 in docs/measurements.md).  None (the
+        default): H.264's and mp4v's ``yuv420p`` only
+        (:data:`cuespin.track.reader.PLANAR_DEFAULT_PIX_FMTS`).
     """
 
     refine: str = "fit"
@@ -231,7 +230,7 @@ class TrackerConfig:
     threaded: bool = True
     look: str = "auto"
     sphere: bool = True
-    planes: bool = False
+    planes: bool | None = None
 
 
 @dataclass
