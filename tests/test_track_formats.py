@@ -218,20 +218,22 @@ def test_planar_grey_frames_are_opencvs(tmp_path, codec):
     assert n == 12
 
 
-def lossless_yuv420p(path, planes):
+def lossless_420(path, planes, full_range):
     """Write (Y, U, V) planes, each frame's (h, w), (h / 2, w / 2) twice,
-    as a lossless yuv420p FFV1 file; OpenCV's BGR of each frame."""
+    losslessly: yuv420p by FFV1, full-range yuvj420p by lossless JPEG
+    (what MJPG decodes to); OpenCV's BGR of each frame."""
     import av
     import cv2
 
+    pix_fmt = "yuvj420p" if full_range else "yuv420p"
     c = av.open(str(path), "w")
-    s = c.add_stream("ffv1", rate=30)
+    s = c.add_stream("ljpeg" if full_range else "ffv1", rate=30)
     s.height, s.width = planes[0][0].shape
-    s.pix_fmt = "yuv420p"
+    s.pix_fmt = pix_fmt
     for y, u, v in planes:
         w = y.shape[1]
         fr = av.VideoFrame.from_ndarray(np.concatenate([y, u.reshape(-1, w), v.reshape(-1, w)]),
-                                        format="yuv420p")
+                                        format=pix_fmt)
         for pk in s.encode(fr):
             c.mux(pk)
     for pk in s.encode():
@@ -243,18 +245,19 @@ def lossless_yuv420p(path, planes):
     return out
 
 
-def swscale_bgr(y, u, v):
+def swscale_bgr(y, u, v, full_range):
     """BGR of planes by track.reader.swscale_terms, in numpy."""
     from cuespin.track.reader import swscale_terms
 
-    fy, bu, guv, rv = swscale_terms(False)
+    fy, bu, guv, rv = swscale_terms(full_range)
     uu, vv = (np.repeat(np.repeat(c, 2, 0), 2, 1) for c in (u, v))
     L = fy[y]
     return np.clip(np.stack([L + bu[uu], L + guv[uu, vv], L + rv[vv]], axis=-1), 0, 255).astype(np.uint8)
 
 
-def test_swscale_terms_are_opencvs_levels(tmp_path):
-    # Random planes through OpenCV's decoding of a lossless yuv420p file:
+@pytest.mark.parametrize("full_range", [False, True])
+def test_swscale_terms_are_opencvs_levels(tmp_path, full_range):
+    # Random planes through OpenCV's decoding of a lossless 4:2:0 file:
     # swscale_terms' arithmetic (numpy), the compiled window conversion at
     # odd corners and PyAV's swscale give OpenCV's levels to the bit.
     from cuespin.track.reader import FrameSource, PlanarFrame, probe
@@ -263,20 +266,22 @@ def test_swscale_terms_are_opencvs_levels(tmp_path):
     h, w = 96, 160
     planes = [(rng.integers(0, 256, (h, w), dtype=np.uint8), rng.integers(0, 256, (h // 2, w // 2), dtype=np.uint8),
                rng.integers(0, 256, (h // 2, w // 2), dtype=np.uint8)) for _ in range(3)]
-    refs = lossless_yuv420p(tmp_path / "r.mkv", planes)
-    frames = list(FrameSource(tmp_path / "r.mkv", probe(tmp_path / "r.mkv"), planes=True))
+    video = tmp_path / "r.avi"
+    refs = lossless_420(video, planes, full_range)
+    frames = list(FrameSource(video, probe(video), planes=True))
     for (y, u, v), ref, frame in zip(planes, refs, frames):
         assert isinstance(frame, PlanarFrame)
-        np.testing.assert_array_equal(swscale_bgr(y, u, v), ref)
+        np.testing.assert_array_equal(swscale_bgr(y, u, v, full_range), ref)
         np.testing.assert_array_equal(frame[3:50, 7:101], ref[3:50, 7:101])
         np.testing.assert_array_equal(np.asarray(frame), ref)
 
 
 @pytest.mark.slow
-def test_swscale_terms_every_level(tmp_path):
+@pytest.mark.parametrize("full_range", [False, True])
+def test_swscale_terms_every_level(tmp_path, full_range):
     # Every one of the 2^24 (Y, U, V), each once (a 2 x 2 block's four Y
     # levels share its U, V), through OpenCV's decoding of a lossless
-    # yuv420p file: swscale_terms' arithmetic to the bit.
+    # 4:2:0 file: swscale_terms' arithmetic to the bit.
     n = 512  # 8 frames of 2048 x 1024: 2^19 blocks each
     uv = np.arange(65536)
     bu, bv, bk = np.repeat(uv // 256, 64), np.repeat(uv % 256, 64), np.tile(np.arange(64), 65536)
@@ -289,9 +294,9 @@ def test_swscale_terms_every_level(tmp_path):
             for du in (0, 1):
                 y[dv::2, du::2] = 4 * k + 2 * dv + du
         planes.append((y, u.astype(np.uint8), v.astype(np.uint8)))
-    refs = lossless_yuv420p(tmp_path / "all.mkv", planes)
+    refs = lossless_420(tmp_path / "all.avi", planes, full_range)
     for (y, u, v), ref in zip(planes, refs):
-        np.testing.assert_array_equal(swscale_bgr(y, u, v), ref)
+        np.testing.assert_array_equal(swscale_bgr(y, u, v, full_range), ref)
 
 
 def test_planes_fall_back_to_opencv_where_it_disagrees(tmp_path, monkeypatch):

@@ -7,12 +7,14 @@ planes that all agree) is read as one channel.  PyAV reads what OpenCV
 cannot open, and gives the container's presentation timestamps, from a
 pass over the packets (no decoding: a few ms per thousand frames).
 
-For the tracker (``FrameSource(planes=True)``) a 4:2:0 stream (``yuv420p``,
-``yuvj420p``: MJPG, H.264, mp4v) is decoded by PyAV and handed over as its
-planes (:class:`PlanarFrame`): the tracker looks at most frames through a
-window around the ball, and the YUV to BGR conversion of the whole frame
-was about half of decoding's CPU (H.264, tspeed10); the windows are
-converted on demand.
+For the tracker (``FrameSource(planes=True)``; ``planes=None``: H.264's
+and mp4v's ``yuv420p``) a 4:2:0 stream (``yuv420p``, ``yuvj420p``: MJPG,
+H.264, mp4v) is decoded by PyAV and handed over as its planes
+(:class:`PlanarFrame`): the tracker looks at most frames through a window
+around the ball, and the YUV to BGR conversion of the whole frame was about
+half of decoding's CPU (H.264, tspeed10); the windows are converted on
+demand, by swscale's own arithmetic (:func:`swscale_terms`), so the levels
+are OpenCV's to the bit and the tracks the same.
 """
 
 from __future__ import annotations
@@ -64,8 +66,9 @@ def swscale_terms(full_range: bool):
     the product's floor / 2^16).  B = sat(fy[Y] + bu[U]), G = sat(fy[Y] +
     guv[U, V]), R = sat(fy[Y] + rv[V]), saturated to 0-255.  Equal to
     OpenCV's decoding for every one of the 2^24 (Y, U, V) of a lossless
-    yuv420p file (``tests/test_track_formats.py``); a video is read as
-    planes only where its first frame agrees (:class:`FrameSource`).
+    file, both ranges (yuv420p by FFV1, yuvj420p by lossless JPEG;
+    ``tests/test_track_formats.py``); a video is read as planes only where
+    its first frame agrees (:class:`FrameSource`).
 
     Returns
     -------
