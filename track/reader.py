@@ -7,10 +7,9 @@ planes that all agree) is read as one channel.  PyAV reads what OpenCV
 cannot open, and gives the container's presentation timestamps, from a
 pass over the packets (no decoding: a few ms per thousand frames).
 
-For the tracker (``FrameSource(planes=True)``; ``planes=None``: H.264's
-and mp4v's ``yuv420p``) a 4:2:0 stream (``yuv420p``, ``yuvj420p``: MJPG,
-H.264, mp4v) is decoded by PyAV and handed over as its planes
-(:class:`PlanarFrame`): the tracker looks at most frames through a window
+For the tracker (``FrameSource(planes=True)``, or ``planes=None``) a 4:2:0
+stream (``yuv420p``, ``yuvj420p``: MJPG, H.264, mp4v) is decoded by PyAV
+and handed over as its planes (:class:`PlanarFrame`): the tracker looks at most frames through a window
 around the ball, and the YUV to BGR conversion of the whole frame was about
 half of decoding's CPU (H.264, tspeed10); the windows are converted on
 demand, by swscale's own arithmetic (:func:`swscale_terms`), so the levels
@@ -48,8 +47,11 @@ CHROMA_420_PIX_FMTS = {"nv12", "nv21", "p010le", "p010be", "p016le", "p016be"}
 # levels are full range (JPEG's ``yuvj``) rather than BT.601's 16-235.
 PLANAR_PIX_FMTS = {"yuv420p": False, "yuvj420p": True}
 # Those read as planes unless told otherwise (FrameSource(planes=None)):
-# H.264's and mp4v's, where the planes save the whole frame's conversion.
-PLANAR_DEFAULT_PIX_FMTS = {"yuv420p"}
+# H.264's and mp4v's (yuv420p) and MJPG's (yuvj420p): the planes save the
+# whole frame's conversion and PyAV decodes them for less CPU than OpenCV
+# (the tracking run's CPU on the speed benchmark's 1,000-frame files,
+# medians: H.264 3.2 -> 2.4 s, mp4v 4.0 -> 3.1, MJPG 4.4 -> 3.7; speed13).
+PLANAR_DEFAULT_PIX_FMTS = {"yuv420p", "yuvj420p"}
 # FFmpeg's BT.601 YUV -> RGB coefficients (libswscale/yuv2rgb.c,
 # ff_yuv2rgb_coeffs[SWS_CS_ITU601]: crv, cbu, cgu, cgv in 16.16 fixed
 # point), swscale's default and what OpenCV's decoding converts with.

@@ -220,8 +220,8 @@ class TrackerConfig:
         OpenCV's levels to the bit (checked on each video's first frame;
         where they differ, OpenCV's decoding), so the same tracks, for less
         CPU and memory (speed13 in docs/measurements.md).  None (the
-        default): H.264's and mp4v's ``yuv420p`` only
-        (:data:`cuespin.track.reader.PLANAR_DEFAULT_PIX_FMTS`).
+        default): those of
+        :data:`cuespin.track.reader.PLANAR_DEFAULT_PIX_FMTS` (all three).
     """
 
     refine: str = "fit"
