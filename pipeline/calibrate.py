@@ -1099,9 +1099,10 @@ class Detection:
 # 1/4 px): the corners of noise-free frames 0.007-0.012 px RMS off (0.002-0.004
 # at 16x), the mean error over 40 noise seeds 0.007-0.015 px RMS per camera
 # against 0.02 px of scatter; with the jackknife alone the errors' Mahalanobis
-# distance per coordinate was 1.66 pooled over 8 cameras x 40 seeds (the
-# stated covariance too sure along its narrow directions), 0.96 with this
-# added (seeds 100-139: docs/measurements.md, auto13).
+# distance per coordinate was 1.68 pooled over 8 cameras x noise seeds 0-39
+# (the stated covariance too sure along its narrow directions), 0.98 with
+# this added (set there); on seeds 100-139 1.52 and 0.89 (docs/measurements.md,
+# auto13).
 EDGE_PATTERN_PX = 0.012
 
 

@@ -228,9 +228,9 @@ def test_the_automatic_corners_stated_error_is_their_real_one():
 # The stated covariance against the real errors of the corners and k1 on
 # drawn frames of a distorted lens (2 m, 10 deg, k1 -0.25, noise seeds 0-7):
 # the mean Mahalanobis distance per coordinate, e' C^-1 e / 9, was 1.89 with
-# the jackknife alone (1.36-2.05 over four such 8-frame sets, 1.66 pooled over
+# the jackknife alone (1.08-2.05 over four such 8-frame sets, 1.68 pooled over
 # 8 cameras x 40 seeds) and 0.99 with the edge locator's fixed pattern
-# (EDGE_PATTERN_PX; 0.68-0.99 over the four sets, 0.96 pooled).  Its spread
+# (EDGE_PATTERN_PX; 0.68-0.99 over the four sets, 0.98 pooled).  Its spread
 # over 8 frames (72 terms: sd 0.17, and the jackknife's own scatter) sets the
 # band; the jackknife alone must stay out of it on these frames.
 MAHALANOBIS_BAND = (0.6, 1.5)
