@@ -1662,10 +1662,9 @@ def calibrate_frame(frame: np.ndarray, table: Table = Table(), *, corners=None, 
     # with them): stated/real 0.6-1.8 on drawn and rendered tables, where the
     # points' scatter over their number gave 0.2-0.8 (docs/calibration.md,
     # section 6), with the edge locator's fixed pattern added (EDGE_PATTERN_PX:
-    # without it the covariance was too sure along its narrow directions, and
-    # the distorted --auto rows covered 80-86%).  A corner error given
-    # (``corner_sigma_px``) is taken instead,
-    # one coordinate at a time, and the bow's error as one more joint move.
+    # without it the covariance was too sure along its narrow directions).  A
+    # corner error given (``corner_sigma_px``) is taken instead, one
+    # coordinate at a time, and the bow's error as one more joint move.
     given = "corner_sigma_px" in kw
     if not given:
         kw["corner_sigma_px"] = float(math.sqrt(np.trace(det.corner_cov[:8, :8]) / 8.0))
