@@ -254,20 +254,22 @@ def auto(args):
               f"f {fe[:, 0].mean() if args.frames else fe[-1, 0]:+.2%} (stated {fe[:, 1].mean():.1%}) | {m_err:9.1e} | "
               f"{rv['exact']:.2e} / {rv['auto']:.2e} ({rv['auto'] / rv['exact']:.2f}x), "
               f"{rw['exact']:.2e} / {rw['auto']:.2e} | {len(res['auto'])} {sigma:.2f} {len(pert)} | "
-              f"{cover['exact']:.0%} / {cover['auto']:.0%}{boot(inside['auto'])}, "
+              f"{cover['exact']:.0%} / {cover['auto']:.0%}{boot(inside['auto'])}{binom(inside['auto'])}, "
               f"{zv['exact']:.2f} / {zv['auto']:.2f}", flush=True)
         pooled.append(inside["auto"])
         cz = np.array(cal_z)
         pooled_cal.append(np.abs(cz) < 1.96)
         print(f"    the calibration's share alone: (auto - exact) / stated share, RMS {np.sqrt(np.mean(cz**2)):.2f}, "
-              f"cover95 {np.mean(np.abs(cz) < 1.96):.0%}{boot(np.abs(cz) < 1.96)}", flush=True)
+              f"cover95 {np.mean(np.abs(cz) < 1.96):.0%}{boot(np.abs(cz) < 1.96)}{binom(np.abs(cz) < 1.96)}",
+              flush=True)
         if args.frames:
             print(f"    f error per frame (%): {np.round(100 * fe[:, 0], 2).tolist()}; z "
                   f"{np.round(fe[:, 0] / np.where(fe[:, 1] > 0, fe[:, 1], np.nan), 2).tolist()}", flush=True)
     if len(pooled) > 1:
         print(f"pooled over {len(pooled)} rows, {sum(len(p) for p in pooled)} shots: cover "
-              f"{np.mean(np.concatenate(pooled)):.1%}{boot(*pooled)}; the calibration's share alone "
-              f"{np.mean(np.concatenate(pooled_cal)):.1%}{boot(*pooled_cal)}")
+              f"{np.mean(np.concatenate(pooled)):.1%}{boot(*pooled)}{binom(np.concatenate(pooled))}; the "
+              f"calibration's share alone {np.mean(np.concatenate(pooled_cal)):.1%}{boot(*pooled_cal)}"
+              f"{binom(np.concatenate(pooled_cal))}")
 
 
 def boot(*rows, n: int = 2000, seed: int = 0) -> str:
@@ -281,6 +283,20 @@ def boot(*rows, n: int = 2000, seed: int = 0) -> str:
     means = [np.mean(np.concatenate([r[rng.integers(0, len(r), len(r))].ravel() for r in rows])) for _ in range(n)]
     lo, hi = np.percentile(means, [2.5, 97.5])
     return f" [{lo:.0%}, {hi:.0%}]"
+
+
+def binom(inside) -> str:
+    """The 95% binomial (Clopper-Pearson) interval of a coverage over its
+    components, as if independent (a shot's four share its track and, with
+    one frame a row, every component its calibration: narrower than
+    :func:`boot`'s where they are not)."""
+    from scipy.stats import binomtest
+
+    x = np.asarray(inside, dtype=bool).ravel()
+    if not len(x):
+        return ""
+    ci = binomtest(int(x.sum()), len(x)).proportion_ci()
+    return f" binom [{ci.low:.0%}, {ci.high:.0%}] of {len(x)}"
 
 
 def stated(args):
@@ -297,7 +313,8 @@ def stated(args):
     from cuespin.render.draw import FrameRenderer
 
     def row(label, img, truth):
-        det = detect_corners(img, robust=not args.no_robust)
+        kw = {} if args.pattern_px is None else {"pattern_px": args.pattern_px}
+        det = detect_corners(img, robust=not args.no_robust, **kw)
         d = min((np.roll(det.corners, -s, axis=0) - truth for s in range(4)), key=lambda e: np.abs(e).max())
         h, w = img.shape[:2]
         naive = det.edge_rms * math.sqrt(4.0 / ((w + h) / 4.0))     # the scatter over the points' number
@@ -597,6 +614,9 @@ def main():
     ap.add_argument("--stated", action="store_true",
                     help="the automatic corners' stated error against their real one, per frame")
     ap.add_argument("--seeds", type=int, default=3, help="--stated: noise seeds per drawn camera")
+    ap.add_argument("--pattern-px", type=float, default=None,
+                    help="--stated: the edge locator's fixed-pattern error (px) instead of EDGE_PATTERN_PX "
+                         "(0: the jackknife alone, before auto13)")
     ap.add_argument("--no-robust", action="store_true",
                     help="--stated: keep the edge points STRAY_EDGE_Z or more from their line (as before)")
     ap.add_argument("--shaded", action="store_true",

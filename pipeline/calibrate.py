@@ -101,7 +101,7 @@ class Calibration:
     corner_sigma_px : float or None
         Error of each corner coordinate (px) assumed (clicked: ``--corner-error``,
         default 1; automatic: the RMS over the 8 coordinates of the edges'
-        jackknife error, :func:`corner_covariance`).
+        jackknife error, :func:`corner_covariance`, with ``EDGE_PATTERN_PX``).
     perturbed : tuple of Camera
         The cameras of the calibration's sensitivity set (:func:`perturbed_cameras`):
         with a corner error given (clicked corners, or ``corner_sigma_px``),
@@ -1078,7 +1078,8 @@ class Detection:
         ``corners``): the lens's error carried into the perturbed cameras.
     corner_cov : ndarray, shape (9, 9), or None
         Covariance of ``(corners.ravel(), kappa)`` from the edge points'
-        jackknife (:func:`corner_covariance`; kappa's row 0 with a known lens).
+        jackknife (:func:`corner_covariance`; kappa's row 0 with a known lens)
+        and the edge locator's fixed pattern (``EDGE_PATTERN_PX``).
     """
 
     corners: np.ndarray
@@ -1090,8 +1091,23 @@ class Detection:
     corner_cov: np.ndarray | None = None
 
 
+# The edge locator's fixed-pattern error on a corner coordinate (px): what a
+# frame's pixel grid puts on the sub-pixel edges the same way in every noise
+# draw, which a jackknife along the sides cannot see (it sees the points'
+# scatter about a line, not where the line sits).  Measured on the drawn
+# tables (synthetic_table_frame, 4x supersampled: edges land on multiples of
+# 1/4 px): the corners of noise-free frames 0.007-0.012 px RMS off (0.002-0.004
+# at 16x), the mean error over 40 noise seeds 0.007-0.015 px RMS per camera
+# against 0.02 px of scatter; with the jackknife alone the errors' Mahalanobis
+# distance per coordinate was 1.68 pooled over 8 cameras x noise seeds 0-39
+# (the stated covariance too sure along its narrow directions), 0.98 with
+# this added (set there); on seeds 100-139 1.52 and 0.89 (docs/measurements.md,
+# auto13).
+EDGE_PATTERN_PX = 0.012
+
+
 def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = True,
-                   noses: bool = True, robust: bool = True) -> Detection:
+                   noses: bool = True, robust: bool = True, pattern_px: float = EDGE_PATTERN_PX) -> Detection:
     """The playing surface's four corners in a frame (:class:`Detection`).
 
     Parameters
@@ -1108,6 +1124,10 @@ def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = Tru
         Drop the edge points ``STRAY_EDGE_Z`` robust standard deviations or
         more from their side's line (:func:`drop_strays`) before the bow,
         the corners and their jackknife.
+    pattern_px : float
+        The edge locator's fixed-pattern error (px a corner coordinate,
+        ``EDGE_PATTERN_PX``), added to the jackknife's covariance on the 8
+        corner coordinates as independent errors (0: the jackknife alone).
     """
     D, thr = _felt_distance(img)
     quad, contour = _felt_quad(D, thr)
@@ -1131,6 +1151,7 @@ def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = Tru
         corners_kappa = fit_sides(sides, kappa=kappa + kappa_sigma, centre=centre)[0]
     corners, edge_rms = fit_sides(sides, K, dist, kappa, centre)
     cov = corner_covariance(sides, K, dist, kappa, centre, size=(w, h) if corners_kappa is not None else None)
+    cov[:8, :8] += pattern_px**2 * np.eye(8)
     return Detection(corners=corners, edge_rms=edge_rms, kappa=kappa, edge=edge, kappa_sigma=kappa_sigma,
                      corners_kappa=corners_kappa, corner_cov=cov)
 
@@ -1640,8 +1661,10 @@ def calibrate_frame(frame: np.ndarray, table: Table = Table(), *, corners=None, 
     # The corners' error from the edges' jackknife (the lens's bow re-estimated
     # with them): stated/real 0.6-1.8 on drawn and rendered tables, where the
     # points' scatter over their number gave 0.2-0.8 (docs/calibration.md,
-    # section 6).  A corner error given (``corner_sigma_px``) is taken instead,
-    # one coordinate at a time, and the bow's error as one more joint move.
+    # section 6), with the edge locator's fixed pattern added (EDGE_PATTERN_PX:
+    # without it the covariance was too sure along its narrow directions).  A
+    # corner error given (``corner_sigma_px``) is taken instead, one
+    # coordinate at a time, and the bow's error as one more joint move.
     given = "corner_sigma_px" in kw
     if not given:
         kw["corner_sigma_px"] = float(math.sqrt(np.trace(det.corner_cov[:8, :8]) / 8.0))
