@@ -363,6 +363,9 @@ def _track_stats(res, tuv, t, t0, r, cam):
         return out, good
     z = e / se
     dm = e - e.mean(axis=0)
+    # per image axis (u across the frame, v down it): a 4:2:0 writer's
+    # chroma filter need not be the same along both
+    out.update(z_u=float(np.sqrt(np.mean(z[:, 0] ** 2))), z_v=float(np.sqrt(np.mean(z[:, 1] ** 2))))
     out.update(rmse=float(np.sqrt(np.mean(e**2))), z=float(np.sqrt(np.mean(z**2))),
                z_raw=float(np.sqrt(np.mean(z**2) * res.look_factor)),
                z_dm=float(np.sqrt(np.mean((dm / se) ** 2))), bias=float(np.hypot(*e.mean(axis=0))),
@@ -452,7 +455,9 @@ def realistic(args):
             rows.append(row)
             print(f"shot {row['i']:3d} {row['look']:9} fps {row['fps']:3.0f} noise {row['noise']:4.1f} "
                   f"ffv1 rmse {row.get('ffv1_rmse', np.nan):.4f} z {row.get('ffv1_z', np.nan):.2f} "
-                  f"(raw {row.get('ffv1_z_raw', np.nan):.2f}) bound {row['bound']:.4f}", flush=True)
+                  f"(raw {row.get('ffv1_z_raw', np.nan):.2f}) mjpg z {row.get('mjpg_z', np.nan):.2f} "
+                  f"(u {row.get('mjpg_z_u', np.nan):.2f}, v {row.get('mjpg_z_v', np.nan):.2f}) "
+                  f"bound {row['bound']:.4f}", flush=True)
             if args.csv:
                 if out is None:
                     out = open(args.csv, "w", newline="")
@@ -486,7 +491,8 @@ def realistic_table(rows):
         z = df[f"{codec}_z"].dropna()
         print(f"{codec}: err/se median {z.median():.2f}, share of shots within 0.8-1.25: "
               f"{np.mean((z >= 0.8) & (z <= 1.25)):.0%}, p10 {z.quantile(0.1):.2f}, p90 {z.quantile(0.9):.2f} "
-              f"(before the look factor: median {df[f'{codec}_z_raw'].median():.2f})")
+              f"(before the look factor: median {df[f'{codec}_z_raw'].median():.2f}; per axis u / v: median "
+              f"{df[f'{codec}_z_u'].median():.2f} / {df[f'{codec}_z_v'].median():.2f})")
 
 
 def main():

@@ -141,3 +141,37 @@ def test_blocks_stated_error_on_mjpg_with_the_codec_term(shot7):
     z = out[:, 1, 1:3] / (out[:, 1, 3:5] * np.sqrt(V))
     assert V == JPEG_CHROMA_VAR
     assert 1 - 3 * 0.072 < np.sqrt(np.mean(z**2)) < 1 + 3 * 0.072
+
+
+def test_tracker_states_the_codec_term_on_mjpg_blocks(tmp_path, monkeypatch):
+    # The tracker, not the test, applies the term (review 9a): a colour shot
+    # through OpenCV's MJPG writer (4:2:0, intra-frame, lossy), its
+    # projection luma-blind so its fits run on the chroma's blocks, tracked
+    # as is and with the term set to 1.  The same centres (the term comes
+    # after every rule that reads the covariance), and each frame's stated
+    # covariance, the look's factor taken off, JPEG_CHROMA_VAR times the
+    # fits' own (to float rounding).
+    from cuespin.render.video import encode_frames
+    from cuespin.track import misfit
+    from cuespin.track.synthetic import colour_frames
+    from cuespin.track.video import track_video
+    from cuespin.data_gen.sampler import make_scene, sample_shot
+    from cuespin.physics import Shot
+
+    shot, params = sample_shot(2, "case3")  # test_track_formats' small scene: 60 frames, a 5.7 px ball
+    scene = make_scene(Shot(shot.x0, shot.v0, shot.w0, t0=0.1), params, fps=120.0, px_per_m=200.0,
+                       render={"duration": 0.5, "noise_sigma": 0.0})
+    video = tmp_path / "v.avi"
+    # a yellow ball on grey felt (BGR): 17 grey levels apart, 130 in blue
+    frames = list(colour_frames(scene, (40, 200, 220), (170, 170, 170), noise=2.0, seed=1))
+    encode_frames(frames, video, "MJPG", scene.camera.fps, frames[0].shape[1::-1])
+    info = probe(video)
+    assert info.chroma_block == 2 and not info.lossless and not info.inter_frame
+    res = track_video(video, scene)
+    monkeypatch.setattr(misfit, "JPEG_CHROMA_VAR", 1.0)
+    own = track_video(video, scene)
+    assert res.projection.luma_blind and res.ok.sum() > 20, res.status_counts()
+    np.testing.assert_array_equal(res.ok, own.ok)
+    np.testing.assert_array_equal(res.uv[res.ok], own.uv[own.ok])
+    stated = res.cov_px[res.ok] / res.look_factor
+    np.testing.assert_allclose(stated, JPEG_CHROMA_VAR * own.cov_px[own.ok] / own.look_factor, rtol=1e-12)

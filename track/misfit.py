@@ -130,6 +130,15 @@ EDGE_FRAMES = 2
 # FFV1), and 1.45 rounds the seed-0 median 1.47 down to the pooled seeds'
 # side (1.52); the recovery still estimates a codec term of its own on top
 # (recover.estimate's codec_excess), which takes up most of it there.
+# One value for both image axes (mjpgerr7): per axis the seed-0 shots give
+# 1.33 (u) and 1.54 (v), bootstrap SEs 0.13 and 0.15, no cross term (the
+# whitened error's uv median -0.03); on seed 1 that pair leaves the
+# in-band counts as the one value does (u 10, v 7 of 12).  OpenCV's MJPG
+# writer (FFmpeg's swscale) averages the chroma's pairs along a row but
+# filters its columns over 6 rows (-0.03, 0.10, 0.43, 0.43, 0.10, -0.03),
+# a model of blocks does not; in controlled fits (seed 0 shots 2, 5, 7, 9,
+# 48 frames each, the writer emulated with and without those taps) they
+# raised v's error variance on 3 of 4 (geometric mean x1.14, u x0.96).
 JPEG_CHROMA_VAR = 1.45
 
 
