@@ -194,6 +194,37 @@ def test_fast_paths_give_the_same_numbers(rolling, ar1, seed, exposure):
     assert np.array_equal(loop, many)
 
 
+@pytest.mark.parametrize("rolling,seed,start_off", [(False, 3, 0.0), (True, 4, 0.0), (False, 11, 0.3)])
+def test_lm_fit_is_least_squares(rolling, seed, start_off, monkeypatch):
+    # recover.mle.lm_fit is least_squares' lm call without its wrapper: the
+    # same fit to the last bit (x, cost, residuals, Jacobian, status,
+    # message), from the truth and from a start 30% off in speed and spin
+    # (seed 11: a masse shot cut while sliding, rank-deficient Jacobians
+    # and their forward differences).
+    from scipy.optimize import least_squares
+
+    import cuespin.recover.mle as mle
+    from cuespin.recover.measurements import build_measurements
+    shot, p = sample_shot(seed, "case4" if rolling else ("masse" if start_off else "random"))
+    ph = phases(shot, p)
+    t_cut = shot.t0 + 0.5 * (ph.t1 - shot.t0) if start_off else min(ph.t2 + 0.3, shot.t0 + 3.0)
+    t, xy = synthetic(shot, p, fps=120.0, seed=seed, t_cut=t_cut)
+    meas = build_measurements(t, xy, 2e-5, t0=shot.t0, t_rest=ph.t2, exposure_s=0.004, frame_dt=1 / 120.0,
+                              shared_rest=True)
+    k = 1.0 + start_off
+    start = (shot.x0, shot.t0, k * np.asarray(shot.v0), k * np.asarray(shot.w0))
+    new = mle.fit_model(meas, p, start, 0.004, rolling)
+
+    def lm_fit(resid, p0, jac, x_scale, tol, max_nfev):
+        return least_squares(resid, p0, jac=jac, x_scale=x_scale, method="lm", xtol=tol, ftol=tol, gtol=tol,
+                             max_nfev=max_nfev)
+    monkeypatch.setattr(mle, "lm_fit", lm_fit)
+    old = mle.fit_model(meas, p, start, 0.004, rolling)
+    for name in ("x", "jac", "residuals"):
+        assert np.array_equal(getattr(new, name), getattr(old, name)), name
+    assert (new.chi2, new.converged, new.message) == (old.chi2, old.converged, old.message)
+
+
 def test_mle_degenerate_when_track_ends_while_sliding():
     shot, p = sample_shot(11, "masse")
     ph = phases(shot, p)
