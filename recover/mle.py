@@ -37,7 +37,7 @@ except ImportError:  # pragma: no cover - a scipy that moved them: least_squares
     _minpack = None
 
 from cuespin.fit.decide import autocorrelated
-from cuespin.physics.motion import BallParams, Shot, phases, positions, positions_jacobian, z_cross
+from cuespin.physics.motion import SLIP_ZERO, BallParams, Shot, phases, positions, positions_jacobian, z_cross
 from cuespin.recover.measurements import Measurements, build_measurements, frame_lattice, lattice_ar1_sums
 
 # A fit whose residuals are this many times the stated variance does not
@@ -248,6 +248,7 @@ class TrackModel:
         self.exposure_s = exposure_s
         self.nodes = self.t if exposure_s <= 0 else (self.t[:, None] + 0.5 * exposure_s * _GL_T[None, :]).ravel()
         self.ordered = bool(np.all(self.nodes[1:] >= self.nodes[:-1]))
+        self.last = float(self.nodes.max()) if len(self.nodes) else -np.inf
 
     def __call__(self, shot: Shot, params: BallParams) -> np.ndarray:
         """Observed centre (m) at the frame times, shape (n, 2)."""
@@ -267,11 +268,12 @@ class TrackModel:
         w = 0.5 * _GL_W
         return (w[0] * x[:, :, 0] + w[1] * x[:, :, 1]) + w[2] * x[:, :, 2]
 
-    def jacobian(self, shot: Shot, params: BallParams, rolling: bool = False) -> np.ndarray:
-        """Its derivatives with respect to the shot's parameters, shape (n, 2, p)."""
+    def jacobian(self, shot: Shot, params: BallParams, rolling: bool = False, ph=None) -> np.ndarray:
+        """Its derivatives with respect to the shot's parameters, shape (n,
+        2, p); ``ph``: the shot's ``phases``, when the caller has them."""
         if self.exposure_s <= 0:
-            return positions_jacobian(shot, params, self.t, rolling, ordered=self.ordered)
-        d = positions_jacobian(shot, params, self.nodes, rolling, ordered=self.ordered)
+            return positions_jacobian(shot, params, self.t, rolling, ph=ph, ordered=self.ordered)
+        d = positions_jacobian(shot, params, self.nodes, rolling, ph=ph, ordered=self.ordered)
         p = d.shape[2]
         return ((0.5 * _GL_W) @ d.reshape(len(self.t), len(_GL_T), 2 * p)).reshape(len(self.t), 2, p)
 
@@ -279,6 +281,22 @@ class TrackModel:
 def model_track(shot: Shot, params: BallParams, t, exposure_s: float = 0.0):
     """Observed centre (m) at frame times: the position averaged over the exposure."""
     return TrackModel(t, exposure_s)(shot, params)
+
+
+def _deficient_by_form(model: TrackModel, ph, rolling: bool) -> bool:
+    """Whether the exact Jacobian of ``model`` at a shot of phases ``ph`` is
+    rank deficient by its form, not by round-off: no frame's exposure
+    reaches the end of sliding (eq. 9 alone: the slip's size along its own
+    direction leaves the path unchanged, so a combination of the v0 and w0
+    columns is zero), or the free-slip model without slip (|u0| at most
+    SLIP_ZERO: the w0 columns are zeros, physics.motion.positions_jacobian).
+    There :func:`_rank_deficient` says so on the Jacobian, which need not
+    be made: its smallest eigenvalue measured at most 5.1e-16 in 1,237 such
+    Jacobians (recover_speed.py's 8 MJPG shots and 105 simulated recoveries,
+    ``/tmp/fspeed13/pred.py``), 200 times below RANK_DEFICIENT_EIG; all of
+    the no-slip ones exactly deficient.  NaN times or slip: False (the
+    Jacobian is made and tested, as before)."""
+    return bool(ph.t1 > model.last) or (not rolling and float(np.hypot(*ph.u0)) <= SLIP_ZERO)
 
 
 def _rank_deficient(J) -> bool:
@@ -475,8 +493,12 @@ def fit_model(meas: Measurements, params: BallParams, start, exposure_s: float, 
 
     def jac(p):  # exact (physics.motion.positions_jacobian): no residual evaluations for it
         shot, pr = _unpack(p, rolling, fit_friction, params)
-        J = whitened_jacobian(model.jacobian(shot, pr, rolling))
-        return forward_jacobian(resid, p, resid(p), many=many) if _rank_deficient(J) else J
+        ph = phases(shot, pr)
+        if not _deficient_by_form(model, ph, rolling):
+            J = whitened_jacobian(model.jacobian(shot, pr, rolling, ph))
+            if not _rank_deficient(J):
+                return J
+        return forward_jacobian(resid, p, resid(p), many=many)
 
     lo = np.full(len(p0), -np.inf)
     hi = np.full(len(p0), np.inf)

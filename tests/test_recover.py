@@ -225,6 +225,36 @@ def test_lm_fit_is_least_squares(rolling, seed, start_off, monkeypatch):
     assert (new.chi2, new.converged, new.message) == (old.chi2, old.converged, old.message)
 
 
+def test_deficient_by_form_is_deficient():
+    # recover.mle._deficient_by_form skips making the exact Jacobian where
+    # its form makes it rank deficient (sliding past the track's end; free
+    # slip without slip): the Jacobian's own test must agree at every such
+    # point (and the form must not claim a track that sees sliding end).
+    import cuespin.recover.mle as mle
+    from cuespin.physics.motion import z_cross
+    from cuespin.recover.measurements import build_measurements
+    seen = {True: 0, False: 0}
+    for seed in range(6):
+        shot, p = sample_shot(seed, "random")
+        ph = phases(shot, p)
+        for cut, ex in ((0.5, 0.004), (3.0, 0.0)):  # cut while sliding; the whole shot
+            t, xy = synthetic(shot, p, fps=120.0, seed=seed, t_cut=shot.t0 + cut * (ph.t1 - shot.t0) + 0.05 * (cut > 1))
+            meas = build_measurements(t, xy, 2e-5, t0=shot.t0, t_rest=ph.t2, exposure_s=ex, frame_dt=1 / 120.0,
+                                      shared_rest=True)
+            model, jmap = mle.TrackModel(meas.t_used, ex), mle.jacobian_map(meas)
+            for k, rolling in ((1.0, False), (0.7, False), (1.0, True)):
+                v0 = k * np.asarray(shot.v0)
+                for w0 in (np.asarray(shot.w0), z_cross(v0) / p.R):  # the second: no slip
+                    s = Shot(shot.x0, v0, z_cross(v0) / p.R if rolling else w0, shot.t0)
+                    q = phases(s, p)
+                    if mle._deficient_by_form(model, q, rolling):
+                        seen[q.t1 > model.last] += 1
+                        assert mle._rank_deficient(jmap(model.jacobian(s, p, rolling)))
+                    else:
+                        assert q.t1 <= model.last
+    assert seen[True] > 0 and seen[False] > 0, seen
+
+
 def test_mle_degenerate_when_track_ends_while_sliding():
     shot, p = sample_shot(11, "masse")
     ph = phases(shot, p)
