@@ -296,7 +296,10 @@ class Measurements:
     def _means(self, v):
         g, cnt, _ = self._grouping
         m = self.n
-        return np.stack([np.bincount(g, weights=v[:, d], minlength=m) for d in (0, 1)], 1) / cnt[:, None]
+        out = np.empty((m, 2))
+        for d in (0, 1):  # each axis's sums over the count: np.stack's then divided, the same numbers
+            np.divide(np.bincount(g, weights=v[:, d], minlength=m), cnt, out=out[:, d])
+        return out
 
     def whiten(self, model_used) -> np.ndarray:
         """Whitened residuals, shape (m, 2), in measurement order (time order):

@@ -218,18 +218,22 @@ class ModelFit:
 
 
 def _unpack(p, rolling, fit_friction, params: BallParams):
-    x0, t0, v0 = p[0:2], p[2], p[3:5]
+    # Python floats first (one tolist, not a numpy scalar each: the fits
+    # unpack every residual's point); the same values.
+    q = np.asarray(p, dtype=float)
+    f = q.tolist()
+    x0, t0, v0 = (f[0], f[1]), f[2], (f[3], f[4])
     i = 5
     if rolling:
-        w0 = z_cross(v0) / params.R  # no slip: u0 = 0
+        w0 = z_cross(q[3:5]) / params.R  # no slip: u0 = 0
     else:
-        w0 = p[5:7]
+        w0 = (f[5], f[6])
         i = 7
     if fit_friction and rolling:  # no sliding: mu_s leaves no trace in the track
-        params = BallParams(R=params.R, mu_s=params.mu_s, mu_r=float(p[i]), g=params.g)
+        params = BallParams(R=params.R, mu_s=params.mu_s, mu_r=f[i], g=params.g)
     elif fit_friction:
-        params = BallParams(R=params.R, mu_s=float(p[i]), mu_r=float(p[i + 1]), g=params.g)
-    return Shot(x0=x0, v0=v0, w0=w0, t0=float(t0)), params
+        params = BallParams(R=params.R, mu_s=f[i], mu_r=f[i + 1], g=params.g)
+    return Shot(x0=x0, v0=v0, w0=w0, t0=t0), params
 
 
 def _names(rolling: bool, fit_friction: bool) -> tuple:
