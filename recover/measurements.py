@@ -458,8 +458,9 @@ def group_shares(frame_cov_used, g, m: int, scatter, min_share: float = 0.0, sca
     for a single frame), as :func:`group_covariance` has them (the same
     arguments): two frames of one rest have covariance ``f C``."""
     cnt = np.bincount(g, minlength=m)
-    c = np.zeros((m, 2, 2))
-    np.add.at(c, g, frame_cov_used)
+    c = np.empty((m, 2, 2))
+    for i, j in ((0, 0), (0, 1), (1, 0), (1, 1)):  # np.add.at's sums: each in frame order, from zero
+        c[:, i, j] = np.bincount(g, weights=frame_cov_used[:, i, j], minlength=m)
     c /= np.maximum(cnt, 1)[:, None, None]
     share = np.zeros(m)
     share[cnt > 1] = 1.0  # a scatter not measured: one shared error
