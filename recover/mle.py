@@ -27,16 +27,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import OptimizeResult, brentq, least_squares
+from scipy.optimize import brentq, least_squares
 from scipy.sparse import csr_array
 
-try:  # MINPACK's lmder, as least_squares(method="lm") calls it (lm_fit)
-    from scipy.optimize import _minpack
-    from scipy.optimize._lsq.least_squares import FROM_MINPACK_TO_COMMON, TERMINATION_MESSAGES
-except ImportError:  # pragma: no cover - a scipy that moved them: least_squares itself
-    _minpack = None
-
 from cuespin.fit.decide import autocorrelated
+from cuespin.fit.lm import lm_fit
 from cuespin.physics.motion import SLIP_ZERO, BallParams, Shot, phases, positions, positions_jacobian, z_cross
 from cuespin.recover.measurements import Measurements, build_measurements, frame_lattice, lattice_ar1_sums
 
@@ -414,58 +409,6 @@ def ar1_prewhiten(meas: Measurements, r, rho: float) -> np.ndarray:
     return prewhitener(meas, rho)(r)
 
 
-def lm_fit(resid, p0, jac, x_scale, tol: float = LM_TOL, max_nfev: int = 100) -> OptimizeResult:
-    """``least_squares(resid, p0, jac=jac, x_scale=x_scale, method="lm",
-    xtol=tol, ftol=tol, gtol=tol, max_nfev=max_nfev)``: the same MINPACK
-    call (lmder, ``diag = 1 / x_scale``), on the same points, with the same
-    residuals and Jacobians (each evaluated once a point, as least_squares'
-    VectorFunction keeps them: its start's first, then the end's Jacobian
-    again when the last point evaluated was another), without its wrapper:
-    measured 3-5% of a recovery's CPU (the benchmark's 8 shots, 1,500
-    residuals and 800 Jacobians a run).  The fields the fits read: ``x``,
-    ``cost``, ``fun``, ``jac``, ``status``, ``success``, ``message``.
-    Raises ValueError where least_squares does (residuals not finite at the
-    start, fewer residuals than parameters)."""
-    x0 = np.atleast_1d(np.asarray(p0, dtype=float)).astype(float)
-    x_scale = np.asarray(x_scale, dtype=float)
-    if np.isnan(x0).any():
-        raise ValueError("Initial guess is outside of provided bounds")  # least_squares' check: NaN is outside
-    if _minpack is None:  # pragma: no cover
-        return least_squares(resid, x0, jac=jac, x_scale=x_scale, method="lm", xtol=tol, ftol=tol, gtol=tol,
-                             max_nfev=max_nfev)
-    last = {"x": x0.copy(), "f": None, "J": None}  # the last point asked for, and what is known there
-
-    def at(x):  # np.array_equal's test (elementwise ==), without its overhead
-        if not (x.shape == last["x"].shape and bool((x == last["x"]).all())):
-            last.update(x=np.array(x, dtype=float), f=None, J=None)
-
-    def fun(x):
-        at(x)
-        if last["f"] is None:
-            last["f"] = np.atleast_1d(resid(last["x"].copy()))
-        return last["f"].copy()
-
-    def jacobian(x):
-        at(x)
-        if last["J"] is None:
-            last["J"] = np.atleast_2d(jac(last["x"].copy()))
-        return last["J"].copy()
-
-    f0 = fun(x0)
-    jacobian(x0)
-    if not np.all(np.isfinite(f0)):
-        raise ValueError("Residuals are not finite in the initial point.")
-    if f0.size < x0.size:
-        raise ValueError("Method 'lm' doesn't work when the number of residuals is less than the number of "
-                         "variables.")
-    x, info, status = _minpack._lmder(fun, jacobian, x0.copy(), (), True, False, tol, tol, tol, max_nfev, 100.0,
-                                      1 / x_scale)
-    f = info["fvec"]
-    status = FROM_MINPACK_TO_COMMON[status]
-    return OptimizeResult(x=x, cost=0.5 * np.dot(f, f), fun=f, jac=jacobian(x), status=status,
-                          message=TERMINATION_MESSAGES[status], success=status > 0)
-
-
 def fit_model(meas: Measurements, params: BallParams, start, exposure_s: float, rolling: bool,
               fit_friction: bool = False, ar1: float = 0.0) -> ModelFit:
     """Fit one model (free slip or rolling from the strike) to the measurements.
@@ -528,7 +471,7 @@ def fit_model(meas: Measurements, params: BallParams, start, exposure_s: float, 
         # astray, not a working limit.  Tolerances 1e-7:
         # answers within 5e-6 standard errors of those at 1e-10 (10 benchmark
         # shots, both codecs), in 25% less time.
-        r = lm_fit(resid, p0, jac, x_scale, LM_TOL, max_nfev=100)
+        r = lm_fit(resid, p0, jac, x_scale, LM_TOL, LM_TOL, LM_TOL, max_nfev=100)
     shot, pr = _unpack(r.x, rolling, fit_friction, params)
     # The AR(1) coefficient was estimated from the same residuals: one
     # parameter more.
@@ -1116,7 +1059,7 @@ def profile_chi2(fit: ModelFit, meas: Measurements, exposure_s: float, delta: fl
         return forward_jacobian(resid, q, resid(q), many=many) if _rank_deficient(J) else J
 
     q0 = np.r_[shot.x0, shot.t0, shot.v0, 0.0]
-    r = lm_fit(resid, q0, jac, np.r_[1e-3, 1e-3, 1e-3, 1e-2, 1e-2, 1.0], LM_TOL, max_nfev=100)
+    r = lm_fit(resid, q0, jac, np.r_[1e-3, 1e-3, 1e-3, 1e-2, 1e-2, 1.0], LM_TOL, LM_TOL, LM_TOL, max_nfev=100)
     return float(2 * r.cost)
 
 

@@ -215,8 +215,8 @@ def test_lm_fit_is_least_squares(rolling, seed, start_off, monkeypatch):
     start = (shot.x0, shot.t0, k * np.asarray(shot.v0), k * np.asarray(shot.w0))
     new = mle.fit_model(meas, p, start, 0.004, rolling)
 
-    def lm_fit(resid, p0, jac, x_scale, tol, max_nfev):
-        return least_squares(resid, p0, jac=jac, x_scale=x_scale, method="lm", xtol=tol, ftol=tol, gtol=tol,
+    def lm_fit(resid, p0, jac, x_scale, ftol, xtol, gtol, max_nfev):
+        return least_squares(resid, p0, jac=jac, x_scale=x_scale, method="lm", xtol=xtol, ftol=ftol, gtol=gtol,
                              max_nfev=max_nfev)
     monkeypatch.setattr(mle, "lm_fit", lm_fit)
     old = mle.fit_model(meas, p, start, 0.004, rolling)
