@@ -171,7 +171,8 @@ def fit_parabola(p, start: Parabola, max_nfev: int = PARABOLA_MAX_NFEV) -> Parab
 
     def build(q):
         # log a is unbounded while the fit explores; keep exp finite.
-        return Parabola(a=float(np.exp(np.clip(q[0], -60.0, 60.0))), theta=float(q[1]), vertex=np.array(q[2:4]))
+        # (np.clip's bounds on the float: the same number, NaN kept, without its overhead)
+        return Parabola(a=float(np.exp(min(max(float(q[0]), -60.0), 60.0))), theta=float(q[1]), vertex=np.array(q[2:4]))
 
     last = {}
 
