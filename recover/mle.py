@@ -290,11 +290,11 @@ def _deficient_by_form(model: TrackModel, ph, rolling: bool) -> bool:
     columns is zero), or the free-slip model without slip (|u0| at most
     SLIP_ZERO: the w0 columns are zeros, physics.motion.positions_jacobian).
     There :func:`_rank_deficient` says so on the Jacobian, which need not
-    be made: its smallest eigenvalue measured at most 5.1e-16 in 1,237 such
-    Jacobians (recover_speed.py's 8 MJPG shots and 105 simulated recoveries,
-    ``/tmp/fspeed13/pred.py``), 200 times below RANK_DEFICIENT_EIG; all of
-    the no-slip ones exactly deficient.  NaN times or slip: False (the
-    Jacobian is made and tested, as before)."""
+    be made: its smallest eigenvalue measured at most 5.1e-16 in the 1,237
+    Jacobians past the end (recover_speed.py's 8 MJPG shots and 105
+    simulated recoveries), 200 times below RANK_DEFICIENT_EIG; the 113
+    without slip (zero columns) all deficient.  NaN times or slip: False
+    (the Jacobian is made and tested, as before)."""
     return bool(ph.t1 > model.last) or (not rolling and float(np.hypot(*ph.u0)) <= SLIP_ZERO)
 
 
