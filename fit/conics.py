@@ -18,10 +18,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
 from scipy.stats import f as f_dist
 
 from cuespin.fit.decide import curved as decide_curved
+from cuespin.fit.lm import lm_fit
 from cuespin.physics.parabola import Parabola
 
 # Residual evaluations the orthogonal-distance parabola fit may take
@@ -171,7 +171,8 @@ def fit_parabola(p, start: Parabola, max_nfev: int = PARABOLA_MAX_NFEV) -> Parab
 
     def build(q):
         # log a is unbounded while the fit explores; keep exp finite.
-        return Parabola(a=float(np.exp(np.clip(q[0], -60.0, 60.0))), theta=float(q[1]), vertex=np.array(q[2:4]))
+        # (np.clip's bounds on the float: the same number, NaN kept, without its overhead)
+        return Parabola(a=float(np.exp(min(max(float(q[0]), -60.0), 60.0))), theta=float(q[1]), vertex=np.array(q[2:4]))
 
     last = {}
 
@@ -197,7 +198,7 @@ def fit_parabola(p, start: Parabola, max_nfev: int = PARABOLA_MAX_NFEV) -> Parab
     try:
         # A straight path sends a towards 0, where the fit wanders: cap the
         # effort (PARABOLA_MAX_NFEV).
-        r = least_squares(resid, q0, jac=jac, method="lm", xtol=1e-12, ftol=1e-12, max_nfev=max_nfev)
+        r = lm_fit(resid, q0, jac, None, ftol=1e-12, xtol=1e-12, max_nfev=max_nfev)  # least_squares' lm
     except (ValueError, FloatingPointError) as exc:
         return ParabolaFit(False, f"parabola fit failed: {exc}")
     if not np.all(np.isfinite(r.x)):

@@ -158,8 +158,14 @@ def _solve_many(t, xy, t0s, t1s, decel):
     # (4 times slower: this was most of the search's time), the same
     # operations in the same order, so the same numbers.
     res = np.empty((K, n, 2))
-    for d in (0, 1):
-        model = coef[:, 0, d, None] + tau * coef[:, 1, d, None] + c2 * coef[:, 2, d, None] + roll * a_r[:, d, None]
+    model, term = np.empty((K, n)), np.empty((K, n))
+    for d in (0, 1):  # in place, the same operations in the same order
+        np.multiply(tau, coef[:, 1, d, None], out=term)
+        np.add(coef[:, 0, d, None], term, out=model)
+        np.multiply(c2, coef[:, 2, d, None], out=term)
+        model += term
+        np.multiply(roll, a_r[:, d, None], out=term)
+        model += term
         np.subtract(xy[None, :, d], model, out=res[:, :, d])
     flat = res.reshape(K, 2 * n)
     sse = np.einsum("kj,kj->k", flat, flat)

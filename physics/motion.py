@@ -278,10 +278,10 @@ def _phase_index(ph: Phases, t, ordered: bool | None = None):
     bisection instead of four passes and scattered copies; the masks when
     ``t`` is not sorted or a phase boundary is NaN.  ``ordered``: whether
     ``t`` is sorted, when the caller knows (checked here otherwise)."""
-    bounds = (ph.t0, ph.t1, ph.t2)
-    if any(b != b for b in bounds) or not (ordered if ordered is not None else np.all(t[1:] >= t[:-1])):
+    t0, t1, t2 = ph.t0, ph.t1, ph.t2
+    if t0 != t0 or t1 != t1 or t2 != t2 or not (ordered if ordered is not None else np.all(t[1:] >= t[:-1])):
         return _phase_masks(ph, t)
-    i0, i1, i2 = np.searchsorted(t, bounds, side="left")  # first frame at or after each boundary
+    i0, i1, i2 = t.searchsorted((t0, t1, t2), side="left").tolist()  # first frame at or after each boundary
     return slice(0, i0), slice(i0, i1), slice(i1, i2), slice(i2, len(t))
 
 
@@ -321,6 +321,15 @@ def positions(shot: Shot, params: BallParams, t, ph: Phases | None = None,
         ph = phases(shot, params)
     t = np.atleast_1d(np.asarray(t, dtype=float))
     return _positions(ph, params, t, *_phase_index(ph, t, ordered))
+
+
+def _powers(s) -> np.ndarray:
+    """Rows ``(1, s, s^2)``, shape (k, 3) (np.stack's numbers, without its overhead)."""
+    out = np.empty((s.shape[0], 3))
+    out[:, 0] = 1.0
+    out[:, 1] = s
+    np.multiply(s, s, out=out[:, 2])
+    return out
 
 
 def positions_jacobian(shot: Shot, params: BallParams, t, rolling: bool = False,
@@ -394,7 +403,7 @@ def positions_jacobian(shot: Shot, params: BallParams, t, rolling: bool = False,
     # times the velocity v0 - mu_s g s u_hat, eq. 7)
     C = np.stack([d_x0 - np.outer(ph.v0, d_t0), d_v0 + mu_g * np.outer(ph.u_hat, d_t0), -0.5 * mu_g * d_uhat])
     s = t[sliding] - ph.t0
-    out[sliding] = np.stack([np.ones_like(s), s, s * s], axis=1) @ C.reshape(3, -1)
+    out[sliding] = _powers(s) @ C.reshape(3, -1)
     if _any(rolls):
         a_r = 5.0 / 7.0 * mu_r * g  # eq. 16
         v1_hat = v1 / speed_v1
@@ -403,7 +412,7 @@ def positions_jacobian(shot: Shot, params: BallParams, t, rolling: bool = False,
         # eq. 18: x1 + v1 r - 1/2 a_r r^2 v1_hat (velocity v1 - a_r r v1_hat)
         C = np.stack([d_x1 - np.outer(v1, d_r), d_v1 + a_r * np.outer(v1_hat, d_r), -0.5 * a_r * d_v1hat])
         r = t[rolls] - ph.t1
-        out[rolls] = np.stack([np.ones_like(r), r, r * r], axis=1) @ C.reshape(3, -1)
+        out[rolls] = _powers(r) @ C.reshape(3, -1)
     if _any(rest):
         if speed_v1 <= SPEED_ZERO:  # stopped as sliding ended (case 2): x2 = x1
             out[rest] = d_x1.ravel()

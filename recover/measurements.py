@@ -296,7 +296,10 @@ class Measurements:
     def _means(self, v):
         g, cnt, _ = self._grouping
         m = self.n
-        return np.stack([np.bincount(g, weights=v[:, d], minlength=m) for d in (0, 1)], 1) / cnt[:, None]
+        out = np.empty((m, 2))
+        for d in (0, 1):  # each axis's sums over the count: np.stack's then divided, the same numbers
+            np.divide(np.bincount(g, weights=v[:, d], minlength=m), cnt, out=out[:, d])
+        return out
 
     def whiten(self, model_used) -> np.ndarray:
         """Whitened residuals, shape (m, 2), in measurement order (time order):
@@ -455,8 +458,9 @@ def group_shares(frame_cov_used, g, m: int, scatter, min_share: float = 0.0, sca
     for a single frame), as :func:`group_covariance` has them (the same
     arguments): two frames of one rest have covariance ``f C``."""
     cnt = np.bincount(g, minlength=m)
-    c = np.zeros((m, 2, 2))
-    np.add.at(c, g, frame_cov_used)
+    c = np.empty((m, 2, 2))
+    for i, j in ((0, 0), (0, 1), (1, 0), (1, 1)):  # np.add.at's sums: each in frame order, from zero
+        c[:, i, j] = np.bincount(g, weights=frame_cov_used[:, i, j], minlength=m)
     c /= np.maximum(cnt, 1)[:, None, None]
     share = np.zeros(m)
     share[cnt > 1] = 1.0  # a scatter not measured: one shared error

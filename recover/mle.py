@@ -31,7 +31,8 @@ from scipy.optimize import brentq, least_squares
 from scipy.sparse import csr_array
 
 from cuespin.fit.decide import autocorrelated
-from cuespin.physics.motion import BallParams, Shot, phases, positions, positions_jacobian, z_cross
+from cuespin.fit.lm import lm_fit
+from cuespin.physics.motion import SLIP_ZERO, BallParams, Shot, phases, positions, positions_jacobian, z_cross
 from cuespin.recover.measurements import Measurements, build_measurements, frame_lattice, lattice_ar1_sums
 
 # A fit whose residuals are this many times the stated variance does not
@@ -212,18 +213,22 @@ class ModelFit:
 
 
 def _unpack(p, rolling, fit_friction, params: BallParams):
-    x0, t0, v0 = p[0:2], p[2], p[3:5]
+    # Python floats first (one tolist, not a numpy scalar each: the fits
+    # unpack every residual's point); the same values.
+    q = np.asarray(p, dtype=float)
+    f = q.tolist()
+    x0, t0, v0 = (f[0], f[1]), f[2], (f[3], f[4])
     i = 5
     if rolling:
-        w0 = z_cross(v0) / params.R  # no slip: u0 = 0
+        w0 = z_cross(q[3:5]) / params.R  # no slip: u0 = 0
     else:
-        w0 = p[5:7]
+        w0 = (f[5], f[6])
         i = 7
     if fit_friction and rolling:  # no sliding: mu_s leaves no trace in the track
-        params = BallParams(R=params.R, mu_s=params.mu_s, mu_r=float(p[i]), g=params.g)
+        params = BallParams(R=params.R, mu_s=params.mu_s, mu_r=f[i], g=params.g)
     elif fit_friction:
-        params = BallParams(R=params.R, mu_s=float(p[i]), mu_r=float(p[i + 1]), g=params.g)
-    return Shot(x0=x0, v0=v0, w0=w0, t0=float(t0)), params
+        params = BallParams(R=params.R, mu_s=f[i], mu_r=f[i + 1], g=params.g)
+    return Shot(x0=x0, v0=v0, w0=w0, t0=t0), params
 
 
 def _names(rolling: bool, fit_friction: bool) -> tuple:
@@ -242,6 +247,7 @@ class TrackModel:
         self.exposure_s = exposure_s
         self.nodes = self.t if exposure_s <= 0 else (self.t[:, None] + 0.5 * exposure_s * _GL_T[None, :]).ravel()
         self.ordered = bool(np.all(self.nodes[1:] >= self.nodes[:-1]))
+        self.last = float(self.nodes.max()) if len(self.nodes) else -np.inf
 
     def __call__(self, shot: Shot, params: BallParams) -> np.ndarray:
         """Observed centre (m) at the frame times, shape (n, 2)."""
@@ -261,11 +267,12 @@ class TrackModel:
         w = 0.5 * _GL_W
         return (w[0] * x[:, :, 0] + w[1] * x[:, :, 1]) + w[2] * x[:, :, 2]
 
-    def jacobian(self, shot: Shot, params: BallParams, rolling: bool = False) -> np.ndarray:
-        """Its derivatives with respect to the shot's parameters, shape (n, 2, p)."""
+    def jacobian(self, shot: Shot, params: BallParams, rolling: bool = False, ph=None) -> np.ndarray:
+        """Its derivatives with respect to the shot's parameters, shape (n,
+        2, p); ``ph``: the shot's ``phases``, when the caller has them."""
         if self.exposure_s <= 0:
-            return positions_jacobian(shot, params, self.t, rolling, ordered=self.ordered)
-        d = positions_jacobian(shot, params, self.nodes, rolling, ordered=self.ordered)
+            return positions_jacobian(shot, params, self.t, rolling, ph=ph, ordered=self.ordered)
+        d = positions_jacobian(shot, params, self.nodes, rolling, ph=ph, ordered=self.ordered)
         p = d.shape[2]
         return ((0.5 * _GL_W) @ d.reshape(len(self.t), len(_GL_T), 2 * p)).reshape(len(self.t), 2, p)
 
@@ -273,6 +280,22 @@ class TrackModel:
 def model_track(shot: Shot, params: BallParams, t, exposure_s: float = 0.0):
     """Observed centre (m) at frame times: the position averaged over the exposure."""
     return TrackModel(t, exposure_s)(shot, params)
+
+
+def _deficient_by_form(model: TrackModel, ph, rolling: bool) -> bool:
+    """Whether the exact Jacobian of ``model`` at a shot of phases ``ph`` is
+    rank deficient by its form, not by round-off: no frame's exposure
+    reaches the end of sliding (eq. 9 alone: the slip's size along its own
+    direction leaves the path unchanged, so a combination of the v0 and w0
+    columns is zero), or the free-slip model without slip (|u0| at most
+    SLIP_ZERO: the w0 columns are zeros, physics.motion.positions_jacobian).
+    There :func:`_rank_deficient` says so on the Jacobian, which need not
+    be made: its smallest eigenvalue measured at most 5.1e-16 in the 1,237
+    Jacobians past the end (recover_speed.py's 8 MJPG shots and 105
+    simulated recoveries), 200 times below RANK_DEFICIENT_EIG; the 113
+    without slip (zero columns) all deficient.  NaN times or slip: False
+    (the Jacobian is made and tested, as before)."""
+    return bool(ph.t1 > model.last) or (not rolling and float(np.hypot(*ph.u0)) <= SLIP_ZERO)
 
 
 def _rank_deficient(J) -> bool:
@@ -417,8 +440,12 @@ def fit_model(meas: Measurements, params: BallParams, start, exposure_s: float, 
 
     def jac(p):  # exact (physics.motion.positions_jacobian): no residual evaluations for it
         shot, pr = _unpack(p, rolling, fit_friction, params)
-        J = whitened_jacobian(model.jacobian(shot, pr, rolling))
-        return forward_jacobian(resid, p, resid(p), many=many) if _rank_deficient(J) else J
+        ph = phases(shot, pr)
+        if not _deficient_by_form(model, ph, rolling):
+            J = whitened_jacobian(model.jacobian(shot, pr, rolling, ph))
+            if not _rank_deficient(J):
+                return J
+        return forward_jacobian(resid, p, resid(p), many=many)
 
     lo = np.full(len(p0), -np.inf)
     hi = np.full(len(p0), np.inf)
@@ -444,8 +471,7 @@ def fit_model(meas: Measurements, params: BallParams, start, exposure_s: float, 
         # astray, not a working limit.  Tolerances 1e-7:
         # answers within 5e-6 standard errors of those at 1e-10 (10 benchmark
         # shots, both codecs), in 25% less time.
-        r = least_squares(resid, p0, jac=jac, x_scale=x_scale, method="lm",
-                          xtol=LM_TOL, ftol=LM_TOL, gtol=LM_TOL, max_nfev=100)
+        r = lm_fit(resid, p0, jac, x_scale, LM_TOL, LM_TOL, LM_TOL, max_nfev=100)
     shot, pr = _unpack(r.x, rolling, fit_friction, params)
     # The AR(1) coefficient was estimated from the same residuals: one
     # parameter more.
@@ -1033,8 +1059,7 @@ def profile_chi2(fit: ModelFit, meas: Measurements, exposure_s: float, delta: fl
         return forward_jacobian(resid, q, resid(q), many=many) if _rank_deficient(J) else J
 
     q0 = np.r_[shot.x0, shot.t0, shot.v0, 0.0]
-    r = least_squares(resid, q0, jac=jac, x_scale=np.r_[1e-3, 1e-3, 1e-3, 1e-2, 1e-2, 1.0], method="lm",
-                      xtol=LM_TOL, ftol=LM_TOL, gtol=LM_TOL, max_nfev=100)
+    r = lm_fit(resid, q0, jac, np.r_[1e-3, 1e-3, 1e-3, 1e-2, 1e-2, 1.0], LM_TOL, LM_TOL, LM_TOL, max_nfev=100)
     return float(2 * r.cost)
 
 

@@ -110,6 +110,32 @@ def test_fitted_parabola_holds_the_sliding_path(seed):
     assert np.std(shape.parabola.residuals) == pytest.approx(SIGMA_M, rel=0.15)
 
 
+@pytest.mark.parametrize("seed,max_nfev", [(30, 12), (31, 200)])
+def test_parabola_fit_is_least_squares(seed, max_nfev, monkeypatch):
+    # fit.lm.lm_fit is least_squares' lm call without its wrapper (MINPACK's
+    # own scaling, as least_squares' default x_scale): the same fit to the
+    # last bit, capped (the path's shape) and run to convergence (the paper's).
+    from scipy.optimize import least_squares
+
+    import cuespin.fit.conics as conics
+    from cuespin.physics.parabola import Parabola
+    shot, params = sample_shot(seed, "masse")
+    t, xy, ph = noisy_track(shot, params)
+    slide = (t > shot.t0) & (t < ph.t1)
+    true = sliding_parabola(shot.x0, shot.v0, shot.w0, params)
+    start = Parabola(a=true.a * 1.3, theta=true.theta + 0.05, vertex=true.vertex + 0.01)
+    new = conics.fit_parabola(xy[slide], start, max_nfev)
+
+    def lm_fit(resid, p0, jac, x_scale, ftol, xtol, max_nfev):
+        return least_squares(resid, p0, jac=jac, method="lm", xtol=xtol, ftol=ftol, max_nfev=max_nfev)
+    monkeypatch.setattr(conics, "lm_fit", lm_fit)
+    old = conics.fit_parabola(xy[slide], start, max_nfev)
+    assert new.ok and old.ok
+    assert (new.parabola.a, new.parabola.theta) == (old.parabola.a, old.parabola.theta)
+    for a, b in ((new.parabola.vertex, old.parabola.vertex), (new.residuals, old.residuals), (new.cov, old.cov)):
+        assert np.array_equal(a, b)
+
+
 def test_parabola_jacobian_is_the_distances_derivative():
     # The fit's analytic Jacobian (fit.conics.parabola_jacobian) against
     # central differences of the orthogonal distances, points either side

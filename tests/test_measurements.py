@@ -644,3 +644,21 @@ def test_frames_without_a_stated_error_are_left_out_not_fitted():
         assert got["methods"][m]["status"] == want["methods"][m]["status"]
         assert got["methods"][m]["v0"] == want["methods"][m]["v0"] and got["methods"][m]["w0"] == want["methods"][m]["w0"]
     assert got["methods"]["mle"]["status"] == "ok"
+
+
+def test_group_sums_are_add_at_sums():
+    # group_shares' mean covariances (bincount's sums, each in frame order
+    # from zero) are np.add.at's numbers to the last bit: the fits' answers
+    # were kept bit for bit.
+    from cuespin.recover.measurements import group_shares
+    rng = np.random.default_rng(3)
+    g = np.sort(rng.integers(0, 40, 300))
+    g = np.unique(g, return_inverse=True)[1]
+    m = int(g.max()) + 1
+    a = rng.standard_normal((300, 2, 2)) * 1e-5
+    cov = a @ np.swapaxes(a, 1, 2) + 1e-12 * np.eye(2)
+    c, _ = group_shares(cov, g, m, np.full((m, 2, 2), np.nan))
+    ref = np.zeros((m, 2, 2))
+    np.add.at(ref, g, cov)
+    ref /= np.maximum(np.bincount(g, minlength=m), 1)[:, None, None]
+    assert np.array_equal(c, ref)

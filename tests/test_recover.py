@@ -194,6 +194,67 @@ def test_fast_paths_give_the_same_numbers(rolling, ar1, seed, exposure):
     assert np.array_equal(loop, many)
 
 
+@pytest.mark.parametrize("rolling,seed,start_off", [(False, 3, 0.0), (True, 4, 0.0), (False, 11, 0.3)])
+def test_lm_fit_is_least_squares(rolling, seed, start_off, monkeypatch):
+    # recover.mle.lm_fit is least_squares' lm call without its wrapper: the
+    # same fit to the last bit (x, cost, residuals, Jacobian, status,
+    # message), from the truth and from a start 30% off in speed and spin
+    # (seed 11: a masse shot cut while sliding, rank-deficient Jacobians
+    # and their forward differences).
+    from scipy.optimize import least_squares
+
+    import cuespin.recover.mle as mle
+    from cuespin.recover.measurements import build_measurements
+    shot, p = sample_shot(seed, "case4" if rolling else ("masse" if start_off else "random"))
+    ph = phases(shot, p)
+    t_cut = shot.t0 + 0.5 * (ph.t1 - shot.t0) if start_off else min(ph.t2 + 0.3, shot.t0 + 3.0)
+    t, xy = synthetic(shot, p, fps=120.0, seed=seed, t_cut=t_cut)
+    meas = build_measurements(t, xy, 2e-5, t0=shot.t0, t_rest=ph.t2, exposure_s=0.004, frame_dt=1 / 120.0,
+                              shared_rest=True)
+    k = 1.0 + start_off
+    start = (shot.x0, shot.t0, k * np.asarray(shot.v0), k * np.asarray(shot.w0))
+    new = mle.fit_model(meas, p, start, 0.004, rolling)
+
+    def lm_fit(resid, p0, jac, x_scale, ftol, xtol, gtol, max_nfev):
+        return least_squares(resid, p0, jac=jac, x_scale=x_scale, method="lm", xtol=xtol, ftol=ftol, gtol=gtol,
+                             max_nfev=max_nfev)
+    monkeypatch.setattr(mle, "lm_fit", lm_fit)
+    old = mle.fit_model(meas, p, start, 0.004, rolling)
+    for name in ("x", "jac", "residuals"):
+        assert np.array_equal(getattr(new, name), getattr(old, name)), name
+    assert (new.chi2, new.converged, new.message) == (old.chi2, old.converged, old.message)
+
+
+def test_deficient_by_form_is_deficient():
+    # recover.mle._deficient_by_form skips making the exact Jacobian where
+    # its form makes it rank deficient (sliding past the track's end; free
+    # slip without slip): the Jacobian's own test must agree at every such
+    # point (and the form must not claim a track that sees sliding end).
+    import cuespin.recover.mle as mle
+    from cuespin.physics.motion import z_cross
+    from cuespin.recover.measurements import build_measurements
+    seen = {True: 0, False: 0}
+    for seed in range(6):
+        shot, p = sample_shot(seed, "random")
+        ph = phases(shot, p)
+        for cut, ex in ((0.5, 0.004), (3.0, 0.0)):  # cut while sliding; the whole shot
+            t, xy = synthetic(shot, p, fps=120.0, seed=seed, t_cut=shot.t0 + cut * (ph.t1 - shot.t0) + 0.05 * (cut > 1))
+            meas = build_measurements(t, xy, 2e-5, t0=shot.t0, t_rest=ph.t2, exposure_s=ex, frame_dt=1 / 120.0,
+                                      shared_rest=True)
+            model, jmap = mle.TrackModel(meas.t_used, ex), mle.jacobian_map(meas)
+            for k, rolling in ((1.0, False), (0.7, False), (1.0, True)):
+                v0 = k * np.asarray(shot.v0)
+                for w0 in (np.asarray(shot.w0), z_cross(v0) / p.R):  # the second: no slip
+                    s = Shot(shot.x0, v0, z_cross(v0) / p.R if rolling else w0, shot.t0)
+                    q = phases(s, p)
+                    if mle._deficient_by_form(model, q, rolling):
+                        seen[q.t1 > model.last] += 1
+                        assert mle._rank_deficient(jmap(model.jacobian(s, p, rolling)))
+                    else:
+                        assert q.t1 <= model.last
+    assert seen[True] > 0 and seen[False] > 0, seen
+
+
 def test_mle_degenerate_when_track_ends_while_sliding():
     shot, p = sample_shot(11, "masse")
     ph = phases(shot, p)
