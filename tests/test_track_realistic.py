@@ -101,9 +101,6 @@ NOT_YET = {
                  "the set 97.98% of its frames on open cloth",
     (7, "FFV1"): "issue 10: shot 5 (red on red in a low light): 29 of 81 frames found, the set 97.59% of its "
                  "frames on open cloth",
-    (6, "FFV1"): "issue 10, a regression since the lit sphere's learnt PSF (blur5): shot 1 has 35 of its 481 frames "
-                 "dropped as 'fit pulled off the ball' (481 found on cue6's 728fb26), the found ones within 0.009 "
-                 "radii; the set 1953 of 1988 frames (98.2%); no false centre",
 }
 
 
