@@ -101,10 +101,35 @@ def test_a_rest_is_held_to_its_own_typical_fit():
     # was dropped; each phase against its own, only a fit pulled within it.
     from cuespin.track.tracker import PULLED_RMS_FACTOR, pulled_fits
 
+    # (A rest under a quarter of the frames: a longer one moves the pooled
+    # upper quartile into it, and the spread's fence, PULLED_SPREAD_IQRS,
+    # then keeps it even pooled.)
     rng = np.random.default_rng(5)
-    still = np.r_[np.ones(60, bool), np.zeros(100, bool)]
+    still = np.r_[np.ones(30, bool), np.zeros(130, bool)]
     rms = np.where(still, 3.5, 1.0) * rng.uniform(0.9, 1.1, len(still))
     rms[[10, 100]] *= 1.2 * PULLED_RMS_FACTOR     # one pulled fit in each phase
     ok = np.ones(len(rms), bool)
-    assert pulled_fits(rms, ok)[still].sum() > 50  # the pooled rule: the rest dropped
+    assert pulled_fits(rms, ok)[still].sum() >= 29  # the pooled rule: the rest dropped
     assert set(np.flatnonzero(pulled_fits(rms, ok, still=still))) == {10, 100}
+
+
+def test_a_look_that_spreads_the_fits_is_not_a_pull():
+    # sample_scenes(6, 6, realistic, FFV1)[1]'s residuals (a dotted ball
+    # rolling at 240 fps, the lit sphere): the frames whose dots the
+    # markings rule did not find (at the rim) explain their window ~4 times
+    # worse than the best quarter, and all were within 0.007 R; a fit held
+    # 0.25 R off explains its window at least 11 times worse (pulled7).
+    # Their values here: quartiles 1.98 and 4.18, those frames 7.3-8.3.
+    from cuespin.track.tracker import PULLED_RMS_FACTOR, PULLED_SPREAD_IQRS, pulled_fits
+
+    rng = np.random.default_rng(6)
+    rms = rng.choice([1.6, 2.2, 3.0, 4.2], 480) * rng.uniform(0.9, 1.1, 480)
+    rms[::14] = rng.uniform(7.3, 8.3, len(rms[::14]))  # the dots unfound: 35 frames
+    ok = np.ones(len(rms), bool)
+    q1, q3 = np.percentile(rms, [25, 75])
+    assert (rms > PULLED_RMS_FACTOR * q1).sum() >= 30  # against the best quarter alone: dropped
+    assert not pulled_fits(rms, ok).any()
+    # A fit held 0.25 R off on those windows: RMS 22.8 or more, measured.
+    rms[[7, 300]] = 22.8
+    assert q3 + PULLED_SPREAD_IQRS * (q3 - q1) < 22.8
+    assert set(np.flatnonzero(pulled_fits(rms, ok))) == {7, 300}

@@ -20,7 +20,7 @@ import pytest
 from cuespin.data_gen.sampler import sample_scenes
 from cuespin.render import render_video
 from cuespin.render.draw import FrameRenderer
-from cuespin.track.tracker import TrackerConfig
+from cuespin.track.tracker import TrackerConfig, pulled_fits
 from cuespin.track.video import track_video
 
 # Issue 10: the share of the frames where the ball is wholly in view and on
@@ -96,14 +96,12 @@ def test_resting_balls_that_outshine_the_ball_are_not_tracked(tmp_path, shot, se
 # The sets whose targets are not met yet, as measured (README, Known
 # limits): strict, so that a fix shows as a pass to be unmarked.
 NOT_YET = {
-    (7, "MJPG"): "issue 10: shot 4 (480 fps, a white ball with dots, the cue beside it after the strike): 6 "
-                 "centres 0.31-0.45 radii off; shot 5 (red on red in a low light): 47 of 81 frames found, "
-                 "the set 97.98% of its frames on open cloth",
-    (7, "FFV1"): "issue 10: shot 5 (red on red in a low light): 29 of 81 frames found, the set 97.59% of its "
-                 "frames on open cloth",
-    (6, "FFV1"): "issue 10, a regression since the lit sphere's learnt PSF (blur5): shot 1 has 35 of its 481 frames "
-                 "dropped as 'fit pulled off the ball' (481 found on cue6's 728fb26), the found ones within 0.009 "
-                 "radii; the set 1953 of 1988 frames (98.2%); no false centre",
+    (7, "MJPG"): "issue 10: shot 4 (480 fps, a white ball with dots, the cue beside it after the strike): 5 "
+                 "centres 0.30-0.45 radii off (frames 223-227); shot 5 (red on red in a low light): 64 of 81 frames "
+                 "found; the set 2303 of 2322 frames on open cloth (99.2%; pulled7's measurement)",
+    (7, "FFV1"): "issue 10: shot 5 (red on red in a low light): 33 of 81 frames found, 3 of them 0.25-0.31 radii "
+                 "off (frames 33, 56, 59: the departure's centroid within RESTART_RADII of the fit "
+                 "(0.07-0.23 R), so not tried again; pulled7's measurement)",
 }
 
 
@@ -292,3 +290,74 @@ def test_every_found_frame_states_a_positive_definite_error(tmp_path):
     c = tr.cov_px[tr.ok]
     assert tr.ok.sum() >= 0.97 * len(tr.ok)  # measured 728 of 736 (0.989); the refits taken unchecked: 713 (0.969)
     assert np.all(np.isfinite(c)) and np.all(c[:, 0, 0] > 0) and np.all(np.linalg.det(c) > 0)
+
+
+@pytest.mark.slow
+def test_the_pulled_rule_drops_fits_off_the_ball_not_a_turning_look(tmp_path, monkeypatch):
+    # track.tracker.pulled_fits' two error rates on the generator's track
+    # that broke it (sample_scenes(6, 6, realistic, FFV1)[1], a dotted ball
+    # rolling at 240 fps, the lit sphere's learnt PSF; its first second):
+    # the frames it drops that were right (the dots unfound at the rim
+    # raise a correct fit's residual: against 3 times the best quarter's,
+    # 35 of the 2-s shot's 481 were dropped, all within 0.007 R), and the
+    # fits 0.25 R off (issue 10's false centre) it would keep: each final
+    # refit's window explained with its centre held that far off in 8
+    # directions (level and look refitted, linear at the fixed centre),
+    # its residual RMS the fit's times the ratio of the two linear fits'.
+    from cuespin.track import video
+    from cuespin.track.model import SphereLook, _model_rows, blur_nodes
+
+    scene = sample_scenes(2, 6, look="realistic", codec="FFV1")[1]
+    scene.render["max_duration"] = 1.0
+    path = tmp_path / "dots.avi"
+    render_video(scene, path)
+    off = 0.25 * np.c_[np.cos(np.arange(8) * np.pi / 4), np.sin(np.arange(8) * np.pi / 4)]
+
+    def linear_rms(patch, felt, u0, v0, c, b, r, shade, outline, valid):
+        look = np.array(shade, float)
+        look[:3] = 0.0  # the look's coefficients refitted below, with the level
+        m0, JT = _model_rows(c, b, 0.0, felt, r, u0, v0, blur_nodes(np.hypot(*b)), look, False, outline)
+        y = (np.asarray(patch, float) - felt - m0).ravel()
+        use = np.ones(len(y), bool) if valid is None else np.asarray(valid, bool).ravel()
+        A = JT[2:6].T[use]
+        e = y[use] - A @ np.linalg.lstsq(A, y[use], rcond=1e-9)[0]
+        return np.sqrt(np.mean(e ** 2))
+
+    held, seen = [], {}
+    fit_disc = video.fit_disc
+
+    def fit_and_hold(patch, felt, u0, v0, c0, r, G, **kw):
+        g = fit_disc(patch, felt, u0, v0, c0, r, G, **kw)
+        if not (g and g.stated):
+            held.append(None)  # the frame keeps its first fit (track_video): not measured
+            return g
+        shade, outline = kw.get("shade"), kw.get("outline")
+        rr = outline.radius if isinstance(shade, SphereLook) and outline is not None else r
+        args = (patch, felt, u0, v0)
+        at = linear_rms(*args, g.c, g.b, rr, g.shade, outline, kw.get("valid"))
+        held.append([g.rms * linear_rms(*args, g.c + d * r, g.b, rr, g.shade, outline, kw.get("valid")) / at
+                     for d in off])
+        return g
+
+    def keep_all(rms, ok, still=None):
+        seen.update(rms=np.array(rms), ok=np.array(ok), still=np.array(still))
+        return np.zeros(len(rms), bool)
+
+    monkeypatch.setattr(video, "fit_disc", fit_and_hold)
+    monkeypatch.setattr(video, "pulled_fits", keep_all)
+    tr = track_video(path, scene, TrackerConfig(threaded=False))
+    rms, ok, still = seen["rms"], seen["ok"], seen["still"]
+    truth = pd.read_csv(path.with_suffix(".truth.csv")).iloc[:tr.n_frames]
+    err = np.hypot(*(tr.uv - np.c_[truth.uc_px.values, truth.vc_px.values]).T) / tr.radius_px
+    fitted = np.flatnonzero(ok & np.isfinite(rms))
+    assert len(held) == len(fitted) and err[fitted].max() < MAX_ERR_RADII  # every frame refitted, none off
+    dropped = pulled_fits(rms, ok, still=still)
+    assert not dropped.any(), f"{dropped.sum()} correct frames dropped (rms {np.round(rms[dropped], 2)})"
+    kept, measured = 0, [(k, h) for k, h in zip(fitted, held) if h is not None]
+    assert len(measured) >= 0.95 * len(fitted)
+    for k, h in measured:
+        for v in h:
+            r = rms.copy()
+            r[k] = v
+            kept += not pulled_fits(r, ok, still=still)[k]
+    assert kept == 0, f"{kept} of {len(off) * len(measured)} fits held 0.25 R off kept"
