@@ -145,6 +145,22 @@ MARK_RETRY_RADII = 0.1
 # 39-65 (median 54) in the frames fitted at the ball; the quadratic look
 # from the same start found all of them within 0.05 radii.
 SPHERE_A_MIN = 0.5
+# The lit sphere's refit of a marked frame (from the quadratic look's
+# centre) may move it at most this far (radii): it refines that centre (by
+# 0.06-0.1 px on realistic seed 0 shot 18), it does not relocate the ball
+# (the lit sphere alone tracked a marked, highlighted ball 5.2 radii off).
+SPHERE_MARK_MOVE_RADII = 0.1
+# Markings at the rim (within MARK_RIM_PX of it, where the markings rule
+# does not look: the quadratic look's misfit is largest there) are found
+# against the lit sphere, which holds the rim: a pixel within half a pixel
+# of the ball's outline departing from its fit by more than OUTLIER_SIGMAS
+# noise sigmas, in a group of at least MARK_MIN_PX, grown by one; the
+# sphere refitted without them, and the search done again from that refit
+# (the first fit, pulled by the dot, departs beside it too), at most this
+# many times.  A dark dot at the rim left in pulled the lit sphere's centre
+# 0.08-0.16 px (simulated: r 12.2 px, noise 1.7, bound 0.004 px), left out
+# 0.004-0.006 px (docs/measurements.md, branch marks7).
+RIM_MARK_PASSES = 2
 # Frames whose two fits (disc and shaded) decide the look (config.look "auto").
 LOOK_FRAMES = 12
 # The shaded look is kept when its pooled residual reduction exceeds the
@@ -348,6 +364,31 @@ def marking_pixels(patch, felt, u0: int, v0: int, c, b, r: float, r_in: float, s
     # taken for a marking, seed 0 shot 17: one frame 2 px off).
     return (cv2.dilate(core, np.ones((3, 3), np.uint8)).astype(bool)
             | (cv2.dilate(core, smear_kernel(b)).astype(bool) & inner))
+
+
+def rim_marking_pixels(patch, felt, u0: int, v0: int, g, r: float, sigma: float, left=None,
+                       outline=None) -> np.ndarray | None:
+    """Pixels near the rim that depart from the lit sphere's fit ``g`` (a
+    :func:`~cuespin.track.model.fit_disc` with a :class:`SphereLook`, on the
+    window ``patch``, ``felt`` with top-left ``(u0, v0)``, ball radius ``r``
+    px) as a marking does (:data:`RIM_MARK_PASSES`' rule), grown by one
+    pixel; ``left``: pixels already left out (never returned).  None when
+    there are none."""
+    rr = r if outline is None else outline.radius  # fit_disc's scale of the sphere
+    m, _ = _model_rows(g.c, g.b, g.G, felt, rr, u0, v0, blur_nodes(np.hypot(*g.b)), g.shade, False, outline)
+    res = np.asarray(patch, np.float64) - felt - m
+    near = segment_distance(felt.shape, u0, v0, g.c, g.b) < r + 0.5
+    if left is not None:
+        near &= ~left
+    bad = (near & (np.abs(res) > OUTLIER_SIGMAS * max(sigma, 0.5))).astype(np.uint8)
+    if bad.sum() < MARK_MIN_PX:
+        return None
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(bad, connectivity=8)
+    big = np.nonzero(stats[1:, cv2.CC_STAT_AREA] >= MARK_MIN_PX)[0] + 1
+    if not len(big):
+        return None
+    out = cv2.dilate(_members(n, big).view(np.uint8)[labels], np.ones((3, 3), np.uint8)).astype(bool)
+    return out if left is None else out & ~left
 
 
 def smear_kernel(b) -> np.ndarray:
@@ -882,6 +923,31 @@ class BallTracker:
                 return g, marks, fb
         return f, None, fit_blur
 
+    def _rim_unmarked(self, patch, felt, u0, v0, f, r, fit_blur, ol, marks, foreign):
+        """The lit sphere's fit ``f`` of a marked frame again without the
+        markings at its rim (:func:`rim_marking_pixels`, at most
+        :data:`RIM_MARK_PASSES` times, each from the last refit): (fit,
+        markings with those at the rim), or ``(f, marks)`` when there are
+        none, a refit fails or it moves more than
+        :data:`SPHERE_MARK_MOVE_RADII`."""
+        if self.block > 1:
+            return f, marks
+        left = kept_pixels(marks, foreign)
+        left = None if left is None else ~left
+        g, rim = f, None
+        for _ in range(RIM_MARK_PASSES):
+            add = rim_marking_pixels(patch, felt, u0, v0, g, r, self.bg.sigma, left, ol)
+            if add is None:
+                break
+            h = fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=self.shade,
+                         valid=kept_pixels(marks, add, foreign), outline=ol, block=self.block)
+            if not (h and h.stated):
+                break
+            g, rim = h, add
+        if rim is None or np.hypot(*(g.c - f.c)) > SPHERE_MARK_MOVE_RADII * r:
+            return f, marks
+        return g, marks | rim
+
     @staticmethod
     def _explains_better(patch, felt, u0, v0, g, f, marks, foreign, r, fit_blur, shade, ol, block=1) -> bool:
         """Whether the fit ``g`` explains the window better than ``f``, both
@@ -1163,6 +1229,18 @@ class BallTracker:
                 if m2 is not None and self._explains_better(patch, felt, u0, v0, g, f, marks | m2, foreign, r,
                                                             fit_blur, mark_look, ol, self.block):
                     f, marks, fit_blur = g, m2, fb2
+            if marks is not None and isinstance(shade, SphereLook):
+                # The refit without the markings used the quadratic look
+                # (above); the lit sphere on the same pixels, from there, is
+                # kept when it explains them better (both have three look
+                # coefficients): a strongly shaded white ball with dots
+                # (realistic seed 0 shot 18, ambient 0.25) was 0.06-0.1 px
+                # off across the motion in every frame with the quadratic.
+                g = fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=shade,
+                             valid=kept_pixels(marks, foreign), outline=ol, block=self.block)
+                if g and g.stated and g.rms < f.rms and np.hypot(*(g.c - f.c)) <= SPHERE_MARK_MOVE_RADII * r:
+                    f = g
+                    f, marks = self._rim_unmarked(patch, felt, u0, v0, f, r, fit_blur, ol, marks, foreign)
             if recentre:
                 # The ball's middle may lie on the other side of the felt
                 # than its rim (a shaded ball close to the felt's colour):
