@@ -154,13 +154,19 @@ SPHERE_MARK_MOVE_RADII = 0.1
 # does not look: the quadratic look's misfit is largest there) are found
 # against the lit sphere, which holds the rim: a pixel within half a pixel
 # of the ball's outline departing from its fit by more than OUTLIER_SIGMAS
-# noise sigmas, in a group of at least MARK_MIN_PX, grown by one; the
+# noise sigmas, in a group of at least RIM_MARK_MIN_PX, grown by one; the
 # sphere refitted without them, and the search done again from that refit
-# (the first fit, pulled by the dot, departs beside it too), at most this
-# many times.  A dark dot at the rim left in pulled the lit sphere's centre
-# 0.08-0.16 px (simulated: r 12.2 px, noise 1.7, bound 0.004 px), left out
-# 0.004-0.006 px (docs/measurements.md, branch marks7).
+# (the first fit, pulled by the dot, departs beside it too), at most
+# RIM_MARK_PASSES times.  Only in frames whose markings the rule inside
+# found (a marked ball).  A dark dot at the rim left in pulled the lit
+# sphere's centre 0.08-0.16 px (simulated: r 12.2 px, noise 1.7, bound
+# 0.004 px), left out 0.004-0.006 px.  A dot turning over the rim shows one
+# or two pixels there (realistic seed 0 shot 18: -50 levels, noise 1.7):
+# groups of one count, which Gaussian noise passes once in 1.7 million
+# pixels, ~1e-4 a frame's rim (docs/measurements.md, branch marks7: shot 18
+# RMSE 0.0088 px with groups of 3, 0.0032 with 1; the bound 0.0023).
 RIM_MARK_PASSES = 2
+RIM_MARK_MIN_PX = 1
 # Frames whose two fits (disc and shaded) decide the look (config.look "auto").
 LOOK_FRAMES = 12
 # The shaded look is kept when its pooled residual reduction exceeds the
@@ -384,10 +390,10 @@ def rim_marking_pixels(patch, felt, u0: int, v0: int, g, r: float, sigma: float 
     if sigma is None:  # the noise from the residual, robust to the markings' pixels (MAD)
         sigma = 1.4826 * float(np.median(np.abs(res if left is None else res[~left])))
     bad = (near & (np.abs(res) > OUTLIER_SIGMAS * max(sigma, 0.5))).astype(np.uint8)
-    if bad.sum() < MARK_MIN_PX:
+    if bad.sum() < RIM_MARK_MIN_PX:
         return None
     n, labels, stats, _ = cv2.connectedComponentsWithStats(bad, connectivity=8)
-    big = np.nonzero(stats[1:, cv2.CC_STAT_AREA] >= MARK_MIN_PX)[0] + 1
+    big = np.nonzero(stats[1:, cv2.CC_STAT_AREA] >= RIM_MARK_MIN_PX)[0] + 1
     if not len(big):
         return None
     out = cv2.dilate(_members(n, big).view(np.uint8)[labels], np.ones((3, 3), np.uint8)).astype(bool)
