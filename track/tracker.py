@@ -152,13 +152,13 @@ SPHERE_A_MIN = 0.5
 SPHERE_MARK_MOVE_RADII = 0.1
 # Markings at the rim (within MARK_RIM_PX of it, where the markings rule
 # does not look: the quadratic look's misfit is largest there) are found
-# against the lit sphere, which holds the rim: a pixel within half a pixel
-# of the ball's outline departing from its fit by more than OUTLIER_SIGMAS
+# against the lit sphere, which holds the rim: a pixel of the ball (its
+# outline grown by half a pixel) departing from its fit by more than OUTLIER_SIGMAS
 # noise sigmas, in a group of at least RIM_MARK_MIN_PX, grown by one; the
 # sphere refitted without them, and the search done again from that refit
 # (the first fit, pulled by the dot, departs beside it too), at most
-# RIM_MARK_PASSES times.  Only in frames whose markings the rule inside
-# found (a marked ball).  A dark dot at the rim left in pulled the lit
+# RIM_MARK_PASSES times.  Only on a marked ball (the frames whose markings
+# the rule inside found, and MARKED_BALL_FRAMES's).  A dark dot at the rim left in pulled the lit
 # sphere's centre 0.08-0.16 px (simulated: r 12.2 px, noise 1.7, bound
 # 0.004 px), left out 0.004-0.006 px.  A dot turning over the rim shows one
 # or two pixels there (realistic seed 0 shot 18: -50 levels, noise 1.7):
@@ -167,6 +167,13 @@ SPHERE_MARK_MOVE_RADII = 0.1
 # RMSE 0.0088 px with groups of 3, 0.0032 with 1; the bound 0.0023).
 RIM_MARK_PASSES = 2
 RIM_MARK_MIN_PX = 1
+# A ball whose markings the rule inside found in this many frames is a
+# marked ball: its frames where the rule finds none (a logo turned away,
+# what is still in view under the rule's threshold) get the lit sphere's
+# rule (RIM_MARK_PASSES) too: realistic seed 0 shot 3 (a blue ball with a
+# logo on blue felt) RMSE 0.0271 -> 0.0171 px (docs/measurements.md,
+# branch marks7; misfit5 found its unmarked frames 2.1 stated errors off).
+MARKED_BALL_FRAMES = 8
 # Frames whose two fits (disc and shaded) decide the look (config.look "auto").
 LOOK_FRAMES = 12
 # The shaded look is kept when its pooled residual reduction exceeds the
@@ -374,7 +381,9 @@ def marking_pixels(patch, felt, u0: int, v0: int, c, b, r: float, r_in: float, s
 
 def rim_marking_pixels(patch, felt, u0: int, v0: int, g, r: float, sigma: float | None, left=None,
                        outline=None) -> np.ndarray | None:
-    """Pixels near the rim that depart from the lit sphere's fit ``g`` (a
+    """Pixels on the ball (within half a pixel of its outline: the rim
+    too, where :func:`marking_pixels` does not look) that depart from the
+    lit sphere's fit ``g`` (a
     :func:`~cuespin.track.model.fit_disc` with a :class:`SphereLook`, on the
     window ``patch``, ``felt`` with top-left ``(u0, v0)``, ball radius ``r``
     px) as a marking does (:data:`RIM_MARK_PASSES`' rule), grown by one
@@ -687,6 +696,7 @@ class BallTracker:
         self._sphere_samples: list = []  # the Samples the lit sphere was learnt from
         self._sphere_outline = None  # and their outline
         self._sphere_a = None  # the voting frames' median diffuse coefficient (SPHERE_A_MIN)
+        self._n_marked = 0  # frames whose markings the rule found (a marked ball: MARKED_BALL_FRAMES)
         self._candidates: tuple = ()  # the last full search's blobs
         self._bands = None  # the radius map's bands on the search mask (multi-scale search)
         self._pred = None  # this frame's predicted centre (px), None without history
@@ -978,7 +988,7 @@ class BallTracker:
             g, rim = h, add
         if rim is None or np.hypot(*(g.c - f.c)) > SPHERE_MARK_MOVE_RADII * r:
             return f, marks
-        return g, marks | rim
+        return g, rim if marks is None else marks | rim
 
     @staticmethod
     def _explains_better(patch, felt, u0, v0, g, f, marks, foreign, r, fit_blur, shade, ol, block=1) -> bool:
@@ -1284,6 +1294,9 @@ class BallTracker:
                 if g and g.stated and g.rms < f.rms and np.hypot(*(g.c - f.c)) <= SPHERE_MARK_MOVE_RADII * r:
                     f = g
                     f, marks = self._rim_unmarked(patch, felt, u0, v0, f, r, fit_blur, ol, marks, foreign)
+            elif marks is None and isinstance(shade, SphereLook) and self._n_marked >= MARKED_BALL_FRAMES:
+                f, marks = self._rim_unmarked(patch, felt, u0, v0, f, r, fit_blur, ol, None, foreign)
+            self._n_marked += marks is not None
             if recentre:
                 # The ball's middle may lie on the other side of the felt
                 # than its rim (a shaded ball close to the felt's colour):
