@@ -379,6 +379,18 @@ def marking_pixels(patch, felt, u0: int, v0: int, c, b, r: float, r_in: float, s
             | (cv2.dilate(core, smear_kernel(b)).astype(bool) & inner))
 
 
+def _groups(bad: np.ndarray, min_px: int) -> np.ndarray | None:
+    """The 8-connected groups of at least ``min_px`` pixels of the mask
+    ``bad`` (uint8), as a uint8 mask; None when there are none."""
+    if bad.sum() < min_px:
+        return None
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(bad, connectivity=8)
+    big = np.nonzero(stats[1:, cv2.CC_STAT_AREA] >= min_px)[0] + 1
+    if not len(big):
+        return None
+    return _members(n, big).view(np.uint8)[labels]
+
+
 def rim_marking_pixels(patch, felt, u0: int, v0: int, g, r: float, sigma: float | None, left=None,
                        outline=None) -> np.ndarray | None:
     """Pixels on the ball (within half a pixel of its outline: the rim
@@ -398,14 +410,10 @@ def rim_marking_pixels(patch, felt, u0: int, v0: int, g, r: float, sigma: float 
         near &= ~left
     if sigma is None:  # the noise from the residual, robust to the markings' pixels (MAD)
         sigma = 1.4826 * float(np.median(np.abs(res if left is None else res[~left])))
-    bad = (near & (np.abs(res) > OUTLIER_SIGMAS * max(sigma, 0.5))).astype(np.uint8)
-    if bad.sum() < RIM_MARK_MIN_PX:
+    bad = _groups((near & (np.abs(res) > OUTLIER_SIGMAS * max(sigma, 0.5))).astype(np.uint8), RIM_MARK_MIN_PX)
+    if bad is None:
         return None
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(bad, connectivity=8)
-    big = np.nonzero(stats[1:, cv2.CC_STAT_AREA] >= RIM_MARK_MIN_PX)[0] + 1
-    if not len(big):
-        return None
-    out = cv2.dilate(_members(n, big).view(np.uint8)[labels], np.ones((3, 3), np.uint8)).astype(bool)
+    out = cv2.dilate(bad, np.ones((3, 3), np.uint8)).astype(bool)
     return out if left is None else out & ~left
 
 
@@ -470,14 +478,9 @@ def foreign_pixels(D: np.ndarray, beyond: np.ndarray, sigma: float, contrast: fl
     something other than the ball or the felt (the rule at
     ``FOREIGN_GAP_PX``): groups of ``FOREIGN_MIN_PX`` or more beyond the
     ball, grown by ``FOREIGN_GROW_PX``.  None when there are none."""
-    bad = (beyond & (np.abs(D) > foreign_threshold(sigma, contrast))).astype(np.uint8)
-    if bad.sum() < FOREIGN_MIN_PX:
+    bad = _groups((beyond & (np.abs(D) > foreign_threshold(sigma, contrast))).astype(np.uint8), FOREIGN_MIN_PX)
+    if bad is None:
         return None
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(bad, connectivity=8)
-    big = np.nonzero(stats[1:, cv2.CC_STAT_AREA] >= FOREIGN_MIN_PX)[0] + 1
-    if not len(big):
-        return None
-    bad = _members(n, big).view(np.uint8)[labels]
     g = 2 * FOREIGN_GROW_PX + 1
     return cv2.dilate(bad, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (g, g))).astype(bool)
 
