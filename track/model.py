@@ -469,9 +469,95 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
     outcome, G, look, it, se, cov, rms = kernel().fit(
         y, felt, use, valid is not None, c, b, float(G0), float(r), kind, geo, int(u0), int(v0), bool(shade),
         look_geo, bool(fit_blur), _CONSTS)
+    if outcome == kernel().FIT_NO_CONVERGENCE and isinstance(shade, SphereLook):
+        g = _kinked_minimum(y, felt, use, valid is not None, c, b, r, u0, v0, shade, fit_blur, outline, it)
+        if g:
+            return g
     if outcome:
         return _failed(FIT_REASONS[outcome], c, b, G, it)
     return DiscFit(True, "", c, b, G, se, rms, it, cov, look if shade else None)
+
+
+# The lit sphere's look is taken at each pixel's centre, as the renderer
+# draws it (FrameRenderer._ball_windows), and it is not smooth there: the
+# normal's ``nz = sqrt(1 - rho^2)`` has an infinite slope at the rim and
+# ``max(n.L, 0)`` a kink at the terminator, so each pixel centre that
+# crosses either as the centre moves puts a kink in the residual sum.  On
+# a strongly shaded ball (realistic seed 0 shot 18: ambient 0.25, light
+# at 0.92 rad, r 12.2 px) the sum's second difference over centre steps of
+# 0.005 px jumps from ~20 to -150..+190 every ~0.02 px, and Gauss-Newton,
+# whose step is the local quadratic's, cycles within ~0.03 px around the
+# minimum for 400 iterations (92 of 374 refits of marked frames there,
+# docs/measurements.md, branch marks7).  Then the centre (and the blur when
+# fitted) is found by a compass search of the residual sum with the four
+# linear coefficients (level, diffuse, highlight, rim) solved at each
+# point: first step KINK_STEP_PX (the cycle's size), halved when no move
+# helps, down to KINK_MIN_STEP_PX (far below the bound: 0.002 px there).
+KINK_STEP_PX = 0.02
+KINK_MIN_STEP_PX = 1e-4
+# The search refines where Gauss-Newton cycled; a minimum farther than this
+# from there is not the one it circled (a fit running off): no fit.
+KINK_MAX_MOVE_PX = 0.25
+
+
+def _kinked_minimum(y, felt, use, has_valid, c, b, r, u0, v0, look: SphereLook, fit_blur, outline, it):
+    """The lit sphere's least-squares fit where Gauss-Newton cycled
+    (:data:`KINK_STEP_PX`'s comment): a :class:`DiscFit` from a compass
+    search started at ``c``, ``b`` (where the cycle stopped), its
+    covariance the kernel's sandwich (HC1) at the minimum found; a falsy
+    fit when the search ran off or the normal equations are singular."""
+    h, w = felt.shape
+    sel = np.asarray(use, bool) if has_valid else np.ones(h * w, bool)
+    geo = look.geometry()
+    zero_look = np.r_[0.0, 0.0, 0.0, geo]
+    n_free = 4 if fit_blur else 2
+
+    def profile(x):
+        cb = (x[:2], x[2:4] if fit_blur else b)
+        m, JT = _model_rows(cb[0], cb[1], 0.0, felt, r, u0, v0, blur_nodes(float(np.hypot(*cb[1]))), zero_look,
+                            False, outline)
+        L = JT[2:6, sel].T  # d/dG, d/da, d/ds, d/dq: the model is linear in them
+        e = y[sel] - m.ravel()[sel]
+        theta, *_ = np.linalg.lstsq(L, e, rcond=None)
+        res = e - L @ theta
+        return float(res @ res), theta
+
+    x0 = np.r_[c, b] if fit_blur else np.array(c, float)
+    x, (best, theta) = x0.copy(), profile(x0)
+    step = KINK_STEP_PX
+    while step >= KINK_MIN_STEP_PX:
+        moved = False
+        for k in range(n_free):
+            for sign in (1.0, -1.0):
+                t = x.copy()
+                t[k] += sign * step
+                v, th = profile(t)
+                if v < best:
+                    x, best, theta, moved = t, v, th, True
+                    break
+        if not moved:
+            step /= 2
+        if np.hypot(*(x[:2] - x0[:2])) > KINK_MAX_MOVE_PX:
+            return _failed(FIT_REASONS[3], x[:2], b, float("nan"), it)
+    cc, bb = x[:2].copy(), (x[2:4].copy() if fit_blur else np.array(b, float))
+    if not (u0 - 0.5 <= cc[0] <= u0 + w - 0.5 and v0 - 0.5 <= cc[1] <= v0 + h - 0.5):
+        return _failed(FIT_REASONS[4], cc, bb, float(theta[0]), it)
+    # The kernel's sandwich at the minimum (kernel.fit: HC1 with the lit
+    # sphere, SPHERE_CLUSTER_PX 0), every parameter's column at once.
+    shade = np.r_[theta[1:], geo]
+    m, JT = _model_rows(cc, bb, float(theta[0]), felt, r, u0, v0, blur_nodes(float(np.hypot(*bb))), shade,
+                        fit_blur, outline)
+    J = JT[:, sel]
+    res = y[sel] - m.ravel()[sel]
+    dof = max(int(sel.sum()) - J.shape[0], 1)
+    try:
+        A = np.linalg.inv(J @ J.T)
+    except np.linalg.LinAlgError:
+        return _failed(FIT_REASONS[1], cc, bb, float(theta[0]), it)
+    V = (A @ ((J * res * res) @ J.T) @ A)[:2, :2] * (sel.sum() / dof)
+    cov = 0.5 * (V + V.T)
+    se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    return DiscFit(True, "", cc, bb, float(theta[0]), se, float(np.sqrt(best / dof)), it, cov, shade)
 
 
 # A 4:2:0 video (MJPG, H.264's yuv420p) stores its colour at half

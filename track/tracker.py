@@ -145,6 +145,35 @@ MARK_RETRY_RADII = 0.1
 # 39-65 (median 54) in the frames fitted at the ball; the quadratic look
 # from the same start found all of them within 0.05 radii.
 SPHERE_A_MIN = 0.5
+# The lit sphere's refit of a marked frame (from the quadratic look's
+# centre) may move it at most this far (radii): it refines that centre (by
+# 0.06-0.1 px on realistic seed 0 shot 18), it does not relocate the ball
+# (the lit sphere alone tracked a marked, highlighted ball 5.2 radii off).
+SPHERE_MARK_MOVE_RADII = 0.1
+# Markings at the rim (within MARK_RIM_PX of it, where the markings rule
+# does not look: the quadratic look's misfit is largest there) are found
+# against the lit sphere, which holds the rim: a pixel of the ball (its
+# outline grown by half a pixel) departing from its fit by more than OUTLIER_SIGMAS
+# noise sigmas, in a group of at least RIM_MARK_MIN_PX, grown by one; the
+# sphere refitted without them, and the search done again from that refit
+# (the first fit, pulled by the dot, departs beside it too), at most
+# RIM_MARK_PASSES times.  Only on a marked ball (the frames whose markings
+# the rule inside found, and MARKED_BALL_FRAMES's).  A dark dot at the rim left in pulled the lit
+# sphere's centre 0.08-0.16 px (simulated: r 12.2 px, noise 1.7, bound
+# 0.004 px), left out 0.004-0.006 px.  A dot turning over the rim shows one
+# or two pixels there (realistic seed 0 shot 18: -50 levels, noise 1.7):
+# groups of one count, which Gaussian noise passes once in 1.7 million
+# pixels, ~1e-4 a frame's rim (docs/measurements.md, branch marks7: shot 18
+# RMSE 0.0088 px with groups of 3, 0.0032 with 1; the bound 0.0023).
+RIM_MARK_PASSES = 2
+RIM_MARK_MIN_PX = 1
+# A ball whose markings the rule inside found in this many frames is a
+# marked ball: its frames where the rule finds none (a logo turned away,
+# what is still in view under the rule's threshold) get the lit sphere's
+# rule (RIM_MARK_PASSES) too: realistic seed 0 shot 3 (a blue ball with a
+# logo on blue felt) RMSE 0.0271 -> 0.0171 px (docs/measurements.md,
+# branch marks7; misfit5 found its unmarked frames 2.1 stated errors off).
+MARKED_BALL_FRAMES = 8
 # Frames whose two fits (disc and shaded) decide the look (config.look "auto").
 LOOK_FRAMES = 12
 # The shaded look is kept when its pooled residual reduction exceeds the
@@ -349,6 +378,67 @@ def marking_pixels(patch, felt, u0: int, v0: int, c, b, r: float, r_in: float, s
             | (cv2.dilate(core, smear_kernel(b)).astype(bool) & inner))
 
 
+def _groups(bad: np.ndarray, min_px: int) -> np.ndarray | None:
+    """The 8-connected groups of at least ``min_px`` pixels of the mask
+    ``bad`` (uint8), as a uint8 mask; None when there are none."""
+    if bad.sum() < min_px:
+        return None
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(bad, connectivity=8)
+    big = np.nonzero(stats[1:, cv2.CC_STAT_AREA] >= min_px)[0] + 1
+    if not len(big):
+        return None
+    return _members(n, big).view(np.uint8)[labels]
+
+
+def rim_marking_pixels(patch, felt, u0: int, v0: int, g, r: float, sigma: float | None, left=None,
+                       outline=None) -> np.ndarray | None:
+    """Pixels on the ball (within half a pixel of its outline: the rim
+    too, where :func:`marking_pixels` does not look) that depart from the
+    lit sphere's fit ``g`` (a
+    :func:`~cuespin.track.model.fit_disc` with a :class:`SphereLook`, on the
+    window ``patch``, ``felt`` with top-left ``(u0, v0)``, ball radius ``r``
+    px) as a marking does (:data:`RIM_MARK_PASSES`' rule), grown by one
+    pixel; ``sigma`` the noise (levels; None: from the residual's median
+    absolute value); ``left``: pixels already left out (never returned).
+    None when there are none."""
+    rr = r if outline is None else outline.radius  # fit_disc's scale of the sphere
+    m, _ = _model_rows(g.c, g.b, g.G, felt, rr, u0, v0, blur_nodes(np.hypot(*g.b)), g.shade, False, outline)
+    res = np.asarray(patch, np.float64) - felt - m
+    near = segment_distance(felt.shape, u0, v0, g.c, g.b) < r + 0.5
+    if left is not None:
+        near &= ~left
+    if sigma is None:  # the noise from the residual, robust to the markings' pixels (MAD)
+        sigma = 1.4826 * float(np.median(np.abs(res if left is None else res[~left])))
+    bad = _groups((near & (np.abs(res) > OUTLIER_SIGMAS * max(sigma, 0.5))).astype(np.uint8), RIM_MARK_MIN_PX)
+    if bad is None:
+        return None
+    out = cv2.dilate(bad, np.ones((3, 3), np.uint8)).astype(bool)
+    return out if left is None else out & ~left
+
+
+def rim_left_out(samples, look, marked, r: float, outline=None, block: int = 1) -> list | None:
+    """The lit sphere's voting frames (:class:`~cuespin.track.sphere.Sample`)
+    with the markings at their rim (:func:`rim_marking_pixels`, against the
+    look ``look`` fitted on each, the noise from its residual) left out too,
+    in the frames whose markings were found (``marked``, a bool a sample);
+    ``r`` the ball's radius (px).  None when none was found (or ``block`` >
+    1: the rule reads pixels)."""
+    if block > 1:
+        return None
+    out, found = [], False
+    for s, m in zip(samples, marked):
+        add = None
+        if m:
+            g = fit_disc(s.patch, s.felt, s.u0, s.v0, s.c, r, s.G, b0=s.b, fit_blur=s.fit_blur, shade=look,
+                         valid=s.valid, outline=outline, jackknife=False)
+            if g:
+                add = rim_marking_pixels(s.patch, s.felt, s.u0, s.v0, g, r, None,
+                                         None if s.valid is None else ~s.valid, outline)
+        found |= add is not None
+        out.append(s if add is None else s._replace(valid=kept_pixels(None if s.valid is None else ~s.valid, add)))
+    return out if found else None
+
+
 def smear_kernel(b) -> np.ndarray:
     """Structuring element (uint8) that grows a marking's pixels by one (its
     antialiased edge) and along the blur segment ``b`` (px) both ways by half
@@ -387,14 +477,9 @@ def foreign_pixels(D: np.ndarray, beyond: np.ndarray, sigma: float, contrast: fl
     something other than the ball or the felt (the rule at
     ``FOREIGN_GAP_PX``): groups of ``FOREIGN_MIN_PX`` or more beyond the
     ball, grown by ``FOREIGN_GROW_PX``.  None when there are none."""
-    bad = (beyond & (np.abs(D) > foreign_threshold(sigma, contrast))).astype(np.uint8)
-    if bad.sum() < FOREIGN_MIN_PX:
+    bad = _groups((beyond & (np.abs(D) > foreign_threshold(sigma, contrast))).astype(np.uint8), FOREIGN_MIN_PX)
+    if bad is None:
         return None
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(bad, connectivity=8)
-    big = np.nonzero(stats[1:, cv2.CC_STAT_AREA] >= FOREIGN_MIN_PX)[0] + 1
-    if not len(big):
-        return None
-    bad = _members(n, big).view(np.uint8)[labels]
     g = 2 * FOREIGN_GROW_PX + 1
     return cv2.dilate(bad, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (g, g))).astype(bool)
 
@@ -633,6 +718,7 @@ class BallTracker:
         self._sphere_samples: list = []  # the Samples the lit sphere was learnt from
         self._sphere_outline = None  # and their outline
         self._sphere_a = None  # the voting frames' median diffuse coefficient (SPHERE_A_MIN)
+        self._n_marked = 0  # frames whose markings the rule found (a marked ball: MARKED_BALL_FRAMES)
         self._candidates: tuple = ()  # the last full search's blobs
         self._bands = None  # the radius map's bands on the search mask (multi-scale search)
         self._pred = None  # this frame's predicted centre (px), None without history
@@ -901,6 +987,31 @@ class BallTracker:
                 return g, marks, fb
         return f, None, fit_blur
 
+    def _rim_unmarked(self, patch, felt, u0, v0, f, r, fit_blur, ol, marks, foreign):
+        """The lit sphere's fit ``f`` of a marked frame again without the
+        markings at its rim (:func:`rim_marking_pixels`, at most
+        :data:`RIM_MARK_PASSES` times, each from the last refit): (fit,
+        markings with those at the rim), or ``(f, marks)`` when there are
+        none, a refit fails or it moves more than
+        :data:`SPHERE_MARK_MOVE_RADII`."""
+        if self.block > 1:
+            return f, marks
+        left = kept_pixels(marks, foreign)
+        left = None if left is None else ~left
+        g, rim = f, None
+        for _ in range(RIM_MARK_PASSES):
+            add = rim_marking_pixels(patch, felt, u0, v0, g, r, self.bg.sigma, left, ol)
+            if add is None:
+                break
+            h = fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=self.shade,
+                         valid=kept_pixels(marks, add, foreign), outline=ol, block=self.block)
+            if not (h and h.stated):
+                break
+            g, rim = h, add
+        if rim is None or np.hypot(*(g.c - f.c)) > SPHERE_MARK_MOVE_RADII * r:
+            return f, marks
+        return g, rim if marks is None else marks | rim
+
     @staticmethod
     def _explains_better(patch, felt, u0, v0, g, f, marks, foreign, r, fit_blur, shade, ol, block=1) -> bool:
         """Whether the fit ``g`` explains the window better than ``f``, both
@@ -993,6 +1104,17 @@ class BallTracker:
         look, _ = learn_sphere(samples, self.r, self.outline, block=self.block)
         if look is None:
             return
+        rim = rim_left_out(samples, look, [lf is not None and lf.marks is not None for _, _, lf in self._look_fits],
+                           self.r, self.outline, self.block)
+        if rim is not None:
+            # Learnt again without the markings at the rim, which the first
+            # look's fits show: left in, they tilted the light (realistic
+            # seed 0 shot 18: elevation 0.9075 for the renderer's 0.9245,
+            # every moving frame then ~0.011 px off, away from the light).
+            again, _ = learn_sphere(rim, self.r, self.outline, start=look, block=self.block)
+            if again is not None:
+                look, samples = again, rim
+                self._look_fits = [(s, f, lf) for s, (_, f, lf) in zip(samples, self._look_fits)]
         self.shade = look
         self._sphere_samples, self._sphere_outline = samples, self.outline
         diffuse = []
@@ -1182,6 +1304,21 @@ class BallTracker:
                 if m2 is not None and self._explains_better(patch, felt, u0, v0, g, f, marks | m2, foreign, r,
                                                             fit_blur, mark_look, ol, self.block):
                     f, marks, fit_blur = g, m2, fb2
+            if marks is not None and isinstance(shade, SphereLook):
+                # The refit without the markings used the quadratic look
+                # (above); the lit sphere on the same pixels, from there, is
+                # kept when it explains them better (both have three look
+                # coefficients): a strongly shaded white ball with dots
+                # (realistic seed 0 shot 18, ambient 0.25) was 0.06-0.1 px
+                # off across the motion in every frame with the quadratic.
+                g = fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=shade,
+                             valid=kept_pixels(marks, foreign), outline=ol, block=self.block)
+                if g and g.stated and g.rms < f.rms and np.hypot(*(g.c - f.c)) <= SPHERE_MARK_MOVE_RADII * r:
+                    f = g
+                    f, marks = self._rim_unmarked(patch, felt, u0, v0, f, r, fit_blur, ol, marks, foreign)
+            elif marks is None and isinstance(shade, SphereLook) and self._n_marked >= MARKED_BALL_FRAMES:
+                f, marks = self._rim_unmarked(patch, felt, u0, v0, f, r, fit_blur, ol, None, foreign)
+            self._n_marked += marks is not None
             if recentre:
                 # The ball's middle may lie on the other side of the felt
                 # than its rim (a shaded ball close to the felt's colour):
