@@ -226,23 +226,26 @@ def test_the_automatic_corners_stated_error_is_their_real_one():
 
 
 # The stated covariance against the real errors of the corners and k1 on
-# drawn frames of a distorted lens (2 m, 10 deg, k1 -0.25, noise seeds 0-7):
-# the mean Mahalanobis distance per coordinate, e' C^-1 e / 9, was 1.89 with
-# the jackknife alone (1.08-2.05 over four such 8-frame sets, 1.68 pooled over
-# 8 cameras x 40 seeds) and 0.99 with the edge locator's fixed pattern
-# (EDGE_PATTERN_PX; 0.68-0.99 over the four sets, 0.98 pooled).  Its spread
-# over 8 frames (72 terms: sd 0.17, and the jackknife's own scatter) sets the
-# band; the jackknife alone must stay out of it on these frames.
+# drawn frames of a distorted lens: the mean Mahalanobis distance per
+# coordinate, e' C^-1 e / 9.  EDGE_PATTERN_PX was set on 8 cameras x noise
+# seeds 0-39 (2 m, 10 deg, k1 -0.25 among them); this test uses a camera
+# outside those (2.5 m, 7 deg, k1 -0.15) and fresh seeds (review 10a).
+# Measured over 8-frame sets: with the pattern 0.70-0.96 on this camera
+# (three sets), 0.72-1.00 on three cameras (eight sets); the jackknife alone
+# 1.18-1.89, always 1.60-1.90 times the distance with the pattern.  The band
+# is the sd over 8 frames (72 terms: 0.17) and the jackknife's own scatter;
+# the ratio's floor is under its smallest measured value.
 MAHALANOBIS_BAND = (0.6, 1.5)
+ALONE_OVER_PATTERN_MIN = 1.4
 
 
 def test_the_automatic_corners_covariance_is_honest_on_a_distorted_lens():
-    true = pinhole_camera(height_m=2.0, tilt_deg=10.0, k1=-0.25, R=R, size=SIZE, fps=240.0, roll_deg=1.0)
+    true = pinhole_camera(height_m=2.5, tilt_deg=7.0, k1=-0.15, R=R, size=SIZE, fps=240.0, roll_deg=1.0)
     truth = true_corners(true)
-    kappa = -0.25 / true.K[0, 0] ** 2
+    kappa = -0.15 / true.K[0, 0] ** 2
     with_pattern, alone = [], []
     for s in range(8):
-        det = detect_corners(synthetic_table_frame(true, seed=125 + 1000 * s, cushion_m=0.05, pockets=True))
+        det = detect_corners(synthetic_table_frame(true, seed=7 + 1000 * s, cushion_m=0.05, pockets=True))
         k = min(range(4), key=lambda k: np.abs(np.roll(det.corners, -k, axis=0) - truth).max())
         idx = np.r_[np.roll(np.arange(8).reshape(4, 2), -k, axis=0).ravel(), 8]
         e = np.r_[(np.roll(det.corners, -k, axis=0) - truth).ravel(), det.kappa - kappa]
@@ -252,7 +255,7 @@ def test_the_automatic_corners_covariance_is_honest_on_a_distorted_lens():
             out.append((e / d) @ np.linalg.solve(cov / np.outer(d, d), e / d) / 9.0)
     lo, hi = MAHALANOBIS_BAND
     assert lo < np.mean(with_pattern) < hi, with_pattern
-    assert np.mean(alone) > hi, alone
+    assert np.mean(alone) > ALONE_OVER_PATTERN_MIN * np.mean(with_pattern), (alone, with_pattern)
 
 
 @pytest.mark.slow
