@@ -47,8 +47,8 @@ def lm_fit(resid, p0, jac, x_scale=None, ftol: float = 1e-8, xtol: float = 1e-8,
     if x_scale is not None:
         x_scale = np.asarray(x_scale, dtype=float)
     if _minpack is None:  # pragma: no cover
-        return least_squares(resid, x0, jac=jac, x_scale=x_scale, method="lm", ftol=ftol, xtol=xtol, gtol=gtol,
-                             max_nfev=max_nfev)
+        return least_squares(resid, x0, jac=jac, x_scale="jac" if x_scale is None else x_scale, method="lm",
+                             ftol=ftol, xtol=xtol, gtol=gtol, max_nfev=max_nfev)
     if np.isnan(x0).any():
         raise ValueError("Initial guess is outside of provided bounds")  # least_squares' check: NaN is outside
     last = {"x": x0.copy(), "f": None, "J": None}  # the last point asked for, and what is known there
@@ -77,8 +77,12 @@ def lm_fit(resid, p0, jac, x_scale=None, ftol: float = 1e-8, xtol: float = 1e-8,
         raise ValueError("Method 'lm' doesn't work when the number of residuals is less than the number of "
                          "variables.")
     diag = None if x_scale is None else 1 / x_scale
-    x, info, status = _minpack._lmder(fun, jacobian, x0.copy(), (), True, False, ftol, xtol, gtol,
-                                      100 * x0.size if max_nfev is None else max_nfev, 100.0, diag)
+    try:
+        x, info, status = _minpack._lmder(fun, jacobian, x0.copy(), (), True, False, ftol, xtol, gtol,
+                                          100 * x0.size if max_nfev is None else max_nfev, 100.0, diag)
+    except TypeError:  # pragma: no cover - a scipy whose private lmder takes other arguments (review 10a)
+        return least_squares(resid, x0, jac=jac, x_scale="jac" if x_scale is None else x_scale, method="lm",
+                             ftol=ftol, xtol=xtol, gtol=gtol, max_nfev=max_nfev)
     f = info["fvec"]
     status = FROM_MINPACK_TO_COMMON[status]
     return OptimizeResult(x=x, cost=0.5 * np.dot(f, f), fun=f, jac=jacobian(x), status=status,

@@ -1101,8 +1101,12 @@ class Detection:
 # against 0.02 px of scatter; with the jackknife alone the errors' Mahalanobis
 # distance per coordinate was 1.68 pooled over 8 cameras x noise seeds 0-39
 # (the stated covariance too sure along its narrow directions), 0.98 with
-# this added (set there); on seeds 100-139 1.52 and 0.89 (docs/measurements.md,
-# auto13).
+# this added (set there); on seeds 100-139 1.52 and 0.89 (the same 8 cameras,
+# so the same pattern: not an independent check; on three other cameras
+# 0.70-1.00, review 10a).  About 85% of this variance is the drawn frames' 4x
+# supersampling (noise-free corners 0.0099 -> 0.0038 px at 16x): a real
+# camera's own pattern is unmeasured, and this stays as a floor of the
+# corners' error (docs/measurements.md, auto13).
 EDGE_PATTERN_PX = 0.012
 
 
