@@ -282,3 +282,39 @@ def test_a_marked_balls_frame_without_markings_inside_loses_its_rim_dot():
     rmse_with = np.sqrt(np.mean(np.sum(np.square(err_with), 1)))
     assert rmse_without / crb < 1.5 * 1.02
     assert rmse_with > 10 * rmse_without
+
+
+def test_faint_rim_dots_are_found_on_a_still_balls_mean_window():
+    # tracker.rim_left_out on the lit sphere's voting frames: a still ball's
+    # 12 frames, two faint dots (-8 levels at full cover) at the rim, noise
+    # 1.7.  Frame by frame the rule takes 23-52% of the dots' pixels (a dot
+    # departs under its 5 sigmas); on the frames' mean window (the window
+    # learn_sphere fits) all of them and nothing beyond the dots grown by
+    # one (seeds 0-3, measured, /tmp/marks8/t9.py).  Realistic seed 0 shot
+    # 13: the learnt elevation 1.372 -> 1.329 rad (the renderer's 1.318).
+    from cuespin.track.model import SphereLook
+    from cuespin.track.sphere import Sample
+    from cuespin.track.tracker import rim_left_out
+    for seed in range(2):
+        rng = np.random.default_rng(seed)
+        r, n = 12.2, 33
+        look = SphereLook(float(rng.uniform(0, 2 * np.pi)), 1.3, 10.0)
+        c = np.array([384.0, 350.0]) + rng.uniform(0, 1, 2)
+        u0, v0 = int(round(c[0])) - n // 2, int(round(c[1])) - n // 2
+        felt = 90.0 + rng.normal(0, 2, (n, n))
+        img = felt + streak_model(c, np.zeros(2), 60.0, felt, r, u0, v0, np.zeros(1),
+                                  np.r_[200.0, 0.0, 0.0, look.geometry()])[0]
+        dot = np.zeros((n, n))
+        for ang in rng.uniform(0, 2 * np.pi, 2):
+            dot += disc_coverage(c[0] + (r - 0.7) * np.cos(ang), c[1] + (r - 0.7) * np.sin(ang), 2.0, u0, v0, n, n)
+        img = img - 8.0 * dot
+        frames = [Sample(np.clip(np.rint(img + 1.7 * rng.standard_normal(img.shape)), 0, 255), felt, u0, v0, c,
+                         np.zeros(2), 60.0, False, np.zeros(3), None) for _ in range(12)]
+        rim = rim_left_out(frames, look, [True] * 12, r)
+        assert rim is not None
+        out = ~rim[0].valid
+        assert all(np.array_equal(~s.valid, out) for s in rim)  # the same pixels out in every frame
+        core = dot > 0.5
+        grown = cv2.dilate((dot > 0).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+        assert (out & core).sum() == core.sum()
+        assert not (out & ~grown).any()
