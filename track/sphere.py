@@ -69,29 +69,39 @@ class Sample(NamedTuple):
     valid: np.ndarray | None
 
 
-def still_groups(samples: list) -> list:
-    """The samples averaged into groups of the same still ball in the same
-    window, largest first (at most ``MAX_GROUPS``): list of Sample."""
+def still_members(samples: list) -> list:
+    """The samples' indices grouped by the same still ball in the same
+    window (:data:`STILL_PX`), largest group first, every group: list of
+    lists of int."""
     groups: list[list] = []
-    for s in samples:
+    for i, s in enumerate(samples):
         for g in groups:
-            f = g[0]
+            f = samples[g[0]]
             if (f.u0, f.v0, f.patch.shape) == (s.u0, s.v0, s.patch.shape) and np.hypot(*(s.c - f.c)) <= STILL_PX \
                     and not s.fit_blur and not f.fit_blur and len(blur_nodes(np.hypot(*s.b))) == 1 \
                     and len(blur_nodes(np.hypot(*f.b))) == 1:
-                g.append(s)
+                g.append(i)
                 break
         else:
-            groups.append([s])
+            groups.append([i])
     groups.sort(key=len, reverse=True)
-    out = []
-    for g in groups[:MAX_GROUPS]:
-        valid = None
-        if any(s.valid is not None for s in g):
-            valid = np.logical_and.reduce([np.ones(s.patch.shape, bool) if s.valid is None else s.valid for s in g])
-        out.append(g[0]._replace(patch=np.mean([s.patch for s in g], axis=0),
-                                 felt=np.mean([s.felt for s in g], axis=0), valid=valid))
-    return out
+    return groups
+
+
+def mean_sample(group: list) -> Sample:
+    """One still ball's samples (a group of :func:`still_members`) as one:
+    the windows and felts averaged, the pixels valid in all of them."""
+    valid = None
+    if any(s.valid is not None for s in group):
+        valid = np.logical_and.reduce([np.ones(s.patch.shape, bool) if s.valid is None else s.valid for s in group])
+    return group[0]._replace(patch=np.mean([s.patch for s in group], axis=0),
+                             felt=np.mean([s.felt for s in group], axis=0), valid=valid)
+
+
+def still_groups(samples: list) -> list:
+    """The samples averaged into groups of the same still ball in the same
+    window, largest first (at most ``MAX_GROUPS``): list of Sample."""
+    return [mean_sample([samples[i] for i in g]) for g in still_members(samples)[:MAX_GROUPS]]
 
 
 def _rss(groups, r: float, outline, look: SphereLook, block: int = 1) -> float:
