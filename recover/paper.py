@@ -61,7 +61,10 @@ THEOREM1_RTOL = 0.5
 # x1's stated errors do not carry (the maximum-likelihood fit's rule,
 # recover.mle.MIN_SLIDING_FRAMES, counted on the segmentation's frames).
 # Seed 21's realistic MJPG shot 13 (60 fps, sliding 4 frames, 2 of them
-# in the arc): the line's answer 29 stated errors off (v0 40%).
+# in the arc): the line's answer 29 stated errors off (v0 40%), x1 3.4 mm
+# off against 0.19 mm stated.  Measured (docs/measurements.md, rec8): no
+# paper answer lost on 188 cached rendered shots; of 31 short_slide.py
+# shots (rest in view) with 1-2 frame arcs, the paper's one ok was 196% off.
 PAPER_MIN_SLIDING_FRAMES = 3
 # Evaluations the answer's parabola fit may take (fit.conics.fit_parabola,
 # one an iteration with its analytic Jacobian), so that it converges and
