@@ -55,6 +55,17 @@ TIE_T1_FRAMES = 2.0
 # Theorem 1 and is not an answer.  The fitted vertex is extrapolated beyond
 # the sliding arc, so it is loose: 0.5 rejects only gross misfits.
 THEOREM1_RTOL = 0.5
+# The end of sliding, x1 and t1 (eq. 26), is where the segmentation's
+# breakpoint falls; a sliding arc seen in fewer frames than this leaves it
+# to where the strike and the end of sliding fall between frames, which
+# x1's stated errors do not carry (the maximum-likelihood fit's rule,
+# recover.mle.MIN_SLIDING_FRAMES, counted on the segmentation's frames).
+# Seed 21's realistic MJPG shot 13 (60 fps, sliding 4 frames, 2 of them
+# in the arc): the line's answer 29 stated errors off (v0 40%), x1 3.4 mm
+# off against 0.19 mm stated.  Measured (docs/measurements.md, rec8): no
+# paper answer lost on 188 cached rendered shots; of 31 short_slide.py
+# shots (rest in view) with 1-2 frame arcs, the paper's one ok was 196% off.
+PAPER_MIN_SLIDING_FRAMES = 3
 # Evaluations the answer's parabola fit may take (fit.conics.fit_parabola,
 # one an iteration with its analytic Jacobian), so that it converges and
 # its covariance (the converged fit's) holds: from the decision's fit,
@@ -492,6 +503,11 @@ def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, n
     if not np.isfinite(seg.t1):
         return PaperResult("degenerate", "sliding had not ended when the track did: x1, and so "
                            "the paper's method, is not determined", x0=seg.x0)
+    n_slide = 0 if seg.slide is None else len(seg.slide)
+    if seg.t1 > seg.t0 and n_slide < PAPER_MIN_SLIDING_FRAMES:
+        return PaperResult("degenerate", f"sliding seen in {n_slide} frame(s): x1 and t1, where sliding "
+                           "ends, rest on where it falls between frames, and the paper's method needs them "
+                           f"(at least {PAPER_MIN_SLIDING_FRAMES} frames)", x0=seg.x0, x1=seg.x1)
     # x1 is itself estimated (to about a frame's travel), so eq. 37 and the line's
     # forward check are held to that, not to the pixel noise alone.
     tol = CONSISTENCY_SIGMAS * sigma + np.hypot(*seg.v1) * frame_dt

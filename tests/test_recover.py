@@ -81,6 +81,28 @@ def test_paper_line_without_rest_point_is_degenerate():
     assert r.status == "degenerate" and "rest point" in r.reason
 
 
+@pytest.mark.parametrize("seed", [1, 2])
+def test_paper_refuses_sliding_seen_in_one_or_two_frames(seed):
+    # benchmarks/short_slide.py's shot (case 4 given a slip of 1.5 frames at
+    # 60 fps), with its rest in view: the segmentation's sliding arc holds 1-2
+    # frames, so x1 and t1 rest on where sliding ends between frames (seed
+    # 21's realistic MJPG shot 13: the line's answer 29 stated errors off).
+    from cuespin.physics.motion import z_cross
+    from cuespin.recover.estimate import estimate
+    from cuespin.recover.paper import PAPER_MIN_SLIDING_FRAMES
+    from cuespin.recover.simulate import simulate_track
+    fps, sigma = 60.0, 1e-4
+    shot, p = sample_shot(seed, "case4")
+    u0 = 3.5 * p.mu_s * p.g * (1.5 / fps) * np.array([0.6, 0.8])  # eq. 10
+    v0 = np.asarray(shot.v0, float)
+    s = Shot(x0=shot.x0, v0=v0, w0=z_cross(v0 - u0) / p.R, t0=shot.t0)
+    tr = simulate_track(s, p, fps, sigma, seed, t_end=phases(s, p).t2 + 0.3)
+    r = estimate(tr.t, tr.xy, np.full(len(tr.t), sigma), p).paper
+    assert r.status == "degenerate", (r.status, r.reason)
+    seen = int(r.reason.split("sliding seen in ")[1].split(" ")[0])
+    assert 1 <= seen < PAPER_MIN_SLIDING_FRAMES
+
+
 # -- maximum likelihood on synthetic tracks -----------------------------------------
 
 def synthetic(shot, p, fps=240.0, sigma=2e-5, seed=0, t_cut=None):
