@@ -483,10 +483,10 @@ class ThreadedFrames:
     the exception, raised from the iterator (after the frames decoded
     before it).  :meth:`close` stops the thread.
 
-    Frames cross in lists of up to ``CHUNK``: one queue hand-over (a lock, a
-    condition's wake-up of the other thread) a frame cost ~40 us of CPU
-    between the two threads on this machine, per frame (speed14,
-    ``docs/measurements.md``).
+    Frames cross in lists of up to ``CHUNK``: a queue hand-over (a lock, a
+    condition's wake-up of the other thread) per frame cost ~12 us of CPU a
+    frame more than one per 8 frames (``/tmp/speed14/qb.py``, speed14 in
+    ``docs/measurements.md``); the same frames in the same order.
     """
 
     CHUNK = 8
