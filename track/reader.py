@@ -492,9 +492,10 @@ class ThreadedFrames:
     CHUNK = 8
 
     def __init__(self, source, maxsize: int):
-        # ``maxsize`` frames: the queue holds lists of CHUNK, the decoding
-        # thread one more list while it fills it.
-        self.q: queue.Queue = queue.Queue(maxsize=max(int(maxsize) // self.CHUNK, 2))
+        # About ``maxsize`` frames held: the queue's lists and the one the
+        # decoding thread fills (lists of fewer frames when few fit: large frames).
+        self.chunk = max(1, min(self.CHUNK, int(maxsize) // 4))
+        self.q: queue.Queue = queue.Queue(maxsize=max(int(maxsize) // self.chunk, 2))
         self._stop = threading.Event()
         self._t = threading.Thread(target=self._run, args=(source,), daemon=True)
         self._t.start()
@@ -513,7 +514,7 @@ class ThreadedFrames:
         try:
             for img in source:
                 chunk.append(img)
-                if len(chunk) == self.CHUNK:
+                if len(chunk) == self.chunk:
                     if not self._put(chunk):
                         return
                     chunk = []
