@@ -329,3 +329,27 @@ def planar_video(tmp_path, codec, look):
     video = tmp_path / ("v.mp4" if codec == "H264" else "v.avi")
     render_video(scene, video)
     return video, FrameSource(video, probe(video), planes=True), cv2.VideoCapture(str(video), cv2.CAP_FFMPEG)
+
+
+@pytest.mark.parametrize("maxsize", [1, 4, 40])
+def test_threaded_frames_order_and_error(maxsize):
+    """The decoding thread's frames arrive in order, in lists or not, and a
+    decoding failure after them arrives after every frame decoded before it."""
+    from cuespin.track.reader import ThreadedFrames
+
+    def source(n, fail):
+        for i in range(n):
+            yield i
+        if fail:
+            raise ValueError("broken packet")
+
+    assert list(ThreadedFrames(source(21, False), maxsize)) == list(range(21))
+    got = []
+    with pytest.raises(ValueError, match="broken packet"):
+        for i in ThreadedFrames(source(13, True), maxsize):
+            got.append(i)
+    assert got == list(range(13))
+    feed = ThreadedFrames(source(10**6, False), maxsize)
+    assert feed.chunk * feed.q.maxsize <= max(maxsize, 2 * feed.chunk)  # about maxsize frames queued
+    assert next(iter(feed)) == 0
+    feed.close()

@@ -480,27 +480,49 @@ class ThreadedFrames:
 
     OpenCV and PyAV release the GIL while decoding, so decoding overlaps the
     tracker's work.  Iterating yields frames; a decoding failure arrives as
-    the exception, raised from the iterator.  :meth:`close` stops the thread.
+    the exception, raised from the iterator (after the frames decoded
+    before it).  :meth:`close` stops the thread.
+
+    Frames cross in lists of up to ``CHUNK``: a queue hand-over (a lock, a
+    condition's wake-up of the other thread) per frame cost ~12 us of CPU a
+    frame more than one per 8 frames (``/tmp/speed14/qb.py``, speed14 in
+    ``docs/measurements.md``); the same frames in the same order.
     """
 
+    CHUNK = 8
+
     def __init__(self, source, maxsize: int):
-        self.q: queue.Queue = queue.Queue(maxsize=max(int(maxsize), 2))
+        # About ``maxsize`` frames held: the queue's lists and the one the
+        # decoding thread fills (lists of fewer frames when few fit: large frames).
+        self.chunk = max(1, min(self.CHUNK, int(maxsize) // 4))
+        self.q: queue.Queue = queue.Queue(maxsize=max(int(maxsize) // self.chunk, 2))
         self._stop = threading.Event()
         self._t = threading.Thread(target=self._run, args=(source,), daemon=True)
         self._t.start()
 
+    def _put(self, item) -> bool:
+        while not self._stop.is_set():
+            try:
+                self.q.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
     def _run(self, source):
+        chunk = []
         try:
             for img in source:
-                while not self._stop.is_set():
-                    try:
-                        self.q.put(img, timeout=0.1)
-                        break
-                    except queue.Full:
-                        continue
-                if self._stop.is_set():
-                    return
-        except BaseException as exc:  # surfaced on the consumer's thread
+                chunk.append(img)
+                if len(chunk) == self.chunk:
+                    if not self._put(chunk):
+                        return
+                    chunk = []
+            if chunk:
+                self._put(chunk)
+        except BaseException as exc:  # surfaced on the consumer's thread, after the frames before it
+            if chunk:
+                self.q.put(chunk)
             self.q.put(exc)
         finally:
             self.q.put(None)
@@ -512,7 +534,7 @@ class ThreadedFrames:
                 return
             if isinstance(item, BaseException):
                 raise item
-            yield item
+            yield from item
 
     def close(self):
         self._stop.set()
