@@ -339,8 +339,8 @@ def test_the_pulled_rule_drops_fits_off_the_ball_not_a_turning_look(tmp_path, mo
                      for d in off])
         return g
 
-    def keep_all(rms, ok, still=None):
-        seen.update(rms=np.array(rms), ok=np.array(ok), still=np.array(still))
+    def keep_all(rms, ok, still=None, se=None):
+        seen.update(rms=np.array(rms), ok=np.array(ok), still=np.array(still), se=np.array(se))
         return np.zeros(len(rms), bool)
 
     monkeypatch.setattr(video, "fit_disc", fit_and_hold)
@@ -353,6 +353,8 @@ def test_the_pulled_rule_drops_fits_off_the_ball_not_a_turning_look(tmp_path, mo
     assert len(held) == len(fitted) and err[fitted].max() < MAX_ERR_RADII  # every frame refitted, none off
     dropped = pulled_fits(rms, ok, still=still)
     assert not dropped.any(), f"{dropped.sum()} correct frames dropped (rms {np.round(rms[dropped], 2)})"
+    # The ill-determined centre's rule (red8) drops none of them either.
+    assert not pulled_fits(rms, ok, still=still, se=seen["se"]).any()
     kept, measured = 0, [(k, h) for k, h in zip(fitted, held) if h is not None]
     assert len(measured) >= 0.95 * len(fitted)
     for k, h in measured:
