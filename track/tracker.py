@@ -1237,7 +1237,7 @@ class BallTracker:
         the disc's): what a window around it must hold."""
         return self.r if outline is None else max(self.r, outline.max_radius)
 
-    def _refine(self, frame, loc, blur, recentre: bool = True) -> Observation:
+    def _refine(self, frame, loc, blur, recentre: bool = True, at_loc: bool = False) -> Observation:
         r = self.r
         # The ball's outline here, from the camera (None: the disc of r).
         ol = self.outline = self.outline_of(loc) if self.outline_of is not None else None
@@ -1260,7 +1260,10 @@ class BallTracker:
         patch = self.proj(frame, v0, v1, u0, u1)
         felt = self.bg.image[v0:v1, u0:u1]
         D = self.pol * (patch - felt)
-        c = centroid(D, u0, v0, loc, half - 1 if unknown_blur else r_ball + 2 + 0.5 * np.hypot(*blur))
+        # The fit starts at the window's centroid, or at ``loc`` itself when
+        # that is already a centroid of the whole ball (the recentring below).
+        c = np.asarray(loc, float) if at_loc else \
+            centroid(D, u0, v0, loc, half - 1 if unknown_blur else r_ball + 2 + 0.5 * np.hypot(*blur))
         if unknown_blur and self.exposure_frames > 0:
             blur = streak_from_moments(D, u0, v0, c, r)
         if self.cfg.refine == "moments":
@@ -1365,7 +1368,13 @@ class BallTracker:
                 # tell which is the ball's.
                 alt = self._departure_centre(frame, f.c, r_ball)
                 if np.hypot(*(alt - f.c)) > RESTART_RADII * r_ball:
-                    other = self._refine(frame, alt, f.b, recentre=False)
+                    # Started at the departure's centroid itself: the
+                    # window's centroid of the signed departure, taken again
+                    # from there, walked 3.4-3.5 R off (the red ball's bright
+                    # middle and dark rim; sample_scenes(6, 7, realistic,
+                    # FFV1)[5]) and the fit failed in 20 frames of its rest
+                    # (red8: 29 -> 52 of 81 found, none off by 0.25 R).
+                    other = self._refine(frame, alt, f.b, recentre=False, at_loc=True)
                     self.outline = ol
                     apart = other.status != OK or np.hypot(*(other.uv - f.c)) > RESTART_RADII * r_ball
                     if apart and other.status == OK and other.rms < f.rms:
