@@ -145,3 +145,39 @@ def test_a_run_of_pulled_fits_is_dropped_whatever_its_share():
         run = np.arange(n) < round(share * n)
         rms[run] *= 4.0
         assert np.array_equal(pulled_fits(rms, np.ones(n, bool)), run), (n, share)
+
+
+def test_an_ill_determined_centre_that_fits_worse_is_a_pull():
+    # sample_scenes(6, 7, realistic, FFV1)[5] (red on red in a low light),
+    # its 32 fits as recorded (rms in levels, the stated error's larger axis
+    # in px, their error in radii): frames 33, 56 and 59 are 0.25-0.31 R off,
+    # fitted only 1.26-1.65 times worse than the reference (the RMS rule
+    # needs 3) but stating 5-9 times the track's median error (red8).
+    from cuespin.track.tracker import ILL_RMS_FACTOR, ILL_SE_FACTOR, pulled_fits
+
+    frames = np.array([14, 15, 17, 18, 19, 20, 21, 24, 25, 26, 27, 28, 33, 34, 35, 37, 39, 41, 44, 47, 48, 51, 52, 54,
+                       55, 56, 59, 61, 63, 64, 76, 78])
+    rms = np.array([13.77, 1.67, 1.81, 1.87, 1.81, 1.6, 2.2, 1.81, 1.83, 1.75, 1.72, 1.81, 2.26, 2.28, 2.29, 1.81, 1.79,
+                    1.67, 1.77, 2.3, 2.23, 2.32, 3.33, 3.37, 3.09, 2.97, 2.45, 2.59, 2.73, 2.07, 1.76, 1.86])
+    se = np.array([0.194, 0.095, 0.092, 0.008, 0.011, 0.048, 0.011, 0.089, 0.013, 0.018, 0.043, 0.02, 0.233, 0.012,
+                   0.011, 0.055, 0.029, 0.052, 0.065, 0.011, 0.012, 0.013, 0.013, 0.051, 0.028, 0.327, 0.246, 0.243,
+                   0.012, 0.023, 0.076, 0.046])
+    err = np.array([0.464, 0.001, 0.002, 0.001, 0.002, 0.012, 0.002, 0.012, 0.001, 0.001, 0.009, 0.001, 0.251, 0.003,
+                    0.001, 0.089, 0.003, 0.007, 0.003, 0.003, 0.002, 0.001, 0.003, 0.006, 0.005, 0.309, 0.28, 0.163,
+                    0.002, 0.001, 0.068, 0.06])
+    still = np.isin(frames, [63, 64])
+    ok = np.ones(len(rms), bool)
+    assert set(frames[pulled_fits(rms, ok, still=still)]) == {14}  # the RMS rule alone
+    pulled = pulled_fits(rms, ok, still=still, se=se)
+    assert set(frames[err > 0.25]) <= set(frames[pulled])
+    assert (err[pulled] > 0.15).all()  # 61 (0.163 R) the one correct fit dropped of 13610 measured
+    # A correct fit stating far more than the track's typical error (a
+    # streak's length; 500 times in sample_scenes(6, 5, realistic, FFV1)[2])
+    # and fitted as the others are: kept.  Measured, such fits reach 1.07
+    # times the reference, under ILL_RMS_FACTOR.
+    se2 = se.copy()
+    se2[3] = 500 * ILL_SE_FACTOR * np.median(se)
+    rms2 = rms.copy()
+    rms2[3] = 1.07 * np.percentile(rms[~still], 25)
+    assert not pulled_fits(rms2, ok, still=still, se=se2)[3]
+    assert ILL_RMS_FACTOR > 1.07

@@ -536,7 +536,8 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     d = np.where(found[1:] & found[:-1], d, np.inf)
     step[1:] = d
     step[:-1] = np.minimum(step[:-1], d)
-    pulled = pulled_fits(rms, found, still=step < STILL_PX)
+    se_px = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0, None)).max(axis=1)
+    pulled = pulled_fits(rms, found, still=step < STILL_PX, se=se_px)
     status[pulled] = PULLED
     uv[pulled] = np.nan
     cov[pulled] = np.nan
