@@ -247,6 +247,37 @@ def test_lm_fit_is_least_squares(rolling, seed, start_off, monkeypatch):
     assert (new.chi2, new.converged, new.message) == (old.chi2, old.converged, old.message)
 
 
+def test_lm_fit_falls_back_to_least_squares_with_minpacks_scaling(monkeypatch):
+    # Where scipy's private lmder is not usable (decided at import), lm_fit
+    # is least_squares' lm with x_scale "jac" (scipy 1.16's default, the
+    # scaling the private call uses): the same point on a curved fit.
+    import cuespin.fit.lm as lm
+
+    t = np.linspace(0.0, 2.0, 40)
+    y = 1.5 * np.exp(-0.7 * t) + 0.01 * np.sin(13 * t)
+
+    def resid(p):
+        return p[0] * np.exp(-p[1] * t) - y
+
+    def jac(p):
+        e = np.exp(-p[1] * t)
+        return np.c_[e, -p[0] * t * e]
+
+    direct = lm.lm_fit(resid, [1.0, 0.1], jac)
+    assert lm._lmder_answers()
+
+    class Moved:  # a scipy whose private lmder takes other arguments
+        @staticmethod
+        def _lmder(*args):
+            raise TypeError("_lmder() takes 11 positional arguments")
+
+    monkeypatch.setattr(lm, "_minpack", Moved)
+    assert not lm._lmder_answers()  # the probe import runs refuses it
+    monkeypatch.setattr(lm, "_minpack", None)
+    fallback = lm.lm_fit(resid, [1.0, 0.1], jac)
+    assert np.allclose(direct.x, fallback.x, rtol=1e-10, atol=0) and fallback.success
+
+
 def test_deficient_by_form_is_deficient():
     # recover.mle._deficient_by_form skips making the exact Jacobian where
     # its form makes it rank deficient (sliding past the track's end; free
