@@ -353,3 +353,18 @@ def test_threaded_frames_order_and_error(maxsize):
     assert feed.chunk * feed.q.maxsize <= max(maxsize, 2 * feed.chunk)  # about maxsize frames queued
     assert next(iter(feed)) == 0
     feed.close()
+
+
+def test_a_planar_window_is_clipped_to_the_frame():
+    # The compiled conversion reads the planes without bounds checks: a
+    # window asked past the frame's edge is clipped to it (review 10b: a
+    # 20 x 20 window at (90, 60) of a 98 x 66 frame read past the Y plane).
+    from cuespin.track.reader import PlanarFrame
+
+    rng = np.random.default_rng(3)
+    h, w = 66, 98
+    planes = rng.integers(0, 256, (3 * h // 2, w), dtype=np.uint8)
+    frame = PlanarFrame(planes, full_range=False)
+    whole = frame.window(0, h, 0, w).copy()
+    assert np.array_equal(frame.window(60, 80, 90, 110), whole[60:66, 90:98])
+    assert frame.window(70, 80, 0, 10).shape == (0, 10, 3)

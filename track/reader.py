@@ -50,7 +50,10 @@ PLANAR_PIX_FMTS = {"yuv420p": False, "yuvj420p": True}
 # H.264's and mp4v's (yuv420p) and MJPG's (yuvj420p): the planes save the
 # whole frame's conversion and PyAV decodes them for less CPU than OpenCV
 # (the tracking run's CPU on the speed benchmark's 1,000-frame files,
-# medians: H.264 3.2 -> 2.4 s, mp4v 4.0 -> 3.1, MJPG 4.4 -> 3.7; speed13).
+# medians: H.264 3.21 -> 2.29 s, mp4v 3.77 -> 3.13, MJPG 4.30 -> 3.65;
+# speed13).  Only BT.601's coefficients are known here: a stream OpenCV
+# converts otherwise (BT.709-tagged H.264, usual from phones) fails the
+# first-frame check and is read through OpenCV, exact but without the gain.
 PLANAR_DEFAULT_PIX_FMTS = {"yuv420p", "yuvj420p"}
 # FFmpeg's BT.601 YUV -> RGB coefficients (libswscale/yuv2rgb.c,
 # ff_yuv2rgb_coeffs[SWS_CS_ITU601]: crv, cbu, cgu, cgv in 16.16 fixed
@@ -296,7 +299,13 @@ class PlanarFrame:
         self._last = None  # (v0, v1, u0, u1, BGR) of the last window converted
 
     def window(self, v0: int, v1: int, u0: int, u1: int) -> np.ndarray:
-        """BGR of rows ``v0:v1`` and columns ``u0:u1`` (within the frame), (v1 - v0, u1 - u0, 3)."""
+        """BGR of rows ``v0:v1`` and columns ``u0:u1``, clipped to the frame
+        (the compiled conversion has no bounds checks: review 10b), (v1 - v0,
+        u1 - u0, 3) after clipping."""
+        h, w = self.shape[:2]
+        v0, v1 = min(max(v0, 0), h), min(max(v1, 0), h)
+        u0, u1 = min(max(u0, 0), w), min(max(u1, 0), w)
+        v1, u1 = max(v1, v0), max(u1, u0)
         if self._bgr is not None:
             return self._bgr[v0:v1, u0:u1]
         if self._last is not None:
