@@ -218,10 +218,11 @@ def test_planar_grey_frames_are_opencvs(tmp_path, codec):
     assert n == 12
 
 
-def lossless_420(path, planes, full_range):
+def lossless_420(path, planes, full_range, options=None):
     """Write (Y, U, V) planes, each frame's (h, w), (h / 2, w / 2) twice,
     losslessly: yuv420p by FFV1, full-range yuvj420p by lossless JPEG
-    (what MJPG decodes to); OpenCV's BGR of each frame."""
+    (what MJPG decodes to), with the encoder's ``options`` (a colour
+    matrix's tag: kept by Matroska, not AVI); OpenCV's BGR of each frame."""
     import av
     import cv2
 
@@ -230,6 +231,8 @@ def lossless_420(path, planes, full_range):
     s = c.add_stream("ljpeg" if full_range else "ffv1", rate=30)
     s.height, s.width = planes[0][0].shape
     s.pix_fmt = pix_fmt
+    if options:
+        s.options = options
     for y, u, v in planes:
         w = y.shape[1]
         fr = av.VideoFrame.from_ndarray(np.concatenate([y, u.reshape(-1, w), v.reshape(-1, w)]),
@@ -245,11 +248,11 @@ def lossless_420(path, planes, full_range):
     return out
 
 
-def swscale_bgr(y, u, v, full_range):
+def swscale_bgr(y, u, v, full_range, matrix="bt601"):
     """BGR of planes by track.reader.swscale_terms, in numpy."""
     from cuespin.track.reader import swscale_terms
 
-    fy, bu, guv, rv = swscale_terms(full_range)
+    fy, bu, guv, rv = swscale_terms(full_range, matrix)
     uu, vv = (np.repeat(np.repeat(c, 2, 0), 2, 1) for c in (u, v))
     L = fy[y]
     return np.clip(np.stack([L + bu[uu], L + guv[uu, vv], L + rv[vv]], axis=-1), 0, 255).astype(np.uint8)
@@ -276,6 +279,31 @@ def test_swscale_terms_are_opencvs_levels(tmp_path, full_range):
         np.testing.assert_array_equal(np.asarray(frame), ref)
 
 
+def test_swscale_terms_bt709_are_opencvs_levels(tmp_path):
+    # Random planes of a lossless BT.709-tagged file (FFV1, limited range):
+    # BT.709's row gives OpenCV's levels to the bit, the planes are taken,
+    # and BT.601's row is levels away (review 10b's row, beyond H.264's
+    # levels).  Full-range BT.709 is not checked: FFmpeg's JPEG decoders
+    # tag their frames BT.601 whatever the file says.
+    from cuespin.track.reader import FrameSource, PlanarFrame, probe
+
+    rng = np.random.default_rng(8)
+    h, w = 96, 160
+    planes = [tuple(rng.integers(0, 256, s, dtype=np.uint8) for s in ((h, w), (h // 2, w // 2), (h // 2, w // 2)))
+              for _ in range(3)]
+    video = tmp_path / "r709.mkv"
+    refs = lossless_420(video, planes, False, {"colorspace": "bt709", "color_primaries": "bt709",
+                                               "color_trc": "bt709"})
+    source = FrameSource(video, probe(video), planes=True)
+    for (y, u, v), ref, frame in zip(planes, refs, source):
+        assert isinstance(frame, PlanarFrame) and frame.matrix == "bt709"
+        np.testing.assert_array_equal(swscale_bgr(y, u, v, False, "bt709"), ref)
+        assert not np.array_equal(swscale_bgr(y, u, v, False), ref)
+        np.testing.assert_array_equal(frame[3:50, 7:101], ref[3:50, 7:101])
+        np.testing.assert_array_equal(np.asarray(frame), ref)
+    assert source.planar
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("full_range", [False, True])
 def test_swscale_terms_every_level(tmp_path, full_range):
@@ -297,6 +325,43 @@ def test_swscale_terms_every_level(tmp_path, full_range):
     refs = lossless_420(tmp_path / "all.avi", planes, full_range)
     for (y, u, v), ref in zip(planes, refs):
         np.testing.assert_array_equal(swscale_bgr(y, u, v, full_range), ref)
+
+
+def test_bt709_h264_is_read_as_planes(tmp_path):
+    # A BT.709-tagged H.264 file (the usual from phones; review 10b): the
+    # frame's colour matrix picks BT.709's row, so the planes are taken
+    # (not OpenCV's fallback) and every window and whole frame is OpenCV's
+    # decoding to the bit; BT.601's row would not be.
+    import av
+    import cv2
+
+    from cuespin.track.reader import FrameSource, PlanarFrame, probe
+
+    rng = np.random.default_rng(11)
+    h, w, n = 240, 320, 40
+    yy, xx = np.mgrid[0:h, 0:w]
+    frames = [np.clip(np.stack([(xx + 3 * i) % 256, (2 * yy + i) % 256, ((xx + yy) // 2 + 5 * i) % 256], -1)
+                      + rng.integers(-20, 21, (h, w, 3)), 0, 255).astype(np.uint8) for i in range(n)]
+    video = tmp_path / "bt709.mp4"
+    write_av(frames, video, "libx264", "yuv420p", 30.0,
+             options={"crf": "18", "colorspace": "bt709", "color_primaries": "bt709", "color_trc": "bt709"})
+    with av.open(str(video)) as c:
+        assert c.streams.video[0].codec_context.colorspace == 1  # AVCOL_SPC_BT709: the file is tagged
+    source = FrameSource(video, probe(video), planes=None)
+    cap = cv2.VideoCapture(str(video), cv2.CAP_FFMPEG)
+    k = 0
+    for frame in source:
+        ok, ref = cap.read()
+        assert ok and isinstance(frame, PlanarFrame) and frame.matrix == "bt709"
+        if k == 0:
+            bt601 = PlanarFrame(frame._av, False, "bt601")
+            assert not np.array_equal(bt601.window(0, h, 0, w), ref)
+        # the compiled windows (none within the one before), then PyAV's whole frame
+        for v0, v1, u0, u1 in ((3, 50, 7, 101), (101, 240, 199, 320), (0, h, 0, w)):
+            np.testing.assert_array_equal(frame.window(v0, v1, u0, u1), ref[v0:v1, u0:u1])
+        np.testing.assert_array_equal(np.asarray(frame), ref)
+        k += 1
+    assert k == n and source.planar and not cap.read()[0]
 
 
 def test_planes_fall_back_to_opencv_where_it_disagrees(tmp_path, monkeypatch):

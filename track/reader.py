@@ -51,17 +51,28 @@ PLANAR_PIX_FMTS = {"yuv420p": False, "yuvj420p": True}
 # whole frame's conversion and PyAV decodes them for less CPU than OpenCV
 # (the tracking run's CPU on the speed benchmark's 1,000-frame files,
 # medians: H.264 3.21 -> 2.29 s, mp4v 3.77 -> 3.13, MJPG 4.30 -> 3.65;
-# speed13).  Only BT.601's coefficients are known here: a stream OpenCV
-# converts otherwise (BT.709-tagged H.264, usual from phones) fails the
-# first-frame check and is read through OpenCV, exact but without the gain.
+# speed13).  BT.601's and BT.709's coefficients are known here (the frame's
+# colour matrix picks them, :data:`SWS_MATRICES`): a BT.709-tagged file
+# (H.264 from phones) is read as planes too; a stream OpenCV converts
+# otherwise (another matrix) fails the first-frame check and is read
+# through OpenCV, exact but without the gain.
 PLANAR_DEFAULT_PIX_FMTS = {"yuv420p", "yuvj420p"}
-# FFmpeg's BT.601 YUV -> RGB coefficients (libswscale/yuv2rgb.c,
-# ff_yuv2rgb_coeffs[SWS_CS_ITU601]: crv, cbu, cgu, cgv in 16.16 fixed
-# point), swscale's default and what OpenCV's decoding converts with.
+# FFmpeg's YUV -> RGB coefficients (libswscale/yuv2rgb.c,
+# ff_yuv2rgb_coeffs[SWS_CS_*]: crv, cbu, cgu, cgv in 16.16 fixed point).
+# BT.601's is swscale's default, what OpenCV converts an untagged stream
+# with; BT.709's what OpenCV (and PyAV) convert a BT.709-tagged one with
+# (all 40 of 40 frames of a libx264 bt709 file equal OpenCV's to the bit:
+# review 10b, ``tests/test_track_formats.py``).
 SWS_ITU601 = (104597, 132201, 25675, 53279)
+SWS_ITU709 = (117489, 138438, 13975, 34925)
+SWS_COEFFS = {"bt601": SWS_ITU601, "bt709": SWS_ITU709}
+# FFmpeg's AVColorSpace codes (a frame's ``colorspace`` in PyAV) of the
+# matrices known here; any other (unspecified, SMPTE 170M, BT.2020...)
+# keeps BT.601's, swscale's default, and the first-frame check guards it.
+SWS_MATRICES = {1: "bt709"}  # AVCOL_SPC_BT709
 
 
-def swscale_terms(full_range: bool):
+def swscale_terms(full_range: bool, matrix: str = "bt601"):
     """Each channel's luma and chroma terms in FFmpeg swscale's unscaled
     4:2:0 -> BGR24 conversion (what ``cv2.VideoCapture`` hands back): the
     16-bit coefficients ``ff_yuv2rgb_c_init_tables`` derives (``roundToInt16``
@@ -73,14 +84,24 @@ def swscale_terms(full_range: bool):
     OpenCV's decoding for every one of the 2^24 (Y, U, V) of a lossless
     file, both ranges (yuv420p by FFV1, yuvj420p by lossless JPEG;
     ``tests/test_track_formats.py``); a video is read as planes only where
-    its first frame agrees (:class:`FrameSource`).
+    its first frame agrees (:class:`FrameSource`).  BT.709's row
+    (``matrix="bt709"``) by the same arithmetic: OpenCV's levels on a
+    BT.709-tagged H.264 file, every frame (``tests/test_track_formats.py``).
+
+    Parameters
+    ----------
+    full_range : bool
+        Levels 0-255 (``yuvj420p``) rather than 16-235.
+    matrix : str
+        A key of :data:`SWS_COEFFS`: ``"bt601"`` or ``"bt709"``.
 
     Returns
     -------
     fy, bu, rv : ndarray, (256,) int32
     guv : ndarray, (256, 256) int32, indexed [U, V]
     """
-    crv, cbu, cgu, cgv = SWS_ITU601[0], SWS_ITU601[1], -SWS_ITU601[2], -SWS_ITU601[3]
+    k = SWS_COEFFS[matrix]
+    crv, cbu, cgu, cgv = k[0], k[1], -k[2], -k[3]
     if full_range:
         cy, oy = 1 << 16, 0
         # C's integer division truncates toward zero
@@ -262,8 +283,9 @@ class PlanarFrame:
     :func:`cuespin.track.window.yuv420_bgr`); ``np.asarray(frame)`` converts
     the whole frame once (by PyAV's swscale when the frame is PyAV's, the
     same levels) and keeps it.  The levels are OpenCV's decoding of the same
-    file, to the bit, wherever OpenCV converts with swscale's default
-    BT.601 arithmetic (:class:`FrameSource` checks a video's first frame).
+    file, to the bit, wherever OpenCV converts with swscale's arithmetic
+    and the frame's colour matrix is one known here (BT.601, BT.709:
+    ``matrix``; :class:`FrameSource` checks a video's first frame).
 
     Parameters
     ----------
@@ -272,13 +294,16 @@ class PlanarFrame:
         rows, then U's and V's (PyAV's ``to_ndarray()``).
     full_range : bool
         Levels 0-255 (``yuvj420p``) rather than 16-235.
+    matrix : str
+        The colour matrix's coefficients, a key of :data:`SWS_COEFFS`.
     """
 
     ndim = 3
     dtype = np.dtype(np.uint8)
 
-    def __init__(self, planes, full_range: bool):
+    def __init__(self, planes, full_range: bool, matrix: str = "bt601"):
         self.full_range = full_range
+        self.matrix = matrix
         if isinstance(planes, np.ndarray):
             self._av = None
             h, w = planes.shape[0] * 2 // 3, planes.shape[1]
@@ -317,7 +342,7 @@ class PlanarFrame:
                 return bgr[v0 - a0:v1 - a0, u0 - b0:u1 - b0]
         from cuespin.track.window import yuv420_bgr
 
-        fy, bu, guv, rv = _TERMS[self.full_range]
+        fy, bu, guv, rv = _TERMS[self.full_range, self.matrix]
         bgr = yuv420_bgr(self._y, self._u, self._v, v0, u0, np.empty((v1 - v0, u1 - u0, 3), np.uint8),
                          fy, bu, guv, rv, SAT_512)
         self._last = (v0, v1, u0, u1, bgr)
@@ -352,10 +377,10 @@ class PlanarFrame:
         return self._bgr if dtype is None else self._bgr.astype(dtype)
 
 
-# swscale's terms, limited (False) and full range (True), and the grey level
-# of each luma level with neutral chroma.
-_TERMS = {r: swscale_terms(r) for r in (False, True)}
-_GREY = {r: np.clip(_TERMS[r][0], 0, 255).astype(np.uint8) for r in (False, True)}
+# swscale's terms by (full range, matrix), and the grey level of each luma
+# level with neutral chroma (the luma term: the same for every matrix).
+_TERMS = {(r, m): swscale_terms(r, m) for r in (False, True) for m in SWS_COEFFS}
+_GREY = {r: np.clip(_TERMS[r, "bt601"][0], 0, 255).astype(np.uint8) for r in (False, True)}
 
 
 class FrameSource:
@@ -466,9 +491,11 @@ class FrameSource:
                 if fr.format.name != self.info.pix_fmt:  # the stream changed format: BGR whole
                     yield self._emit(fr.to_ndarray(format="bgr24"))
                     continue
-                frame = PlanarFrame(fr, full_range)
+                # the frame's colour matrix, as PyAV's and OpenCV's swscale read it
+                matrix = SWS_MATRICES.get(getattr(fr, "colorspace", None), "bt601")
+                frame = PlanarFrame(fr, full_range, matrix)
                 if not self._decided:
-                    if not self._opencv_agrees(PlanarFrame(fr, full_range)):
+                    if not self._opencv_agrees(PlanarFrame(fr, full_range, matrix)):
                         break
                     agreed = True
                     self.grey = self._grey_content(np.asarray(frame))
