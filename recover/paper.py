@@ -70,6 +70,22 @@ THEOREM1_RTOL = 0.5
 # was 196% off (review 10c).  The same number as the MLE's rule, counted on
 # the segmentation's frames (the MLE counts t0 < t < t1).
 PAPER_MIN_SLIDING_FRAMES = MIN_SLIDING_FRAMES
+# An answer's own sliding time (eq. 10) must agree with the one the
+# segmentation measured (eq. 26).  One tolerance (sliding_time_tolerance)
+# is the time the end of sliding can be told apart from rolling: past t1
+# the two paths part by (mu_s g / 2) dt^2, under SLIDING_END_SIGMAS
+# position sigmas for dt = sqrt(2 SLIDING_END_SIGMAS sigma / (mu_s g)),
+# plus TIE_T1_FRAMES frames for the breakpoint's placement.  An ok answer
+# more than SLIDING_TIME_TOLERANCES of them off is refused.  Measured
+# (docs/measurements.md, arc9; the generator's simulated tracks, no video):
+# the correct answers (ok, within 3 stated errors) of 2 x 120 case-2 and
+# 2 x 150 sliding tracks (recover.simulate, seeds 3, 4, 11, 12) lie at most
+# 1.46 tolerances off (parabolas; lines 1.06, case 2 at 480 fps); the wrong
+# ok answers of short_slide.py's shots with the rest in view, arcs run over
+# the whole track (369-2073 frames) or of 3 frames, 46-264% off, lie
+# 12.6-145 tolerances off.  3: twice the largest correct one.
+SLIDING_END_SIGMAS = CONSISTENCY_SIGMAS
+SLIDING_TIME_TOLERANCES = 3.0
 # Evaluations the answer's parabola fit may take (fit.conics.fit_parabola,
 # one an iteration with its analytic Jacobian), so that it converges and
 # its covariance (the converged fit's) holds: from the decision's fit,
@@ -481,7 +497,35 @@ def paper_from_segments(seg, t, xy, params: BallParams, sigma: float, frame_dt: 
         ``max(1, chi2/dof)``; the paper's inputs are measured by the same
         frames, so their errors follow the same model.
     """
-    return _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, near, apart, meas, noise)
+    res = _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, near, apart, meas, noise)
+    return sliding_time_check(res, seg, params, sigma, frame_dt)
+
+
+def sliding_time_tolerance(params: BallParams, sigma: float, frame_dt: float) -> float:
+    """How far (s) an answer's sliding time may lie from the measured one:
+    TIE_T1_FRAMES frames plus the time after t1 in which sliding and
+    rolling part by less than SLIDING_END_SIGMAS position sigmas (m)."""
+    return TIE_T1_FRAMES * frame_dt + float(np.sqrt(2.0 * SLIDING_END_SIGMAS * sigma / (params.mu_s * params.g)))
+
+
+def sliding_time_check(res: PaperResult, seg, params: BallParams, sigma: float, frame_dt: float) -> PaperResult:
+    """``res``, or ``failed`` when its sliding time (eq. 10) disagrees with
+    the segmentation's measured ``t1 - t0`` (eq. 26) by more than
+    SLIDING_TIME_TOLERANCES of :func:`sliding_time_tolerance`: the answer does not describe the track
+    it was measured on (the segmentation ran the arc too long, or the root
+    slides seconds where the track slid frames)."""
+    if res.status != "ok" or not seg or not np.isfinite(seg.t1):
+        return res
+    measured = float(seg.t1 - seg.t0)
+    answer = sliding_time(res.v0, res.w0, params)
+    tol = sliding_time_tolerance(params, sigma, frame_dt)
+    if abs(answer - measured) <= SLIDING_TIME_TOLERANCES * tol:
+        return res
+    return replace(res, status="failed", reason=(
+        f"the answer slides {answer:.3f} s (eq. 10), the track {measured:.3f} s (eq. 26): "
+        f"{abs(answer - measured) / tol:.0f} times the {tol * 1e3:.0f} ms to which the end of sliding "
+        f"can be placed (more than {SLIDING_TIME_TOLERANCES:g}), so the answer does not describe this track"),
+                   v0=None, w0=None, u0=None, solutions=[], stderr={})
 
 
 def nearest_root(res: PaperResult, near, params: BallParams) -> PaperResult:
