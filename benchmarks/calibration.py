@@ -296,7 +296,7 @@ def binom(inside) -> str:
     if not len(x):
         return ""
     ci = binomtest(int(x.sum()), len(x)).proportion_ci()
-    return f" binom [{ci.low:.0%}, {ci.high:.0%}] of {len(x)}"
+    return f" binom, components as if independent [{ci.low:.0%}, {ci.high:.0%}] of {len(x)}"
 
 
 def stated(args):
