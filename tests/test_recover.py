@@ -103,18 +103,15 @@ def test_paper_refuses_sliding_seen_in_one_or_two_frames(seed):
     assert 1 <= seen < PAPER_MIN_SLIDING_FRAMES
 
 
-def test_paper_refuses_the_one_frame_arc_it_once_answered_196_percent_off(monkeypatch):
-    # benchmarks/short_slide.py's generator with the rest in view (seed 5,
-    # its 148th shot: case 4 given a slip of 0.70 frames at 60 fps, 1e-4 m):
-    # the segmentation's arc holds 1 frame; with neither refusal the line
-    # answered ok, v0 196% off (rec8; review 10c: the test above's shots
-    # were already failed before the rule).  Each refusal catches it alone.
-    import cuespin.recover.paper as paper
+def short_slide_shot(seed, k):
+    """benchmarks/short_slide.py's k-th shot (1-based) of ``seed``, run on
+    until the rest is in view: case 4 given a slip of 0.2-8 frames (eq. 10)
+    at 60/120/240 fps and 2e-5/1e-4/6e-4 m noise in turn.  Returns the track,
+    its BallParams, sigma (m), exposure (s) and the true v0 (m/s)."""
     from cuespin.physics.motion import z_cross
-    from cuespin.recover.estimate import estimate
     from cuespin.recover.simulate import simulate_track
-    rng = np.random.default_rng(5)
-    for i in range(148):  # the generator's draws up to its 148th shot
+    rng = np.random.default_rng(seed)
+    for i in range(k):  # the generator's draws up to its k-th shot
         fps = (60.0, 120.0, 240.0)[i % 3]
         sigma = (2e-5, 1e-4, 6e-4)[(i // 3) % 3]
         shot, p = sample_shot(rng, "case4")
@@ -125,6 +122,18 @@ def test_paper_refuses_the_one_frame_arc_it_once_answered_196_percent_off(monkey
         s = Shot(x0=shot.x0, v0=v0, w0=z_cross(v0 - u0) / p.R, t0=shot.t0)
         exposure = float(rng.uniform(0.3, 1.0) / fps) if rng.random() < 0.5 else 0.0
         tr = simulate_track(s, p, fps, sigma, rng, exposure, t_end=phases(s, p).t2 + 0.3)
+    return tr, p, sigma, exposure, v0
+
+
+def test_paper_refuses_the_one_frame_arc_it_once_answered_196_percent_off(monkeypatch):
+    # benchmarks/short_slide.py's generator with the rest in view (seed 5,
+    # its 148th shot: case 4 given a slip of 0.70 frames at 60 fps, 1e-4 m):
+    # the segmentation's arc holds 1 frame; with neither refusal the line
+    # answered ok, v0 196% off (rec8; review 10c: the test above's shots
+    # were already failed before the rule).  Each refusal catches it alone.
+    import cuespin.recover.paper as paper
+    from cuespin.recover.estimate import estimate
+    tr, p, sigma, exposure, v0 = short_slide_shot(5, 148)
 
     def paper_answer():
         return estimate(tr.t, tr.xy, np.full(len(tr.t), sigma), p, exposure).paper
@@ -143,21 +152,8 @@ def test_paper_refuses_an_answer_that_slides_longer_than_the_track():
     # the segmentation's arc holds 3 frames (0.010 s of sliding) and the
     # line's root slides 3.29 s (eq. 10), its v0 200% off, once answered ok
     # (docs/measurements.md, arc9).
-    from cuespin.physics.motion import z_cross
     from cuespin.recover.estimate import estimate
-    from cuespin.recover.simulate import simulate_track
-    rng = np.random.default_rng(5)
-    for i in range(12):  # the generator's draws up to its 12th shot
-        fps = (60.0, 120.0, 240.0)[i % 3]
-        sigma = (2e-5, 1e-4, 6e-4)[(i // 3) % 3]
-        shot, p = sample_shot(rng, "case4")
-        tau1 = float(rng.uniform(0.2, 8.0)) / fps
-        ang = rng.uniform(0, 2 * np.pi)
-        u0 = 3.5 * p.mu_s * p.g * tau1 * np.array([np.cos(ang), np.sin(ang)])  # eq. 10
-        v0 = np.asarray(shot.v0, float)
-        s = Shot(x0=shot.x0, v0=v0, w0=z_cross(v0 - u0) / p.R, t0=shot.t0)
-        exposure = float(rng.uniform(0.3, 1.0) / fps) if rng.random() < 0.5 else 0.0
-        tr = simulate_track(s, p, fps, sigma, rng, exposure, t_end=phases(s, p).t2 + 0.3)
+    tr, p, sigma, exposure, _ = short_slide_shot(5, 12)
     r = estimate(tr.t, tr.xy, np.full(len(tr.t), sigma), p, exposure).paper
     assert r.status == "failed", (r.status, r.reason)
     assert "eq. 26" in r.reason and r.v0 is None

@@ -180,6 +180,20 @@ def test_a_smeared_dot_is_left_out_along_the_blur():
     assert np.sqrt(np.mean(err**2)) < 0.024 and err.max() < 0.06, (np.sqrt(np.mean(err**2)), err.max())
 
 
+def known_pixels_bound2(c, felt, u0, v0, r, shade, clear) -> float:
+    """The Cramer-Rao bound's centre variance (px^2, both axes summed) of a
+    lit sphere whose markings' pixels are known (only ``clear`` used), at
+    noise 1.7, with its level and look coefficients as nuisances."""
+    _, J = streak_model(c, np.zeros(2), 60.0, felt, r, u0, v0, np.zeros(1), shade, blur_cols=False)
+    J = J[clear.ravel()][:, [0, 1, 4, 5, 6, 7]]
+    return 1.7 ** 2 * np.trace(np.linalg.inv(J.T @ J)[:2, :2])
+
+
+def rms_px(errors) -> float:
+    """RMS of 2-D centre errors (px)."""
+    return float(np.sqrt(np.mean(np.sum(np.square(errors), 1))))
+
+
 def lit_marked_ball(rng, inside=(5.0, 7.0)):
     """A strongly shaded ball (the lit sphere's look, ambient 60, diffuse 200,
     light at 0.92 rad: realistic seed 0 shot 18's) of radius 12.2 px on a
@@ -234,16 +248,12 @@ def test_a_dot_at_the_rim_is_left_out_against_the_lit_sphere():
         q = fit_disc(img, felt, u0, v0, f.c, r, f.G, shade=True, valid=~m)
         g = fit_disc(img, felt, u0, v0, q.c, r, q.G, shade=look, valid=~m)
         assert g and g.stated, g.reason
-        h, marks = BallTracker._rim_unmarked(T, img, felt, u0, v0, g, r, False, None, m, None)
+        h, _ = BallTracker._rim_unmarked(T, img, felt, u0, v0, g, r, False, None, m, None)
         assert h.stated
         err_in.append(g.c - c)
         err_rim.append(h.c - c)
-        _, J = streak_model(c, np.zeros(2), 60.0, felt, r, u0, v0, np.zeros(1), g.shade, blur_cols=False)
-        J = J[clear.ravel()][:, [0, 1, 4, 5, 6, 7]]
-        bound.append(1.7 ** 2 * np.trace(np.linalg.inv(J.T @ J)[:2, :2]))
-    crb = np.sqrt(np.mean(bound))
-    rmse_rim = np.sqrt(np.mean(np.sum(np.square(err_rim), 1)))
-    rmse_in = np.sqrt(np.mean(np.sum(np.square(err_in), 1)))
+        bound.append(known_pixels_bound2(c, felt, u0, v0, r, g.shade, clear))
+    crb, rmse_rim, rmse_in = np.sqrt(np.mean(bound)), rms_px(err_rim), rms_px(err_in)
     assert rmse_rim / crb < 1.5 * 0.99
     assert rmse_in > 10 * rmse_rim
 
@@ -274,12 +284,8 @@ def test_a_marked_balls_frame_without_markings_inside_loses_its_rim_dot():
         assert h.stated
         err_with.append(g.c - c)
         err_without.append(h.c - c)
-        _, J = streak_model(c, np.zeros(2), 60.0, felt, r, u0, v0, np.zeros(1), g.shade, blur_cols=False)
-        J = J[clear.ravel()][:, [0, 1, 4, 5, 6, 7]]
-        bound.append(1.7 ** 2 * np.trace(np.linalg.inv(J.T @ J)[:2, :2]))
-    crb = np.sqrt(np.mean(bound))
-    rmse_without = np.sqrt(np.mean(np.sum(np.square(err_without), 1)))
-    rmse_with = np.sqrt(np.mean(np.sum(np.square(err_with), 1)))
+        bound.append(known_pixels_bound2(c, felt, u0, v0, r, g.shade, clear))
+    crb, rmse_without, rmse_with = np.sqrt(np.mean(bound)), rms_px(err_without), rms_px(err_with)
     assert rmse_without / crb < 1.5 * 1.02
     assert rmse_with > 10 * rmse_without
 
