@@ -56,7 +56,7 @@ PLANAR_PIX_FMTS = {"yuv420p": False, "yuvj420p": True}
 # (H.264 from phones) is read as planes too; a stream OpenCV converts
 # otherwise (another matrix) fails the first-frame check and is read
 # through OpenCV, exact but without the gain.
-PLANAR_DEFAULT_PIX_FMTS = {"yuv420p", "yuvj420p"}
+PLANAR_DEFAULT_PIX_FMTS = frozenset(PLANAR_PIX_FMTS)  # every one read as planes, since speed13
 # FFmpeg's YUV -> RGB coefficients (libswscale/yuv2rgb.c,
 # ff_yuv2rgb_coeffs[SWS_CS_*]: crv, cbu, cgu, cgv in 16.16 fixed point).
 # BT.601's is swscale's default, what OpenCV converts an untagged stream
