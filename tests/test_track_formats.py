@@ -433,3 +433,26 @@ def test_a_planar_window_is_clipped_to_the_frame():
     whole = frame.window(0, h, 0, w).copy()
     assert np.array_equal(frame.window(60, 80, 90, 110), whole[60:66, 90:98])
     assert frame.window(70, 80, 0, 10).shape == (0, 10, 3)
+
+
+@pytest.mark.parametrize("codec,pix_fmt,ext,planes", [
+    ("ffv1", "bgr0", "avi", False),      # OpenCV's decoding
+    ("mjpeg", "yuvj420p", "avi", None),  # the planes (MJPG's default)
+])
+def test_a_colour_video_opening_on_black_frames_is_colour(tmp_path, codec, pix_fmt, ext, planes):
+    # A fade from black: the first frames' planes agree (neutral), as a grey
+    # video's do; they decide nothing, the first coloured frame decides colour.
+    # A grey video opening the same way is still read as grey.
+    from cuespin.track.reader import FrameSource, probe
+
+    scene = small_scene(duration=0.1)
+    colour = list(colour_frames(scene, YELLOW, GREY_FELT, noise=2.0, seed=1))
+    black = np.zeros_like(colour[0])
+    for name, frames, grey in (("c", [black] * 3 + colour, False),
+                               ("g", [black[..., 1]] * 3 + [f[..., 1] for f in colour], True)):
+        video = tmp_path / f"{name}.{ext}"
+        write_av(frames, video, codec, pix_fmt, scene.camera.fps)
+        read = list(FrameSource(video, probe(video), planes=planes))
+        assert len(read) == len(frames)
+        assert all(np.asarray(f).ndim == (2 if grey else 3) for f in read), name
+        assert np.asarray(read[0]).max() <= 16 and np.asarray(read[-1]).max() > 100  # order kept

@@ -125,7 +125,18 @@ SAT_512 = np.clip(np.arange(-512, 1024), 0, 255).astype(np.uint8)
 
 # A grey video's frames still decode to BGR when its stream is yuv (MJPG
 # with neutral chroma); after YUV to BGR conversion the three planes agree
-# exactly.  Checked on the first frame only.
+# exactly.  A colour video's black (or any blank) frame is neutral too, so a
+# blank frame decides nothing: the first frame whose planes differ makes the
+# video colour, the first neutral frame with content (levels spanning more
+# than BLANK_SPREAD_LEVELS) makes it grey.  Undecided frames are held, at
+# most GREY_UNDECIDED_BYTES of them (then, or at the end, the video is grey).
+# 32 levels: a fade's dark frame through MJPG keeps neutral chroma with luma
+# spanning a few levels; the project's grey looks span the ball/felt contrast
+# (>= 25) plus noise, and a grey video undecided longer is only held longer.
+BLANK_SPREAD_LEVELS = 32
+# 64 MB: 23 frames of 1280 x 720 BGR, 8 of 4K; inside the tracker's
+# look-ahead budget (track.video.LOOKAHEAD_BYTES, 384 MB).
+GREY_UNDECIDED_BYTES = 64 << 20
 
 try:  # OpenCV logs a warning per frame for some streams; failures are reported by us
     cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
@@ -397,36 +408,60 @@ class FrameSource:
         self.path = Path(path)
         self.info = info
         self.grey = info.pix_fmt in GREY_PIX_FMTS
-        self._decided = self.grey  # grey-by-content is decided on the first frame
+        self._decided = self.grey  # else grey by content, decided in __iter__ (_verdict)
         if planes is None:
             planes = info.pix_fmt in PLANAR_DEFAULT_PIX_FMTS
         # PyAV opened the file (probe read its stream) and the planes split evenly.
         self.planar = (planes and info.pix_fmt in PLANAR_PIX_FMTS and info.time_base is not None
                        and info.width % 2 == 0 and info.height % 2 == 0)
 
-    def _grey_content(self, img) -> bool:
-        return bool(np.array_equal(img[..., 0], img[..., 1]) and np.array_equal(img[..., 0], img[..., 2]))
+    def _verdict(self, img) -> bool | None:
+        """Grey (True), colour (False) or undecided (None: a blank neutral frame)."""
+        if img.ndim == 2:
+            return True
+        img = np.asarray(img)
+        g = img[..., 1]
+        if not (np.array_equal(img[..., 0], g) and np.array_equal(g, img[..., 2])):
+            return False
+        return True if int(g.max()) - int(g.min()) > BLANK_SPREAD_LEVELS else None
 
     def _emit(self, img):
+        """A decoded frame, 2-D (one channel) or (h, w, 3) BGR; read as grey later."""
         if img.ndim == 3 and img.shape[2] == 1:
-            img = img[:, :, 0]
-        if img.ndim == 2:
-            self.grey = True
+            return img[:, :, 0]
+        if img.ndim == 3 and img.shape[2] == 4:
+            return img[:, :, :3]
+        return img
+
+    def _as_read(self, img):
+        if not self.grey or img.ndim == 2:
             return img
-        if img.shape[2] == 4:
-            img = img[:, :, :3]
-        if not self._decided:
-            self.grey = self._grey_content(img)
-            self._decided = True
-        return cv2.extractChannel(img, 1) if self.grey else img
+        # a grey video: one channel, as a grey stream's decoding gives it
+        return img.grey() if isinstance(img, PlanarFrame) else cv2.extractChannel(img, 1)
 
     def __iter__(self):
         if self.planar:
-            yield from self._iter_planes()
+            raw = self._iter_planes()
         elif self.info.backend == "cv2":
-            yield from self._iter_cv2()
+            raw = self._iter_cv2()
         else:
-            yield from self._iter_av()
+            raw = self._iter_av()
+        held, nbytes = [], 0
+        for img in raw:
+            if self._decided:
+                yield self._as_read(img)
+                continue
+            verdict = self._verdict(img)
+            held.append(img)
+            nbytes += img.shape[0] * img.shape[1] * 3
+            if verdict is None and nbytes < GREY_UNDECIDED_BYTES:
+                continue
+            self.grey, self._decided = verdict is not False, True
+            yield from map(self._as_read, held)
+            held = []
+        if held:  # blank neutral frames to the end: nothing says colour
+            self.grey = self._decided = True
+            yield from map(self._as_read, held)
 
     def _iter_cv2(self):
         cap = _open_cv2(self.path)
@@ -484,29 +519,27 @@ class FrameSource:
         full_range = PLANAR_PIX_FMTS[self.info.pix_fmt]
         with quiet_native_stderr():
             c = av.open(str(self.path))
-        agreed = False
+        first = True
         try:
             s = c.streams.video[0]
             for fr in c.decode(s):
                 if fr.format.name != self.info.pix_fmt:  # the stream changed format: BGR whole
+                    first = False
                     yield self._emit(fr.to_ndarray(format="bgr24"))
                     continue
                 # the frame's colour matrix, as PyAV's and OpenCV's swscale read it
                 matrix = SWS_MATRICES.get(getattr(fr, "colorspace", None), "bt601")
                 frame = PlanarFrame(fr, full_range, matrix)
-                if not self._decided:
+                if first:
                     if not self._opencv_agrees(PlanarFrame(fr, full_range, matrix)):
                         break
-                    agreed = True
-                    self.grey = self._grey_content(np.asarray(frame))
-                    self._decided = True
-                # a grey video: one channel, as the other paths give it
-                yield frame.grey() if self.grey else frame
+                first = False
+                yield frame
         except av.error.FFmpegError as exc:
             raise TrackError(str(exc)) from None
         finally:
             c.close()
-        if not agreed and not self._decided:  # OpenCV's levels differ: its own decoding throughout
+        if first:  # OpenCV's levels differ (or no frame): its own decoding throughout
             self.planar = False
             yield from (self._iter_cv2() if self.info.backend == "cv2" else self._iter_av())
 
