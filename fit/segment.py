@@ -47,15 +47,15 @@ MOVE_CONFIRM_FRAMES = 3
 # mu_r g).  Left free, a_s equal to rolling's makes "sliding" up to any t1
 # the same path as rolling, the profile over t1 is flat there, and its
 # minimum fell seconds into the rolling on short slides
-# (benchmarks/short_slide.py's draws with the rest in view, seeds 5 and 6:
-# arcs of up to 2223 frames, |a_s| equal to the rolling deceleration to
-# 1e-4, true slides 0.2-3.4 frames; docs/measurements.md, seg11).  The
-# sampler's friction (mu_s 0.1-0.3, mu_r 0.005-0.02) puts the true ratio
-# at 7 or more; 5 leaves the slide's estimated a_s 30% below that.  Measured
-# against 2.5 on the same draws (breakpoint errors over 10 frames: 2.5
-# kept 4 of 138 at 12-27 frames, its minimum on the rule's boundary; 5
-# kept 1 of 138) and on sliding_tracks (120, seed 11: every breakpoint the
-# same as with no rule).
+# (benchmarks/short_slide.py's draws with the rest in view, seeds 5 and 6,
+# 300 shots: 23 breakpoints more than 10 frames off, 14 of them 25-2155
+# frames, |a_s| equal to the rolling deceleration to 1e-4; with the rule 4,
+# at most 18 frames; docs/measurements.md, seg11).  The sampler's friction
+# (mu_s 0.1-0.3, mu_r 0.005-0.02) puts the true ratio at 7 or more; 5
+# leaves the slide's estimated a_s 30% below that.  2.5 was tried: 4 of the
+# first 138 of those shots more than 10 frames off (12-27), its minimum
+# held on the rule's boundary, against 1 with 5.  Sliding and case-2 tracks
+# (recover.simulate, 120 each): every breakpoint the same as without it.
 SLIDE_DECEL_RATIO = 5.0
 
 
