@@ -41,6 +41,22 @@ MIN_REST_S = 0.05
 MIN_MOVING_FRAMES = 6
 # The strike is the first of this many consecutive frames away from the start.
 MOVE_CONFIRM_FRAMES = 3
+# The sliding fit's slide (t1 after t0, ended in view or running on) is a
+# slide only where its fitted acceleration is a slide's: |a_s| (eq. 9:
+# mu_s g) at least this many times the rolling deceleration (eq. 18: (5/7)
+# mu_r g).  Left free, a_s equal to rolling's makes "sliding" up to any t1
+# the same path as rolling, the profile over t1 is flat there, and its
+# minimum fell seconds into the rolling on short slides
+# (benchmarks/short_slide.py's draws with the rest in view, seeds 5 and 6,
+# 300 shots: 23 breakpoints more than 10 frames off, 14 of them 25-2155
+# frames, |a_s| equal to the rolling deceleration to 1e-4; with the rule 4,
+# at most 18 frames; docs/measurements.md, seg11).  The sampler's friction
+# (mu_s 0.1-0.3, mu_r 0.005-0.02) puts the true ratio at 7 or more; 5
+# leaves the slide's estimated a_s 30% below that.  2.5 was tried: 4 of the
+# first 138 of those shots more than 10 frames off (12-27), its minimum
+# held on the rule's boundary, against 1 with 5.  Sliding and case-2 tracks
+# (recover.simulate, 120 each): every breakpoint the same as without it.
+SLIDE_DECEL_RATIO = 5.0
 
 
 @dataclass(frozen=True)
@@ -343,9 +359,17 @@ def segment_track(t, xy, decel: float, sigma: float | None = None,
     back = d1 / speed if speed > 0 else dt
     t0_guess = t[k_move] - float(np.clip(back, 0.0, dt if k_move > 0 else 10 * dt))
 
+    def cost_any(t0s, t1s):
+        t0s, t1s = np.broadcast_arrays(np.asarray(t0s, dtype=float), np.asarray(t1s, dtype=float))
+        c, coef, _ = _solve_many(tf, xf, t0s, np.minimum(t1s, beyond), decel)
+        return np.where(t1s < t0s, np.inf, c), coef
+
     def cost_many(t0s, t1s):
-        c = _solve_many(tf, xf, t0s, np.minimum(t1s, beyond), decel)[0]
-        return np.where(np.asarray(t1s) < np.asarray(t0s), np.inf, c)
+        # The one breakpoint rule: the sliding fit's slide (t1 > t0, ended in
+        # view or not) decelerates as a slide does, not as rolling does.
+        c, coef = cost_any(t0s, t1s)
+        slide = np.asarray(t1s) - np.asarray(t0s) > 1e-9
+        return np.where(slide & (np.hypot(*coef[:, 2].T) < SLIDE_DECEL_RATIO * decel), np.inf, c)
 
     # A t1 past the last frame means "still sliding when the track ends".
     beyond = tf[-1] + dt
@@ -382,8 +406,8 @@ def segment_track(t, xy, decel: float, sigma: float | None = None,
     if t1 < beyond:
         # "Still sliding at the end" at its own best strike time (a breakpoint
         # fit may have moved t0 to suit its kink).
-        def cost_unended(t0s, _t1s):
-            return cost_many(t0s, np.full(np.shape(t0s), beyond))
+        def cost_unended(t0s, _t1s):  # the alternative as it is, decided in fit.decide
+            return cost_any(t0s, np.full(np.shape(t0s), beyond))[0]
 
         t_un, _, sse_un = _zoom(cost_unended, t0, t0, dt, 0.0, 1e-3 * dt)
         end_F = max(sse_un - best_sse, 0.0) / max(best_sse / dof, 1e-300)

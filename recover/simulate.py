@@ -129,12 +129,14 @@ def case2_tracks(n: int, seed: int, fps_grid=FPS_GRID, sigma_grid=SIGMA_GRID_M, 
 
 
 def short_slip_tracks(n: int, seed: int, frames=(0.2, 1.0), fps_grid=(60.0, 120.0, 240.0),
-                      sigma_grid=SIGMA_GRID_M, blur: bool = True):
+                      sigma_grid=SIGMA_GRID_M, blur: bool = True, to_rest: bool = False):
     """``n`` tracks of shots that slide for ``frames`` (a uniform range, in
     frames) after the strike: the sampler's rolling-from-the-strike shot
     (case 4) given a slip ``|u0| = 7/2 mu_s g tau1`` (eq. 10) in a random
-    direction, v0 kept (as benchmarks/short_slide.py draws them).  Yields
-    :class:`SimTrack`."""
+    direction, v0 kept (as benchmarks/short_slide.py draws them).
+    ``to_rest``: each track runs on to 0.3 s after the rest (seconds of
+    rolling, where the sliding arc once ran on), not :data:`MAX_AFTER_STRIKE_S`.
+    Yields :class:`SimTrack`."""
     from cuespin.physics.motion import z_cross
     rng = np.random.default_rng(seed)
     for i in range(n):
@@ -146,4 +148,5 @@ def short_slip_tracks(n: int, seed: int, frames=(0.2, 1.0), fps_grid=(60.0, 120.
         v0 = np.asarray(shot.v0, float)
         s = Shot(x0=shot.x0, v0=v0, w0=z_cross(v0 - u0) / params.R, t0=shot.t0)
         exposure = _exposure(rng, fps, blur)
-        yield simulate_track(s, params, fps, sigma, rng, exposure)
+        yield simulate_track(s, params, fps, sigma, rng, exposure,
+                             t_end=phases(s, params).t2 + 0.3 if to_rest else None)
