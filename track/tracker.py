@@ -171,6 +171,17 @@ SPHERE_MARK_MOVE_RADII = 0.1
 # RMSE 0.0088 px with groups of 3, 0.0032 with 1; the bound 0.0023).
 RIM_MARK_PASSES = 2
 RIM_MARK_MIN_PX = 1
+# A logo turning over the rim shows as a crescent 2-3 px wide, each pixel
+# under the rule above (realistic seed 0 shot 3, a blue ball with a logo:
+# -5..-12 levels at noise 2.5, frames 130-133 and 171-172 pulled 0.03-0.09
+# px towards it, 3-5 stated errors).  So the mean of the ball's pixels in
+# each RIM_MARK_BOX x RIM_MARK_BOX square is judged too, at OUTLIER_SIGMAS
+# of that mean's noise (sigma / sqrt(n), n of them on the ball, at least
+# RIM_MARK_BOX), its pixels on the ball taken as the marking's: shot 3
+# RMSE 0.0173 -> 0.0126 px (docs/measurements.md, branch marks9).  On the
+# unmarked frames of that shot the largest such mean was 2.4-4.3 of its
+# noise (76 frames).
+RIM_MARK_BOX = 3
 # A ball whose markings the rule inside found in this many frames is a
 # marked ball: its frames where the rule finds none (a logo turned away,
 # what is still in view under the rule's threshold) get the lit sphere's
@@ -416,7 +427,15 @@ def rim_marking_pixels(patch, felt, u0: int, v0: int, g, r: float, sigma: float 
         near &= ~left
     if sigma is None:  # the noise from the residual, robust to the markings' pixels (MAD)
         sigma = 1.4826 * float(np.median(np.abs(res if left is None else res[~left])))
-    bad = _groups((near & (np.abs(res) > OUTLIER_SIGMAS * max(sigma, sigma_min))).astype(np.uint8), RIM_MARK_MIN_PX)
+    sig = max(sigma, sigma_min)
+    bad = near & (np.abs(res) > OUTLIER_SIGMAS * sig)
+    # A faint marking spread along the rim (RIM_MARK_BOX): each square's
+    # mean of the ball's pixels at OUTLIER_SIGMAS of that mean's noise.
+    k = np.ones((RIM_MARK_BOX, RIM_MARK_BOX), np.float64)
+    n = cv2.filter2D(near.astype(np.float64), -1, k, borderType=cv2.BORDER_CONSTANT)
+    s = cv2.filter2D(np.where(near, res, 0.0), -1, k, borderType=cv2.BORDER_CONSTANT)
+    box = near & (n >= RIM_MARK_BOX) & (np.abs(s) > OUTLIER_SIGMAS * sig * np.sqrt(np.maximum(n, 1.0)))
+    bad = _groups((bad | box).astype(np.uint8), RIM_MARK_MIN_PX)
     if bad is None:
         return None
     out = cv2.dilate(bad, np.ones((3, 3), np.uint8)).astype(bool)
