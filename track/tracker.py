@@ -188,10 +188,10 @@ RIM_MARK_BOX = 3
 # rule (RIM_MARK_PASSES) too: realistic seed 0 shot 3 (a blue ball with a
 # logo on blue felt) RMSE 0.0271 -> 0.0171 px (docs/measurements.md,
 # branch marks7; misfit5 found its unmarked frames 2.1 stated errors off).
-# Counted per fit, and a frame refitted from another centre counts again:
-# on shot 17 its 97 frames counted 174-194 (review 10c), so 8 is about 4
-# frames; the value itself is not measured (shot 3 measured the rule).
-MARKED_BALL_FRAMES = 8
+# Counted in frames (a frame refitted from another centre counts once; per
+# fit, shot 17's 97 frames counted 174-194, review 10c, and the 8 fits this
+# was first set at were about 4 frames).
+MARKED_BALL_FRAMES = 4
 # Frames whose two fits (disc and shaded) decide the look (config.look "auto").
 LOOK_FRAMES = 12
 # The shaded look is kept when its pooled residual reduction exceeds the
@@ -429,13 +429,17 @@ def rim_marking_pixels(patch, felt, u0: int, v0: int, g, r: float, sigma: float 
         sigma = 1.4826 * float(np.median(np.abs(res if left is None else res[~left])))
     sig = max(sigma, sigma_min)
     bad = near & (np.abs(res) > OUTLIER_SIGMAS * sig)
-    # A faint marking spread along the rim (RIM_MARK_BOX): each square's
-    # mean of the ball's pixels at OUTLIER_SIGMAS of that mean's noise.
-    k = np.ones((RIM_MARK_BOX, RIM_MARK_BOX), np.float64)
-    n = cv2.filter2D(near.astype(np.float64), -1, k, borderType=cv2.BORDER_CONSTANT)
-    s = cv2.filter2D(np.where(near, res, 0.0), -1, k, borderType=cv2.BORDER_CONSTANT)
-    box = near & (n >= RIM_MARK_BOX) & (np.abs(s) > OUTLIER_SIGMAS * sig * np.sqrt(np.maximum(n, 1.0)))
-    bad = _groups((bad | box).astype(np.uint8), RIM_MARK_MIN_PX)
+    if not bad.any():
+        # A faint marking spread along the rim (RIM_MARK_BOX): each square's
+        # mean of the ball's pixels at OUTLIER_SIGMAS of that mean's noise.
+        # Only where no pixel passes alone: a fit pulled by a dot departs
+        # along half its rim by a few levels (the refit from without the
+        # dot is judged again, RIM_MARK_PASSES).
+        k = np.ones((RIM_MARK_BOX, RIM_MARK_BOX), np.float64)
+        n = cv2.filter2D(near.astype(np.float64), -1, k, borderType=cv2.BORDER_CONSTANT)
+        s = cv2.filter2D(np.where(near, res, 0.0), -1, k, borderType=cv2.BORDER_CONSTANT)
+        bad = near & (n >= RIM_MARK_BOX) & (np.abs(s) > OUTLIER_SIGMAS * sig * np.sqrt(np.maximum(n, 1.0)))
+    bad = _groups(bad.astype(np.uint8), RIM_MARK_MIN_PX)
     if bad is None:
         return None
     out = cv2.dilate(bad, np.ones((3, 3), np.uint8)).astype(bool)
@@ -820,7 +824,8 @@ class BallTracker:
         self._sphere_marked: list = []  # theirs whose markings were found (rim_left_out)
         self._sphere_outline = None  # and their outline
         self._sphere_a = None  # the voting frames' median diffuse coefficient (SPHERE_A_MIN)
-        self._n_marked = 0  # frames whose markings the rule found (a marked ball: MARKED_BALL_FRAMES)
+        self._marked = set()  # frames whose markings the rule found (a marked ball: MARKED_BALL_FRAMES)
+        self._k = -1  # the frame step() tracks
         self._candidates: tuple = ()  # the last full search's blobs
         self._bands = None  # the radius map's bands on the search mask (multi-scale search)
         self._pred = None  # this frame's predicted centre (px), None without history
@@ -947,6 +952,7 @@ class BallTracker:
         """Track frame ``k`` (8-bit grey or BGR, full size)."""
         if self.gone:
             return _lost(GONE)
+        self._k = k
         pred, vel = self._velocity(k)
         self._pred = pred
         blur = self._pred_blur = vel * self.exposure_frames
@@ -1429,9 +1435,10 @@ class BallTracker:
                 if g and g.stated and g.rms < f.rms and np.hypot(*(g.c - f.c)) <= SPHERE_MARK_MOVE_RADII * r:
                     f = g
                     f, marks = self._rim_unmarked(patch, felt, u0, v0, f, r, fit_blur, ol, marks, foreign)
-            elif marks is None and isinstance(shade, SphereLook) and self._n_marked >= MARKED_BALL_FRAMES:
+            elif marks is None and isinstance(shade, SphereLook) and len(self._marked) >= MARKED_BALL_FRAMES:
                 f, marks = self._rim_unmarked(patch, felt, u0, v0, f, r, fit_blur, ol, None, foreign)
-            self._n_marked += marks is not None
+            if marks is not None:
+                self._marked.add(self._k)
             if recentre:
                 # The ball's middle may lie on the other side of the felt
                 # than its rim (a shaded ball close to the felt's colour):
