@@ -409,7 +409,7 @@ def _groups(bad: np.ndarray, min_px: int) -> np.ndarray | None:
 
 
 def rim_marking_pixels(patch, felt, u0: int, v0: int, g, r: float, sigma: float | None, left=None,
-                       outline=None, sigma_min: float = 0.5) -> np.ndarray | None:
+                       outline=None, sigma_min: float = 0.5, refit: bool = False) -> np.ndarray | None:
     """Pixels on the ball (within half a pixel of its outline: the rim
     too, where :func:`marking_pixels` does not look) that depart from the
     lit sphere's fit ``g`` (a
@@ -418,7 +418,9 @@ def rim_marking_pixels(patch, felt, u0: int, v0: int, g, r: float, sigma: float 
     px) as a marking does (:data:`RIM_MARK_PASSES`' rule), grown by one
     pixel; ``sigma`` the noise (levels; None: from the residual's median
     absolute value), at least ``sigma_min``; ``left``: pixels already left
-    out (never returned).  None when there are none."""
+    out (never returned); ``refit``: ``g`` is a refit without the pixels
+    a pass before found (:data:`RIM_MARK_BOX`'s means are judged then too).
+    None when there are none."""
     rr = r if outline is None else outline.radius  # fit_disc's scale of the sphere
     m, _ = _model_rows(g.c, g.b, g.G, felt, rr, u0, v0, blur_nodes(np.hypot(*g.b)), g.shade, False, outline)
     res = np.asarray(patch, np.float64) - felt - m
@@ -429,11 +431,11 @@ def rim_marking_pixels(patch, felt, u0: int, v0: int, g, r: float, sigma: float 
         sigma = 1.4826 * float(np.median(np.abs(res if left is None else res[~left])))
     sig = max(sigma, sigma_min)
     bad = near & (np.abs(res) > OUTLIER_SIGMAS * sig)
-    if not bad.any():
+    if refit or not bad.any():
         # A faint marking spread along the rim (RIM_MARK_BOX): each square's
         # mean of the ball's pixels at OUTLIER_SIGMAS of that mean's noise.
-        # Only where no pixel passes alone: a fit pulled by a dot departs
-        # along half its rim by a few levels (the refit from without the
+        # Not on a first fit where pixels pass alone: pulled by a dot it
+        # departs along half its rim by a few levels (the refit without the
         # dot is judged again, RIM_MARK_PASSES).
         k = np.ones((RIM_MARK_BOX, RIM_MARK_BOX), np.float64)
         n = cv2.filter2D(near.astype(np.float64), -1, k, borderType=cv2.BORDER_CONSTANT)
@@ -492,7 +494,7 @@ def rim_left_out(samples, look, marked, r: float, outline=None, block: int = 1) 
             if not g:
                 break
             found_now = rim_marking_pixels(s.patch, s.felt, s.u0, s.v0, g, r, None, left, outline,
-                                           sigma_min=RIM_MEAN_SIGMA_MIN)
+                                           sigma_min=RIM_MEAN_SIGMA_MIN, refit=add is not None)
             if found_now is None:
                 break
             add = found_now
@@ -1108,7 +1110,7 @@ class BallTracker:
         left = None if left is None else ~left
         g, rim = f, None
         for _ in range(RIM_MARK_PASSES):
-            add = rim_marking_pixels(patch, felt, u0, v0, g, r, self.bg.sigma, left, ol)
+            add = rim_marking_pixels(patch, felt, u0, v0, g, r, self.bg.sigma, left, ol, refit=rim is not None)
             if add is None:
                 break
             h = fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=self.shade,
