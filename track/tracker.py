@@ -437,10 +437,13 @@ def rim_marking_pixels(patch, felt, u0: int, v0: int, g, r: float, sigma: float 
         # Not on a first fit where pixels pass alone: pulled by a dot it
         # departs along half its rim by a few levels (the refit without the
         # dot is judged again, RIM_MARK_PASSES).
+        # The pixels that passed alone, grown by one, are not in the means
+        # (a square beside a dot would take the dot's pixels for its own).
         k = np.ones((RIM_MARK_BOX, RIM_MARK_BOX), np.float64)
-        n = cv2.filter2D(near.astype(np.float64), -1, k, borderType=cv2.BORDER_CONSTANT)
-        s = cv2.filter2D(np.where(near, res, 0.0), -1, k, borderType=cv2.BORDER_CONSTANT)
-        bad = near & (n >= RIM_MARK_BOX) & (np.abs(s) > OUTLIER_SIGMAS * sig * np.sqrt(np.maximum(n, 1.0)))
+        rest = near & ~cv2.dilate(bad.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+        n = cv2.filter2D(rest.astype(np.float64), -1, k, borderType=cv2.BORDER_CONSTANT)
+        s = cv2.filter2D(np.where(rest, res, 0.0), -1, k, borderType=cv2.BORDER_CONSTANT)
+        bad |= rest & (n >= RIM_MARK_BOX) & (np.abs(s) > OUTLIER_SIGMAS * sig * np.sqrt(np.maximum(n, 1.0)))
     bad = _groups(bad.astype(np.uint8), RIM_MARK_MIN_PX)
     if bad is None:
         return None
@@ -494,7 +497,7 @@ def rim_left_out(samples, look, marked, r: float, outline=None, block: int = 1) 
             if not g:
                 break
             found_now = rim_marking_pixels(s.patch, s.felt, s.u0, s.v0, g, r, None, left, outline,
-                                           sigma_min=RIM_MEAN_SIGMA_MIN, refit=add is not None)
+                                           sigma_min=RIM_MEAN_SIGMA_MIN)
             if found_now is None:
                 break
             add = found_now
