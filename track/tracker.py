@@ -451,19 +451,6 @@ def rim_marking_pixels(patch, felt, u0: int, v0: int, g, r: float, sigma: float 
     return out if left is None else out & ~left
 
 
-def departs(patch, felt, u0: int, v0: int, g, r: float, pixels, outline, thresh: float) -> bool:
-    """Whether any of the window's ``pixels`` (a mask) departs from the lit
-    sphere's fit ``g`` by more than ``thresh`` levels (the markings rule's,
-    :func:`marking_pixels`): a highlight the quadratic look's rule took
-    for a marking does not (realistic seed 0 shot 12, a highlighted ball
-    without markings: the marked path's refits RMSE 0.00795 px, without
-    them 0.00726; docs/measurements.md, branch marks9)."""
-    rr = r if outline is None else outline.radius  # fit_disc's scale of the sphere
-    m, _ = _model_rows(g.c, g.b, g.G, felt, rr, u0, v0, blur_nodes(np.hypot(*g.b)), g.shade, False, outline)
-    res = np.asarray(patch, np.float64) - felt - m
-    return bool(np.any(np.abs(res[pixels]) > thresh))
-
-
 # The noise (levels) :func:`rim_left_out`'s rule assumes at least on a still
 # ball's mean window: its residual's MAD there is the noise over sqrt(n)
 # (1.7 / sqrt(12) = 0.5), below the pixel-centred look's own misfit: on a
@@ -1430,14 +1417,7 @@ class BallTracker:
                     return _lost(FIT_FAILED)
                 f = g
             if shade and marks is None:
-                before = (f, fit_blur)
                 f, marks, fit_blur = self._unmarked(patch, felt, u0, v0, f, r, fit_blur, ol, foreign, shade=mark_look)
-                if marks is not None and isinstance(shade, SphereLook) and before[0].shade is not None \
-                        and not departs(patch, felt, u0, v0, before[0], r, marks, ol,
-                                        max(MARK_CONTRAST * self._ball_contrast(f, felt), OUTLIER_SIGMAS * self.bg.sigma)):
-                    # What the quadratic look's rule took for markings the
-                    # lit sphere's fit explains (a highlight's peak): none.
-                    (f, fit_blur), marks = before, None
             pred = self._pred
             if marks is not None and pred is not None and np.hypot(*(f.c - pred)) > MARK_RETRY_RADII * r \
                     and u0 <= pred[0] <= u1 - 1 and v0 <= pred[1] <= v1 - 1:
