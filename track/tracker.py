@@ -162,7 +162,12 @@ SPHERE_MARK_MOVE_RADII = 0.1
 # so a highlight's peak passes for a marking: on realistic seed 0's
 # highlight shots 12 and 17 (no markings) the gate opened in every frame
 # and the rim rule changed every frame's fit, RMSE 0.00825 -> 0.00795 and
-# 0.01039 -> 0.01043 px (review 10c): not worse there, but not gated.  A dark dot at the rim left in pulled the lit
+# 0.01039 -> 0.01043 px (review 10c); but with the markings rule off
+# altogether shot 12 is 0.00726 px (err/se 1.07 for 1.16; shot 7 the same,
+# 0.00749): the gate costs 9% there, and dropping the markings the lit
+# sphere's fit explains frame by frame did not recover it (0.00795; the
+# learnt elevation moves with the gate, 1.0506 -> 1.0356 rad;
+# docs/measurements.md, branch marks9).  A dark dot at the rim left in pulled the lit
 # sphere's centre 0.08-0.16 px (simulated: r 12.2 px, noise 1.7, bound
 # 0.004 px), left out 0.004-0.006 px.  A dot turning over the rim shows one
 # or two pixels there (realistic seed 0 shot 18: -50 levels, noise 1.7):
