@@ -365,9 +365,9 @@ def test_a_logos_faint_crescent_at_the_rim_is_left_out():
     # from no markings (a marked ball's frame, MARKED_BALL_FRAMES).  Measured
     # (30 patches, noise 2.5, /tmp/marks9/t1.py): RMS error over the bound
     # of a fit that knows the logo's pixels, without -> with the rule, seed
-    # 0 2.39x -> 1.31x, seed 1 2.68 -> 1.86, seed 2 2.24 -> 1.24.  Asserted
+    # 0 2.39x -> 1.12x, seed 1 2.68 -> 1.44, seed 2 2.24 -> 1.06.  Asserted
     # on seed 0: under the largest of the three, and the logo's pull at
-    # least 1.3x what is left (seed 0: 1.8x; seeds 1-2 1.4x, 1.8x).
+    # least 1.5x what is left (seed 0: 2.1x; seeds 1-2 1.9x, 2.1x).
     from types import SimpleNamespace
 
     from cuespin.track.tracker import BallTracker
@@ -385,5 +385,5 @@ def test_a_logos_faint_crescent_at_the_rim_is_left_out():
         err_without.append(h.c - c)
         bound.append(known_pixels_bound2(c, felt, u0, v0, r, g.shade, clear) * (noise / 1.7) ** 2)
     crb, rmse_without, rmse_with = np.sqrt(np.mean(bound)), rms_px(err_without), rms_px(err_with)
-    assert rmse_without / crb < 1.86
-    assert rmse_with > 1.3 * rmse_without
+    assert rmse_without / crb < 1.44
+    assert rmse_with > 1.5 * rmse_without

@@ -183,7 +183,7 @@ RIM_MARK_MIN_PX = 1
 # each RIM_MARK_BOX x RIM_MARK_BOX square is judged too, at OUTLIER_SIGMAS
 # of that mean's noise (sigma / sqrt(n), n of them on the ball, at least
 # RIM_MARK_BOX), its pixels on the ball taken as the marking's: shot 3
-# RMSE 0.0173 -> 0.0126 px (docs/measurements.md, branch marks9).  On the
+# RMSE 0.0173 -> 0.0136 px (docs/measurements.md, branch marks9).  On the
 # unmarked frames of that shot the largest such mean was 2.4-4.3 of its
 # noise (76 frames).
 RIM_MARK_BOX = 3
