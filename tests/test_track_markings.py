@@ -324,3 +324,66 @@ def test_faint_rim_dots_are_found_on_a_still_balls_mean_window():
         grown = cv2.dilate((dot > 0).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
         assert (out & core).sum() == core.sum()
         assert not (out & ~grown).any()
+
+
+def logo_at_the_rim(rng, tilt=1.25, depth=8.0, noise=2.5):
+    """lit_marked_ball's strongly shaded ball with the renderer's logo
+    (render.look.mark_mask, "logo") turned ``tilt`` rad from the view
+    towards a random side, so that its large disc shows as a crescent at
+    the rim, ``depth`` levels darker (realistic seed 0 shot 3's: -5..-12
+    at noise 2.5, under the rim's one-pixel rule): (the frame, felt,
+    top-left pixel, true centre, radius, look, the pixels the logo does not
+    touch)."""
+    from cuespin.render import look as lk
+    from cuespin.track.model import SphereLook
+    r, n = 12.2, 33
+    look = SphereLook(float(rng.uniform(0, 2 * np.pi)), 0.92, 10.0)
+    c = np.array([384.0, 350.0]) + rng.uniform(0, 1, 2)
+    u0, v0 = int(round(c[0])) - n // 2, int(round(c[1])) - n // 2
+    felt = 90.0 + rng.normal(0, 2, (n, n))
+    img = felt + streak_model(c, np.zeros(2), 60.0, felt, r, u0, v0, np.zeros(1),
+                              np.r_[200.0, 0.0, 0.0, look.geometry()])[0]
+    # R takes the body's z (the logo's centre, render.look.marks) to d.
+    az = rng.uniform(0, 2 * np.pi)
+    d = np.array([np.sin(tilt) * np.cos(az), np.sin(tilt) * np.sin(az), np.cos(tilt)])
+    k = np.cross([0.0, 0.0, 1.0], d)
+    s = np.linalg.norm(k)
+    k /= s
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    R = np.eye(3) + s * K + (1 - d[2]) * K @ K
+    X, Y = np.meshgrid((np.arange(u0, u0 + n) - c[0]) / r, (np.arange(v0, v0 + n) - c[1]) / r)
+    rho2 = X * X + Y * Y
+    normals = np.stack([X, Y, np.sqrt(np.maximum(1 - rho2, 0))], -1)
+    m = lk.mark_mask(normals @ R, "logo", r) * (rho2 < 1)  # body normals R^T n
+    img = np.clip(np.rint(img - depth * m + noise * rng.standard_normal(img.shape)), 0, 255)
+    return img, felt, u0, v0, c, r, look, m == 0
+
+
+def test_a_logos_faint_crescent_at_the_rim_is_left_out():
+    # tracker.RIM_MARK_BOX: a logo turned over the rim, each pixel under the
+    # rim's one-pixel rule, its 3 x 3 means over it; BallTracker._rim_unmarked
+    # from no markings (a marked ball's frame, MARKED_BALL_FRAMES).  Measured
+    # (30 patches, noise 2.5, /tmp/marks9/t1.py): RMS error over the bound
+    # of a fit that knows the logo's pixels, without -> with the rule, seed
+    # 0 2.39x -> 1.12x, seed 1 2.68 -> 1.44, seed 2 2.24 -> 1.06.  Asserted
+    # on seed 0: under the largest of the three, and the logo's pull at
+    # least 1.5x what is left (seed 0: 2.1x; seeds 1-2 1.9x, 2.1x).
+    from types import SimpleNamespace
+
+    from cuespin.track.tracker import BallTracker
+    rng = np.random.default_rng(0)
+    noise = 2.5
+    T = SimpleNamespace(block=1, bg=SimpleNamespace(sigma=noise))
+    err_with, err_without, bound = [], [], []
+    for _ in range(30):
+        img, felt, u0, v0, c, r, look, clear = logo_at_the_rim(rng, noise=noise)
+        T.shade = look
+        g = fit_disc(img, felt, u0, v0, c + [0.3, -0.2], r, 150.0, shade=look)
+        assert g and g.stated, g.reason
+        h, _ = BallTracker._rim_unmarked(T, img, felt, u0, v0, g, r, False, None, None, None)
+        err_with.append(g.c - c)
+        err_without.append(h.c - c)
+        bound.append(known_pixels_bound2(c, felt, u0, v0, r, g.shade, clear) * (noise / 1.7) ** 2)
+    crb, rmse_without, rmse_with = np.sqrt(np.mean(bound)), rms_px(err_without), rms_px(err_with)
+    assert rmse_without / crb < 1.44
+    assert rmse_with > 1.5 * rmse_without

@@ -497,6 +497,10 @@ KINK_STEP_PX = 0.02
 KINK_MIN_STEP_PX = 1e-4
 # The search refines where Gauss-Newton cycled; a minimum farther than this
 # from there is not the one it circled (a fit running off): no fit.
+# Measured on the 172 refits that cycled (blur5's dump, realistic seed 0
+# shot 18; /tmp/marks9/kink.py with no limit): the search moved the centre
+# 0.009 px (median), 0.029 (90%), 0.085 at most from where the cycle
+# stopped; 0.25 is three times the largest.
 KINK_MAX_MOVE_PX = 0.25
 
 
