@@ -295,3 +295,50 @@ def test_hidden_pixels_are_add_frames_numpy_form(colour):
         ref._partial[v0:v1, u0:u1][ys, xs] -= frame[v0:v1, u0:u1][ys, xs]
         ref.full_hidden[v0:v1, u0:u1] += out
         assert np.array_equal(acc._partial, ref._partial) and np.array_equal(acc.full_hidden, ref.full_hidden)
+
+
+def _jackknife_cov_numpy(g, y, felt, U0, V0, r, fit_blur, shade, ok):
+    """model._jackknife_cov's covariance as its numpy glue computed it before
+    (the model's rows, BLAS's Gram, LAPACK's inverse, cluster_meat, A meat A)."""
+    from cuespin.track.model import CLUSTER_PX, SPHERE_CLUSTER_PX, _model_rows, blur_nodes
+
+    h, w = y.shape
+    m, JT = _model_rows(g.c, g.b, g.G, felt, r, U0, V0, blur_nodes(np.hypot(*g.b)), g.shade, fit_blur)
+    use = np.ones((h, w)) if ok is None else np.asarray(ok, float)
+    e = ((y - felt - m) * use).ravel()
+    JT = JT * use.ravel()
+    A = np.linalg.inv(JT @ JT.T)
+    meat, solved = window.cluster_meat(JT, e, h, w, max(int(CLUSTER_PX if shade is True else SPHERE_CLUSTER_PX), 1), A)
+    assert solved
+    cov = (A @ meat @ A)[:2, :2]
+    return 0.5 * (cov + cov.T)
+
+
+@pytest.mark.parametrize("look", [False, True, "sphere"])
+def test_jackknife_cov_is_the_numpy_glue(look):
+    # Rounding only (the kernel's Gram and Gauss-Jordan for BLAS's product
+    # and LAPACK's inverse): 1e-9 relative is far below a stated error's
+    # digits; the tracks on the speed files agree to it (branch speed15).
+    from cuespin.render.draw import disc_coverage
+    from cuespin.track.model import SphereLook, _jackknife_cov, fit_disc
+
+    shade = SphereLook(0.6, 0.9, 8.0) if look == "sphere" else look
+    rng = np.random.default_rng(11)
+    for trial in range(12):
+        h, w = (int(x) for x in rng.integers(14, 22, 2))
+        c = np.array([w / 2 + rng.uniform(-1, 1), h / 2 + rng.uniform(-1, 1)])
+        r = rng.uniform(3.5, 5.0)
+        fit_blur = trial % 3 == 0
+        b0 = np.array([2.5, 1.0]) if fit_blur else np.zeros(2)
+        felt = 90.0 + rng.normal(0, 1, (h, w))
+        cover = np.mean([disc_coverage(*(c + t * b0), r, 0, 0, w, h) for t in np.linspace(-0.5, 0.5, 9)], axis=0)
+        y = felt + 120.0 * cover + rng.normal(0, 3, (h, w))
+        ok = None if trial % 2 else rng.random((h, w)) > 0.05
+        # The blur held (a fitted one need not converge on 12 random
+        # streaks); the jackknife's rows then take it as fitted or not.
+        g = fit_disc(y, felt, 0, 0, c, r, 200.0, b0=b0, shade=shade, valid=ok)
+        assert g
+        got = _jackknife_cov(g, y, felt, 0, 0, r, fit_blur, shade, ok, None)
+        ref = _jackknife_cov_numpy(g, y, felt, 0, 0, r, fit_blur, shade, ok)
+        np.testing.assert_allclose(got.cov, ref, rtol=1e-9, atol=1e-12 * np.abs(ref).max())
+        np.testing.assert_allclose(got.stderr, np.sqrt(np.diag(ref)), rtol=1e-9)

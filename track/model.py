@@ -678,29 +678,27 @@ def _jackknife_cov(g: DiscFit, y, felt, U0, V0, r, fit_blur, shade, ok, outline)
     ``H_gg`` the cluster's block of the hat matrix) states each cluster's
     score as if the cluster had been left out of the fit: 1.03 / 1.21 there.
     """
-    h, w = y.shape
     if isinstance(shade, SphereLook) and outline is not None:  # as fit_disc: the outline's own radius
         r = outline.radius
-    m, JT = _model_rows(g.c, g.b, g.G, felt, r, U0, V0, blur_nodes(np.hypot(*g.b)), g.shade, fit_blur, outline)
-    use = np.ones((h, w)) if ok is None else np.asarray(ok, float)
-    e = ((np.asarray(y, float) - felt - m) * use).ravel()
-    JT = JT * use.ravel()
-    B = max(int(CLUSTER_PX if shade is True else SPHERE_CLUSTER_PX), 1)
-    try:
-        A = np.linalg.inv(JT @ JT.T)
-    except np.linalg.LinAlgError:
-        return g
     # (I - H_gg)^-1 e_g, H_gg = J_g^T A J_g: each cluster's residuals had it
-    # been left out, and their scores' outer products summed, compiled
-    # (track.window.cluster_meat: numpy's einsum and batched solves over
-    # zero-padded clusters were ~0.5 ms of a 1 ms fit; the same to rounding).
+    # been left out, and their scores' outer products summed; the model's
+    # rows, A = (J J^T)^-1 and the centre's block of A meat A with them, in
+    # one compiled call (track.window.jackknife_cov, cluster_meat: numpy's
+    # einsum and batched solves over zero-padded clusters were ~0.5 ms of a
+    # 1 ms fit, its glue ~0.15 s a 1,000 frames; the same to rounding).
     from cuespin.track import window
-    meat, solved = window.cluster_meat(JT, e, h, w, B, A)
-    if not solved:  # a singular I - H_gg
-        return g
-    cov = (A @ meat @ A)[:2, :2]
-    cov = 0.5 * (cov + cov.T)
-    if not (np.all(np.isfinite(cov)) and np.all(np.linalg.eigvalsh(cov) > 0)):
+    felt = np.ascontiguousarray(felt, dtype=np.float64)
+    h, w = felt.shape
+    use = np.ones(h * w) if ok is None else np.asarray(ok, float).ravel()
+    kind, geo = _geometry(r, outline)
+    B = max(int(CLUSTER_PX if shade is True else SPHERE_CLUSTER_PX), 1)
+    has_shade = g.shade is not None
+    cov, stated = window.jackknife_cov(np.ascontiguousarray(y, dtype=np.float64), felt, use, float(g.c[0]),
+                                       float(g.c[1]), float(g.b[0]), float(g.b[1]), float(g.G), float(r), kind, geo,
+                                       int(U0), int(V0), blur_nodes(float(np.hypot(*g.b))),
+                                       np.ascontiguousarray(g.shade, dtype=np.float64) if has_shade else _NO_SHADE,
+                                       has_shade, bool(fit_blur), B)
+    if not stated:
         return g
     return replace(g, cov=cov, stderr=np.sqrt(np.diag(cov)))
 

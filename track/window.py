@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from cuespin.track.kernel import _jit
+from cuespin.track.kernel import _centre_cov, _gram, _inverse, _jit, model_rows
 
 
 @_jit()
@@ -222,6 +222,55 @@ def linear_fit(AT, y, sel):
 
 
 @_jit()
+def _pushed_score(Jc, x, n, k, A, M, T, v):
+    """One cluster's jackknifed score ``(I_k - J_g J_g^T A)^-1 J_g e_g``
+    into ``v`` (``Jc`` (k, >= n) its rows, ``x`` its residuals; ``M``, ``T``
+    (k, k) scratch); False on an exact zero pivot."""
+    for q in range(k):
+        acc = 0.0
+        for i in range(n):
+            acc += Jc[q, i] * x[i]
+        v[q] = acc
+    for q in range(k):  # J_g J_g^T, in M
+        for p2 in range(q + 1):
+            acc = 0.0
+            for i in range(n):
+                acc += Jc[q, i] * Jc[p2, i]
+            M[q, p2] = acc
+            M[p2, q] = acc
+    for q in range(k):  # I - (J_g J_g^T) A
+        for j in range(k):
+            acc = 0.0
+            for p2 in range(k):
+                acc += M[q, p2] * A[p2, j]
+            T[q, j] = (1.0 if q == j else 0.0) - acc
+    for c in range(k):  # Gaussian elimination, partial pivoting
+        piv = c
+        big = abs(T[c, c])
+        for i in range(c + 1, k):
+            if abs(T[i, c]) > big:
+                big, piv = abs(T[i, c]), i
+        if big == 0.0:
+            return False
+        if piv != c:
+            for j in range(k):
+                T[c, j], T[piv, j] = T[piv, j], T[c, j]
+            v[c], v[piv] = v[piv], v[c]
+        for i in range(c + 1, k):
+            f = T[i, c] / T[c, c]
+            if f != 0.0:
+                for j in range(c + 1, k):
+                    T[i, j] -= f * T[c, j]
+                v[i] -= f * v[c]
+    for i in range(k - 1, -1, -1):
+        acc = v[i]
+        for j in range(i + 1, k):
+            acc -= T[i, j] * v[j]
+        v[i] = acc / T[i, i]
+    return True
+
+
+@_jit()
 def cluster_meat(JT, e, h, w, B, A):
     """The jackknife's meat over square clusters (CR3): for each ``B`` x
     ``B`` cluster of a ``h`` x ``w`` window (row-major; the last row and
@@ -233,7 +282,14 @@ def cluster_meat(JT, e, h, w, B, A):
     :func:`cuespin.track.model._jackknife_cov`'s numpy form (einsum and
     batched solves over zero-padded clusters) to rounding, in one call.
     Returns (meat, ok); ok False when some ``I - H_gg`` is singular (an
-    exact zero pivot, where numpy's solve raises)."""
+    exact zero pivot, where numpy's solve raises).
+
+    A cluster of more pixels than parameters (``n`` > ``k``: 3 x 3 blocks
+    and six or eight parameters) takes the push-through identity's form,
+    ``J_g (I_n - J_g^T A J_g)^-1 e_g = (I_k - J_g J_g^T A)^-1 J_g e_g``: a
+    ``k`` x ``k`` solve instead of ``n`` x ``n`` (the same to rounding; its
+    determinant is the same, Sylvester's: 65 -> 3x us a 17 x 17 window,
+    branch speed15)."""
     k = JT.shape[0]
     nb = B * B
     meat = np.zeros((k, k))
@@ -242,6 +298,9 @@ def cluster_meat(JT, e, h, w, B, A):
     M = np.empty((nb, nb))
     x = np.empty(nb)
     S = np.empty(k)
+    Mk = np.empty((k, k))
+    Tk = np.empty((k, k))
+    v = np.empty(k)
     for gi in range(0, h, B):
         for gj in range(0, w, B):
             n = 0
@@ -252,6 +311,13 @@ def cluster_meat(JT, e, h, w, B, A):
                         Jc[q, n] = JT[q, p]
                     x[n] = e[p]
                     n += 1
+            if n > k:
+                if not _pushed_score(Jc, x, n, k, A, Mk, Tk, v):
+                    return meat, False
+                for q in range(k):
+                    for p2 in range(k):
+                        meat[q, p2] += v[q] * v[p2]
+                continue
             for q in range(k):  # A J_g
                 for i in range(n):
                     acc = 0.0
@@ -296,6 +362,53 @@ def cluster_meat(JT, e, h, w, B, A):
                 for p2 in range(k):
                     meat[q, p2] += S[q] * S[p2]
     return meat, True
+
+
+@_jit()
+def jackknife_cov(y, felt, use, c0, c1, b0, b1, G, r, kind, geo, u0, v0, taus, shade, has_shade, blur_rows, B):
+    """:func:`cuespin.track.model._jackknife_cov`'s arithmetic in one call:
+    the model's rows at the fit (:func:`cuespin.track.kernel.model_rows`,
+    the same call its numpy glue made), the residuals and rows on the
+    pixels ``use`` (0/1, h*w), ``A = (J J^T)^-1`` (the kernel's Gram and
+    Gauss-Jordan in place of BLAS's product and LAPACK's inverse: the same
+    to rounding), the meat (:func:`cluster_meat`) and the centre's block of
+    ``A meat A``, symmetrised.  Its numpy glue was ~0.15 s a 1,000 frames of
+    the tracker's main thread (eleven small calls a fit, branch speed15).
+    Returns (cov (2, 2), ok); ok False where the numpy form kept the fit's
+    own sandwich: a singular ``J J^T`` or ``I - H_gg``, or a covariance not
+    finite and positive definite."""
+    h, w = felt.shape
+    npx = h * w
+    k = (5 if blur_rows else 3) + (3 if has_shade else 0)
+    m = np.empty(npx)
+    JT = np.empty((k, npx))
+    cov = np.zeros((2, 2))
+    model_rows(c0, c1, b0, b1, G, felt, r, kind, geo, u0, v0, taus, shade, has_shade, blur_rows, m, JT)
+    yf = y.ravel()
+    ff = felt.ravel()
+    e = np.empty(npx)
+    for p in range(npx):
+        e[p] = (yf[p] - ff[p] - m[p]) * use[p]
+    for a in range(k):
+        for p in range(npx):
+            JT[a, p] *= use[p]
+    invertible, A = _inverse(_gram(JT, e, False))
+    if not invertible:
+        return cov, False
+    meat, solved = cluster_meat(JT, e, h, w, B, A)
+    if not solved:
+        return cov, False
+    V = _centre_cov(A, meat)
+    cov[0, 0], cov[1, 1] = V[0, 0], V[1, 1]
+    cov[0, 1] = cov[1, 0] = 0.5 * (V[0, 1] + V[1, 0])
+    for a in range(2):
+        for b in range(2):
+            if not np.isfinite(cov[a, b]):
+                return cov, False
+    # Both eigenvalues of the symmetric 2 x 2 positive (numpy's eigvalsh > 0).
+    if not (cov[0, 0] > 0.0 and cov[0, 0] * cov[1, 1] - cov[0, 1] * cov[0, 1] > 0.0):
+        return cov, False
+    return cov, True
 
 
 @_jit()
@@ -378,6 +491,9 @@ def warm_up() -> None:
     AT = np.ones((6, 9))
     linear_fit(AT[2:6], np.ones(9), np.ones(9, bool))
     cluster_meat(AT * 0.1, np.ones(9), 3, 3, 3, np.eye(6))
+    y = np.full((3, 3), 2.0)
+    jackknife_cov(y, y - 1.0, np.ones(9), 1.0, 1.0, 0.0, 0.0, 3.0, 1.0, 0, np.ones(1), 0, 0, np.zeros(1),
+                  np.zeros(3), True, False, 3)
     block_means(D, 0, 0, 4, 4, 2)
     block_means(felt, 0, 0, 4, 4, 2)
     block_all(np.ones((9, 9), bool), 0, 0, 4, 4, 2)
@@ -386,7 +502,7 @@ def warm_up() -> None:
 
 
 __all__ = ["block_all", "block_means", "centroid", "cluster_meat", "departure_centroid", "foreign_count",
-           "hidden_pixels", "linear_fit", "warm_up"]
+           "hidden_pixels", "jackknife_cov", "linear_fit", "warm_up"]
 
 
 
