@@ -342,3 +342,61 @@ def test_jackknife_cov_is_the_numpy_glue(look):
         ref = _jackknife_cov_numpy(g, y, felt, 0, 0, r, fit_blur, shade, ok)
         np.testing.assert_allclose(got.cov, ref, rtol=1e-9, atol=1e-12 * np.abs(ref).max())
         np.testing.assert_allclose(got.stderr, np.sqrt(np.diag(ref)), rtol=1e-9)
+
+
+def _refit_shift_numpy(felt_old, felt_new, u0, v0, c, b, G, r, fit_blur, shade=None, valid=None):
+    """model.refit_shift (pixels) as its numpy form computed it before."""
+    from cuespin.track import kernel
+    from cuespin.track.model import _model_rows, blur_nodes
+
+    taus = blur_nodes(np.hypot(*b))
+    felt_old, felt_new = np.asarray(felt_old, np.float64), np.asarray(felt_new, np.float64)
+    iG = 4 if fit_blur else 2
+    _, D = _model_rows(c, b, 1.0, np.zeros_like(felt_old), r, u0, v0, taus, None, fit_blur)
+    df = (felt_new - felt_old).ravel()
+    cov = D[iG]
+    kept = df * (1.0 - cov)
+    if shade is None:
+        Jo, Jn = D.copy(), D
+        Jo[:iG] *= (G - felt_old).ravel()
+        Jn[:iG] *= (G - felt_new).ravel()
+    else:
+        _, Jo = _model_rows(c, b, G, felt_old, r, u0, v0, taus, shade, fit_blur)
+        Jn = Jo.copy()
+        moved = D[:iG] * df
+        psf = float(shade[kernel.PSF_AT]) if len(shade) > kernel.PSF_AT else 0.0
+        if psf > 0:
+            h, w = felt_old.shape
+            moved = moved.reshape(-1, h, w)
+            kernel.psf_blur(moved, psf)
+            seen = (df * cov).reshape(1, h, w)
+            kernel.psf_blur(seen, psf)
+            moved, kept = moved.reshape(iG, -1), df - seen.ravel()
+        Jn[:iG] -= moved
+    if valid is not None:
+        Jo = Jo * np.asarray(valid, float).reshape(1, -1)
+    return -np.linalg.lstsq(Jo @ Jn.T, Jo @ kept, rcond=1e-9)[0][:2]
+
+
+@pytest.mark.parametrize("look", [None, "quadratic", "sphere", "sphere_psf"])
+def test_felt_shift_is_the_numpy_form(look):
+    # Rounding only (sums in another order; numba's gelsd for numpy's): the
+    # tracks' centres on the speed files agree to it (branch speed15).
+    from cuespin.track.model import SphereLook, refit_shift
+
+    rng = np.random.default_rng(12)
+    geo = {"sphere": SphereLook(0.6, 0.9, 8.0), "sphere_psf": SphereLook(0.6, 0.9, 8.0, psf=0.8)}
+    for trial in range(12):
+        h, w = (int(x) for x in rng.integers(14, 22, 2))
+        c = np.array([w / 2 + rng.uniform(-1, 1), h / 2 + rng.uniform(-1, 1)])
+        r = rng.uniform(3.5, 5.0)
+        fit_blur = trial % 3 == 0
+        b = np.array([2.5, 1.0]) if fit_blur else np.zeros(2)
+        shade = None if look is None else (np.array([3.0, -2.0, 5.0]) if look == "quadratic"
+                                           else np.r_[40.0, 20.0, -3.0, geo[look].geometry()])
+        old = (90.0 + rng.normal(0, 1, (h, w))).astype(np.float32)
+        new = old + rng.normal(0, 2, (h, w)).astype(np.float32)
+        valid = None if trial % 2 else rng.random((h, w)) > 0.05
+        got = refit_shift(old, new, 3, 5, c + (3, 5), b, 200.0, r, fit_blur, shade, valid=valid)
+        ref = _refit_shift_numpy(old, new, 3, 5, c + (3, 5), b, 200.0, r, fit_blur, shade, valid)
+        np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-12)
