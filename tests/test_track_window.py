@@ -297,6 +297,15 @@ def test_hidden_pixels_are_add_frames_numpy_form(colour):
         assert np.array_equal(acc._partial, ref._partial) and np.array_equal(acc.full_hidden, ref.full_hidden)
 
 
+def _ball_window(rng, trial):
+    """A random ball's window: (h, w, centre, radius (px), whether its
+    blur is fitted, blur vector (px): every third trial)."""
+    h, w = (int(x) for x in rng.integers(14, 22, 2))
+    c = np.array([w / 2 + rng.uniform(-1, 1), h / 2 + rng.uniform(-1, 1)])
+    fit_blur = trial % 3 == 0
+    return h, w, c, rng.uniform(3.5, 5.0), fit_blur, np.array([2.5, 1.0]) if fit_blur else np.zeros(2)
+
+
 def _jackknife_cov_numpy(g, y, felt, U0, V0, r, fit_blur, shade, ok):
     """model._jackknife_cov's covariance as its numpy glue computed it before
     (the model's rows, BLAS's Gram, LAPACK's inverse, cluster_meat, A meat A)."""
@@ -325,11 +334,7 @@ def test_jackknife_cov_is_the_numpy_glue(look):
     shade = SphereLook(0.6, 0.9, 8.0) if look == "sphere" else look
     rng = np.random.default_rng(11)
     for trial in range(12):
-        h, w = (int(x) for x in rng.integers(14, 22, 2))
-        c = np.array([w / 2 + rng.uniform(-1, 1), h / 2 + rng.uniform(-1, 1)])
-        r = rng.uniform(3.5, 5.0)
-        fit_blur = trial % 3 == 0
-        b0 = np.array([2.5, 1.0]) if fit_blur else np.zeros(2)
+        h, w, c, r, fit_blur, b0 = _ball_window(rng, trial)
         felt = 90.0 + rng.normal(0, 1, (h, w))
         cover = np.mean([disc_coverage(*(c + t * b0), r, 0, 0, w, h) for t in np.linspace(-0.5, 0.5, 9)], axis=0)
         y = felt + 120.0 * cover + rng.normal(0, 3, (h, w))
@@ -387,11 +392,7 @@ def test_felt_shift_is_the_numpy_form(look):
     rng = np.random.default_rng(12)
     geo = {"sphere": SphereLook(0.6, 0.9, 8.0), "sphere_psf": SphereLook(0.6, 0.9, 8.0, psf=0.8)}
     for trial in range(12):
-        h, w = (int(x) for x in rng.integers(14, 22, 2))
-        c = np.array([w / 2 + rng.uniform(-1, 1), h / 2 + rng.uniform(-1, 1)])
-        r = rng.uniform(3.5, 5.0)
-        fit_blur = trial % 3 == 0
-        b = np.array([2.5, 1.0]) if fit_blur else np.zeros(2)
+        h, w, c, r, fit_blur, b = _ball_window(rng, trial)
         shade = None if look is None else (np.array([3.0, -2.0, 5.0]) if look == "quadratic"
                                            else np.r_[40.0, 20.0, -3.0, geo[look].geometry()])
         old = (90.0 + rng.normal(0, 1, (h, w))).astype(np.float32)
