@@ -295,3 +295,109 @@ def test_hidden_pixels_are_add_frames_numpy_form(colour):
         ref._partial[v0:v1, u0:u1][ys, xs] -= frame[v0:v1, u0:u1][ys, xs]
         ref.full_hidden[v0:v1, u0:u1] += out
         assert np.array_equal(acc._partial, ref._partial) and np.array_equal(acc.full_hidden, ref.full_hidden)
+
+
+def _ball_window(rng, trial):
+    """A random ball's window: (h, w, centre, radius (px), whether its
+    blur is fitted, blur vector (px): every third trial)."""
+    h, w = (int(x) for x in rng.integers(14, 22, 2))
+    c = np.array([w / 2 + rng.uniform(-1, 1), h / 2 + rng.uniform(-1, 1)])
+    fit_blur = trial % 3 == 0
+    return h, w, c, rng.uniform(3.5, 5.0), fit_blur, np.array([2.5, 1.0]) if fit_blur else np.zeros(2)
+
+
+def _jackknife_cov_numpy(g, y, felt, U0, V0, r, fit_blur, shade, ok):
+    """model._jackknife_cov's covariance as its numpy glue computed it before
+    (the model's rows, BLAS's Gram, LAPACK's inverse, cluster_meat, A meat A)."""
+    from cuespin.track.model import CLUSTER_PX, SPHERE_CLUSTER_PX, _model_rows, blur_nodes
+
+    h, w = y.shape
+    m, JT = _model_rows(g.c, g.b, g.G, felt, r, U0, V0, blur_nodes(np.hypot(*g.b)), g.shade, fit_blur)
+    use = np.ones((h, w)) if ok is None else np.asarray(ok, float)
+    e = ((y - felt - m) * use).ravel()
+    JT = JT * use.ravel()
+    A = np.linalg.inv(JT @ JT.T)
+    meat, solved = window.cluster_meat(JT, e, h, w, max(int(CLUSTER_PX if shade is True else SPHERE_CLUSTER_PX), 1), A)
+    assert solved
+    cov = (A @ meat @ A)[:2, :2]
+    return 0.5 * (cov + cov.T)
+
+
+@pytest.mark.parametrize("look", [False, True, "sphere"])
+def test_jackknife_cov_is_the_numpy_glue(look):
+    # Rounding only (the kernel's Gram and Gauss-Jordan for BLAS's product
+    # and LAPACK's inverse): 1e-9 relative is far below a stated error's
+    # digits; the tracks on the speed files agree to it (branch speed15).
+    from cuespin.render.draw import disc_coverage
+    from cuespin.track.model import SphereLook, _jackknife_cov, fit_disc
+
+    shade = SphereLook(0.6, 0.9, 8.0) if look == "sphere" else look
+    rng = np.random.default_rng(11)
+    for trial in range(12):
+        h, w, c, r, fit_blur, b0 = _ball_window(rng, trial)
+        felt = 90.0 + rng.normal(0, 1, (h, w))
+        cover = np.mean([disc_coverage(*(c + t * b0), r, 0, 0, w, h) for t in np.linspace(-0.5, 0.5, 9)], axis=0)
+        y = felt + 120.0 * cover + rng.normal(0, 3, (h, w))
+        ok = None if trial % 2 else rng.random((h, w)) > 0.05
+        # The blur held (a fitted one need not converge on 12 random
+        # streaks); the jackknife's rows then take it as fitted or not.
+        g = fit_disc(y, felt, 0, 0, c, r, 200.0, b0=b0, shade=shade, valid=ok)
+        assert g
+        got = _jackknife_cov(g, y, felt, 0, 0, r, fit_blur, shade, ok, None)
+        ref = _jackknife_cov_numpy(g, y, felt, 0, 0, r, fit_blur, shade, ok)
+        np.testing.assert_allclose(got.cov, ref, rtol=1e-9, atol=1e-12 * np.abs(ref).max())
+        np.testing.assert_allclose(got.stderr, np.sqrt(np.diag(ref)), rtol=1e-9)
+
+
+def _refit_shift_numpy(felt_old, felt_new, u0, v0, c, b, G, r, fit_blur, shade=None, valid=None):
+    """model.refit_shift (pixels) as its numpy form computed it before."""
+    from cuespin.track import kernel
+    from cuespin.track.model import _model_rows, blur_nodes
+
+    taus = blur_nodes(np.hypot(*b))
+    felt_old, felt_new = np.asarray(felt_old, np.float64), np.asarray(felt_new, np.float64)
+    iG = 4 if fit_blur else 2
+    _, D = _model_rows(c, b, 1.0, np.zeros_like(felt_old), r, u0, v0, taus, None, fit_blur)
+    df = (felt_new - felt_old).ravel()
+    cov = D[iG]
+    kept = df * (1.0 - cov)
+    if shade is None:
+        Jo, Jn = D.copy(), D
+        Jo[:iG] *= (G - felt_old).ravel()
+        Jn[:iG] *= (G - felt_new).ravel()
+    else:
+        _, Jo = _model_rows(c, b, G, felt_old, r, u0, v0, taus, shade, fit_blur)
+        Jn = Jo.copy()
+        moved = D[:iG] * df
+        psf = float(shade[kernel.PSF_AT]) if len(shade) > kernel.PSF_AT else 0.0
+        if psf > 0:
+            h, w = felt_old.shape
+            moved = moved.reshape(-1, h, w)
+            kernel.psf_blur(moved, psf)
+            seen = (df * cov).reshape(1, h, w)
+            kernel.psf_blur(seen, psf)
+            moved, kept = moved.reshape(iG, -1), df - seen.ravel()
+        Jn[:iG] -= moved
+    if valid is not None:
+        Jo = Jo * np.asarray(valid, float).reshape(1, -1)
+    return -np.linalg.lstsq(Jo @ Jn.T, Jo @ kept, rcond=1e-9)[0][:2]
+
+
+@pytest.mark.parametrize("look", [None, "quadratic", "sphere", "sphere_psf"])
+def test_felt_shift_is_the_numpy_form(look):
+    # Rounding only (sums in another order; numba's gelsd for numpy's): the
+    # tracks' centres on the speed files agree to it (branch speed15).
+    from cuespin.track.model import SphereLook, refit_shift
+
+    rng = np.random.default_rng(12)
+    geo = {"sphere": SphereLook(0.6, 0.9, 8.0), "sphere_psf": SphereLook(0.6, 0.9, 8.0, psf=0.8)}
+    for trial in range(12):
+        h, w, c, r, fit_blur, b = _ball_window(rng, trial)
+        shade = None if look is None else (np.array([3.0, -2.0, 5.0]) if look == "quadratic"
+                                           else np.r_[40.0, 20.0, -3.0, geo[look].geometry()])
+        old = (90.0 + rng.normal(0, 1, (h, w))).astype(np.float32)
+        new = old + rng.normal(0, 2, (h, w)).astype(np.float32)
+        valid = None if trial % 2 else rng.random((h, w)) > 0.05
+        got = refit_shift(old, new, 3, 5, c + (3, 5), b, 200.0, r, fit_blur, shade, valid=valid)
+        ref = _refit_shift_numpy(old, new, 3, 5, c + (3, 5), b, 200.0, r, fit_blur, shade, valid)
+        np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-12)

@@ -682,29 +682,27 @@ def _jackknife_cov(g: DiscFit, y, felt, U0, V0, r, fit_blur, shade, ok, outline)
     ``H_gg`` the cluster's block of the hat matrix) states each cluster's
     score as if the cluster had been left out of the fit: 1.03 / 1.21 there.
     """
-    h, w = y.shape
     if isinstance(shade, SphereLook) and outline is not None:  # as fit_disc: the outline's own radius
         r = outline.radius
-    m, JT = _model_rows(g.c, g.b, g.G, felt, r, U0, V0, blur_nodes(np.hypot(*g.b)), g.shade, fit_blur, outline)
-    use = np.ones((h, w)) if ok is None else np.asarray(ok, float)
-    e = ((np.asarray(y, float) - felt - m) * use).ravel()
-    JT = JT * use.ravel()
-    B = max(int(CLUSTER_PX if shade is True else SPHERE_CLUSTER_PX), 1)
-    try:
-        A = np.linalg.inv(JT @ JT.T)
-    except np.linalg.LinAlgError:
-        return g
     # (I - H_gg)^-1 e_g, H_gg = J_g^T A J_g: each cluster's residuals had it
-    # been left out, and their scores' outer products summed, compiled
-    # (track.window.cluster_meat: numpy's einsum and batched solves over
-    # zero-padded clusters were ~0.5 ms of a 1 ms fit; the same to rounding).
+    # been left out, and their scores' outer products summed; the model's
+    # rows, A = (J J^T)^-1 and the centre's block of A meat A with them, in
+    # one compiled call (track.window.jackknife_cov, cluster_meat: numpy's
+    # einsum and batched solves over zero-padded clusters were ~0.5 ms of a
+    # 1 ms fit, its glue ~0.15 s a 1,000 frames; the same to rounding).
     from cuespin.track import window
-    meat, solved = window.cluster_meat(JT, e, h, w, B, A)
-    if not solved:  # a singular I - H_gg
-        return g
-    cov = (A @ meat @ A)[:2, :2]
-    cov = 0.5 * (cov + cov.T)
-    if not (np.all(np.isfinite(cov)) and np.all(np.linalg.eigvalsh(cov) > 0)):
+    felt = np.ascontiguousarray(felt, dtype=np.float64)
+    h, w = felt.shape
+    use = np.ones(h * w) if ok is None else np.asarray(ok, float).ravel()
+    kind, geo = _geometry(r, outline)
+    B = max(int(CLUSTER_PX if shade is True else SPHERE_CLUSTER_PX), 1)
+    has_shade = g.shade is not None
+    cov, stated = window.jackknife_cov(np.ascontiguousarray(y, dtype=np.float64), felt, use, float(g.c[0]),
+                                       float(g.c[1]), float(g.b[0]), float(g.b[1]), float(g.G), float(r), kind, geo,
+                                       int(U0), int(V0), blur_nodes(float(np.hypot(*g.b))),
+                                       np.ascontiguousarray(g.shade, dtype=np.float64) if has_shade else _NO_SHADE,
+                                       has_shade, bool(fit_blur), B)
+    if not stated:
         return g
     return replace(g, cov=cov, stderr=np.sqrt(np.diag(cov)))
 
@@ -749,6 +747,11 @@ def moments(D: np.ndarray, u0: int, v0: int, c0, radius: float, n_iter: int = 3)
     return c
 
 
+# refit_shift's least squares: singular values below this fraction of the
+# largest are cut (a blur fitted near zero length, whose rows vanish).
+SHIFT_RCOND = 1e-9
+
+
 def refit_shift(felt_old: np.ndarray, felt_new: np.ndarray, u0: int, v0: int, c, b, G: float,
                 r: float, fit_blur: bool, shade=None, outline=None, valid=None, block: int = 1) -> np.ndarray:
     """Change of a converged disc fit's centre (px) when its felt is replaced.
@@ -772,48 +775,29 @@ def refit_shift(felt_old: np.ndarray, felt_new: np.ndarray, u0: int, v0: int, c,
         (U0, V0), (fo, fn, ok) = block_patch(block, u0, v0, felt_old, felt_new, ok)
         cc, rc, bc, ol = _coarse(block, c, r, b, outline)
         return block * refit_shift(fo, fn, U0, V0, cc, bc, G, rc, fit_blur, shade, ol, ok)
-    taus = blur_nodes(np.hypot(*b))
-    c, b = np.asarray(c, float), np.asarray(b, float)
-    felt_old = np.asarray(felt_old, np.float64)
-    felt_new = np.asarray(felt_new, np.float64)
     # The rows before the level's (centre, blur) are linear in the felt, with
     # the coverage's derivatives as its coefficient (the disc's rows at
     # level 1 on zero felt); the others do not depend on it.  So one
-    # evaluation (two with the look) serves both felts.
-    iG = 4 if fit_blur else 2
-    _, D = _model_rows(c, b, 1.0, np.zeros_like(felt_old), r, u0, v0, taus, None, fit_blur, outline)
-    df = (felt_new - felt_old).ravel()
-    cov = D[iG]
-    kept = df * (1.0 - cov)  # the residual's change the felt's makes, less the model's
-    if shade is None:
-        Jo, Jn = D.copy(), D
-        Jo[:iG] *= (G - felt_old).ravel()
-        Jn[:iG] *= (G - felt_new).ravel()
-    else:
-        _, Jo = _model_rows(c, b, G, felt_old, r, u0, v0, taus, shade, fit_blur, outline)
-        Jn = Jo.copy()
-        moved = D[:iG] * df
-        psf = float(shade[kernel().PSF_AT]) if len(shade) > kernel().PSF_AT else 0.0
-        if psf > 0:
-            # The lit sphere's model is seen through the lens (SphereLook.psf):
-            # so is the felt's share of it.
-            h, w = felt_old.shape
-            moved = moved.reshape(-1, h, w)
-            kernel().psf_blur(moved, psf)
-            seen = (df * cov).reshape(1, h, w)
-            kernel().psf_blur(seen, psf)
-            moved, kept = moved.reshape(iG, -1), df - seen.ravel()
-        Jn[:iG] -= moved
-    # Least squares, not solve: a blur fitted near zero length has (almost)
-    # zero derivatives (the blur acts at second order there), which must not
-    # stop the centre's correction.
-    if valid is not None:  # the pixels the fit left out tell it nothing (rows form: a column per pixel)
-        Jo = Jo * np.asarray(valid, float).reshape(1, -1)
+    # evaluation (two with the look) serves both felts; with the lit
+    # sphere's lens blur the felt's share is seen through it too.  Least
+    # squares, not solve: a blur fitted near zero length has (almost) zero
+    # derivatives (the blur acts at second order there), which must not
+    # stop the centre's correction.  All in one compiled call
+    # (track.window.felt_shift; the numpy form's ~20 small calls a frame).
+    from cuespin.track import window
+    c, b = np.asarray(c, float), np.asarray(b, float)
+    kind, geo = _geometry(r, outline)
+    has_valid = valid is not None
     try:
-        step = -np.linalg.lstsq(Jo @ Jn.T, Jo @ kept, rcond=1e-9)[0]
+        return window.felt_shift(np.ascontiguousarray(felt_old, dtype=np.float64),
+                                 np.ascontiguousarray(felt_new, dtype=np.float64),
+                                 np.asarray(valid, float).ravel() if has_valid else _NO_SHADE, has_valid,
+                                 float(c[0]), float(c[1]), float(b[0]), float(b[1]), float(G), float(r), kind, geo,
+                                 int(u0), int(v0), blur_nodes(float(np.hypot(*b))),
+                                 _NO_SHADE if shade is None else np.ascontiguousarray(shade, dtype=np.float64),
+                                 shade is not None, bool(fit_blur), SHIFT_RCOND)
     except np.linalg.LinAlgError:
         return np.zeros(2)
-    return step[:2]
 
 
 def streak_from_moments(D: np.ndarray, u0: int, v0: int, c, radius: float) -> np.ndarray:

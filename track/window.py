@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from cuespin.track.kernel import _jit
+from cuespin.track.kernel import PSF_AT, _centre_cov, _gram, _inverse, _jit, model_rows, psf_blur
 
 
 @_jit()
@@ -222,6 +222,63 @@ def linear_fit(AT, y, sel):
 
 
 @_jit()
+def _gauss_solve(M, x, n):
+    """``M[:n, :n] z = x[:n]`` by Gaussian elimination with partial pivoting
+    (LAPACK's gesv's rule), ``z`` into ``x``, ``M`` overwritten; False on an
+    exact zero pivot (where numpy's solve raises)."""
+    for c in range(n):
+        piv = c
+        big = abs(M[c, c])
+        for i in range(c + 1, n):
+            if abs(M[i, c]) > big:
+                big, piv = abs(M[i, c]), i
+        if big == 0.0:
+            return False
+        if piv != c:
+            for j in range(n):
+                M[c, j], M[piv, j] = M[piv, j], M[c, j]
+            x[c], x[piv] = x[piv], x[c]
+        for i in range(c + 1, n):
+            f = M[i, c] / M[c, c]
+            if f != 0.0:
+                for j in range(c + 1, n):
+                    M[i, j] -= f * M[c, j]
+                x[i] -= f * x[c]
+    for i in range(n - 1, -1, -1):
+        acc = x[i]
+        for j in range(i + 1, n):
+            acc -= M[i, j] * x[j]
+        x[i] = acc / M[i, i]
+    return True
+
+
+@_jit()
+def _pushed_score(Jc, x, n, k, A, M, T, v):
+    """One cluster's jackknifed score ``(I_k - J_g J_g^T A)^-1 J_g e_g``
+    into ``v`` (``Jc`` (k, >= n) its rows, ``x`` its residuals; ``M``, ``T``
+    (k, k) scratch); False on an exact zero pivot."""
+    for q in range(k):
+        acc = 0.0
+        for i in range(n):
+            acc += Jc[q, i] * x[i]
+        v[q] = acc
+    for q in range(k):  # J_g J_g^T, in M
+        for p2 in range(q + 1):
+            acc = 0.0
+            for i in range(n):
+                acc += Jc[q, i] * Jc[p2, i]
+            M[q, p2] = acc
+            M[p2, q] = acc
+    for q in range(k):  # I - (J_g J_g^T) A
+        for j in range(k):
+            acc = 0.0
+            for p2 in range(k):
+                acc += M[q, p2] * A[p2, j]
+            T[q, j] = (1.0 if q == j else 0.0) - acc
+    return _gauss_solve(T, v, k)
+
+
+@_jit()
 def cluster_meat(JT, e, h, w, B, A):
     """The jackknife's meat over square clusters (CR3): for each ``B`` x
     ``B`` cluster of a ``h`` x ``w`` window (row-major; the last row and
@@ -233,7 +290,14 @@ def cluster_meat(JT, e, h, w, B, A):
     :func:`cuespin.track.model._jackknife_cov`'s numpy form (einsum and
     batched solves over zero-padded clusters) to rounding, in one call.
     Returns (meat, ok); ok False when some ``I - H_gg`` is singular (an
-    exact zero pivot, where numpy's solve raises)."""
+    exact zero pivot, where numpy's solve raises).
+
+    A cluster of more pixels than parameters (``n`` > ``k``: 3 x 3 blocks
+    and six or eight parameters) takes the push-through identity's form,
+    ``J_g (I_n - J_g^T A J_g)^-1 e_g = (I_k - J_g J_g^T A)^-1 J_g e_g``: a
+    ``k`` x ``k`` solve instead of ``n`` x ``n`` (the same to rounding; its
+    determinant is the same, Sylvester's: 65 -> 34 us a 17 x 17 window,
+    branch speed15)."""
     k = JT.shape[0]
     nb = B * B
     meat = np.zeros((k, k))
@@ -242,6 +306,9 @@ def cluster_meat(JT, e, h, w, B, A):
     M = np.empty((nb, nb))
     x = np.empty(nb)
     S = np.empty(k)
+    Mk = np.empty((k, k))
+    Tk = np.empty((k, k))
+    v = np.empty(k)
     for gi in range(0, h, B):
         for gj in range(0, w, B):
             n = 0
@@ -252,6 +319,13 @@ def cluster_meat(JT, e, h, w, B, A):
                         Jc[q, n] = JT[q, p]
                     x[n] = e[p]
                     n += 1
+            if n > k:
+                if not _pushed_score(Jc, x, n, k, A, Mk, Tk, v):
+                    return meat, False
+                for q in range(k):
+                    for p2 in range(k):
+                        meat[q, p2] += v[q] * v[p2]
+                continue
             for q in range(k):  # A J_g
                 for i in range(n):
                     acc = 0.0
@@ -264,29 +338,8 @@ def cluster_meat(JT, e, h, w, B, A):
                     for q in range(k):
                         acc += Jc[q, i] * AJ[q, j]
                     M[i, j] = (1.0 if i == j else 0.0) - acc
-            for c in range(n):  # Gaussian elimination, partial pivoting (LAPACK's gesv's rule)
-                piv = c
-                big = abs(M[c, c])
-                for i in range(c + 1, n):
-                    if abs(M[i, c]) > big:
-                        big, piv = abs(M[i, c]), i
-                if big == 0.0:
-                    return meat, False
-                if piv != c:
-                    for j in range(n):
-                        M[c, j], M[piv, j] = M[piv, j], M[c, j]
-                    x[c], x[piv] = x[piv], x[c]
-                for i in range(c + 1, n):
-                    f = M[i, c] / M[c, c]
-                    if f != 0.0:
-                        for j in range(c + 1, n):
-                            M[i, j] -= f * M[c, j]
-                        x[i] -= f * x[c]
-            for i in range(n - 1, -1, -1):
-                acc = x[i]
-                for j in range(i + 1, n):
-                    acc -= M[i, j] * x[j]
-                x[i] = acc / M[i, i]
+            if not _gauss_solve(M, x, n):
+                return meat, False
             for q in range(k):
                 acc = 0.0
                 for i in range(n):
@@ -296,6 +349,134 @@ def cluster_meat(JT, e, h, w, B, A):
                 for p2 in range(k):
                     meat[q, p2] += S[q] * S[p2]
     return meat, True
+
+
+@_jit()
+def jackknife_cov(y, felt, use, c0, c1, b0, b1, G, r, kind, geo, u0, v0, taus, shade, has_shade, blur_rows, B):
+    """:func:`cuespin.track.model._jackknife_cov`'s arithmetic in one call:
+    the model's rows at the fit (:func:`cuespin.track.kernel.model_rows`,
+    the same call its numpy glue made), the residuals and rows on the
+    pixels ``use`` (0/1, h*w), ``A = (J J^T)^-1`` (the kernel's Gram and
+    Gauss-Jordan in place of BLAS's product and LAPACK's inverse: the same
+    to rounding), the meat (:func:`cluster_meat`) and the centre's block of
+    ``A meat A``, symmetrised.  Its numpy glue was ~0.15 s a 1,000 frames of
+    the tracker's main thread (eleven small calls a fit, branch speed15).
+    Returns (cov (2, 2), ok); ok False where the numpy form kept the fit's
+    own sandwich: a singular ``J J^T`` or ``I - H_gg``, or a covariance not
+    finite and positive definite."""
+    h, w = felt.shape
+    npx = h * w
+    k = (5 if blur_rows else 3) + (3 if has_shade else 0)
+    m = np.empty(npx)
+    JT = np.empty((k, npx))
+    cov = np.zeros((2, 2))
+    model_rows(c0, c1, b0, b1, G, felt, r, kind, geo, u0, v0, taus, shade, has_shade, blur_rows, m, JT)
+    yf = y.ravel()
+    ff = felt.ravel()
+    e = np.empty(npx)
+    for p in range(npx):
+        e[p] = (yf[p] - ff[p] - m[p]) * use[p]
+    for a in range(k):
+        for p in range(npx):
+            JT[a, p] *= use[p]
+    invertible, A = _inverse(_gram(JT, e, False))
+    if not invertible:
+        return cov, False
+    meat, solved = cluster_meat(JT, e, h, w, B, A)
+    if not solved:
+        return cov, False
+    V = _centre_cov(A, meat)
+    cov[0, 0], cov[1, 1] = V[0, 0], V[1, 1]
+    cov[0, 1] = cov[1, 0] = 0.5 * (V[0, 1] + V[1, 0])
+    for a in range(2):
+        for b in range(2):
+            if not np.isfinite(cov[a, b]):
+                return cov, False
+    # Both eigenvalues of the symmetric 2 x 2 positive (numpy's eigvalsh > 0).
+    if not (cov[0, 0] > 0.0 and cov[0, 0] * cov[1, 1] - cov[0, 1] * cov[0, 1] > 0.0):
+        return cov, False
+    return cov, True
+
+
+@_jit()
+def felt_shift(fo, fn, valid, has_valid, c0, c1, b0, b1, G, r, kind, geo, u0, v0, taus, shade, has_shade,
+               blur_rows, rcond):
+    """:func:`cuespin.track.model.refit_shift`'s arithmetic on one window
+    (pixels, or blocks' means) in one call: the model's rows at the fit
+    (:func:`cuespin.track.kernel.model_rows`, the calls its numpy form
+    made), the old and new felts' Jacobians, their products and the least
+    squares (numba's ``lstsq``: LAPACK's gelsd, as numpy's, with the same
+    ``rcond``), the same to rounding.  Its numpy glue was ~0.1 s a 1,000
+    frames of the main thread (branch speed15).  ``fo``, ``fn`` (h, w) the
+    old and new felts, ``valid`` (h*w, 0/1) the pixels the fit used (read
+    when ``has_valid``), ``shade`` the fit's look (read when
+    ``has_shade``).  Returns the centre's change (2,)."""
+    h, w = fo.shape
+    npx = h * w
+    iG = 4 if blur_rows else 2
+    zero = np.zeros((h, w))
+    D = np.empty((iG + 1, npx))
+    m = np.empty(npx)
+    # The rows before the level's are linear in the felt (the disc's at
+    # level 1 on zero felt times G - felt): one evaluation serves both.
+    model_rows(c0, c1, b0, b1, 1.0, zero, r, kind, geo, u0, v0, taus, shade, False, blur_rows, m, D)
+    fof = fo.ravel()
+    fnf = fn.ravel()
+    df = np.empty(npx)
+    kept = np.empty(npx)
+    for p in range(npx):
+        df[p] = fnf[p] - fof[p]
+        kept[p] = df[p] * (1.0 - D[iG, p])
+    if not has_shade:
+        k = iG + 1
+        Jo = D.copy()
+        Jn = D
+        for a in range(iG):
+            for p in range(npx):
+                Jo[a, p] *= G - fof[p]
+                Jn[a, p] *= G - fnf[p]
+    else:
+        k = iG + 4
+        Jo = np.empty((k, npx))
+        model_rows(c0, c1, b0, b1, G, fo, r, kind, geo, u0, v0, taus, shade, True, blur_rows, m, Jo)
+        Jn = Jo.copy()
+        moved = np.empty((iG, npx))
+        for a in range(iG):
+            for p in range(npx):
+                moved[a, p] = D[a, p] * df[p]
+        if shade.shape[0] > PSF_AT and shade[PSF_AT] > 0.0:
+            # The lit sphere's model is seen through the lens: so is the
+            # felt's share of it.
+            psf_blur(moved.reshape(iG, h, w), shade[PSF_AT])
+            seen = np.empty(npx)
+            for p in range(npx):
+                seen[p] = df[p] * D[iG, p]
+            psf_blur(seen.reshape(1, h, w), shade[PSF_AT])
+            for p in range(npx):
+                kept[p] = df[p] - seen[p]
+        for a in range(iG):
+            for p in range(npx):
+                Jn[a, p] -= moved[a, p]
+    if has_valid:
+        for a in range(k):
+            for p in range(npx):
+                Jo[a, p] *= valid[p]
+    M = np.empty((k, k))
+    v = np.empty(k)
+    for a in range(k):
+        for q in range(k):
+            acc = 0.0
+            for p in range(npx):
+                acc += Jo[a, p] * Jn[q, p]
+            M[a, q] = acc
+        acc = 0.0
+        for p in range(npx):
+            acc += Jo[a, p] * kept[p]
+        v[a] = acc
+    x = np.linalg.lstsq(M, v, rcond)[0]
+    out = np.empty(2)
+    out[0], out[1] = -x[0], -x[1]
+    return out
 
 
 @_jit()
@@ -378,6 +559,11 @@ def warm_up() -> None:
     AT = np.ones((6, 9))
     linear_fit(AT[2:6], np.ones(9), np.ones(9, bool))
     cluster_meat(AT * 0.1, np.ones(9), 3, 3, 3, np.eye(6))
+    y = np.full((3, 3), 2.0)
+    jackknife_cov(y, y - 1.0, np.ones(9), 1.0, 1.0, 0.0, 0.0, 3.0, 1.0, 0, np.ones(1), 0, 0, np.zeros(1),
+                  np.zeros(3), True, False, 3)
+    felt_shift(y, y - 1.0, np.ones(9), True, 1.0, 1.0, 0.0, 0.0, 3.0, 1.0, 0, np.ones(1), 0, 0, np.zeros(1),
+               np.zeros(3), True, False, 1e-9)
     block_means(D, 0, 0, 4, 4, 2)
     block_means(felt, 0, 0, 4, 4, 2)
     block_all(np.ones((9, 9), bool), 0, 0, 4, 4, 2)
@@ -386,7 +572,7 @@ def warm_up() -> None:
 
 
 __all__ = ["block_all", "block_means", "centroid", "cluster_meat", "departure_centroid", "foreign_count",
-           "hidden_pixels", "linear_fit", "warm_up"]
+           "felt_shift", "hidden_pixels", "jackknife_cov", "linear_fit", "warm_up"]
 
 
 
