@@ -385,8 +385,9 @@ def still_frames(uv, ok) -> np.ndarray:
     within ``MOVING_PX`` of it (at least one found).  The look's factor is
     the moving ball's (:func:`variance_ratios` counts moving frames only):
     a still ball's look is the same in every frame of its rest, one error
-    the recovery takes as shared (recover.measurements.LOOK_REST_SHARE), not
-    the factor on each frame.
+    the recovery takes as shared on a lossless codec
+    (recover.measurements.LOOK_REST_SHARE), not the factor on each frame
+    (track.video applies it so).
 
     Parameters
     ----------
