@@ -66,7 +66,8 @@ def code_version() -> str:
 
 
 def one_shot(args):
-    i, seed, tmp, codec, tracks, only_cached, noise_max, camera, disc, look, preset = args
+    i, seed, tmp, codec, tracks, only_cached, noise_max, camera, disc, look, preset = args[:11]
+    max_seconds = args[11] if len(args) > 11 else MAX_SECONDS
     from cuespin.data_gen.sampler import sample_scenes
     from cuespin.physics import phases
     from cuespin.pipeline.measure import mle_bound
@@ -93,7 +94,7 @@ def one_shot(args):
 
         video_module.BallTracker = DiscTracker
     scene = sample_scenes(i + 1, seed, preset=preset, camera=camera, look=look)[i]
-    scene.render["max_duration"] = MAX_SECONDS
+    scene.render["max_duration"] = max_seconds
     if codec:
         scene.render["codec"] = codec
     if noise_max is not None:  # the same shots at low noise: uniform in [0, noise_max), seeded by shot
@@ -102,7 +103,8 @@ def one_shot(args):
     # A track cache (--tracks DIR): the render, decode and track of a shot are
     # kept, so a change to fit/ or recover/ is re-measured in seconds.
     tag = ("" if noise_max is None else f"_lt{noise_max:g}") + ("" if camera == "topdown" else f"_{camera}") \
-        + ("_disc" if disc else "") + ("" if look == "plain" else f"_{look}") + (f"_{preset}" if preset else "")
+        + ("_disc" if disc else "") + ("" if look == "plain" else f"_{look}") + (f"_{preset}" if preset else "") \
+        + ("" if max_seconds == MAX_SECONDS else f"_{max_seconds:g}s")
     cached = Path(tracks) / f"s{seed}_{codec or 'scene'}{tag}_{i}.npz" if tracks else None
     if only_cached and not (cached is not None and cached.exists()):
         return None
@@ -292,6 +294,8 @@ def main():
                     help="the sampler's look (realistic: colour, shading, highlights, markings, rails, a cue)")
     ap.add_argument("--preset", default=None, help="the sampler's preset for every shot (e.g. case4: rolling "
                     "from the strike); default its mix")
+    ap.add_argument("--max-seconds", type=float, default=MAX_SECONDS, help="cap each video at this "
+                    "length (s; short clips: the strike and the first rolling, for a rate over many shots)")
     ap.add_argument("--summarize", default=None, help="only print the tables of a CSV written before "
                     "(a run cut short keeps its finished rows); several, comma-separated, are pooled")
     args = ap.parse_args()
@@ -312,7 +316,7 @@ def main():
     with tempfile.TemporaryDirectory() as tmp, Pool(args.workers) as pool:
         # Rows are written as shots finish, so a run cut short keeps them.
         jobs = [(i, args.seed, tmp, args.codec, args.tracks, args.only_cached, args.noise_max,
-                 args.camera, args.disc, args.look, args.preset) for i in range(args.n)]
+                 args.camera, args.disc, args.look, args.preset, args.max_seconds) for i in range(args.n)]
         for row in tqdm(pool.imap_unordered(one_shot, jobs),
                         total=args.n, desc="shots", disable=None):
             if row is None:
@@ -379,6 +383,15 @@ def summarize(rows, seed=0):
         far = [r for r in slip if not r["mle_v0_z"] <= 3.0]
         print(f"rolling from the strike (case4, {len(rolling)} answered ok): free slip chosen in {len(slip)} "
               f"({len(slip) / len(rolling):.1%}; target <= 2%), {len(far)} of them with v0 beyond 3 stated errors")
+        # Every answer that names a model (degenerate ones too): free slip
+        # chosen at all, with the binomial (Clopper-Pearson) 95% interval.
+        from scipy.stats import binomtest
+        named = [r for r in rows if r.get("preset") == "case4" and str(r.get("mle_model") or "") not in ("", "nan")]
+        k = sum(str(r.get("mle_model")) == "full" for r in named)
+        if named:
+            ci = binomtest(k, len(named)).proportion_ci()
+            print(f"  any status naming a model ({len(named)}): free slip {k} ({k / len(named):.1%}, "
+                  f"Clopper-Pearson 95% {ci.low:.1%}-{ci.high:.1%})")
     factors = [r["look_factor"] for r in rows if np.isfinite(r.get("look_factor", np.nan))]
     if factors and max(factors) > 1:
         print(f"tracker's look factor (track.misfit): median {np.median(factors):.2f}, "

@@ -118,6 +118,8 @@ def mle_bound(scene: Scene, track, mle: dict | None = None, independent: bool = 
             meas = build_measurements(t, xy, cov, t0=mle["t0"], t_rest=mle.get("t2"),
                                       exposure_s=cam.exposure_s, frame_dt=1.0 / cam.fps,
                                       shared_rest=not getattr(track, "independent_errors", track.lossless),
+                                      look_rest=bool(track.lossless) and not getattr(track, "independent_errors",
+                                                                                     track.lossless),
                                       px_to_m=pixel_to_table(cam, xy) if in_px else None,
                                       clear_s=mle.get("cue_clear_s") or 0.0,
                                       # under the AR(1) model the fit kept a lossless rest frame by frame

@@ -220,7 +220,8 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
     def measure(t0, clear_s, group_rest=True, scale=(1.0, float("inf"))):
         return build_measurements(t, xy, cov, t0=t0, t_rest=seg.t2, exposure_s=exposure_s,
                                   frame_dt=frame_dt, shared_rest=not independent, px_to_m=px_to_m, clear_s=clear_s,
-                                  group_rest=group_rest, rest_scale=scale[0], rest_scale_dof=scale[1])
+                                  group_rest=group_rest, rest_scale=scale[0], rest_scale_dof=scale[1],
+                                  look_rest=lossless and not independent)
 
     if keep is not None:
         codec = CodecCorrelation(keep.codec_var, frame_dt) if inter_frame and not lossless else None
