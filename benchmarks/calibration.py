@@ -242,6 +242,11 @@ def auto(args):
             cal_z.append(np.concatenate([(dv - r["exact"][0]) / np.sqrt(sv**2 - sfv**2),
                                          (dw - r["exact"][1]) / np.sqrt(sw**2 - sfw**2)]))
             f_err.append((cal.camera.K[0, 0] / true.K[0, 0] - 1, getattr(cal, "focal_sigma", None) or 0.0))
+            if args.frames:     # a line per calibration: the rows' shots pool across runs
+                print(f"  frame {args.frame_seed + i} shot {i}: z " + " ".join(
+                    f"{v:+.2f}" for v in np.concatenate([dv / sv, dw / sw])) + " share z " + " ".join(
+                    f"{v:+.2f}" for v in cal_z[-1]) + f" k1 {kappa * cal.camera.K[0, 0] ** 2:+.5f} f {f_err[-1][0]:+.3%}",
+                    flush=True)
         rv = {k: np.sqrt(np.mean([np.sum(r[0] ** 2) / 2 for r in v])) for k, v in res.items()}
         rw = {k: np.sqrt(np.mean([np.sum(r[1] ** 2) / 2 for r in v])) for k, v in res.items()}
         inside = {k: np.array([np.abs(np.concatenate([r[0] / r[2], r[1] / r[3]])) < 1.96 for r in v])
