@@ -482,7 +482,9 @@ def ball_gradients(samples: np.ndarray, ys: np.ndarray, xs: np.ndarray, votes: n
     (``votes``, :func:`ball_direction`) grown by ``GRAD_RADII`` of the
     ball's radius, one vote per sample.  The noise adds ``c S`` to ``A``
     (the gradients' noise has the pixels' colour covariance), which moves
-    no generalized eigenvector of ``(A, S)``.
+    no generalized eigenvector of ``(A, S)``.  With ``highlight`` (a list)
+    and ``L`` (the noise's Cholesky factor), each voting sample's count of
+    :func:`off_colour_plane` pixels is appended to it.
     """
     n, H, W, _ = samples.shape
     r = as_radius_map(radius_px, (H, W)).r_min
