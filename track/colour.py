@@ -83,6 +83,19 @@ FELT_LEVEL = 100.0
 # the lit side; blind to white (keeping ~0.45 of the separation) none were,
 # the largest error 0.09 radii.
 WHITE_FREE_MIN = 0.4
+# The ball's gradients are taken within this many radii of the positions
+# that voted on its colour (those lie within ~0.5 radii of its centre, where
+# a box the ball fills departs most): the rim and the PSF's spread in.
+GRAD_RADII = 1.0
+# A ball's pixel this many whitened noise sigmas off the plane of its
+# colour and the felt's shows a highlight (the residual is one normal
+# variable: noise alone passes it once in 5e8 pixels).
+HIGHLIGHT_SIGMAS = 6.0
+# This many such pixels over the samples: a highlight is seen.  Measured
+# (FFV1, /tmp/shade9/learn.py): 0 on realistic seed 0 shots 1 and 5 (no
+# highlight), 9 on sample_scenes(6, 7, realistic)[0] (specular 0.61, the
+# highlight in 2 of 9 samples), 794 on (6, 6)[0] (specular 0.43).
+HIGHLIGHT_PIXELS = 1
 # Weights summing to at most this fraction of their absolute sum are blind
 # to luma (the white-free weights sum to zero; float32 rounds them by ~1e-7).
 LUMA_BLIND_TOL = 1e-5
@@ -335,7 +348,7 @@ def wide_votes(samples: np.ndarray, Z: np.ndarray, norm2: np.ndarray, big: np.nd
 
 
 def ball_direction(samples: np.ndarray, ys: np.ndarray, xs: np.ndarray, radius_px,
-                   L: np.ndarray) -> np.ndarray | None:
+                   L: np.ndarray, votes: list | None = None) -> np.ndarray | None:
     """The whitened colour direction (unit, shape (3,)) in which the samples
     depart from each pixel's median where a ball fits in what moved
     (pixels ``ys``, ``xs``), or None when too few depart.
@@ -351,6 +364,7 @@ def ball_direction(samples: np.ndarray, ys: np.ndarray, xs: np.ndarray, radius_p
     small part of the box.  The direction is the principal axis of the
     departures' unit vectors, so that it is the one most box positions
     share (the ball's), not the one the largest departures share.
+    ``votes``, when given, receives the voting positions (bool, (n, m)).
     """
     n, H, W, _ = samples.shape
     # One box for the whole image, the smallest ball's, so that the ball
@@ -375,6 +389,8 @@ def ball_direction(samples: np.ndarray, ys: np.ndarray, xs: np.ndarray, radius_p
     # band, departs more than a ball close to the felt's colour (WIDE_MIN),
     # and PEAK_FRACTION then leaves the ball out of its sample.
     big = wide_votes(samples, Z, norm2, big, ys, xs, r_min, L, k)
+    if votes is not None:
+        votes.append(big)
     if big.sum() < 10:
         return None
     # One vote per sample (its unit vectors' mean outer product): the ball
@@ -451,6 +467,128 @@ def white_free(d: np.ndarray, S: np.ndarray) -> np.ndarray | None:
     return Sd - (a / b) * S1
 
 
+def ball_gradients(samples: np.ndarray, ys: np.ndarray, xs: np.ndarray, votes: np.ndarray,
+                   radius_px, L: np.ndarray | None = None, highlight: list | None = None) -> np.ndarray | None:
+    """The colour image's gradients' second moments at the ball (3 x 3,
+    BGR levels^2 / px^2), or None where no sample votes.
+
+    The centre's Fisher information in a channel ``p = w . bgr`` is
+    ``w' A w / w' S w`` times the pixel count, with ``A`` the mean outer
+    product of the image's derivatives along the centre (the image's
+    spatial gradients, both axes) over the ball's pixels: at its rim the
+    ball's colour minus the felt's, inside the shading's change of the
+    ball's own colour.  Taken on each sample's departure from the samples'
+    per-pixel median (the felt's texture gone) over the voting positions
+    (``votes``, :func:`ball_direction`) grown by ``GRAD_RADII`` of the
+    ball's radius, one vote per sample.  The noise adds ``c S`` to ``A``
+    (the gradients' noise has the pixels' colour covariance), which moves
+    no generalized eigenvector of ``(A, S)``.  With ``highlight`` (a list)
+    and ``L`` (the noise's Cholesky factor), each voting sample's count of
+    :func:`off_colour_plane` pixels is appended to it.
+    """
+    n, H, W, _ = samples.shape
+    r = as_radius_map(radius_px, (H, W)).r_min
+    g = max(int(round(GRAD_RADII * r)), 1)
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * g + 1, 2 * g + 1))
+    A = np.zeros((3, 3))
+    used = 0
+    for s in range(n):
+        if not votes[s].any():
+            continue
+        v, u = ys[votes[s]], xs[votes[s]]
+        v0, v1 = max(int(v.min()) - g - 1, 0), min(int(v.max()) + g + 2, H)
+        u0, u1 = max(int(u.min()) - g - 1, 0), min(int(u.max()) + g + 2, W)
+        on = np.zeros((v1 - v0, u1 - u0), np.uint8)
+        on[v - v0, u - u0] = 1
+        on = cv2.dilate(on, disc).astype(bool)
+        on[[0, -1], :] = False
+        on[:, [0, -1]] = False
+        X = samples[:, v0:v1, u0:u1]
+        D = X[s].astype(np.float64) - median_u8(X)
+        gu = np.zeros_like(D)
+        gv = np.zeros_like(D)
+        gu[:, 1:-1] = (D[:, 2:] - D[:, :-2]) / 2
+        gv[1:-1] = (D[2:] - D[:-2]) / 2
+        gu, gv = gu[on], gv[on]
+        A += (gu.T @ gu + gv.T @ gv) / len(gu)
+        used += 1
+        if highlight is not None:
+            highlight.append(off_colour_plane(X[s].astype(np.float64)[on], median_u8(X)[on].astype(np.float64),
+                                              X[s].astype(np.float64)[v - v0, u - u0], L))
+    return A / used if used else None
+
+
+def off_colour_plane(c: np.ndarray, f: np.ndarray, inner: np.ndarray, L: np.ndarray) -> int:
+    """How many of the ball's pixels ``c`` (m, 3, BGR) lie off the plane of
+    its own colour and the felt's (whitened by ``L``) by more than
+    ``HIGHLIGHT_SIGMAS``: a lit ball's pixels are its colour scaled by its
+    shading, mixed at the rim with the felt, and lie in that plane; a
+    highlight adds white, which leaves it unless white is in the plane
+    (grey felt).  The ball's colour: the median of ``inner``, its pixels at
+    the voting positions; the felt's: the median of ``f``."""
+    b, fe = np.median(inner, axis=0), np.median(f, axis=0)
+    Li = np.linalg.inv(L)
+    Q = np.linalg.qr(Li @ np.c_[b, fe])[0]
+    z = c @ Li.T
+    r = z - (z @ Q) @ Q.T
+    return int((np.sqrt(np.einsum("ij,ij->i", r, r)) > HIGHLIGHT_SIGMAS).sum())
+
+
+def best_channel(A: np.ndarray, S: np.ndarray) -> np.ndarray:
+    """The weights ``w`` (BGR) maximising ``w' A w / w' S w``: the channel
+    that keeps most of the centre's information (:func:`ball_gradients`)
+    under the noise ``S``, the top generalized eigenvector of ``(A, S)``."""
+    L = np.linalg.cholesky(S)
+    Li = np.linalg.inv(L)
+    v = np.linalg.eigh(Li @ A @ Li.T)[1][:, -1]
+    return np.linalg.solve(L.T, v)
+
+
+def channel_rule(d: np.ndarray, S: np.ndarray, gradients) -> tuple[np.ndarray, bool]:
+    """Which combination of the channels the ball is fitted in (the rule,
+    in one place): the weights (BGR) and whether they are blind to white.
+
+    ``d`` is the ball's colour minus the felt's (BGR, any scale: its
+    direction), ``S`` the noise covariance, ``gradients()`` the ball's
+    gradients' moments (:func:`ball_gradients`, computed only when needed).
+
+    - Where the ball departs from the felt mainly in brightness
+      (:func:`white_free` keeps less than ``WHITE_FREE_MIN`` of the
+      separation): Fisher's discriminant along ``d``, ``S^-1 d``.
+    - Where it departs in hue and no highlight is seen
+      (:func:`off_colour_plane` finds fewer than ``HIGHLIGHT_PIXELS``
+      pixels off the plane of the ball's and the felt's colours, over the
+      samples): the channel that keeps most of the centre's information,
+      learnt from the ball's image gradients (:func:`best_channel`), its
+      rim and its shading.  The white-free channel discards the shading,
+      which lies along the ball's own colour, white in part: on
+      benchmarks/track.py realistic seed 0 shot 1 (a shaded blue ball on
+      grey felt, FFV1) its bound was 3.12 times the bound from every
+      channel (the best white-free channel's 3.08), the gradients' 1.17
+      (the best linear combination's 1.17); RMSE 0.0264 -> 0.0122 px.
+    - Where it departs in hue and a highlight is seen: the white-free
+      channel (:func:`white_free`; the highlight, white, is invisible in
+      it).  The gradients' channel takes the highlight in, which the look
+      fits worse: sample_scenes(6, 7, realistic, FFV1)[0] (orange on red,
+      specular 0.61, 1 s) RMSE 0.238 -> 0.316 px; (6, 6)[0] MJPG (blue on
+      blue, specular 0.43) 100% found -> 26% and 9 false centres.  A lossy
+      codec's error at the ball's rim leaves the plane too (MJPG: 9-90
+      pixels a sample on balls without a highlight), so on such video the
+      white-free channel stays (measured in docs/measurements.md, shade9).
+    - Luma (None here) where no ball was seen.
+    """
+    w = np.linalg.solve(S, d)
+    blind = white_free(d, S)
+    if blind is None:
+        return w, False
+    hl: list = []
+    A = gradients(hl)
+    if A is None or sum(hl) >= HIGHLIGHT_PIXELS:
+        return (blind if blind @ d > 0 else -blind), True
+    g = best_channel(A, S)
+    return (g if g @ d > 0 else -g), False
+
+
 def learn_projection(samples: np.ndarray, radius_px) -> Projection:
     """The channel combination that best separates the moving ball from the felt.
 
@@ -466,7 +604,8 @@ def learn_projection(samples: np.ndarray, radius_px) -> Projection:
     Returns
     -------
     Projection
-        ``w`` proportional to ``S^-1 d``, with ``d`` the dominant direction of
+        ``w`` chosen by :func:`channel_rule` (``S^-1 d``, the white-free
+        channel or the ball's gradients' best), with ``d`` the dominant direction of
         (whitened) departures from each pixel's median over the samples:
         where the ball passes, the ball's colour minus the felt's (or its
         negative, where the ball rests most of the time).  Scaled so that
@@ -479,25 +618,23 @@ def learn_projection(samples: np.ndarray, radius_px) -> Projection:
     sd = np.sqrt(np.diag(S))
     ys, xs = np.nonzero(ball_wide(moved_boxes(samples, radius_px, sd), radius_px))
     luma = np.array([0.114, 0.587, 0.299])
-    w = blind = None
+    w = None
+    blind = False
     if len(ys):
-        e = ball_direction(samples, ys, xs, radius_px, L)
+        votes: list = []
+        e = ball_direction(samples, ys, xs, radius_px, L, votes)
         if e is not None:
-            w = np.linalg.solve(L.T, e)                       # w . d = e . z
-            blind = white_free(L @ e, S)
-            if blind is not None:
-                # the ball bright in it; its weights sum to 0, so the sign
-                # rule below would follow rounding (review: -2.2e-16)
-                w = blind if blind @ (L @ e) > 0 else -blind
+            w, blind = channel_rule(L @ e, S, lambda hl: ball_gradients(samples, ys, xs, votes[0], radius_px, L, hl))
     if w is None:
         w = luma / np.sqrt(luma @ S @ luma)
     # Projected noise variance w^T S w = 1 here; give it the channels' mean
     # variance, so the projected image's noise reads like a channel's.
     w = w / np.sqrt(w @ S @ w) * np.sqrt(np.trace(S) / 3.0)
-    if blind is None and w.sum() < 0:  # keep bright things bright where it costs nothing (grey-like w)
+    if not blind and w.sum() < 0:  # keep bright things bright where it costs nothing (grey-like w)
         w = -w
     felt = median_counts(samples[0].reshape(-1, 3))
     return Projection(w=w.astype(np.float32), offset=float(FELT_LEVEL - felt @ w), noise_cov=S)
 
 
-__all__ = ["GREY", "Projection", "learn_projection", "noise_covariance", "white_free"]
+__all__ = ["GREY", "Projection", "best_channel", "channel_rule", "learn_projection", "noise_covariance",
+           "white_free"]

@@ -1,0 +1,49 @@
+"""The channel the tracker fits keeps the centre's information (track.colour)."""
+import numpy as np
+
+from cuespin.data_gen.sampler import sample_scenes
+from cuespin.render.draw import FrameRenderer
+from cuespin.track.bound import centroid_crb_realistic
+from cuespin.track.colour import best_channel, learn_projection
+
+# benchmarks/track.py realistic seed 0 shot 1 (a shaded blue ball on grey
+# felt, no highlight): the bound of the learnt channel over the bound from
+# every channel was 3.12 with the white-free channel (R - B, summing to 0),
+# 1.17 with the gradients' channel, and 1.17 for the best linear combination
+# of the three (a search over the sphere of weights, /tmp/shade9/bnd.py):
+# the tolerance is the issue's 1.3.
+MAX_CHANNEL_LOSS = 1.3
+
+
+def shaded_shot():
+    """benchmarks/track.py realistic seed 0 shot 1: the scene and its renderer."""
+    scene = sample_scenes(2, 0, look="realistic", codec="FFV1")[1]
+    scene.render.update(specular=0.0, markings="none", psf_sigma=0.0, cue=False, balls=[], max_duration=0.8)
+    return scene, FrameRenderer(scene)
+
+
+def test_a_shaded_balls_channel_keeps_its_shading():
+    scene, fr = shaded_shot()
+    rng = np.random.default_rng(0)
+    ks = np.linspace(0, fr.n_frames - 1, 9).round().astype(int)
+    samples = np.stack([fr.render(int(k), rng) for k in ks])
+    r = scene.physics.R * scene.camera.px_per_m(fr._uv_nodes[ks[4]].mean(axis=0))
+    w = learn_projection(samples, r).w.astype(float)
+    for k in ks[5:8]:
+        full = np.sqrt(np.mean(centroid_crb_realistic(fr, int(k)) ** 2))
+        one = np.sqrt(np.mean(centroid_crb_realistic(fr, int(k), grey_weights=w) ** 2))
+        assert one < MAX_CHANNEL_LOSS * full
+
+
+def test_the_best_channel_is_the_generalized_eigenvector():
+    # Information along the ball's edge colour and its shading's colour,
+    # under correlated noise: no other weights keep more per unit noise.
+    d, b = np.array([40.0, -10.0, 5.0]), np.array([150.0, 75.0, 25.0])
+    A = 4.0 * np.outer(d, d) + np.outer(b, b)
+    S = np.array([[9.0, 2.0, 1.0], [2.0, 8.0, 1.5], [1.0, 1.5, 10.0]])
+    w = best_channel(A, S)
+    kept = (w @ A @ w) / (w @ S @ w)
+    rng = np.random.default_rng(1)
+    for v in rng.normal(size=(200, 3)):
+        assert (v @ A @ v) / (v @ S @ v) <= kept * (1 + 1e-12)
+    assert np.isclose(kept, np.linalg.eigvals(np.linalg.solve(S, A)).real.max())
