@@ -96,10 +96,6 @@ def test_resting_balls_that_outshine_the_ball_are_not_tracked(tmp_path, shot, se
 # The sets whose targets are not met yet, as measured (README, Known
 # limits): strict, so that a fix shows as a pass to be unmarked.
 NOT_YET = {
-    (7, "MJPG"): "issue 10: shot 4 (480 fps, a white ball with dots, the cue beside it after the strike): 5 "
-                 "centres 0.30-0.45 radii off (frames 223-227); shot 5 (red on red in a low light): 63 of 81 frames "
-                 "found, none off (largest 0.245 R; red8); the set about 2302 of 2322 frames on open cloth (99.1%; "
-                 "pulled7's measurement with shot 5's 64)",
     (7, "FFV1"): "issue 10: shot 5 (red on red in a low light): 52 of 81 frames found, none off (largest 0.197 "
                  "R; the ill-determined centres 0.25-0.31 R off now pulled, ILL_SE_FACTOR; red8's measurement): "
                  "29 missing where 1% of the set is ~23",
