@@ -474,3 +474,33 @@ def test_the_felt_joined_pass_tells_a_dim_ball_beside_a_line_from_the_cues_stret
     assert called <= n * (0.022 + 3 * np.sqrt(0.022 * 0.978 / n)), (called, n)
     assert missed <= n * (0.011 + 3 * np.sqrt(0.011 * 0.989 / n)), (missed, n)
     assert tracker.STICK_JOINED_WIDTH_RADII < tracker.STICK_WIDTH_RADII
+
+
+def test_the_felts_ghost_of_a_resting_ball_is_left_out_not_a_dark_rim():
+    # The felt learnt around a ball at rest holds speckles of it
+    # (sample_scenes(6, 7, realistic, MJPG)[4]: 150-210 levels over the felt
+    # beside them); once the ball has left, felt_ghost finds those the frame
+    # shows as felt.  A shaded ball's dark rim over a clean felt, below the
+    # felt by as much, is the ball's own and is kept.
+    from cuespin.track.tracker import felt_ghost
+
+    rng = np.random.default_rng(3)
+    n, r, level, ball, thresh = 41, 7.6, 60.0, 230.0, 50.0
+    v, u = np.mgrid[:n, :n]
+    felt = level + rng.normal(0, 1.2, (n, n))
+    rest = np.hypot(u - 18.0, v - 18.0) <= r
+    speckle = rest & (rng.random((n, n)) < 0.5)
+    ghosted = np.where(speckle, ball, felt)
+    moved = np.hypot(u - 22.5, v - 22.5) <= r  # 0.84 radii on
+    frame = np.where(moved, ball, felt + rng.normal(0, 1.2, (n, n)))
+    g = felt_ghost(frame, ghosted, 1, thresh)
+    assert g is not None
+    assert np.array_equal(g, speckle & ~moved)  # under the ball now, the speckles agree with the frame
+    assert felt_ghost(frame, felt, 1, thresh) is None  # a clean felt holds nothing
+    # A shaded ball: a bright middle, a rim 80 levels under the felt.
+    d = np.hypot(u - 20.0, v - 20.0) / r
+    shaded = np.where(d <= 1, level + 150 * (1 - d) - 80 * d, felt)
+    assert (shaded - felt < -thresh).any()
+    assert felt_ghost(shaded, felt, 1, thresh) is None
+    # Nor a dark ball (polarity -1) against its own clean felt.
+    assert felt_ghost(2 * level - shaded, 2 * level - felt, -1, thresh) is None

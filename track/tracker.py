@@ -550,6 +550,30 @@ def foreign_threshold(sigma: float, contrast: float) -> float:
     return max(OUTLIER_SIGMAS * max(sigma, 0.5), FOREIGN_CONTRAST * contrast)
 
 
+def felt_ghost(patch: np.ndarray, felt: np.ndarray, polarity: int, thresh: float) -> np.ndarray | None:
+    """Pixels of a window (bool, its shape) where the felt model holds
+    something of the ball's sign ``polarity`` that the frame ``patch`` does
+    not show: the felt departs from its own median over the window by more
+    than ``thresh`` (levels, :func:`foreign_threshold`) with the ball's sign,
+    and the frame lies below the felt there by as much.  None where there
+    are none (most windows: the first test alone, no median taken).
+
+    The felt learnt around a ball at rest holds speckles of it (the look-ahead
+    samples' median where the ball rested in most of them; 0.8 of a 480-fps
+    shot's first half second, sample_scenes(6, 7, realistic, MJPG)[4]).  As
+    the ball leaves, those pixels showed 150-210 levels less than the felt
+    beside and under it, and the fit was held back towards the rest spot:
+    frames 223-227 0.30-0.45 radii behind the ball (docs/measurements.md,
+    false9).  They tell the fit nothing of the ball; it leaves them out.  A
+    ball's own dark rim or markings over a clean felt are kept (the felt
+    there is its median), as are a shaded ball's parts of either sign."""
+    low = polarity * (patch - felt) < -thresh
+    if not low.any():
+        return None
+    ghost = low & (polarity * (felt - np.median(felt)) > thresh)
+    return ghost if ghost.any() else None
+
+
 def foreign_pixels(D: np.ndarray, beyond: np.ndarray, sigma: float, contrast: float) -> np.ndarray | None:
     """Pixels of a ball-positive window ``D`` (frame less felt) that show
     something other than the ball or the felt (the rule at
@@ -797,6 +821,7 @@ class BallTracker:
         if config.refine not in REFINERS:
             raise ValueError(f"refine must be one of {REFINERS}, got {config.refine!r}")
         self.bg = background
+        self._ghost_of = None  # (patch, felt, felt_ghost's mask) of the last window fitted
         self.pol = background.polarity or 1
         self.r = float(radius_px)
         self.exposure_frames = float(exposure_frames)
@@ -1016,6 +1041,19 @@ class BallTracker:
             self.history = (self.history + [(k, obs.uv)])[-2:]
         return obs
 
+    def _fit_disc(self, patch, felt, *args, valid=None, **kw):
+        """:func:`~cuespin.track.model.fit_disc` without the window's pixels
+        where the felt holds what the frame does not show (:func:`felt_ghost`).
+        The mask is found once a window: a frame's fits share it (the test
+        costs 5-10% of a sharp fit's CPU)."""
+        if self._ghost_of is None or self._ghost_of[0] is not patch or self._ghost_of[1] is not felt:
+            self._ghost_of = (patch, felt, felt_ghost(patch, felt, self.pol,
+                                                      foreign_threshold(self.bg.sigma, self.bg.contrast)))
+        ghost = self._ghost_of[2]
+        if ghost is not None:
+            valid = ~ghost if valid is None else np.asarray(valid, bool) & ~ghost
+        return fit_disc(patch, felt, *args, valid=valid, **kw)
+
     def _window_level(self, D, felt, u0: int, v0: int, c, r: float) -> float:
         """A fit's start level (projected levels) from the window: the felt's
         mean plus the 75th percentile of the departure ``D`` within ``r`` (px)
@@ -1057,7 +1095,7 @@ class BallTracker:
         if bad.sum() < 3:
             return f
         bad = cv2.dilate(bad.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
-        g = fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=shade, valid=~bad,
+        g = self._fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=shade, valid=~bad,
                      outline=self.outline, block=self.block)
         return g if g else f
 
@@ -1097,7 +1135,7 @@ class BallTracker:
         valid = kept_pixels(marks, foreign)
         G = f.G if G0 is None else G0
         for fb in (True, False) if fit_blur else (False,):
-            g = fit_disc(patch, felt, u0, v0, f.c, r, G, b0=f.b, fit_blur=fb, shade=shade, valid=valid, outline=ol,
+            g = self._fit_disc(patch, felt, u0, v0, f.c, r, G, b0=f.b, fit_blur=fb, shade=shade, valid=valid, outline=ol,
                          block=self.block)
             # Left out, the markings' pixels can only lower the residual: a
             # refit that explains its fewer pixels worse than the fit with
@@ -1123,7 +1161,7 @@ class BallTracker:
             add = rim_marking_pixels(patch, felt, u0, v0, g, r, self.bg.sigma, left, ol, refit=rim is not None)
             if add is None:
                 break
-            h = fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=self.shade,
+            h = self._fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=self.shade,
                          valid=kept_pixels(marks, add, foreign), outline=ol, block=self.block)
             if not (h and h.stated):
                 break
@@ -1166,10 +1204,10 @@ class BallTracker:
         if a is None or f.shade[0] * a >= SPHERE_A_MIN * a * a:
             return f, fit_blur
         for blur, q_fit_blur in blurs:
-            q = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=q_fit_blur, shade=True, outline=ol,
+            q = self._fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=q_fit_blur, shade=True, outline=ol,
                          block=self.block)
             if q:
-                g = fit_disc(patch, felt, u0, v0, q.c, r, G0, b0=q.b, fit_blur=q_fit_blur, shade=self.shade,
+                g = self._fit_disc(patch, felt, u0, v0, q.c, r, G0, b0=q.b, fit_blur=q_fit_blur, shade=self.shade,
                              outline=ol, block=self.block)
                 # When the sphere does not converge there either, the
                 # quadratic look, as for a frame whose sphere fit fails.
@@ -1180,7 +1218,7 @@ class BallTracker:
     def _learn_look(self, patch, felt, u0, v0, f_shaded, r, G0, blur, fit_blur, marks=None, foreign=None):
         """One frame's vote on the look: the disc fit's residual sum against
         the shaded one's; decided once ``LOOK_FRAMES`` frames have voted."""
-        d = fit_disc(patch, felt, u0, v0, f_shaded.c, r, G0, b0=blur, fit_blur=fit_blur, outline=self.outline,
+        d = self._fit_disc(patch, felt, u0, v0, f_shaded.c, r, G0, b0=blur, fit_blur=fit_blur, outline=self.outline,
                      block=self.block)
         if not d:
             return
@@ -1188,7 +1226,7 @@ class BallTracker:
             # Both looks on the same pixels (every one, as the disc's): the
             # frame's own shaded fit left some out, and its residual over
             # fewer pixels is no vote against the disc's over all of them.
-            f_shaded = fit_disc(patch, felt, u0, v0, f_shaded.c, r, G0, b0=blur, fit_blur=fit_blur, shade=True,
+            f_shaded = self._fit_disc(patch, felt, u0, v0, f_shaded.c, r, G0, b0=blur, fit_blur=fit_blur, shade=True,
                                 outline=self.outline, block=self.block)
             if not f_shaded:
                 return
@@ -1250,7 +1288,7 @@ class BallTracker:
             for c0 in (s.c, prev):
                 if c0 is None:
                     continue
-                h = fit_disc(s.patch, s.felt, s.u0, s.v0, c0, self.r, s.G, b0=s.b, fit_blur=s.fit_blur,
+                h = self._fit_disc(s.patch, s.felt, s.u0, s.v0, c0, self.r, s.G, b0=s.b, fit_blur=s.fit_blur,
                              shade=look, valid=s.valid, outline=self.outline, block=self.block)
                 if h and h.stated and (g is None or h.rms < g.rms):
                     g = h
@@ -1287,7 +1325,7 @@ class BallTracker:
             self.shade = look
             # The second minimum's check (SPHERE_A_MIN) against the new
             # look's diffuse coefficient, not the first look's.
-            diffuse = [g.shade[0] for g in (fit_disc(s.patch, s.felt, s.u0, s.v0, s.c, self.r, s.G, b0=s.b,
+            diffuse = [g.shade[0] for g in (self._fit_disc(s.patch, s.felt, s.u0, s.v0, s.c, self.r, s.G, b0=s.b,
                                                      fit_blur=s.fit_blur, shade=look, valid=s.valid,
                                                      outline=self._sphere_outline, block=self.block,
                                                      jackknife=False)  # the looks' coefficients only
@@ -1368,14 +1406,14 @@ class BallTracker:
             G0 = float(felt.mean()) + self.pol * max(self.bg.contrast, 1.0)
             # The lit sphere once learnt; before, the quadratic look (or none).
             shade = self.shade if isinstance(self.shade, SphereLook) else self.shade is not False
-            f = first = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur, shade=shade, outline=ol,
+            f = first = self._fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur, shade=shade, outline=ol,
                                  block=self.block)
             first_blur, blurs = fit_blur, [(blur, fit_blur)]
             if not f and not fit_blur and self.exposure_frames > 0:
                 # A streak the prediction missed (the strike, a sudden turn).
                 m_blur = streak_from_moments(D, u0, v0, c, r)
                 m_fit_blur = np.hypot(*m_blur) > FIT_BLUR_PX
-                g = fit_disc(patch, felt, u0, v0, c, r, G0, b0=m_blur, fit_blur=m_fit_blur, shade=shade,
+                g = self._fit_disc(patch, felt, u0, v0, c, r, G0, b0=m_blur, fit_blur=m_fit_blur, shade=shade,
                              outline=ol, block=self.block)
                 # A streak whose ends straddle where the ball was predicted
                 # is no strike but a resting ball the sharp fit did not
@@ -1390,7 +1428,7 @@ class BallTracker:
                 # sample_scene(12, realistic): 3 frames failed from 188, the
                 # ball's 75th percentile over the samples, and converged
                 # from their own).
-                f = fit_disc(patch, felt, u0, v0, c, r, self._window_level(D, felt, u0, v0, c, r_ball),
+                f = self._fit_disc(patch, felt, u0, v0, c, r, self._window_level(D, felt, u0, v0, c, r_ball),
                              b0=blur, fit_blur=fit_blur, shade=shade, outline=ol, block=self.block)
             if f and isinstance(shade, SphereLook):
                 f, fit_blur = self._sphere_checked(patch, felt, u0, v0, f, c, r, G0, blurs, ol, fit_blur)
@@ -1399,7 +1437,7 @@ class BallTracker:
                 # sample_scenes(2, 5, realistic, MJPG)[1], at the strike):
                 # the quadratic look, whose basis is smooth, as before.
                 shade = True
-                f = fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur, shade=shade, outline=ol,
+                f = self._fit_disc(patch, felt, u0, v0, c, r, G0, b0=blur, fit_blur=fit_blur, shade=shade, outline=ol,
                              block=self.block)
             marks = None
             # A frame with markings is refitted with the quadratic look, as
@@ -1418,7 +1456,7 @@ class BallTracker:
                 return _lost(FIT_FAILED)
             foreign = foreign_near(D, u0, v0, f.c, f.b, r_out, self.bg.sigma, self.bg.contrast)
             if foreign is not None:
-                g = fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=shade,
+                g = self._fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=shade,
                              valid=kept_pixels(foreign, marks), outline=ol, block=self.block)
                 if not g:
                     return _lost(FIT_FAILED)
@@ -1442,7 +1480,7 @@ class BallTracker:
                 # coefficients): a strongly shaded white ball with dots
                 # (realistic seed 0 shot 18, ambient 0.25) was 0.06-0.1 px
                 # off across the motion in every frame with the quadratic.
-                g = fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=shade,
+                g = self._fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=shade,
                              valid=kept_pixels(marks, foreign), outline=ol, block=self.block)
                 if g and g.stated and g.rms < f.rms and np.hypot(*(g.c - f.c)) <= SPHERE_MARK_MOVE_RADII * r:
                     f = g
