@@ -129,10 +129,13 @@ SAT_512 = np.clip(np.arange(-512, 1024), 0, 255).astype(np.uint8)
 # blank frame decides nothing: the first frame whose planes differ makes the
 # video colour, the first neutral frame with content (levels spanning more
 # than BLANK_SPREAD_LEVELS) makes it grey.  Undecided frames are held, at
-# most GREY_UNDECIDED_BYTES of them (then, or at the end, the video is grey).
-# 32 levels: a fade's dark frame through MJPG keeps neutral chroma with luma
-# spanning a few levels; the project's grey looks span the ball/felt contrast
-# (>= 25) plus noise, and a grey video undecided longer is only held longer.
+# most GREY_UNDECIDED_BYTES of them; then the video is read as colour (a
+# grey video read as BGR loses nothing but time; a colour one read as its G
+# plane loses the ball's colour contrast: review 11a); blank to the end, grey.
+# 32 levels (not measured: a choice): a fade's dark frame through MJPG keeps
+# neutral chroma with luma spanning a few levels; a grey video whose frames
+# span fewer (a ball/felt contrast under 32 with little noise) is only held
+# longer, then read as colour, the same levels three times.
 BLANK_SPREAD_LEVELS = 32
 # 64 MB: 23 frames of 1280 x 720 BGR, 8 of 4K; inside the tracker's
 # look-ahead budget (track.video.LOOKAHEAD_BYTES, 384 MB).
@@ -456,7 +459,7 @@ class FrameSource:
             nbytes += img.shape[0] * img.shape[1] * 3
             if verdict is None and nbytes < GREY_UNDECIDED_BYTES:
                 continue
-            self.grey, self._decided = verdict is not False, True
+            self.grey, self._decided = verdict is True, True
             yield from map(self._as_read, held)
             held = []
         if held:  # blank neutral frames to the end: nothing says colour
