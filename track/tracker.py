@@ -169,7 +169,8 @@ SPHERE_MARK_MOVE_RADII = 0.1
 # learnt elevation moves with the gate, 1.0506 -> 1.0356 rad, and with the
 # rule off only until the light is learnt shot 12 is 0.00726 px again: the
 # voting frames' highlight left out as markings; docs/measurements.md,
-# branch marks9).  A dark dot at the rim left in pulled the lit
+# branch marks9; given back where the light learnt with them in explains
+# them, marks_given_back: 0.00723 px).  A dark dot at the rim left in pulled the lit
 # sphere's centre 0.08-0.16 px (simulated: r 12.2 px, noise 1.7, bound
 # 0.004 px), left out 0.004-0.006 px.  A dot turning over the rim shows one
 # or two pixels there (realistic seed 0 shot 18: -50 levels, noise 1.7):
