@@ -117,7 +117,8 @@ def test_markings_stay_out_of_the_lights_learning():
     for a, d in ((0.5, 6.0), (2.8, 8.0)):
         cov = disc_coverage(c[0] + d * np.cos(a), c[1] + d * np.sin(a), 2.5, U0, V0, H, W)
         clean = clean * (1 - cov) + 30.0 * cov
-    T = SimpleNamespace(cfg=TrackerConfig(), shade=None, _look_fits=[], r=R_PX, outline=None, block=1)
+    T = SimpleNamespace(cfg=TrackerConfig(), shade=None, _look_fits=[], r=R_PX, outline=None, block=1,
+                        bg=SimpleNamespace(sigma=3.0))  # the noise the frames are drawn with
     fits = []
     for _ in range(12):
         img = np.clip(np.rint(clean + rng.normal(0, 3.0, clean.shape)), 0, 255)
@@ -127,7 +128,8 @@ def test_markings_stay_out_of_the_lights_learning():
         f = fit_disc(img, felt, U0, V0, f0.c, R_PX, f0.G, shade=True, valid=~m)
         assert f
         fits.append(f)
-        BallTracker._keep_for_sphere(T, f, img, felt, U0, V0, False, None, SimpleNamespace(marks=m, c=f.c.copy()))
+        lf = SimpleNamespace(marks=m, foreign=None, c=f.c.copy())
+        BallTracker._keep_for_sphere(T, f, img, felt, U0, V0, False, None, lf)
     BallTracker._learn_sphere(T)
     assert isinstance(T.shade, SphereLook)
     assert abs(T.shade.elevation - truth.elevation) < 0.05

@@ -169,7 +169,8 @@ SPHERE_MARK_MOVE_RADII = 0.1
 # learnt elevation moves with the gate, 1.0506 -> 1.0356 rad, and with the
 # rule off only until the light is learnt shot 12 is 0.00726 px again: the
 # voting frames' highlight left out as markings; docs/measurements.md,
-# branch marks9).  A dark dot at the rim left in pulled the lit
+# branch marks9; given back where the light learnt with them in explains
+# them, marks_given_back: 0.00723 px).  A dark dot at the rim left in pulled the lit
 # sphere's centre 0.08-0.16 px (simulated: r 12.2 px, noise 1.7, bound
 # 0.004 px), left out 0.004-0.006 px.  A dot turning over the rim shows one
 # or two pixels there (realistic seed 0 shot 18: -50 levels, noise 1.7):
@@ -515,6 +516,58 @@ def rim_left_out(samples, look, marked, r: float, outline=None, block: int = 1) 
             v = samples[i].valid
             out[i] = samples[i]._replace(valid=kept_pixels(None if v is None else ~v, add))
     return out if found else None
+
+
+def marks_given_back(samples, look, marks, foreign, r: float, sigma: float, outline=None,
+                     block: int = 1) -> list | None:
+    """The lit sphere's voting frames (:class:`~cuespin.track.sphere.Sample`)
+    with the markings given back where the look ``look``, learnt with them
+    in, explains them: on each still ball's mean window
+    (:func:`~cuespin.track.sphere.still_members`) with a frame whose
+    markings were found (``marks``, a mask or None a sample; ``foreign``
+    likewise, the other pixels left out), the look fitted on every pixel
+    but the foreign ones, and the markings given back when none of their
+    pixels departs from it by ``OUTLIER_SIGMAS`` of a frame's noise
+    ``sigma`` (levels).  ``r`` the ball's radius (px).  None when nothing
+    is given back (or ``block`` > 1: the rule reads pixels).
+
+    The markings rule reads the quadratic look's misfit: a highlight's peak
+    passes for a marking there, and the light learnt without it is off
+    (realistic seed 0 shot 12, no markings: elevation 1.0506 with them left
+    out, 1.0356 with the rule off while learning; RMSE 0.00795 -> 0.00726
+    px; docs/measurements.md, branch marks9)."""
+    if block > 1:
+        return None
+    out, back = list(samples), False
+    for idx in still_members(samples):
+        if not any(marks[i] is not None for i in idx):
+            continue
+        s = mean_sample([samples[i] for i in idx])
+        away = [foreign[i] for i in idx if foreign[i] is not None]
+        left = np.logical_or.reduce(away) if away else None
+        # Fitted with the markings in: the look's specular coefficient is
+        # set by the highlight's own pixels (fitted without them, shot 12's
+        # 15 pixels of the peak all departed from it).
+        g = fit_disc(s.patch, s.felt, s.u0, s.v0, s.c, r, s.G, b0=s.b, fit_blur=s.fit_blur, shade=look,
+                     valid=kept_pixels(left), outline=outline, jackknife=False)
+        if not g:
+            continue
+        rr = r if outline is None else outline.radius  # fit_disc's scale of the sphere
+        m, _ = _model_rows(g.c, g.b, g.G, s.felt, rr, s.u0, s.v0, blur_nodes(np.hypot(*g.b)), g.shade, False,
+                           outline)
+        res = np.abs(np.asarray(s.patch, np.float64) - s.felt - m)
+        # All or none of a still ball's markings, at the markings rule's own
+        # threshold (a frame's noise ``sigma``): on the mean window's noise
+        # the lit sphere's own misfit at the highlight's peak passes for a
+        # marking (shot 12: 6 of its 15 pixels at 5 x the mean's MAD, floor
+        # RIM_MEAN_SIGMA_MIN); a dot's edge departs less than its middle.
+        if any(marks[i] is not None and (res[marks[i]] > OUTLIER_SIGMAS * sigma).any() for i in idx):
+            continue
+        for i in idx:
+            if marks[i] is not None:
+                back = True
+                out[i] = samples[i]._replace(valid=kept_pixels(foreign[i]))
+    return out if back else None
 
 
 def smear_kernel(b) -> np.ndarray:
@@ -1262,7 +1315,23 @@ class BallTracker:
         look, _ = learn_sphere(samples, self.r, self.outline, block=self.block)
         if look is None:
             return
-        self._sphere_marked = [lf is not None and lf.marks is not None for _, _, lf in self._look_fits]
+        marks = [None if lf is None else lf.marks for _, _, lf in self._look_fits]
+        foreign = [None if lf is None else lf.foreign for _, _, lf in self._look_fits]
+        back = None
+        if any(m is not None for m in marks) and self.block == 1:
+            whole = [s._replace(valid=kept_pixels(fo)) for s, fo in zip(samples, foreign)]
+            lit, _ = learn_sphere(whole, self.r, self.outline, block=self.block)
+            back = None if lit is None else marks_given_back(samples, lit, marks, foreign, self.r, self.bg.sigma,
+                                                             self.outline, self.block)
+        if back is not None:
+            again, _ = learn_sphere(back, self.r, self.outline, start=lit, block=self.block)
+            if again is not None:
+                look, samples = again, back
+                self._look_fits = [(s, f, lf) for s, (_, f, lf) in zip(samples, self._look_fits)]
+                marks = [None if (v is None or m is None) else m & ~v for m, v in
+                         zip(marks, (s.valid for s in samples))]
+                marks = [m if m is not None and m.any() else None for m in marks]
+        self._sphere_marked = [m is not None for m in marks]
         rim = rim_left_out(samples, look, self._sphere_marked, self.r, self.outline, self.block)
         if rim is not None:
             # Learnt again without the markings at the rim, which the first
