@@ -1651,7 +1651,7 @@ def _focal_and_errors(cal: Calibration, size, table: Table, same: dict, moves: n
         cal = replace(calibrate_corners(cal.corners_px, size, table, **same), focal_source=source,
                       focal_sigma=sigma / f, edge_rms_px=cal.edge_rms_px, edge=cal.edge)
         corners_say = (f"{fc[0]:.0f} px +/- {100 * fc[1] / fc[0]:.1f}%" if math.isfinite(fc[1])
-                       else "nothing (camera nearly overhead)")
+                       else "the camera is nearly overhead")
         if source == "corners+balls":
             notes = [f"f = {f:.0f} px +/- {100 * sigma / f:.1f}% from the corners' perspective ({corners_say}) "
                      f"and the still balls' shapes ({fb[0]:.0f} px +/- {100 * fb[1] / fb[0]:.1f}%), weighted by "

@@ -623,6 +623,8 @@ def test_clicked_corners_state_the_focal_lengths_error(drawn_10deg):
     top = pinhole_camera(height_m=2.0, tilt_deg=0.0, R=R, size=SIZE, fps=240.0, roll_deg=1.0)
     nom = calibrate_clicked(true_corners(top), SIZE, TABLE, fps=240.0)
     assert nom.focal_source == "nominal" and nom.focal_sigma == pytest.approx(0.15) and len(nom.perturbed) == 9
+    # the note says why in plain words (it read "(nothing (camera nearly overhead))", auto15)
+    assert "focal length (the camera is nearly overhead) and no still ball does" in nom.notes[0], nom.notes
 
 
 @pytest.mark.parametrize("use_balls", [False, pytest.param(True, marks=pytest.mark.slow)])
