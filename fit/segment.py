@@ -61,9 +61,9 @@ SLIDE_DECEL_RATIO = 5.0
 # bound (the search's minimum held against it): the data preferred a slower
 # slide, so the slide's end is not identified (Segments.t1_bound), not a
 # measured t1.  A minimum held there lies within 1e-3 of the bound (the
-# search refines to 1e-3 frame); a free one at 1.02 or more of it
-# (/tmp/seg11 bp tables: short_slide seeds 5, 6, short_slip seed 41,
-# null_rolling seed 7, 690 tracks; seg12).
+# search refines to 1e-3 frame); a free one at 1.015 or more of it
+# (short_slide's draws seeds 5, 6, short_slip_tracks seeds 41, 42,
+# null_rolling_tracks seed 7: 810 tracks; docs/measurements.md, seg12).
 SLIDE_BOUND_REL = 0.01
 
 
