@@ -137,7 +137,9 @@ def sliding_ended(seg, t, t1_fit: float | None = None, friction_known: bool = Tr
 
     The segmentation assumes the rolling deceleration known; when friction
     is being estimated (``friction_known`` False) its breakpoint test does
-    not hold and only the fit's ``t1_fit`` in view is asked for.
+    not hold and only the fit's ``t1_fit`` in view is asked for.  With no
+    rest in view, a breakpoint held on the slide's deceleration bound
+    (``seg.t1_bound``) is no: sliding's end is not identified.
     """
     thr = END_FACTOR * float(f_dist.isf(LEVEL, 1, max(seg.end_dof, 1)))
     F = float(seg.end_F) if np.isfinite(seg.end_F) else 0.0
@@ -146,7 +148,10 @@ def sliding_ended(seg, t, t1_fit: float | None = None, friction_known: bool = Tr
         return Decision(bool(fit_in_view), F, thr)
     if not friction_known:
         return Decision(bool(fit_in_view), F, thr)
-    return Decision(bool(F > thr and t1_in_view(seg.t1, t) and fit_in_view), F, thr)
+    # A breakpoint held on the slide's deceleration bound is not identified
+    # (fit.segment.SLIDE_DECEL_RATIO): its F says nothing of where sliding ended.
+    identified = not getattr(seg, "t1_bound", False)
+    return Decision(bool(F > thr and identified and t1_in_view(seg.t1, t) and fit_in_view), F, thr)
 
 
 def curved(F: float, n: int) -> Decision:

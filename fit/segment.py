@@ -57,6 +57,14 @@ MOVE_CONFIRM_FRAMES = 3
 # held on the rule's boundary, against 1 with 5.  Sliding and case-2 tracks
 # (recover.simulate, 120 each): every breakpoint the same as without it.
 SLIDE_DECEL_RATIO = 5.0
+# The rule decides the breakpoint when the best one's |a_s| sits on its
+# bound (the search's minimum held against it): the data preferred a slower
+# slide, so the slide's end is not identified (Segments.t1_bound), not a
+# measured t1.  A minimum held there lies within 1e-3 of the bound (the
+# search refines to 1e-3 frame); a free one at 1.015 or more of it
+# (short_slide's draws seeds 5, 6, short_slip_tracks seeds 41, 42,
+# null_rolling_tracks seed 7: 810 tracks; docs/measurements.md, seg12).
+SLIDE_BOUND_REL = 0.01
 
 
 @dataclass(frozen=True)
@@ -77,6 +85,11 @@ class Segments:
     index the frames of each phase; ``sigma`` is the position noise (m) the
     fit's residuals show; ``k_move`` the first frame seen moving and
     ``rest_k`` the first frame of the final rest (None: no rest in view).
+    ``t1_bound`` is True when the breakpoint is held on the sliding
+    deceleration's bound (:data:`SLIDE_DECEL_RATIO`): the slide's end is
+    then not identified (a slide too short to show its deceleration, or a
+    cloth whose mu_s g is under that many times the rolling deceleration),
+    and ``t1`` is where the bound put it, not a measurement.
     ``geometry_cov`` holds the covariances (m^2, 2x2) of ``x0``, ``x1``,
     their cross term and ``x2`` (keys ``x0``, ``x1``, ``x0x1``, ``x2``), with
     every frame's error independent at ``sigma``; and, for their covariance
@@ -112,6 +125,7 @@ class Segments:
     geometry_cov: dict | None = None
     rolling: "Segments | None" = None
     unended: "Segments | None" = None
+    t1_bound: bool = False
 
     def __bool__(self):
         return self.ok
@@ -415,8 +429,11 @@ def segment_track(t, xy, decel: float, sigma: float | None = None,
     def finish(t0, t1, **extra):
         return _finish(t, xy, tf, xf, t0, t1, beyond, decel, rest_k, k_end, k_move, dof, **extra)
 
+    # The search's slide (ended in view or not) held on the rule's bound.
+    _, coef = cost_any(np.array([t0]), np.array([t1]))
+    t1_bound = bool(t1 > t0 and np.hypot(*coef[0, 2]) < SLIDE_DECEL_RATIO * decel * (1 + SLIDE_BOUND_REL))
     return finish(t0, t1, end_F=end_F, end_dof=dof, rolling=finish(t_roll, t_roll),
-                  unended=finish(t_un, beyond) if t1 < beyond else None)
+                  unended=finish(t_un, beyond) if t1 < beyond else None, t1_bound=t1_bound)
 
 
 def _finish(t, xy, tf, xf, t0, t1, beyond, decel, rest_k, k_end, k_move, dof, **extra) -> Segments:

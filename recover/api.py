@@ -131,7 +131,11 @@ def paper_dict(est: Estimate, params: BallParams) -> dict:
         ph = phases(Shot(seg.x0, p.v0, p.w0, seg.t0), params)
         out.update(x1=_num(ph.x1), t1=_num(ph.t1), x2=_num(ph.x2), t2=_num(ph.t2))
     elif seg:
-        out.update(x1=_num(seg.x1) if np.isfinite(seg.t1) else None, t1=_num(seg.t1),
+        # A breakpoint held on the slide's deceleration bound is not a measured
+        # t1 (fit.segment.SLIDE_DECEL_RATIO): neither it nor x1 is reported.
+        held = bool(getattr(seg, "t1_bound", False))
+        out.update(x1=_num(seg.x1) if np.isfinite(seg.t1) and not held else None,
+                   t1=None if held else _num(seg.t1),
                    x2=_num(seg.x2), t2=_num(seg.t2))
     return out
 

@@ -551,6 +551,11 @@ def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, n
     if not np.isfinite(seg.t1):
         return PaperResult("degenerate", "sliding had not ended when the track did: x1, and so "
                            "the paper's method, is not determined", x0=seg.x0)
+    if seg.t1 > seg.t0 and seg.t1_bound:
+        return PaperResult("degenerate", "where sliding ends is not identified: the breakpoint's sliding "
+                           "deceleration sits on its bound (fit.segment.SLIDE_DECEL_RATIO times the rolling "
+                           "one: a slide too short to show its deceleration, or mu_s g under that many times "
+                           "(5/7) mu_r g), so t1 and x1 are where the bound put them", x0=seg.x0)
     n_slide = 0 if seg.slide is None else len(seg.slide)
     if seg.t1 > seg.t0 and n_slide < PAPER_MIN_SLIDING_FRAMES:
         return PaperResult("degenerate", f"sliding seen in {n_slide} frame(s): x1 and t1, where sliding "

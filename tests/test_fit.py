@@ -199,32 +199,68 @@ def test_rest_not_ended_by_one_far_frame():
 KNOWN_SHOT_T1_FRAMES = 5.0
 
 
-@pytest.mark.parametrize("k", [27, 91, 125])
-def test_sliding_arc_does_not_run_on_into_the_rolling(k):
+@pytest.mark.parametrize("k, held", [(27, False), (91, False), (125, True)])
+def test_sliding_arc_does_not_run_on_into_the_rolling(k, held):
     # benchmarks/short_slide.py's generator with the rest in view (seed 5:
-    # case 4 given a slip of 0.2-3.2 frames): with a_s free, "sliding" at
+    # case 4 given a slip of 0.2-8 frames): with a_s free, "sliding" at
     # rolling's deceleration is rolling, and the profile's minimum fell 3-7 s
     # into the rolling (shots 27 and 125; arc9's paper answers 196% and 264%
     # off).  Shot 91: with the rule on breakpoints in view alone, the
     # still-sliding fit at rolling's deceleration took over and ran into the
     # rest as case 2 over 2223 frames.  The arc must end near the true t1.
-    from cuespin.fit.segment import SLIDE_DECEL_RATIO
+    # Shot 125's (3.2 frames at 120 fps, 6e-4 m) is held on the rule's bound
+    # and says so (t1_bound; its paper answer refused as not identified);
+    # 27's and 91's are free of it (|a_s| 29.1 and 12.2 times rolling's).
     from tests.test_recover import short_slide_shot
     tr, p, sigma, exposure, _ = short_slide_shot(5, k)
     decel = 5 / 7 * p.mu_r * p.g
     seg = segment_track(tr.t, tr.xy, decel, sigma, exposure)
     t1_true = phases(tr.shot, p).t1
     assert abs(seg.t1 - t1_true) * tr.fps < KNOWN_SHOT_T1_FRAMES, (seg.t1, t1_true)
-    assert seg.t1 == seg.t0 or np.hypot(*seg.a_slide) >= SLIDE_DECEL_RATIO * decel
+    assert seg.t1_bound == held, np.hypot(*seg.a_slide) / decel
 
 
-# recover.simulate.short_slip_tracks(frames=(0.2, 8.0), to_rest=True), seed
-# 41, 120 tracks (60-240 fps, 2e-5-6e-4 m): breakpoints more than
-# SLIP_T1_FAR_FRAMES frames from the true t1, before / after
-# SLIDE_DECEL_RATIO: 8 / 2 of 120; the largest 1630 -> 14.4 frames (at 240
-# fps and 6e-4 m, where a slip under a frame is not seen; 27 s CPU).
+# Where mu_s g is under SLIDE_DECEL_RATIO times the rolling deceleration the
+# rule cannot hold a slide's |a_s| and moves t1 earlier (review 11a,
+# sample_shot(5, "random") with mu_s 0.1 and mu_r set to the ratio, 12
+# tracks at 120/240 fps, 2e-5-6e-4 m: at true ratio 4 t1 -5.3 frames in
+# median, 4 of 12 more than 10 off, up to 28).  A breakpoint off by more
+# than KNOWN_SHOT_T1_FRAMES must say it is held on the bound (this test's
+# draw, rng(5) for each ratio, at ratio 4: 11 of 12 held, errors to 264
+# frames; the one free 0.9 frames off; the review's draw 12 of 12), and a
+# slide above the ratio must not be held (5.5: 0 of 12, t1 within 2.9).
+@pytest.mark.slow
+@pytest.mark.parametrize("ratio_true, held", [(5.5, False), (4.0, True)])
+def test_slide_below_the_deceleration_ratio_is_not_identified(ratio_true, held):
+    import dataclasses
+    from cuespin.data_gen.sampler import sample_shot
+    from cuespin.fit.decide import sliding_ended
+    from cuespin.recover.simulate import simulate_track
+    rng = np.random.default_rng(5)
+    for i in range(12):
+        shot, p = sample_shot(rng, "random")
+        p = dataclasses.replace(p, mu_s=0.1, mu_r=0.1 * 7 / (5 * ratio_true))
+        fps, sigma = (120.0, 240.0)[i % 2], (2e-5, 1e-4, 6e-4)[i % 3]
+        tr = simulate_track(shot, p, fps, sigma, rng, 0.0)
+        seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, sigma, 0.0)
+        off = abs(seg.t1 - phases(shot, p).t1) * fps
+        if not held:
+            assert not seg.t1_bound and off < KNOWN_SHOT_T1_FRAMES, (i, off)
+        else:
+            assert seg.t1_bound or off < KNOWN_SHOT_T1_FRAMES, (i, off)
+            if seg.t1_bound and seg.t2 is None:  # no rest in view: its end is not identified
+                assert not sliding_ended(seg, tr.t)
+
+
+# recover.simulate.short_slip_tracks(frames=(0.2, 8.0), to_rest=True), 120
+# tracks (60-240 fps, 2e-5-6e-4 m): breakpoints more than
+# SLIP_T1_FAR_FRAMES frames from the true t1.  The rate is measured on seed
+# 42 (1 of 120, the largest 10.6 frames; seg12) and asserted on seed 41,
+# the test's (before / after SLIDE_DECEL_RATIO: 8 / 2 of 120; the largest
+# 1630 -> 14.4 frames, at 240 fps and 6e-4 m, where a slip under a frame is
+# not seen; 27 s CPU).
 SLIP_T1_FAR_FRAMES = 10.0
-SLIP_T1_FAR_RATE = 2 / 120
+SLIP_T1_FAR_RATE = 1 / 120
 # No arc runs on this far past the true end of sliding (before the rule: up
 # to 1630 frames on this set, 2223 on short_slide.py's seeds 5 and 6).
 SLIP_T1_RUNAWAY_FRAMES = 25.0
