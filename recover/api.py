@@ -133,7 +133,7 @@ def paper_dict(est: Estimate, params: BallParams) -> dict:
     elif seg:
         # A breakpoint held on the slide's deceleration bound is not a measured
         # t1 (fit.segment.SLIDE_DECEL_RATIO): neither it nor x1 is reported.
-        held = bool(getattr(seg, "t1_bound", False))
+        held = seg.t1_bound
         out.update(x1=_num(seg.x1) if np.isfinite(seg.t1) and not held else None,
                    t1=None if held else _num(seg.t1),
                    x2=_num(seg.x2), t2=_num(seg.t2))
