@@ -8,13 +8,20 @@ speed:    per codec (MJPG, FFV1, mp4v, H.264 written with PyAV's libx264) a
           median of the ratios (target >= 0.8), and the median ratio of
           their CPU times (process-wide, both threads: less noisy than wall
           time on a shared machine, and what a fully loaded one gives).
+          With --rest, the slower shot that stops in view at frame 787 (the
+          default one leaves the view at ~460 and rests off the table), and
+          how the resting ball is followed: frames found, error against the
+          truth's centre, status codes.  --codecs picks codecs, --video-dir
+          keeps the files (a 10,000-frame render takes ~17 min on a loaded
+          2-core machine).
           With --threads, each run's CPU split by thread (Linux: sampled
           from /proc/self/task): the main thread, the decoder thread, FFmpeg's
           and other libraries' worker threads, with the minor page faults of each
           (the sampler's own CPU, its row, 0.05-0.15 s a run, is in the
           process times then: take the ratios from a run without it).
 memory:   peak RSS of the tracker (in a fresh process) on a 1000-frame video
-          and on a 10000-frame one (target: within 20 MB).
+          and on a 10000-frame one (target: within 20 MB); MJPG, or each of
+          --codecs.
 accuracy: centroid RMSE against the truth sidecar and the Cramer-Rao bound
           (from the rendered image's derivatives) per noise level, ball
           radius, blur, lighting gradient and codec, for the disc fit and for
@@ -39,7 +46,7 @@ realistic: per look of the realistic renderer (uniform, shaded, highlight,
           absorbs), the same for MJPG, and grey-only against the luma bound.
 
 Usage: python benchmarks/track.py [speed] [memory] [colour] [accuracy] [realistic] [--quick] [--frames 1000 10000]
-                                  [--repeat 3] [--threads]
+                                  [--repeat 3] [--threads] [--codecs mjpg h264] [--rest] [--video-dir DIR]
                                   [--n 60] [--seed 0] [--workers 2] [--seconds 0.6] [--csv out.csv]
                                   [--shots I ...] [--frames-out DIR] [--codecs ffv1 mjpg grey]
        python benchmarks/track.py realistic --summarize out.csv
@@ -62,6 +69,7 @@ import numpy as np
 
 from cuespin.data_gen.sampler import make_scene, sample_shot
 from cuespin.physics import Shot
+from cuespin.render import FrameRenderer
 from cuespin.pipeline.measure import tracker_accuracy
 from cuespin.track.synthetic import colour_frames, write_av
 from cuespin.track.video import decode_seconds, track_video
@@ -76,10 +84,16 @@ CODECS = {
 }
 
 
+# The --rest shot's v0 and w0 against the sampled one's: the ball stops in
+# view at frame 787 (uv 426, 350; 240 fps, 500 px/m), where the sampled
+# shot's leaves the view at frame ~460 and rests off the table.
+REST_SCALE = 0.45
+
+
 def scene_for(codec, seconds, fps=240.0, noise=5.0, px_per_m=500.0, blur=False, gradient=0.0,
-              seed=1, t0=0.3):
+              seed=1, t0=0.3, v_scale=1.0):
     shot, params = sample_shot(seed, "case3")
-    shot = Shot(shot.x0, shot.v0, shot.w0, t0=t0)
+    shot = Shot(shot.x0, np.asarray(shot.v0) * v_scale, np.asarray(shot.w0) * v_scale, t0=t0)
     return make_scene(shot, params, fps=fps, px_per_m=px_per_m,
                       exposure_s=(1.0 / fps if blur else 0.0),
                       render={"noise_sigma": noise, "codec": codec, "duration": seconds,
@@ -87,11 +101,13 @@ def scene_for(codec, seconds, fps=240.0, noise=5.0, px_per_m=500.0, blur=False, 
                               "felt_grey": 90.0, "ball_grey": 210.0})
 
 
-def colour_video(tmp, codec, n_frames, fps=240.0):
-    """A colour shot of ``n_frames`` written with PyAV; (path, scene)."""
-    scene = scene_for(codec, n_frames / fps, fps=fps)
+def colour_video(tmp, codec, n_frames, fps=240.0, rest=False):
+    """A colour shot of ``n_frames`` written with PyAV (every frame rendered,
+    the felt's noise from a bank of 16); (path, scene).  ``rest``: the
+    slower shot that comes to rest in view (:data:`REST_SCALE`)."""
+    scene = scene_for(codec, n_frames / fps, fps=fps, v_scale=REST_SCALE if rest else 1.0)
     enc, pix, opts, ext, rate = CODECS[codec]
-    path = Path(tmp) / f"speed_{codec}_{n_frames}.{ext}"
+    path = Path(tmp) / f"speed_{codec}_{n_frames}{'_rest' if rest else ''}.{ext}"
     if not path.exists():
         write_av(colour_frames(scene, (40, 200, 220), (40, 110, 30), noise=3.0, seed=1, noise_bank=16),
                  path, enc, pix, fps, options=opts, bit_rate=rate and rate * fps)
@@ -167,12 +183,25 @@ def _thread_line(label, split):
     print(f"    {label:8} " + ", ".join(parts))
 
 
-def speed(tmp, repeat, lengths, threads=False):
-    print("\nspeed: 1280x640 colour, 240 fps (median of alternating runs)")
+def _rest_line(res, scene):
+    """How the tracker follows the ball once it has stopped: frames found at
+    rest, the found ones' median and largest distance from the truth's
+    centre (px), and the first frame of the rest."""
+    uv = FrameRenderer(scene, n_frames=res.n_frames).truth.uv
+    first = np.flatnonzero(np.any(uv != uv[-1], axis=1))[-1] + 1
+    at = np.arange(first, res.n_frames)
+    err = np.hypot(*(res.uv[at] - uv[at]).T)[res.ok[at]]
+    print(f"    at rest from frame {first}: {res.ok[at].sum()}/{len(at)} found, error median "
+          f"{np.median(err):.3f} px, max {err.max():.3f} px; status codes at rest "
+          f"{dict(collections.Counter(res.status[at].tolist()))}")
+
+
+def speed(tmp, repeat, lengths, threads=False, codecs=tuple(CODECS), rest=False, keep=False):
+    print(f"\nspeed: 1280x640 colour, 240 fps (median of alternating runs){', ball at rest in view' if rest else ''}")
     print(f"{'codec':6} {'frames':>6} {'decode fps':>11} {'track fps':>10} {'ratio':>6} {'cpu':>5}  ok")
     for n in lengths:
-        for codec in CODECS:
-            video, scene = colour_video(tmp, codec, n)
+        for codec in codecs:
+            video, scene = colour_video(tmp, codec, n, rest=rest)
             decs, trks, ratios, cpus = [], [], [], []
             splits = []
             for _ in range(repeat):  # interleaved: the machine is shared
@@ -196,7 +225,9 @@ def speed(tmp, repeat, lengths, threads=False):
             if threads:  # the last run's split, by thread (CPU s)
                 _thread_line("decode", splits[-2])
                 _thread_line("track", splits[-1])
-            if n >= 5000:
+            if rest:
+                _rest_line(res, scene)
+            if n >= 5000 and not keep:
                 video.unlink()
 
 
@@ -210,13 +241,14 @@ print(json.dumps({"frames": res.n_frames, "maxrss_mb": resource.getrusage(resour
 """
 
 
-def memory(tmp, lengths):
+def memory(tmp, lengths, codec="MJPG", rest=False):
     from cuespin.pipeline.io import write_scene
-    print("\nmemory: peak RSS of a fresh tracking process (MJPG, colour)")
+    print(f"\nmemory: peak RSS of a fresh tracking process ({codec}, colour"
+          f"{', ball at rest in view' if rest else ''})")
     out = {}
     for n in lengths:
-        video, scene = colour_video(tmp, "MJPG", n)
-        sf = Path(tmp) / f"mem_{n}.json"
+        video, scene = colour_video(tmp, codec, n, rest=rest)
+        sf = Path(tmp) / f"mem_{codec}_{n}.json"
         write_scene(sf, scene)
         r = subprocess.run([sys.executable, "-c", _CHILD, str(video), str(sf)], capture_output=True,
                            text=True, check=True)
@@ -507,8 +539,16 @@ def main():
                     help="realistic: only these shots (indices of the --n set's sample)")
     ap.add_argument("--frames-out", default=None,
                     help="realistic: a directory to write each shot's per-frame track (npz) into")
-    ap.add_argument("--codecs", nargs="+", default=["ffv1", "mjpg", "grey"], choices=["ffv1", "mjpg", "grey"],
-                    help="realistic: track only these (the table needs all three; the CSV has what was tracked)")
+    ap.add_argument("--codecs", nargs="+", default=None, type=str.lower,
+                    choices=["ffv1", "mjpg", "grey", "mp4v", "h264"],
+                    help="realistic: track only these of ffv1 mjpg grey (default all three; the table needs all "
+                         "three; the CSV has what was tracked); speed: only these of mjpg ffv1 mp4v h264 (default "
+                         "all four); memory: each of these (default mjpg)")
+    ap.add_argument("--rest", action="store_true",
+                    help="speed, memory: the slower shot that stops in view at frame 787 (the default shot "
+                         "leaves the view at ~460); prints how the resting ball is followed")
+    ap.add_argument("--video-dir", default=None,
+                    help="speed, memory: write the videos here and reuse them (default: a temporary directory)")
     ap.add_argument("--summarize", default=None, help="realistic: only print the table of a CSV written before")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--threads", action="store_true", help="speed: each run's CPU by thread (Linux)")
@@ -520,13 +560,24 @@ def main():
         realistic_table(pd.read_csv(args.summarize).to_dict("records"))
         return
     cv2.setNumThreads(2)
+    names = {c.lower(): c for c in CODECS}
     if "realistic" in args.parts:
+        args.codecs = args.codecs or ["ffv1", "mjpg", "grey"]
+        if not set(args.codecs) <= {"ffv1", "mjpg", "grey"}:
+            ap.error("realistic: --codecs of ffv1 mjpg grey")
         realistic(args)
+        args.codecs = None
+    if not set(args.codecs or ()) <= set(names):
+        ap.error("speed, memory: --codecs of " + " ".join(names))
     with tempfile.TemporaryDirectory() as tmp:
+        vdir = args.video_dir or tmp
         if "speed" in args.parts:
-            speed(tmp, args.repeat, args.frames, args.threads)
+            speed(vdir, args.repeat, args.frames, args.threads,
+                  codecs=[names[c] for c in args.codecs] if args.codecs else tuple(CODECS), rest=args.rest,
+                  keep=args.video_dir is not None or "memory" in args.parts)
         if "memory" in args.parts:
-            memory(tmp, args.frames)
+            for c in args.codecs or ["mjpg"]:
+                memory(vdir, args.frames, names[c], rest=args.rest)
         if "colour" in args.parts:
             colour(tmp, args.quick)
         if "accuracy" in args.parts:
