@@ -95,6 +95,11 @@ HIGHLIGHT_SIGMAS = 6.0
 # (FFV1, /tmp/shade9/learn.py): 0 on realistic seed 0 shots 1 and 5 (no
 # highlight), 9 on sample_scenes(6, 7, realistic)[0] (specular 0.61, the
 # highlight in 2 of 9 samples), 794 on (6, 6)[0] (specular 0.43).
+# On grey felt a highlight (white) lies in the plane: realistic seed 0 shot 7
+# (yellow on grey, specular 0.47, FFV1) shows 1 pixel over the 9 samples, the
+# margin that keeps it white-free (the gradients' channel there: RMSE 0.0075
+# -> 0.0208 px).  Brightness beyond the ball's and felt's mix also flags
+# shot 1's lit side (3-31 pixels a sample): not used (shade10).
 HIGHLIGHT_PIXELS = 1
 # Weights summing to at most this fraction of their absolute sum are blind
 # to luma (the white-free weights sum to zero; float32 rounds them by ~1e-7).
