@@ -4,7 +4,7 @@ import numpy as np
 from cuespin.data_gen.sampler import sample_scenes
 from cuespin.render.draw import FrameRenderer
 from cuespin.track.bound import centroid_crb_realistic
-from cuespin.track.colour import best_channel, learn_projection
+from cuespin.track.colour import HIGHLIGHT_SIGMAS, best_channel, learn_projection, off_colour_plane
 
 # benchmarks/track.py realistic seed 0 shot 1 (a shaded blue ball on grey
 # felt, no highlight): the bound of the learnt channel over the bound from
@@ -47,3 +47,22 @@ def test_the_best_channel_is_the_generalized_eigenvector():
     for v in rng.normal(size=(200, 3)):
         assert (v @ A @ v) / (v @ S @ v) <= kept * (1 + 1e-12)
     assert np.isclose(kept, np.linalg.eigvals(np.linalg.solve(S, A)).real.max())
+
+
+def test_a_highlight_on_grey_felt_is_seen_and_a_lit_side_is_not():
+    # Pixels a b + m f (+ white) under unit whitened noise, L = identity: on
+    # grey felt white is in the plane of b and f (shot 7's highlight showed 1
+    # pixel off it over 9 samples), so it is seen as white added to the ball;
+    # a lit side (a up to 1.3, m = 0) and the rim's mix (a + m = 1) are not.
+    rng = np.random.default_rng(0)
+    b, f = np.array([40.0, 200.0, 210.0]), np.array([120.0, 120.0, 120.0])
+    a = rng.uniform(0.0, 1.3, 500)
+    m = np.where(a > 1, 0.0, 1 - a)
+    c = a[:, None] * b + m[:, None] * f + rng.standard_normal((500, 3))
+    L = np.eye(3)
+    assert off_colour_plane(c, f[None], b[None], L) == 0
+    # White (72 levels a channel, along the grey felt's colour) on 20 pixels.
+    hl = np.full(3, 4 * HIGHLIGHT_SIGMAS * 3)
+    ci = c.copy()
+    ci[:20] = 0.9 * b + hl + rng.standard_normal((20, 3))
+    assert off_colour_plane(ci, f[None], b[None], L) >= 20

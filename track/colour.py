@@ -95,6 +95,11 @@ HIGHLIGHT_SIGMAS = 6.0
 # (FFV1, /tmp/shade9/learn.py): 0 on realistic seed 0 shots 1 and 5 (no
 # highlight), 9 on sample_scenes(6, 7, realistic)[0] (specular 0.61, the
 # highlight in 2 of 9 samples), 794 on (6, 6)[0] (specular 0.43).
+# On grey felt a highlight (white) lies in the plane and is seen as white
+# added to the ball (off_colour_plane): realistic seed 0 shot 7 (yellow on
+# grey, specular 0.47, FFV1) 15-17 pixels a sample (the plane alone: 1 over
+# the 9 samples; the gradients' channel there: RMSE 0.0075 -> 0.0208 px),
+# shot 2 42-90; shots 1, 5, 9, 10 still 0 (shade10).
 HIGHLIGHT_PIXELS = 1
 # Weights summing to at most this fraction of their absolute sum are blind
 # to luma (the white-free weights sum to zero; float32 rounds them by ~1e-7).
@@ -519,19 +524,29 @@ def ball_gradients(samples: np.ndarray, ys: np.ndarray, xs: np.ndarray, votes: n
 
 
 def off_colour_plane(c: np.ndarray, f: np.ndarray, inner: np.ndarray, L: np.ndarray) -> int:
-    """How many of the ball's pixels ``c`` (m, 3, BGR) lie off the plane of
-    its own colour and the felt's (whitened by ``L``) by more than
-    ``HIGHLIGHT_SIGMAS``: a lit ball's pixels are its colour scaled by its
-    shading, mixed at the rim with the felt, and lie in that plane; a
-    highlight adds white, which leaves it unless white is in the plane
-    (grey felt).  The ball's colour: the median of ``inner``, its pixels at
-    the voting positions; the felt's: the median of ``f``."""
+    """How many of the ball's pixels ``c`` (m, 3, BGR) show a highlight,
+    over ``HIGHLIGHT_SIGMAS`` whitened noise sigmas (``L``): off the plane of
+    its own colour ``b`` and the felt's ``f``, or, in it, white added to the
+    ball.  A lit ball's pixels are its colour scaled by its shading, mixed at
+    the rim with the felt: ``a b + m f`` with ``a + m`` at most about 1, and
+    ``m`` about 0 where ``a`` exceeds 1 (the lit side); a highlight adds
+    white, which leaves the plane unless the felt is grey, where it is ``f``
+    added to the ball: ``a`` and ``m`` both above 0 and ``a + m`` above 1.
+    ``b``: the median of ``inner``, the ball's pixels at the voting
+    positions; ``f``: the median of ``f``."""
     b, fe = np.median(inner, axis=0), np.median(f, axis=0)
     Li = np.linalg.inv(L)
-    Q = np.linalg.qr(Li @ np.c_[b, fe])[0]
+    M = Li @ np.c_[b, fe]
+    Q = np.linalg.qr(M)[0]
     z = c @ Li.T
     r = z - (z @ Q) @ Q.T
-    return int((np.sqrt(np.einsum("ij,ij->i", r, r)) > HIGHLIGHT_SIGMAS).sum())
+    off = np.sqrt(np.einsum("ij,ij->i", r, r)) > HIGHLIGHT_SIGMAS
+    # a and m of each pixel, each over its sigma (whitened noise: identity).
+    P = np.linalg.pinv(M)
+    a, m, k = z @ P[0], z @ P[1], P[0] + P[1]
+    white = ((a > HIGHLIGHT_SIGMAS * np.linalg.norm(P[0])) & (m > HIGHLIGHT_SIGMAS * np.linalg.norm(P[1]))
+             & ((a + m - 1) > HIGHLIGHT_SIGMAS * np.linalg.norm(k)))
+    return int((off | white).sum())
 
 
 def best_channel(A: np.ndarray, S: np.ndarray) -> np.ndarray:
@@ -557,8 +572,8 @@ def channel_rule(d: np.ndarray, S: np.ndarray, gradients) -> tuple[np.ndarray, b
       separation): Fisher's discriminant along ``d``, ``S^-1 d``.
     - Where it departs in hue and no highlight is seen
       (:func:`off_colour_plane` finds fewer than ``HIGHLIGHT_PIXELS``
-      pixels off the plane of the ball's and the felt's colours, over the
-      samples): the channel that keeps most of the centre's information,
+      pixels off the plane of the ball's and the felt's colours, or white
+      added to the ball, over the samples): the channel that keeps most of the centre's information,
       learnt from the ball's image gradients (:func:`best_channel`), its
       rim and its shading.  The white-free channel discards the shading,
       which lies along the ball's own colour, white in part: on
