@@ -118,7 +118,8 @@ def test_markings_stay_out_of_the_lights_learning():
         cov = disc_coverage(c[0] + d * np.cos(a), c[1] + d * np.sin(a), 2.5, U0, V0, H, W)
         clean = clean * (1 - cov) + 30.0 * cov
     T = SimpleNamespace(cfg=TrackerConfig(), shade=None, _look_fits=[], r=R_PX, outline=None, block=1,
-                        bg=SimpleNamespace(sigma=3.0))  # the noise the frames are drawn with
+                        bg=SimpleNamespace(sigma=3.0),  # the noise the frames are drawn with
+                        _fit_disc=fit_disc)  # no felt ghost: the felt is the frames' own
     fits = []
     for _ in range(12):
         img = np.clip(np.rint(clean + rng.normal(0, 3.0, clean.shape)), 0, 255)
