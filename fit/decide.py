@@ -150,7 +150,7 @@ def sliding_ended(seg, t, t1_fit: float | None = None, friction_known: bool = Tr
         return Decision(bool(fit_in_view), F, thr)
     # A breakpoint held on the slide's deceleration bound is not identified
     # (fit.segment.SLIDE_DECEL_RATIO): its F says nothing of where sliding ended.
-    identified = not getattr(seg, "t1_bound", False)
+    identified = not seg.t1_bound
     return Decision(bool(F > thr and identified and t1_in_view(seg.t1, t) and fit_in_view), F, thr)
 
 

@@ -559,7 +559,7 @@ def best_channel(A: np.ndarray, S: np.ndarray) -> np.ndarray:
     return np.linalg.solve(L.T, v)
 
 
-def channel_rule(d: np.ndarray, S: np.ndarray, gradients) -> tuple[np.ndarray, bool]:
+def channel_rule(d: np.ndarray, S: np.ndarray, gradients, lossless: bool = True) -> tuple[np.ndarray, bool]:
     """Which combination of the channels the ball is fitted in (the rule,
     in one place): the weights (BGR) and whether they are blind to white.
 
@@ -570,8 +570,8 @@ def channel_rule(d: np.ndarray, S: np.ndarray, gradients) -> tuple[np.ndarray, b
     - Where the ball departs from the felt mainly in brightness
       (:func:`white_free` keeps less than ``WHITE_FREE_MIN`` of the
       separation): Fisher's discriminant along ``d``, ``S^-1 d``.
-    - Where it departs in hue and no highlight is seen
-      (:func:`off_colour_plane` finds fewer than ``HIGHLIGHT_PIXELS``
+    - Where it departs in hue, the video is lossless (``lossless``) and no
+      highlight is seen (:func:`off_colour_plane` finds fewer than ``HIGHLIGHT_PIXELS``
       pixels off the plane of the ball's and the felt's colours, or white
       added to the ball, over the samples): the channel that keeps most of the centre's information,
       learnt from the ball's image gradients (:func:`best_channel`), its
@@ -588,14 +588,18 @@ def channel_rule(d: np.ndarray, S: np.ndarray, gradients) -> tuple[np.ndarray, b
       specular 0.61, 1 s) RMSE 0.238 -> 0.316 px; (6, 6)[0] MJPG (blue on
       blue, specular 0.43) 100% found -> 26% and 9 false centres.  A lossy
       codec's error at the ball's rim leaves the plane too (MJPG: 9-90
-      pixels a sample on balls without a highlight), so on such video the
-      white-free channel stays (measured in docs/measurements.md, shade9).
+      pixels a sample on balls without a highlight), and the gradients'
+      channel was measured on lossless video only: on a lossy codec the
+      white-free channel stays, by the codec, not by the codec's error
+      tripping the highlight test (review 11b; docs/measurements.md, shade9).
     - Luma (None here) where no ball was seen.
     """
     w = np.linalg.solve(S, d)
     blind = white_free(d, S)
     if blind is None:
         return w, False
+    if not lossless:
+        return (blind if blind @ d > 0 else -blind), True
     hl: list = []
     A = gradients(hl)
     if A is None or sum(hl) >= HIGHLIGHT_PIXELS:
@@ -604,7 +608,7 @@ def channel_rule(d: np.ndarray, S: np.ndarray, gradients) -> tuple[np.ndarray, b
     return (g if g @ d > 0 else -g), False
 
 
-def learn_projection(samples: np.ndarray, radius_px) -> Projection:
+def learn_projection(samples: np.ndarray, radius_px, lossless: bool = True) -> Projection:
     """The channel combination that best separates the moving ball from the felt.
 
     Parameters
@@ -615,6 +619,8 @@ def learn_projection(samples: np.ndarray, radius_px) -> Projection:
         The ball's radius (px), or its map over the image
         (:mod:`cuespin.track.radius`): only regions of motion a ball fits in
         count (a cue's or a shadow's colour is not the ball's).
+    lossless : bool
+        The video's codec is lossless (:func:`channel_rule`).
 
     Returns
     -------
@@ -639,7 +645,8 @@ def learn_projection(samples: np.ndarray, radius_px) -> Projection:
         votes: list = []
         e = ball_direction(samples, ys, xs, radius_px, L, votes)
         if e is not None:
-            w, blind = channel_rule(L @ e, S, lambda hl: ball_gradients(samples, ys, xs, votes[0], radius_px, L, hl))
+            w, blind = channel_rule(L @ e, S, lambda hl: ball_gradients(samples, ys, xs, votes[0], radius_px, L, hl),
+                                    lossless)
     if w is None:
         w = luma / np.sqrt(luma @ S @ luma)
     # Projected noise variance w^T S w = 1 here; give it the channels' mean

@@ -283,17 +283,18 @@ def _warm_up() -> None:
 
 
 def learn_model(frames: list, radius_px, n_samples: int,
-                where: np.ndarray | None = None) -> tuple[Projection, Background]:
+                where: np.ndarray | None = None, lossless: bool = True) -> tuple[Projection, Background]:
     """The projection and the background from ``n_samples`` frames spread over
     ``frames`` (the look-ahead), plus as many again where a resting ball hid
     the felt from most of the first ones.  ``radius_px``: the ball's radius
     (px) or its :class:`~cuespin.track.radius.RadiusMap`; ``where``: the
-    playing surface (:func:`search_mask`)."""
+    playing surface (:func:`search_mask`); ``lossless``: the video's codec
+    is lossless (:func:`~cuespin.track.colour.channel_rule`)."""
     n = len(frames)
     idx = np.unique(np.linspace(0, n - 1, n_samples).round().astype(int))
     colour = frames[0].ndim == 3
     samples = np.stack([frames[i] for i in idx])
-    proj = learn_projection(samples, radius_px) if colour else GREY
+    proj = learn_projection(samples, radius_px, lossless) if colour else GREY
     P = proj.many(samples) if colour else samples
     bg = learn_background(P, radius_px, where)
     if bg.weak_samples.any():
@@ -400,7 +401,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         n_dropped = 0
         best = None  # the model of the look-ahead where the ball moved most
         while True:
-            proj, bg = learn_model(buf, radii, max(config.n_background, 2), mask)
+            proj, bg = learn_model(buf, radii, max(config.n_background, 2), mask, bool(info.lossless))
             if bg.polarity and (best is None or bg.moved_px > best[1].moved_px):
                 best = (proj, bg)
             # The smallest ball in view: under perspective a far ball moving a
