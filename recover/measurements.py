@@ -749,7 +749,7 @@ def moving_scale(meas: Measurements, whitened_residuals, n_par: int) -> tuple[fl
 # benchmarks/accuracy.py: MJPG seeds 21 and 41, plain MJPG seed 5, low
 # noise seed 7; 181 shots, docs/measurements.md "guard1"): at most 2.8 on
 # a correct answer, the median 0.0; a wrong friction on a real H.264 video
-# needed 42-54 (auto15).  Beyond it the model does not explain the track
+# needed 40-54 (auto15).  Beyond it the model does not explain the track
 # (a wrong friction, an unlevel table, a collision), and the codec term
 # would only hide the misfit (chi2/dof 0.65-0.95 there).
 MAX_CODEC_NOISE_RATIO = 10.0
