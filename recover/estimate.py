@@ -17,8 +17,9 @@ import numpy as np
 from cuespin.fit.decide import Decision, autocorrelated, sliding_ended, sliding_seen, strike_in_view, t1_in_view
 from cuespin.fit.segment import Segments, segment_track
 from cuespin.physics.motion import BallParams, phases
-from cuespin.recover.measurements import (CUE_CLEAR_FRAMES, Measurements, as_covariance, build_measurements,
-                                          codec_excess, cue_clear_s, fill_covariance, moving_scale)
+from cuespin.recover.measurements import (CUE_CLEAR_FRAMES, MAX_CODEC_NOISE_RATIO, Measurements, as_covariance,
+                                          build_measurements, codec_excess, codec_noise_ratio, cue_clear_s,
+                                          fill_covariance, moving_scale)
 from cuespin.recover.mle import (CodecCorrelation, MLEResult, ModelFit, ar1_from_residuals, correlated_codec_var,
                                  fit_model, fit_models, initial_guess, lag1_autocorrelation, result, slip_lr,
                                  with_profile_interval)
@@ -329,6 +330,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         breaks=(chosen.t0, float("inf") if runs_to_end(chosen) else chosen.t1) if chosen else None,
         hac=hac, verdicts=dict(mle.verdicts) or None, stop_apart=None if paper is None else paper.stop_apart,
         clear_s=clear_s, rest_scale=scale)
+    paper, mle = unexplained(paper, mle, meas, codec_var, sigma)
     return Estimate(chosen, paper, mle, meas, codec_var, decisions,
                     {"fit": t_fit, "recover": time.perf_counter() - clock}, decided)
 
@@ -363,8 +365,31 @@ def _refit(keep: Decided, seg, t, xy, params, exposure_s, fit_friction, run_pape
         paper = paper_from_segments(chosen, t, xy, params, paper_sigma, frame_dt, keep.strike_seen, independent,
                                     curved=keep.curved, near=keep.paper, apart=keep.stop_apart, meas=meas,
                                     noise=mle_noise(mle))
+    paper, mle = unexplained(paper, mle, meas, keep.codec_var, sigma)
     return Estimate(chosen or seg, paper, mle, meas, keep.codec_var, decisions,
                     {"fit": t_fit, "recover": time.perf_counter() - clock}, keep)
+
+
+def unexplained(paper, mle, meas: Measurements, codec_var: float, sigma: float):
+    """Both methods' answers refused (``failed``) when the codec noise the
+    recovery had to add to explain the track is over
+    :data:`MAX_CODEC_NOISE_RATIO` times the tracker's stated error
+    (recover.measurements.codec_noise_ratio): the model then does not
+    explain the track, and the codec term hides the misfit from chi2.  Both
+    methods weight by that noise (the paper's errors through
+    ``paper_sigma``), so one decision answers both.  Returns ``(paper,
+    mle)``, unchanged otherwise."""
+    ratio = codec_noise_ratio(meas, codec_var, sigma)
+    if not ratio > MAX_CODEC_NOISE_RATIO:
+        return paper, mle
+    why = (f"the model does not explain the track: the fit needed {ratio:.0f} times the tracker's stated error "
+           f"as codec noise (at most {MAX_CODEC_NOISE_RATIO:.0f} on correct answers): a wrong friction (mu_r; "
+           "--fit-friction or the cloth's value), a table not level, or a collision")
+    if mle is not None and mle.status != "failed":
+        mle = MLEResult("failed", why, chi2=mle.chi2, dof=mle.dof)
+    if paper is not None and paper.status != "failed":
+        paper = PaperResult("failed", why)
+    return paper, mle
 
 
 def mle_noise(mle) -> tuple[float, float]:

@@ -36,6 +36,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import cached_property
 
+import math
+
 import numpy as np
 from scipy.optimize import brentq
 from scipy.stats import chi2, f as f_dist
@@ -739,6 +741,45 @@ def moving_scale(meas: Measurements, whitened_residuals, n_par: int) -> tuple[fl
     if dof < MIN_REST_SCATTER_FRAMES:
         return 1.0, float("inf")
     return float(np.sum(r[single] ** 2) / dof), float(dof)
+
+
+# The codec noise a fit may add to the tracker's stated error and still be
+# an answer, as a ratio of per-axis standard deviations (codec_noise_ratio).
+# Measured on the project's realistic renders (cached tracks of
+# benchmarks/accuracy.py: MJPG seeds 21 and 41, plain MJPG seed 5, low
+# noise seed 7; 181 shots, docs/measurements.md "guard1"): at most 2.8 on
+# a correct answer, the median 0.0; a wrong friction on a real H.264 video
+# needed 40-54 (auto15).  Beyond it the model does not explain the track
+# (a wrong friction, an unlevel table, a collision), and the codec term
+# would only hide the misfit (chi2/dof 0.65-0.95 there).
+MAX_CODEC_NOISE_RATIO = 10.0
+
+
+def codec_noise_ratio(meas: Measurements, codec_var: float, sigma: float) -> float:
+    """The codec's measured error over the tracker's stated one: per-axis
+    standard deviations at the median frame, ``sqrt(codec_m2) / sigma``
+    (signed like ``codec_var``: negative when the residuals are smaller than
+    stated).
+
+    Parameters
+    ----------
+    meas : Measurements
+        The measurements the codec variance was solved on (its camera).
+    codec_var : float
+        The codec's per-axis variance (px^2 through ``px_to_m``, else m^2;
+        :func:`codec_excess`).
+    sigma : float
+        The track's stated per-axis error at the median frame (m).
+
+    Returns
+    -------
+    float
+        0 when ``sigma`` is not a positive number.
+    """
+    if not (sigma > 0) or codec_var == 0:
+        return 0.0
+    c = meas.codec_m2(codec_var)
+    return float(math.copysign(math.sqrt(abs(c)), c) / sigma)
 
 
 def codec_excess(meas: Measurements, whitened_residuals, n_par: int) -> float:
