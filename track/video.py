@@ -31,8 +31,8 @@ from cuespin.track.misfit import LookMisfit, codec_variance, error_ar1, look_mis
 from cuespin.track.path import off_path
 from cuespin.track.radius import RadiusMap
 from cuespin.track.model import SphereLook, fit_disc, refit_shift, warm_up
-from cuespin.track.reader import FrameSource, ThreadedFrames, TrackError, frame_times, probe
-from cuespin.track.tracker import (OFF_PATH, OK, PULLED, STATUS_TEXT, STILL_PX, BallTracker, TrackerConfig,
+from cuespin.track.reader import FrameSource, ThreadedFrames, TrackError, blank_frame, frame_times, probe
+from cuespin.track.tracker import (BLANK, OFF_PATH, OK, PULLED, STATUS_TEXT, STILL_PX, BallTracker, TrackerConfig,
                                    beyond_ball, foreign_near, foreign_threshold, kept_pixels, pulled_fits)
 
 # Bytes of decoded frames held before the background is learnt: 437 grey or
@@ -288,7 +288,10 @@ def learn_model(frames: list, radius_px, n_samples: int,
     ``frames`` (the look-ahead), plus as many again where a resting ball hid
     the felt from most of the first ones.  ``radius_px``: the ball's radius
     (px) or its :class:`~cuespin.track.radius.RadiusMap`; ``where``: the
-    playing surface (:func:`search_mask`)."""
+    playing surface (:func:`search_mask`).  Blank frames
+    (:func:`~cuespin.track.reader.blank_frame`: a black lead-in, a fade) are
+    left out: they would teach a felt and a colour projection of black."""
+    frames = [f for f in frames if not blank_frame(f)] or frames
     n = len(frames)
     idx = np.unique(np.linspace(0, n - 1, n_samples).round().astype(int))
     colour = frames[0].ndim == 3
@@ -456,7 +459,12 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
             if item is None:
                 break
             # With nothing moving there is no ball to separate from the felt.
-            obs = tracker.step(k, item) if bg.polarity else tracker.nothing()
+            # A blank frame shows no ball, and stepping would lose the ball's
+            # motion (the strike search, the prediction) on it.
+            if blank_frame(item):
+                obs = tracker.nothing(BLANK)
+            else:
+                obs = tracker.step(k, item) if bg.polarity else tracker.nothing()
             if obs.status == OK and tracker.last_patch is not None:
                 blur_len = np.hypot(*tracker.last_fit.b)
                 patch, pu, pv = tracker.last_patch
