@@ -291,9 +291,19 @@ def learn_model(frames: list, radius_px, n_samples: int,
     playing surface (:func:`search_mask`).  Blank frames
     (:func:`~cuespin.track.reader.blank_frame`: a black lead-in, a fade) are
     left out: they would teach a felt and a colour projection of black."""
-    frames = [f for f in frames if not blank_frame(f)] or frames
     n = len(frames)
     idx = np.unique(np.linspace(0, n - 1, n_samples).round().astype(int))
+    # The clean video's samples less the blank ones, not spread again: a
+    # black first frame respaced the samples and left the strike frame
+    # pulled (FFV1 test, blank1).  Spread over the frames that are not
+    # blank when fewer than half the samples are left (a long black lead-in).
+    seen = np.array([not blank_frame(frames[i]) for i in idx])
+    if 2 * seen.sum() < len(idx):
+        frames = [f for f in frames if not blank_frame(f)] or frames
+        n = len(frames)
+        idx = np.unique(np.linspace(0, n - 1, n_samples).round().astype(int))
+    else:
+        idx = idx[seen]
     colour = frames[0].ndim == 3
     samples = np.stack([frames[i] for i in idx])
     proj = learn_projection(samples, radius_px) if colour else GREY
@@ -306,6 +316,7 @@ def learn_model(frames: list, radius_px, n_samples: int,
         gap = max(n // max(n_samples - 1, 1), 1)
         lo, hi = max(shown.min() - gap // 2, 0), min(shown.max() + gap // 2, n - 1)
         extra = np.setdiff1d(np.linspace(lo, hi, n_samples).round().astype(int), idx)
+        extra = extra[[not blank_frame(frames[i]) for i in extra]]
         if len(extra):
             more = np.stack([frames[i] for i in extra])
             P = np.concatenate([P, proj.many(more) if colour else more])
