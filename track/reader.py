@@ -137,6 +137,30 @@ SAT_512 = np.clip(np.arange(-512, 1024), 0, 255).astype(np.uint8)
 # span fewer (a ball/felt contrast under 32 with little noise) is only held
 # longer, then read as colour, the same levels three times.
 BLANK_SPREAD_LEVELS = 32
+
+
+def blank_frame(img) -> bool:
+    """Whether a frame is blank: its levels (every channel's) span at most
+    :data:`BLANK_SPREAD_LEVELS` (a black lead-in, a fade's dark frame).  It
+    shows neither ball nor felt, so it decides nothing here and the tracker
+    learns nothing from it (``track.video``).
+
+    Parameters
+    ----------
+    img : ndarray, shape (h, w) or (h, w, 3), uint8, or PlanarFrame
+        One decoded frame.
+    """
+    h, w = img.shape[:2]
+    # The middle row and column first: most frames span more there, and a
+    # planar frame then converts those strips only, not the whole frame.
+    for strip in (img[h // 2:h // 2 + 1, :], img[:, w // 2:w // 2 + 1]):
+        strip = np.asarray(strip)
+        if strip.size and int(strip.max()) - int(strip.min()) > BLANK_SPREAD_LEVELS:
+            return False
+    a = np.asarray(img)
+    return a.size == 0 or int(a.max()) - int(a.min()) <= BLANK_SPREAD_LEVELS
+
+
 # 64 MB: 23 frames of 1280 x 720 BGR, 8 of 4K; inside the tracker's
 # look-ahead budget (track.video.LOOKAHEAD_BYTES, 384 MB).
 GREY_UNDECIDED_BYTES = 64 << 20
@@ -426,7 +450,7 @@ class FrameSource:
         g = img[..., 1]
         if not (np.array_equal(img[..., 0], g) and np.array_equal(g, img[..., 2])):
             return False
-        return True if int(g.max()) - int(g.min()) > BLANK_SPREAD_LEVELS else None
+        return None if blank_frame(g) else True
 
     def _emit(self, img):
         """A decoded frame, 2-D (one channel) or (h, w, 3) BGR; read as grey later."""

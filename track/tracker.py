@@ -20,11 +20,11 @@ from cuespin.track.outline import OUTLINE_REFIT_PX, OutlineCache, is_similarity
 from cuespin.track.radius import RadiusMap
 from cuespin.track.sphere import Sample, learn_sphere, mean_sample, still_members
 
-OK, NO_BALL, PARTIAL, TWO_BLOBS, GONE, FIT_FAILED, PULLED, OFF_PATH = 0, 1, 2, 3, 4, 5, 6, 7
+OK, NO_BALL, PARTIAL, TWO_BLOBS, GONE, FIT_FAILED, PULLED, OFF_PATH, BLANK = 0, 1, 2, 3, 4, 5, 6, 7, 8
 STATUS_TEXT = {OK: "ok", NO_BALL: "no ball", PARTIAL: "ball partly out of the frame",
                TWO_BLOBS: "two ball-like blobs", GONE: "ball has left the frame",
                FIT_FAILED: "refinement failed", PULLED: "fit pulled off the ball",
-               OFF_PATH: "centre off the ball's path"}
+               OFF_PATH: "centre off the ball's path", BLANK: "blank"}
 REFINERS = ("fit", "moments")
 # Blur shorter than this (px over the exposure) is modelled at its predicted
 # length, not fitted: a symmetric smear moves no centroid, and its image
@@ -1034,9 +1034,10 @@ class BallTracker:
         return loc, OK
 
     # -- per frame ------------------------------------------------------
-    def nothing(self) -> Observation:
-        """A frame in which no ball is reported."""
-        return _lost(NO_BALL)
+    def nothing(self, status: int = NO_BALL) -> Observation:
+        """A frame in which no ball is reported, with ``status`` (``BLANK``:
+        a blank frame, :func:`cuespin.track.reader.blank_frame`, never stepped)."""
+        return _lost(status)
 
     def step(self, k: int, frame: np.ndarray) -> Observation:
         """Track frame ``k`` (8-bit grey or BGR, full size)."""

@@ -31,8 +31,8 @@ from cuespin.track.misfit import LookMisfit, codec_variance, error_ar1, look_mis
 from cuespin.track.path import off_path
 from cuespin.track.radius import RadiusMap
 from cuespin.track.model import SphereLook, fit_disc, refit_shift, warm_up
-from cuespin.track.reader import FrameSource, ThreadedFrames, TrackError, frame_times, probe
-from cuespin.track.tracker import (OFF_PATH, OK, PULLED, STATUS_TEXT, STILL_PX, BallTracker, TrackerConfig,
+from cuespin.track.reader import FrameSource, ThreadedFrames, TrackError, blank_frame, frame_times, probe
+from cuespin.track.tracker import (BLANK, OFF_PATH, OK, PULLED, STATUS_TEXT, STILL_PX, BallTracker, TrackerConfig,
                                    beyond_ball, foreign_near, foreign_threshold, kept_pixels, pulled_fits)
 
 # Bytes of decoded frames held before the background is learnt: 437 grey or
@@ -289,9 +289,22 @@ def learn_model(frames: list, radius_px, n_samples: int,
     the felt from most of the first ones.  ``radius_px``: the ball's radius
     (px) or its :class:`~cuespin.track.radius.RadiusMap`; ``where``: the
     playing surface (:func:`search_mask`); ``lossless``: the video's codec
-    is lossless (:func:`~cuespin.track.colour.channel_rule`)."""
+    is lossless (:func:`~cuespin.track.colour.channel_rule`).  Blank frames
+    (:func:`~cuespin.track.reader.blank_frame`: a black lead-in, a fade) are
+    left out: they would teach a felt and a colour projection of black."""
     n = len(frames)
     idx = np.unique(np.linspace(0, n - 1, n_samples).round().astype(int))
+    # The clean video's samples less the blank ones, not spread again: a
+    # black first frame respaced the samples and left the strike frame
+    # pulled (FFV1 test, blank1).  Spread over the frames that are not
+    # blank when fewer than half the samples are left (a long black lead-in).
+    seen = np.array([not blank_frame(frames[i]) for i in idx])
+    if 2 * seen.sum() < len(idx):
+        frames = [f for f in frames if not blank_frame(f)] or frames
+        n = len(frames)
+        idx = np.unique(np.linspace(0, n - 1, n_samples).round().astype(int))
+    else:
+        idx = idx[seen]
     colour = frames[0].ndim == 3
     samples = np.stack([frames[i] for i in idx])
     proj = learn_projection(samples, radius_px, lossless) if colour else GREY
@@ -304,6 +317,7 @@ def learn_model(frames: list, radius_px, n_samples: int,
         gap = max(n // max(n_samples - 1, 1), 1)
         lo, hi = max(shown.min() - gap // 2, 0), min(shown.max() + gap // 2, n - 1)
         extra = np.setdiff1d(np.linspace(lo, hi, n_samples).round().astype(int), idx)
+        extra = extra[[not blank_frame(frames[i]) for i in extra]]
         if len(extra):
             more = np.stack([frames[i] for i in extra])
             P = np.concatenate([P, proj.many(more) if colour else more])
@@ -458,6 +472,13 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
                 break
             # With nothing moving there is no ball to separate from the felt.
             obs = tracker.step(k, item) if bg.polarity else tracker.nothing()
+            # A blank frame where no ball was found is reported as blank.  A
+            # frame is not left out before it is stepped: a grey ball 30
+            # levels off its felt with no rails in view spans <= 32 levels
+            # in some frames and is found there (dbg3 greyfirstok: 2 of 60
+            # frames lost when blank frames were not stepped).
+            if obs.status != OK and blank_frame(item):
+                obs = tracker.nothing(BLANK)
             if obs.status == OK and tracker.last_patch is not None:
                 blur_len = np.hypot(*tracker.last_fit.b)
                 patch, pu, pv = tracker.last_patch
