@@ -153,6 +153,8 @@ def one_shot(args):
         kw["ar1_floor"] = error_ar1(getattr(tr, "look_factor", 1.0), getattr(tr, "look_rho", 0.0))
     if "touched" in inspect.signature(recover_track).parameters:
         kw["touched"] = getattr(tr, "touched", None)
+    if "look_factor" in inspect.signature(recover_track).parameters:
+        kw["look_factor"] = float(getattr(tr, "look_factor", 1.0))
     lossless = getattr(tr, "independent_errors", tr.lossless)
     if "independent" in inspect.signature(recover_track).parameters:  # the codec apart from the errors' sharing
         kw["independent"], lossless = lossless, bool(tr.lossless)

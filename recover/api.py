@@ -30,7 +30,8 @@ def _num(x):
 def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0.0,
                   method: str = "all", fit_friction: bool = False, lossless: bool = True,
                   return_estimate: bool = False, inter_frame: bool = False, px_to_m=None, keep=None,
-                  ar1_floor: float = 0.0, touched=None, independent: bool | None = None):
+                  ar1_floor: float = 0.0, touched=None, independent: bool | None = None,
+                  look_factor: float = 1.0):
     """v0 and w0 from a track, by the paper's method and/or maximum likelihood.
 
     Parameters
@@ -59,6 +60,9 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
         otherwise a resting ball's frames are one measurement per rest (a
         lossy codec, or a shaded look the tracker's model misses).  Default
         ``lossless``.
+    look_factor : float
+        ``TrackResult.look_factor``, on every frame's stated error: taken
+        off the rests' frames where they share the look's error.
     inter_frame : bool
         The lossy codec predicts frames from others (H.264): its error is
         shared between neighbouring frames (recover.mle.codec_sandwich).
@@ -102,7 +106,7 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
                    run_paper=method in ("paper", "all"), inter_frame=inter_frame,
                    px_to_m=None if px_to_m is None else np.asarray(px_to_m, dtype=float)[ok], keep=keep,
                    ar1_floor=ar1_floor, touched=None if touched is None else np.asarray(touched, bool)[ok],
-                   independent=independent)
+                   independent=independent, look_factor=look_factor)
     methods = {}
     if method in ("paper", "all"):
         methods["paper"] = paper_dict(est, params)

@@ -129,7 +129,7 @@ def _first_fit(meas, params, starts, exposure_s, fit_friction) -> ModelFit | Non
 def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: bool = True,
              fit_friction: bool = False, run_paper: bool = True, inter_frame: bool = False,
              px_to_m=None, keep: Decided | None = None, ar1_floor: float = 0.0,
-             touched=None, independent: bool | None = None) -> Estimate:
+             touched=None, independent: bool | None = None, look_factor: float = 1.0) -> Estimate:
     """Segment, decide and fit one track.
 
     Parameters
@@ -155,6 +155,11 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         than one frame): a lossy codec's, or a look the tracker's model
         misses (a shaded ball, on a lossless codec too).  Default
         ``lossless``.
+    look_factor : float
+        The factor the tracker put on every frame's covariance for the
+        look (``TrackResult.look_factor``); on a lossless codec with
+        ``independent`` False it is taken off the rests' frames
+        (:func:`cuespin.recover.measurements.build_measurements`).
     fit_friction : bool
         Estimate mu_s and mu_r in the maximum-likelihood fit.
     run_paper : bool
@@ -222,7 +227,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         return build_measurements(t, xy, cov, t0=t0, t_rest=seg.t2, exposure_s=exposure_s,
                                   frame_dt=frame_dt, shared_rest=not independent, px_to_m=px_to_m, clear_s=clear_s,
                                   group_rest=group_rest, rest_scale=scale[0], rest_scale_dof=scale[1],
-                                  look_rest=lossless and not independent)
+                                  look_rest=lossless and not independent, look_factor=look_factor)
 
     if keep is not None:
         codec = CodecCorrelation(keep.codec_var, frame_dt) if inter_frame and not lossless else None

@@ -156,13 +156,15 @@ REST_SHARED_LEVEL = 0.025
 # every frame of the rest, one error of about one frame's stated size, and
 # its frames' scatter shows only the sensor's noise, which the scatter rule
 # above would take for independent frames (share 0.06).  So the whole of
-# one frame's stated covariance (the tracker's, without the look's factor:
-# track.misfit.still_frames) is shared.  Measured against the truth (18
-# realistic FFV1 renders, seed 21, 10-11 answered ok; docs/measurements.md,
-# rec9): the rests' means' squared error in one frame's stated variance,
-# median 0.87; the MLE's coverage 100% -> 95.5% (RMS error / stated 0.60 ->
-# 1.11) with the factor off the still frames and this share, 87.5% (1.70)
-# with the scatter rule instead.
+# one frame's stated covariance (the tracker's, without the look's factor,
+# which build_measurements(look_factor=) takes off the rest's frames) is
+# shared.  Chosen and checked on the same 18 realistic FFV1 renders (seed
+# 21, 11 answered ok; docs/measurements.md, rec9 and rec11): in sample.
+# The rests' means' squared error per axis in one frame's stated variance,
+# median 0.87, against 0.69 (chi2(1)'s median) expected were that variance
+# right: the share slightly understates.  The MLE's coverage 100% -> 95.5%
+# (RMS error / stated 0.60 -> 1.32, RMS / bound 0.82) with the factor off
+# the rests and this share, 87.5% (1.70) with the scatter rule instead.
 LOOK_REST_SHARE = 1.0
 # Frames needed with a finite stated error before the stated errors are
 # used; otherwise the spread of the track itself (the moments refinement
@@ -637,7 +639,8 @@ def build_measurements(t, xy, cov, *, t0: float | None = None, t_rest: float | N
                        exposure_s: float = 0.0, frame_dt: float | None = None,
                        shared_rest: bool = False, px_to_m=None, clear_s: float = 0.0,
                        group_rest: bool = True, rest_scale: float = 1.0,
-                       rest_scale_dof: float = float("inf"), look_rest: bool = False) -> Measurements:
+                       rest_scale_dof: float = float("inf"), look_rest: bool = False,
+                       look_factor: float = 1.0) -> Measurements:
     """Turn a track into the measurements a fit uses.
 
     Parameters
@@ -683,6 +686,12 @@ def build_measurements(t, xy, cov, *, t0: float | None = None, t_rest: float | N
         With ``shared_rest``: each rest shares :data:`LOOK_REST_SHARE` of its
         frames' stated covariance whatever their scatter (a lossless codec's
         shaded ball: the still look's error).
+    look_factor : float
+        With ``look_rest``: the factor the tracker put on every frame's
+        covariance for the moving ball's look (``TrackResult.look_factor``),
+        taken off the frames of the rests grouped here, and only those: the
+        one rule of what is still (a rest from ``t0`` and ``t_rest``), whose
+        error is the shared look's, of one frame's stated size.
 
     Returns
     -------
@@ -713,6 +722,9 @@ def build_measurements(t, xy, cov, *, t0: float | None = None, t_rest: float | N
     for rest in rests:
         if rest.sum() >= least:
             key[rest] = key[rest][0]
+            if look_rest and shared_rest:
+                cov = cov.copy()  # the caller's array stays as given
+                cov[rest] = cov[rest] / float(look_factor)
     group = np.full(len(t), -1)
     _, inv = np.unique(key[use], return_inverse=True)
     group[use] = inv

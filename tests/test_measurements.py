@@ -686,3 +686,40 @@ def test_group_sums_are_add_at_sums():
     np.add.at(ref, g, cov)
     ref /= np.maximum(np.bincount(g, minlength=m), 1)[:, None, None]
     assert np.array_equal(c, ref)
+
+
+@pytest.mark.parametrize("fps", [240.0, 480.0])
+def test_the_look_factor_comes_off_the_recoverys_rest_only(fps):
+    # One rule says what is still (review 11b): the tracker puts the look's
+    # factor on every frame (TrackResult.look_factor) and the recovery takes
+    # it off exactly the frames of the rests it groups (t0, seg.t2), never a
+    # decelerating ball's frames before the segmentation's stop.  The rule
+    # it replaced (0.3 px between neighbours) took it off the last 4.8 s of
+    # a roll at 480 fps, 2.4 s at 240 fps.
+    from cuespin.fit.segment import REST_SIGMAS
+    from cuespin.physics import BallParams, Shot
+    from cuespin.recover.estimate import estimate
+
+    p = BallParams(mu_r=0.01)
+    v = 0.3  # m/s, rolling from the strike: 4.3 s to rest
+    shot = Shot(x0=(0.3, 0.5), v0=(v, 0.0), w0=(0.0, v / p.R), t0=0.0)
+    t2 = phases(shot, p).t2
+    sigma, factor = 1.2e-4, 9.0  # 0.05 px at 2.4 mm/px; a realistic look's factor
+    tr = simulate_track(shot, p, fps, sigma, 0, t_start=-0.1, t_end=t2 + 0.3)
+    stated = sigma * np.sqrt(factor)
+    est = estimate(tr.t, tr.xy, np.full(len(tr.t), stated), p, 0.0, lossless=True, independent=False,
+                   look_factor=factor, run_paper=False)
+    meas = est.meas
+    off = np.isclose(meas.cov[:, 0, 0], sigma**2)
+    rest = np.bincount(meas.group[meas.group >= 0], minlength=meas.group.max() + 1)[meas.group] > 1
+    rest[meas.group < 0] = False
+    np.testing.assert_array_equal(off, rest)
+    assert off[tr.t < 0].any() and off[tr.t > t2].any()
+    # A moving frame in the rest only as the segmentation calls it: within
+    # REST_SIGMAS of its stated error (the factor's) of the final position.
+    end = model_track(shot, p, np.array([t2 + 1.0]), 0.0)[0]
+    dist = np.hypot(*(model_track(shot, p, tr.t, 0.0) - end).T)
+    moving = (tr.t > shot.t0) & (tr.t < t2)
+    assert np.all(dist[off & moving] <= REST_SIGMAS * stated)
+    # the segmentation's stop early by 0.11-0.17 s (seeds 0-2, 240 and 480 fps)
+    assert np.all(tr.t[off & moving] > t2 - 0.25)

@@ -214,21 +214,3 @@ def test_excess_z_false_positive_rate_on_sliding_null_tracks():
     fired, n = _null_false_positives(sliding_tracks(400, 12))
     assert fired <= _allowed(n), fired
 
-
-def test_the_look_factor_leaves_a_still_balls_frames_alone():
-    # still_frames: the frames of a rest (each found neighbour within
-    # MOVING_PX), not the moving ball's, nor the rest's frames next to a
-    # moving one (the strike's, the stop's), nor a frame with no found
-    # neighbour.
-    from cuespin.track.misfit import MOVING_PX, still_frames
-
-    rng = np.random.default_rng(0)
-    u = np.r_[np.full(10, 100.0), 100.0 + 3.0 * np.arange(1, 21), np.full(10, 163.0)]
-    uv = np.c_[u, np.full(40, 50.0)] + 0.02 * MOVING_PX * rng.standard_normal((40, 2))
-    ok = np.ones(40, bool)
-    st = still_frames(uv, ok)
-    assert st[:9].all() and not st[9:31].any() and st[31:].all()
-    ok[5] = False                       # a lost frame: not still, its neighbours still are
-    ok[34], ok[36] = False, False       # frame 35 has no found neighbour
-    st = still_frames(uv, ok)
-    assert not st[5] and st[4] and st[6] and not st[35]

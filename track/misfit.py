@@ -376,37 +376,8 @@ def look_misfit(uv, cov, ok, t=None) -> LookMisfit:
     return LookMisfit(factor=1.0 + c, rho=float(rho), ratios=ratios, z=z)
 
 
-__all__ = ["JPEG_CHROMA_VAR", "LookMisfit", "codec_variance", "look_misfit", "remove_kink", "still_frames",
+__all__ = ["JPEG_CHROMA_VAR", "LookMisfit", "codec_variance", "look_misfit", "remove_kink",
            "third_difference_weights", "variance_ratios"]
-
-
-def still_frames(uv, ok) -> np.ndarray:
-    """Frames, shape (n,), of a still ball: found, and each found neighbour
-    within ``MOVING_PX`` of it (at least one found).  The look's factor is
-    the moving ball's (:func:`variance_ratios` counts moving frames only):
-    a still ball's look is the same in every frame of its rest, one error
-    the recovery takes as shared on a lossless codec
-    (recover.measurements.LOOK_REST_SHARE), not the factor on each frame
-    (track.video applies it so).
-
-    Parameters
-    ----------
-    uv : ndarray, shape (n, 2)
-        Centres (px), one per frame in order.
-    ok : ndarray of bool, shape (n,)
-        Frames where the ball was found.
-    """
-    uv = np.asarray(uv, float)
-    good = np.asarray(ok, bool) & np.all(np.isfinite(uv), axis=1)
-    n = len(uv)
-    step = np.full(n - 1 if n else 0, np.nan)
-    pair = good[1:] & good[:-1] if n else np.zeros(0, bool)
-    step[pair] = np.hypot(*(uv[1:][pair] - uv[:-1][pair]).T)
-    prev = np.r_[np.nan, step]
-    nxt = np.r_[step, np.nan]
-    with np.errstate(invalid="ignore"):
-        near = np.where(np.isnan(prev), True, prev <= MOVING_PX) & np.where(np.isnan(nxt), True, nxt <= MOVING_PX)
-    return good & near & ~(np.isnan(prev) & np.isnan(nxt))
 
 
 def codec_variance(lossless: bool, inter_frame: bool, block: int) -> float:

@@ -27,7 +27,7 @@ from cuespin.videoio import quiet_native_stderr
 from cuespin.track.background import Background, FeltAccumulator, learn_background
 from cuespin.track.colour import GREY, Projection, learn_projection
 from cuespin.track.projection import projected_centres
-from cuespin.track.misfit import LookMisfit, codec_variance, error_ar1, look_misfit, still_frames
+from cuespin.track.misfit import LookMisfit, codec_variance, error_ar1, look_misfit
 from cuespin.track.path import off_path
 from cuespin.track.radius import RadiusMap
 from cuespin.track.model import SphereLook, fit_disc, refit_shift, warm_up
@@ -110,9 +110,10 @@ class TrackResult:
         ball's error is shared between neighbouring frames too.
     cov_px : ndarray, shape (n, 2, 2)
         Covariance of ``uv`` (px^2) by the sandwich over the fit, times
-        ``look_factor`` (on a lossless codec only on the moving ball's
-        frames, not a still ball's: :func:`cuespin.track.misfit.still_frames`);
-        convert to metres with
+        ``look_factor`` on every frame (the recovery takes it off the
+        rests it groups on a lossless codec:
+        :func:`cuespin.recover.measurements.build_measurements`); convert
+        to metres with
         ``scene.camera.cov_to_table(xy, cov_px)``.
     look_factor : float
         What the per-frame fits' covariances were multiplied by: the track's
@@ -614,17 +615,12 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         # (-1, 3, -3, 1) and the constant-rate path is kept bit for bit
         variable = len(t) > 1 and np.ptp(np.diff(t)) > 1e-9 * np.mean(np.diff(t))
         misfit = look_misfit(xy * s, cov_t, ok, t=t if variable else None)
-    # The moving ball's misfit, on its frames only where the codec is
-    # lossless: a still ball's look is one error shared by its rest
-    # (recover.measurements.LOOK_REST_SHARE).  On 18 realistic FFV1 renders
-    # (seed 21) the factor on the rests too stated v0 and w0 1/0.60 times
-    # their errors (coverage 100%); the rests' means' squared error was 0.87
-    # (median) of one frame's stated variance without the factor.  Not on a
-    # lossy codec: there the recovery's rest rule (a codec share from the
-    # scatter, floor 0.06) is no look's, and without the factor on its
-    # frames one of 51 realistic MJPG rolling shots (480 fps, factor 4)
-    # passed for sliding (docs/measurements.md, rec9).
-    cov[(ok & ~still_frames(uv, ok)) if info.lossless else ok] *= misfit.factor
+    # On every frame, as the moving ball's look: where a still ball's look is
+    # one error shared by its rest (a lossless codec), the recovery takes the
+    # factor off that rest's frames, the rest it groups (seg.t2, t0:
+    # recover.measurements.build_measurements(look_factor=)), so that one
+    # rule says what is still.
+    cov[ok] *= misfit.factor
     se = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0, None))
     return TrackResult(t=t, uv=uv, xy=xy, ok=ok, status=status,
                        stderr_px=se, radius_px=radius_px, background=bg, error=error,
