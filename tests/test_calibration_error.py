@@ -113,7 +113,7 @@ def _imaged(cam, tr):
     uv = cam.to_pixels(tr.xy)
     cov_px = np.broadcast_to(np.eye(2) * 0.03**2, (len(tr.t), 2, 2)).copy()
     return SimpleNamespace(t=tr.t, uv=uv, cov_px=cov_px, ok=np.ones(len(tr.t), bool), lossless=True,
-                           independent_errors=True, error_ar1=0.0, inter_frame=False)
+                           independent_errors=True, error_ar1=0.0, inter_frame=False, look_factor=1.0)
 
 
 def _recovered(cam, track, p):
