@@ -194,6 +194,13 @@ def rms_px(errors) -> float:
     return float(np.sqrt(np.mean(np.sum(np.square(errors), 1))))
 
 
+def stand_in_tracker(sigma: float):
+    """What BallTracker's rim rules read of a tracker: one-pixel blocks, the
+    frames' noise ``sigma`` (levels), and its fits (no felt ghost here)."""
+    from types import SimpleNamespace
+    return SimpleNamespace(block=1, bg=SimpleNamespace(sigma=sigma), _fit_disc=fit_disc)
+
+
 def lit_ball(rng):
     """The strongly shaded ball both marked balls below carry (the lit
     sphere's look, ambient 60, diffuse 200, light at 0.92 rad: realistic
@@ -241,11 +248,9 @@ def test_a_dot_at_the_rim_is_left_out_against_the_lit_sphere():
     # present without the rule.  Every lit sphere's fit states an error:
     # Gauss-Newton cycles on the pixel-centred look's kinks in some of them
     # (model._kinked_minimum).
-    from types import SimpleNamespace
-
     from cuespin.track.tracker import BallTracker
     rng = np.random.default_rng(2)
-    T = SimpleNamespace(block=1, bg=SimpleNamespace(sigma=1.7), _fit_disc=fit_disc)  # no felt ghost here
+    T = stand_in_tracker(1.7)
     err_rim, err_in, bound = [], [], []
     for _ in range(30):
         img, felt, u0, v0, c, r, look, clear = lit_marked_ball(rng)
@@ -278,11 +283,9 @@ def test_a_marked_balls_frame_without_markings_inside_loses_its_rim_dot():
     # Asserted: within 1.5x the measured ratio, and the dot's pull present
     # without the rule.  The gate itself (the count of marked frames) is
     # measured on realistic seed 0 shot 3 (slow).
-    from types import SimpleNamespace
-
     from cuespin.track.tracker import BallTracker
     rng = np.random.default_rng(2)
-    T = SimpleNamespace(block=1, bg=SimpleNamespace(sigma=1.7), _fit_disc=fit_disc)  # no felt ghost here
+    T = stand_in_tracker(1.7)
     err_with, err_without, bound = [], [], []
     for _ in range(30):
         img, felt, u0, v0, c, r, look, clear = lit_marked_ball(rng, inside=())
@@ -370,12 +373,10 @@ def test_a_logos_faint_crescent_at_the_rim_is_left_out():
     # 0 2.39x -> 1.12x, seed 1 2.68 -> 1.44, seed 2 2.24 -> 1.06.  Asserted
     # on seed 0: under the largest of the three, and the logo's pull at
     # least 1.5x what is left (seed 0: 2.1x; seeds 1-2 1.9x, 2.1x).
-    from types import SimpleNamespace
-
     from cuespin.track.tracker import BallTracker
     rng = np.random.default_rng(0)
     noise = 2.5
-    T = SimpleNamespace(block=1, bg=SimpleNamespace(sigma=noise), _fit_disc=fit_disc)  # no felt ghost here
+    T = stand_in_tracker(noise)
     err_with, err_without, bound = [], [], []
     for _ in range(30):
         img, felt, u0, v0, c, r, look, clear = logo_at_the_rim(rng, noise=noise)
