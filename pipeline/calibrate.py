@@ -1051,6 +1051,250 @@ def _golden(fun, lo: float, hi: float, tol: float) -> float:
     return (lo + hi) / 2.0
 
 
+# --------------------------------------------------------------------------- cushion lines (a pocketed table)
+# When the felt-coloured outline's sides are not straight (the pockets cut
+# the cushions, markers or the rail's diamonds bite into the outline, a
+# shadow band along the noses splits the felt's region: a real table,
+# auto15's clips, 12-16 px RMS), the cushions' lines are found instead
+# (:func:`cushion_lines`).  Threshold: the largest side's RMS about its
+# robust line, which on the drawn and the renderer's realistic tables is
+# 0.07-0.9 px (auto13/auto14; the realistic rows of corners16, 0.45-0.87)
+# and on the real clips 12-16 px; 2 px lies between with room both ways.
+OUTLINE_STRAIGHT_PX = 2.0
+
+# The reference line along a side from the felt region's contour: a
+# quadratic (a lens's bow) fitted by RANSAC, inliers within this distance
+# (px: the contour is whole pixels, so +-1 px, and a bow's cubic remainder).
+CONTOUR_INLIER_PX = 1.5
+
+# The least share of a side's contour points that must lie on one curve for
+# it to be a side at all (the real clips' sides keep 29-87%: the felt's
+# region there is split by a shadow band along two of the cushions; a
+# frame's edge cutting the table leaves less); the step's own points
+# (the same share, along the nose) are the stricter check.
+CONTOUR_MIN_SHARE = 0.2
+
+# A corner pocket's jaws reach this share of the table's shorter side along
+# each side from the corner (the renderer's corner pocket, radius 0.062 m
+# centred 0.031 m out on the diagonal: 0.07 m of 1.27 m, 5.5%; the real
+# clips' about 30 of 560 px, 5.4%).
+CORNER_GAP_FRAC = 0.1
+
+# How far either side of the reference curve the cushion's profile is read,
+# as a share of the table's shorter side in the image (a cushion is about 4%
+# of a table's width: the renderer's 0.05 of 1.27 m, the real clips' 22 of
+# 560 px; the reference may be the cushion's outer edge or a shadow's inner
+# edge, a cushion's width apart).
+CUSHION_SEARCH_FRAC = 0.1
+
+# A step in the side's median profile counts when it is at least this many
+# grey levels and this many times the flat cloth's robust scatter
+# (cushion_noses' rule: 3 levels, 8x).
+STEP_MIN_LEVELS = 3.0
+STEP_MIN_NOISE = 8.0
+
+
+# The felt's hue tells the cushion's top from the rail when the two differ
+# by at least this much in Lab's (a, b) across a side (the real clips' red
+# rail: 60-90; a grey felt by a black rail: a few), else the whole colour's
+# distance is used.
+CHROMA_MIN_CONTRAST = 20.0
+
+
+def _felt_chroma(img: np.ndarray) -> np.ndarray:
+    """Per-pixel distance in Lab's (a, b) from the felt's (the frame's middle)."""
+    im = np.clip(np.asarray(img, dtype=np.float32), 0, 255).astype(np.uint8)
+    if im.ndim == 2 or im.shape[2] == 1:
+        return np.zeros(im.shape[:2], np.float32)
+    ab = cv2.cvtColor(im, cv2.COLOR_BGR2Lab).astype(np.float32)[..., 1:]
+    h, w = ab.shape[:2]
+    felt = np.median(ab[int(0.35 * h):int(0.65 * h), int(0.35 * w):int(0.65 * w)].reshape(-1, 2), axis=0)
+    return np.linalg.norm(ab - felt, axis=2).astype(np.float32)
+
+
+def _side_points(quad: np.ndarray, contour: np.ndarray, lo: float = 0.06, hi: float = 0.94) -> list:
+    """The contour's points nearest each side of ``quad`` (and within ``lo``-``hi``
+    of its length): a list of 4 arrays of points in order along the side."""
+    dists, along = [], []
+    for i in range(4):
+        a, b = quad[i], quad[(i + 1) % 4]
+        L = float(np.linalg.norm(b - a))
+        d = (b - a) / L
+        rel = contour - a
+        t = rel @ d
+        dists.append(np.abs(rel @ np.array([-d[1], d[0]])) + np.where((t < 0) | (t > L), 1e9, 0.0))
+        along.append(t / L)
+    side_of = np.argmin(np.array(dists), axis=0)
+    out = []
+    for i in range(4):
+        sel = (side_of == i) & (along[i] > lo) & (along[i] < hi)
+        out.append(contour[sel][np.argsort(along[i][sel])])
+    return out
+
+
+def _ransac_curve(t: np.ndarray, o: np.ndarray, tol: float, rng, trials: int = 300):
+    """A quadratic ``o(t)`` through most of the points (RANSAC, then least
+    squares on the inliers twice): ``(coefficients, inlier share)``."""
+    n = len(t)
+    if n < 10:
+        return None, 0.0
+    best, best_n = None, 0
+    for _ in range(trials):
+        idx = rng.choice(n, 3, replace=False)
+        if np.ptp(t[idx]) < 0.2:
+            continue
+        coef = np.polyfit(t[idx], o[idx], 2)
+        k = int(np.sum(np.abs(np.polyval(coef, t) - o) < tol))
+        if k > best_n:
+            best, best_n = coef, k
+    if best is None:
+        return None, 0.0
+    for _ in range(2):
+        inl = np.abs(np.polyval(best, t) - o) < tol
+        best = np.polyfit(t[inl], o[inl], 2)
+    return best, float(np.mean(np.abs(np.polyval(best, t) - o) < tol))
+
+
+def cushion_lines(img: np.ndarray, quad: np.ndarray, contour: np.ndarray, D: np.ndarray, thr: float,
+                  noses: bool = True, reach_px: float = 1.0):
+    """Edge points of the cushions' noses on a pocketed table, where the felt's
+    outline is broken (``OUTLINE_STRAIGHT_PX``).
+
+    Along each side of the rough quadrilateral the felt region's contour gives
+    a reference curve (:func:`_ransac_curve`: the points in the pockets' gaps
+    and on markers left out).  The side's median profile across it (grey, and
+    the colour's distance from the felt), over ``CUSHION_SEARCH_FRAC`` of the
+    table's shorter side either way, is read in order from the outside in:
+    the felt-coloured band's outer edge (the cushion's, where the rail
+    begins), then the first step in brightness inside it (``STEP_MIN_LEVELS``,
+    ``STEP_MIN_NOISE``) is the nose: the cushion's top ends there, whatever
+    lies inside it (the renderer's cloth; on a lit table the nose's face and
+    its shadow on the cloth, a darker band 6-11 px wide on the real clips,
+    whose inner edge moves with the lamps).  No such step: the felt band's
+    outer edge itself (``edge`` ``"felt"``).  Each point of the side is then
+    located sub-pixel there (:func:`_subpixel_edge`, within ``reach_px`` +
+    3 px, narrower than a shadow band), the points more than 2 px off the
+    side's nose line dropped (the pockets' jaws, the balls).  ``noses``
+    False: the felt band's outer edge on every side.
+
+    Returns
+    -------
+    sides : list of 4 ndarrays
+        Edge points (px), as :func:`edge_points`.
+    edge : str
+        ``noses`` or ``felt``.
+
+    Raises
+    ------
+    CalibrationError
+        A side with no line along its contour or no edge across it (the
+        reason says which).
+    """
+    Ds = _smoothed(img)
+    grey = (Ds.mean(axis=2) if Ds.ndim == 3 else Ds).astype(np.float32)
+    Dm = cv2.GaussianBlur(D.astype(np.float32), (0, 0), 1.0)
+    Dc = _felt_chroma(Ds)
+    names = ("first", "second", "third", "fourth")
+    shorter = min(np.linalg.norm(quad[1] - quad[0]), np.linalg.norm(quad[2] - quad[1]),
+                  np.linalg.norm(quad[3] - quad[2]), np.linalg.norm(quad[0] - quad[3]))
+    reach = max(CUSHION_SEARCH_FRAC * shorter, 15.0)
+    offs = np.arange(-reach, reach + 1e-9, 0.5)
+    w = 6                               # 3 px a side of a step, as cushion_noses
+    rng = np.random.default_rng(0)
+    sides, kinds = [], []
+    for i, pts in enumerate(_side_points(quad, contour)):
+        a, b = quad[i], quad[(i + 1) % 4]
+        L = float(np.linalg.norm(b - a))
+        d = (b - a) / L
+        nrm = np.array([-d[1], d[0]])                        # outward
+        coef, share = _ransac_curve((pts - a) @ d / L, (pts - a) @ nrm, CONTOUR_INLIER_PX, rng)
+        if coef is None or share < CONTOUR_MIN_SHARE:
+            raise CalibrationError(f"the {names[i]} side of the felt is not a line ({100 * share:.0f}% of its "
+                                   f"edge on one, under {100 * CONTOUR_MIN_SHARE:.0f}%): the table is cut by the "
+                                   "frame or hidden; give --corners")
+        ts = np.arange(0.1, 0.9, 1.0 / L)
+        base = a + (ts * L)[:, None] * d + np.polyval(coef, ts)[:, None] * nrm
+        # the curve's own normal (a bowed side turns by a few tenths of a degree)
+        slope = np.polyval(np.polyder(coef), ts) / L
+        tang = d[None, :] + slope[:, None] * nrm[None, :]
+        tang /= np.linalg.norm(tang, axis=1, keepdims=True)
+        nrms = np.column_stack([-tang[:, 1], tang[:, 0]])
+        P = base[:, None, :] + offs[None, :, None] * nrms[:, None, :]
+        px, py = P[..., 0].astype(np.float32), P[..., 1].astype(np.float32)
+        g_prof = np.median(cv2.remap(grey, px, py, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE), axis=0)
+        d_prof = np.median(cv2.remap(Dm, px, py, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE), axis=0)
+        c_prof = np.median(cv2.remap(Dc, px, py, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE), axis=0)
+        # the cushion's outer edge: where the colour's hue leaves the felt's (the cushion's top and a
+        # shadow on it are the cloth's hue, a rail is not), else its distance from the felt
+        prof = c_prof if np.ptp(c_prof) >= CHROMA_MIN_CONTRAST else d_prof
+        inner = float(np.median(prof[: len(offs) // 4]))
+        out = np.nonzero(prof >= 0.5 * (inner + prof.max()))[0]
+        out = out[out > len(offs) // 4]
+        if len(out) == 0 or out[0] < 2 * w:
+            raise CalibrationError(f"no felt's edge across the {names[i]} side; give --corners")
+        k_out = int(out[0]) - 1                                # the first step out of the felt's hue
+        cs = np.concatenate([[0.0], np.cumsum(g_prof)])
+        g = np.zeros_like(g_prof)
+        g[w:-w] = ((cs[2 * w + 1:] - cs[w + 1:-w]) - (cs[w:-w - 1] - cs[:-2 * w - 1])) / w
+        flat = np.abs(g[w: max(len(offs) // 4, w + 4)])       # the cloth, well inside
+        noise = float(np.median(flat) + 1.4826 * np.median(np.abs(flat - np.median(flat)))) + 1e-3
+        ag = np.abs(g)
+        peak = (ag >= np.roll(ag, 1)) & (ag >= np.roll(ag, -1)) & (ag > max(STEP_MIN_LEVELS, STEP_MIN_NOISE * noise))
+        peak[k_out - 2 * w:] = False                           # the felt band's own outer edge
+        cand = np.nonzero(peak)[0]
+        if len(cand) and noses:
+            k, kind = int(cand[-1]), "noses"
+            sgn = np.sign(g[k])
+        else:
+            k, kind = k_out, "felt"
+            sgn = np.sign(np.mean(g_prof[max(k - 2 * w, 0):k]) - np.mean(g_prof[k + 1:k + 2 * w + 1]))
+        # each point's own step near the side's (a bowed nose, a reference curve a few px off), smoothed
+        # along the side over 9 points; a quadratic through most of them (the pockets' gaps left out)
+        win = np.arange(offs[k] - 6.0, offs[k] + 6.0 + 1e-9, 0.5)
+        Q = base[:, None, :] + win[None, :, None] * nrms[:, None, :]
+        G = cv2.remap(grey, Q[..., 0].astype(np.float32), Q[..., 1].astype(np.float32), cv2.INTER_LINEAR,
+                      borderMode=cv2.BORDER_REPLICATE)
+        G = cv2.blur(G, (1, 9))
+        step = np.zeros_like(G)
+        step[:, 2:-2] = sgn * ((G[:, 3:-1] + G[:, 4:]) - (G[:, :-4] + G[:, 1:-3]))
+        o_pt = win[np.argmax(step, axis=1)]
+        c2, share2 = _ransac_curve(ts, o_pt, CONTOUR_INLIER_PX, rng)
+        if c2 is None or share2 < CONTOUR_MIN_SHARE:
+            raise CalibrationError(f"the cushion's edge is not a line along the {names[i]} side "
+                                   f"({100 * share2:.0f}% of it on one); give --corners")
+        at = base + np.polyval(c2, ts)[:, None] * nrms
+        edge = _subpixel_edge(Ds, at, nrms.mean(axis=0) / np.linalg.norm(nrms.mean(axis=0)),
+                              np.arange(-reach_px - 3.0, reach_px + 3.0 + 1e-9, 0.25))
+        if len(edge) >= 10:         # off the side's (bowed) line: a pocket's jaw, a ball
+            te, oe = (edge - a) @ d / L, (edge - a) @ nrm
+            ce, _ = _ransac_curve(te, oe, 1.0, rng)
+            if ce is not None:
+                edge = edge[np.abs(np.polyval(ce, te) - oe) < 2.0]
+        if len(edge) < max(10, 0.3 * len(base)):
+            raise CalibrationError(f"the cushion's edge could not be located along the {names[i]} side "
+                                   f"({len(edge)} of {len(base)} points); give --corners")
+        sides.append(edge)
+        kinds.append(kind)
+    # the pockets' jaws bend the noses' ends: points nearer a corner than CORNER_GAP_FRAC of the shorter
+    # side left out (the rough quadrilateral's corners, where the cut above began, can be tens of px off)
+    lines_ = [_fit_line(p)[:2] for p in sides]
+    corners = np.array([_line_intersection(lines_[i - 1], lines_[i]) for i in range(4)])
+    gap = CORNER_GAP_FRAC * min(np.linalg.norm(np.roll(corners, -1, axis=0) - corners, axis=1))
+    for i in range(4):
+        a, b = corners[i], corners[(i + 1) % 4]
+        d = (b - a) / np.linalg.norm(b - a)
+        t_ = (sides[i] - a) @ d
+        keep = (t_ > gap) & (t_ < np.linalg.norm(b - a) - gap)
+        if keep.sum() < 10:
+            raise CalibrationError(f"the cushion's edge could not be located along the {names[i]} side "
+                                   "between its pockets; give --corners")
+        sides[i] = sides[i][keep]
+    if len(set(kinds)) > 1:
+        raise CalibrationError("the cushions' noses show on " + ", ".join(n for n, k in zip(names, kinds) if k == "noses")
+                               + " side(s) only: no one outline all round; give --corners")
+    return sides, kinds[0]
+
+
 @dataclass(frozen=True)
 class Detection:
     """The table's outline found in a frame.
@@ -1139,6 +1383,7 @@ KAPPA_PATTERN_K1 = 6e-5
 
 def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = True,
                    noses: bool = True, robust: bool = True, pattern_px: float = EDGE_PATTERN_PX,
+                   lines: str = "auto",
                    kappa_pattern_k1: float = KAPPA_PATTERN_K1) -> Detection:
     """The playing surface's four corners in a frame (:class:`Detection`).
 
@@ -1152,6 +1397,10 @@ def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = Tru
         Without ``K``: estimate one radial coefficient from the edges' bow.
     noses : bool
         Look for the cushions' noses inside the felt-coloured outline.
+    lines : str
+        ``auto``: the cushions' lines (:func:`cushion_lines`) when a side of
+        the felt's outline is not straight (``OUTLINE_STRAIGHT_PX``: a
+        pocketed real table); ``always`` or ``never``.
     robust : bool
         Drop the edge points ``STRAY_EDGE_Z`` robust standard deviations or
         more from their side's line (:func:`drop_strays`) before the bow,
@@ -1174,6 +1423,10 @@ def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = Tru
         inner = cushion_noses(img, sides)
         if inner is not None:
             sides, edge = inner, "noses"
+    if lines == "always" or (lines == "auto" and max(
+            float(np.sqrt(np.mean(_fit_line(p)[2] ** 2))) for p in sides) > OUTLINE_STRAIGHT_PX):
+        # the outline is broken (pockets, markers, a shadow band): the cushions' lines instead
+        sides, edge = cushion_lines(img, quad, contour, D, thr, noses=noses)
     h, w = D.shape
     centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
     kappa = kappa_sigma = 0.0
@@ -1480,7 +1733,9 @@ def calibrate_video(path, table: Table = Table(), corners=None, *, intrinsics=No
     at ``nose_height_m`` above the cloth), else the felt-coloured outline (the
     surface grown by ``felt_margin_m`` at ``felt_height_m``).  Given corners
     take the same focal-length rule (:func:`calibrate_clicked`), the still
-    balls read from the same median frame.
+    balls read from the same median frame; with ``nose_height_m`` they are
+    taken as clicked where the noses meet, that high above the cloth (the
+    table's frame is the cloth's: x, y of the playing surface's edge, z 0).
     """
     from cuespin.videoio import quiet_native_stderr
 
@@ -1498,6 +1753,8 @@ def calibrate_video(path, table: Table = Table(), corners=None, *, intrinsics=No
     if corners is not None:
         # the median frame where the edges' bow or the still balls are read
         frame = reference_frame(path) if K is None and not kw.get("homography") else None
+        if nose_height_m:           # clicked where the cushions' noses meet, above the cloth
+            kw["corner_height_m"] = nose_height_m
         return calibrate_clicked(corners, size, table, frame=frame, intrinsics=K, distortion=dist, fps=fps,
                                  camera_height_sigma_m=camera_height_sigma_m, use_balls=use_balls, **kw)
     return calibrate_frame(reference_frame(path), table, intrinsics=K, distortion=dist, fps=fps,
@@ -1972,8 +2229,9 @@ def add_parser(sub) -> None:
     c.add_argument("--felt-height", type=float, default=0.0, metavar="M",
                    help="automatic, when no cushion nose shows: that outline's height above the cloth (m)")
     c.add_argument("--nose-height", type=float, default=0.0, metavar="M",
-                   help="automatic: height of the cushions' noses above the cloth (m; 0 for the "
-                        "renderer's flat table, about 0.036 on a real pool table)")
+                   help="height of the cushions' noses above the cloth (m; 0 for the renderer's flat "
+                        "table, about 0.036 on a real pool table): the noses' line found automatically, "
+                        "or --corners clicked where the noses meet, lies that high")
     c.add_argument("--homography", action="store_true",
                    help="write the corners' homography, not a pose: for top-down renders (an "
                         "orthographic view); a real camera D above the cloth reads distances short by R/D")
