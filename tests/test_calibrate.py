@@ -716,3 +716,61 @@ def test_clicked_corners_focal_error_at_3m_is_the_clicks_own():
         f, s, _ = corner_focal(exact + d, SIZE, TABLE, moves, kappa=kappa)
         assert abs(f - (f0 + (fk - f0) @ d.ravel())) < CLICKED_F_LINEAR_TOL * s0, (i, f / ft - 1)
         assert abs(s / s0 - 1.0) < CLICKED_F_STATED_TOL, (i, s / s0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("height,tilt,k1", [(1.5, 15.0, -0.25), (2.0, 10.0, 0.0)])
+def test_cushion_lines_on_the_renderers_pocketed_table(height, tilt, k1):
+    """The cushions' lines (the path a real pocketed table takes when its felt
+    outline is broken) on the renderer's realistic table through a tilted,
+    distorting pinhole camera: pockets, sights, darker cushions, textured
+    felt, lens blur.  Measured (corners16): 0.118 and 0.208 px RMS from the
+    truth, on the cloth (height 0); the issue's target is 0.5 px."""
+    from dataclasses import replace
+
+    from cuespin.data_gen.sampler import make_scene, sample_shot
+    from cuespin.physics.motion import Shot
+    from cuespin.render.draw import FrameRenderer
+
+    shot, params = sample_shot(100, "random")
+    cam = pinhole_camera(height_m=height, tilt_deg=tilt, k1=k1, R=params.R, size=SIZE, fps=240.0, roll_deg=1.0,
+                         margin_m=0.2)
+    scene = replace(make_scene(Shot(shot.x0, shot.v0, shot.w0, t0=0.1), params,
+                               render={"look": "realistic", "noise_sigma": 2.0, "seed": 1}), camera=cam)
+    img = next(iter(FrameRenderer(scene, n_frames=1).frames()))
+    det = detect_corners(img, lines="always")
+    assert det.edge == "noses"
+    truth = cam.project(table_corners(TABLE))
+    d = min((np.roll(det.corners, -s, axis=0) - truth for s in range(4)), key=lambda e: np.abs(e).max())
+    assert np.sqrt(np.mean(np.sum(d**2, axis=1))) < AUTO_CORNER_RMS_PX
+    f = cam.K[0, 0]
+    assert det.kappa * f * f == pytest.approx(k1, abs=0.01)     # measured within 0.001 (k1 -0.250 found)
+
+
+def test_cushion_lines_refuse_a_table_the_frame_cuts():
+    """No cushion line along a side (the frame cuts the table): refused with a
+    reason, not a guessed corner."""
+    from cuespin.pipeline.calibrate import CalibrationError, _felt_distance, _felt_quad, cushion_lines
+
+    true = pinhole_camera(height_m=2.0, tilt_deg=10.0, R=R, size=SIZE, fps=240.0, roll_deg=1.0)
+    img = synthetic_table_frame(true, seed=3, cushion_m=0.05, pockets=True)
+    img[:, : SIZE[0] // 2] = img[SIZE[1] // 2, SIZE[0] // 2]       # the left half: felt to the frame's edge
+    with pytest.raises(CalibrationError, match="give --corners"):
+        D, thr = _felt_distance(img)
+        cushion_lines(img, *_felt_quad(D, thr), D, thr)
+
+
+def test_clicked_corners_at_the_noses_height():
+    """Corners clicked where the cushions' noses meet lie h above the cloth;
+    calibrated as such (``--nose-height``) the ball plane is exact, taken on
+    the cloth it is off by h / (D - h) (measured 1.82% at 2 m for 36 mm)."""
+    from cuespin.pipeline.calibrate import calibrate_clicked
+
+    true = pinhole_camera(height_m=2.0, tilt_deg=10.0, R=R, size=SIZE, fps=240.0, roll_deg=1.0)
+    h = 0.036
+    clicks = true.project(table_corners(TABLE, height_m=h))
+    at_noses = calibrate_clicked(clicks, SIZE, TABLE, intrinsics=np.array(true.K), corner_sigma_px=0.0,
+                                 corner_height_m=h, R_nominal=R)
+    on_cloth = calibrate_clicked(clicks, SIZE, TABLE, intrinsics=np.array(true.K), corner_sigma_px=0.0, R_nominal=R)
+    assert metre_error(at_noses, true) < 1e-6
+    assert metre_error(on_cloth, true) > 0.01     # a 1.8% scale: 10-24 mm at the table's ends
