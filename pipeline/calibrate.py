@@ -1249,7 +1249,7 @@ def cushion_lines(img: np.ndarray, quad: np.ndarray, contour: np.ndarray, D: np.
         noise = float(np.median(flat) + 1.4826 * np.median(np.abs(flat - np.median(flat)))) + 1e-3
         ag = np.abs(g)
         peak = (ag >= np.roll(ag, 1)) & (ag >= np.roll(ag, -1)) & (ag > max(STEP_MIN_LEVELS, STEP_MIN_NOISE * noise))
-        peak[k_out - 2 * w:] = False                           # the felt band's own outer edge
+        peak[max(k_out - 2 * w, 0):] = False                   # the felt band's own outer edge
         cand = np.nonzero(peak)[0]
         if len(cand) and noses:
             k, kind = int(cand[-1]), "noses"
@@ -1408,8 +1408,9 @@ def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = Tru
         Look for the cushions' noses inside the felt-coloured outline.
     lines : str
         ``auto``: the cushions' lines (:func:`cushion_lines`) when a side of
-        the felt's outline is not straight (``OUTLINE_STRAIGHT_PX``: a
-        pocketed real table); ``always`` or ``never``.
+        the felt's outline is not a smooth curve (``OUTLINE_STRAIGHT_PX``: a
+        pocketed real table) or its edge is not found along a side;
+        ``always`` or ``never``.
     robust : bool
         Drop the edge points ``STRAY_EDGE_Z`` robust standard deviations or
         more from their side's line (:func:`drop_strays`) before the bow,
@@ -1426,13 +1427,19 @@ def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = Tru
     """
     D, thr = _felt_distance(img)
     quad, contour = _felt_quad(D, thr)
-    sides = edge_points(img, quad, contour)
-    edge = "felt"
-    if noses:
-        inner = cushion_noses(img, sides)
-        if inner is not None:
-            sides, edge = inner, "noses"
-    if lines == "always" or (lines == "auto" and max(_curve_rms(p) for p in sides) > OUTLINE_STRAIGHT_PX):
+    try:
+        sides = edge_points(img, quad, contour)
+        edge = "felt"
+        if noses:
+            inner = cushion_noses(img, sides)
+            if inner is not None:
+                sides, edge = inner, "noses"
+        broken = max(_curve_rms(p) for p in sides) > OUTLINE_STRAIGHT_PX
+    except CalibrationError:
+        if lines == "never":
+            raise
+        broken = True               # no edge along a side of the outline: the lines may still be there
+    if lines == "always" or (lines == "auto" and broken):
         # the outline is broken (pockets, markers, a shadow band): the cushions' lines instead
         sides, edge = cushion_lines(img, quad, contour, D, thr, noses=noses)
     h, w = D.shape
