@@ -799,3 +799,22 @@ def test_cli_clicked_corners_at_the_noses_height(tmp_path, capsys):
         xy = ball_grid()
         errs[bool(extra)] = float(np.abs(cam.to_table(true.to_pixels(xy)) - xy).max())
     assert errs[True] < 1e-4 and errs[False] > 0.01, errs
+
+
+def test_a_shadow_band_inside_the_noses_is_not_taken_for_them():
+    """Cushions in the cloth's colour and a darker band 15 mm inside the noses
+    (their shadows under lamps, as on the real clips): the outline's largest
+    step is the band's inner edge (measured 2.16 px RMS off the noses' corners
+    through a k1 -0.25 lens); the cushion lines take the outermost step, and
+    the two disagree far beyond their errors (PATHS_DISAGREE_Z), so the
+    lines' corners are kept (measured 0.098 px)."""
+    true = pinhole_camera(height_m=2.0, tilt_deg=10.0, k1=-0.25, R=R, size=SIZE, roll_deg=1.0)
+    img = synthetic_table_frame(true, seed=5, cushion_m=0.05, cushion_shade=1.05, pockets=True, band_m=0.015)
+    truth = true.project(table_corners(TABLE))
+
+    def rms(det):
+        d = min((np.roll(det.corners, -s, axis=0) - truth for s in range(4)), key=lambda e: np.abs(e).max())
+        return float(np.sqrt(np.mean(np.sum(d**2, axis=1))))
+    assert rms(detect_corners(img, lines="never")) > 1.0
+    det = detect_corners(img)
+    assert det.edge == "noses" and rms(det) < AUTO_CORNER_RMS_PX
