@@ -1344,6 +1344,9 @@ class Detection:
         jackknife (:func:`corner_covariance`; kappa's row 0 with a known lens)
         and the edge locator's fixed pattern (``EDGE_PATTERN_PX``,
         ``KAPPA_PATTERN_K1``).
+    lines : bool
+        The sides are the cushions' lines (:func:`cushion_lines`), not the
+        felt outline's.
     """
 
     corners: np.ndarray
@@ -1353,6 +1356,7 @@ class Detection:
     kappa_sigma: float = 0.0
     corners_kappa: np.ndarray | None = None
     corner_cov: np.ndarray | None = None
+    lines: bool = False
 
 
 # The edge locator's fixed-pattern error on a corner coordinate (px): what a
@@ -1457,14 +1461,14 @@ def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = Tru
         sides, edge = cushion_lines(img, quad, contour, D, thr, noses=noses)
     kw = dict(K=K, dist=dist, estimate_lens=estimate_lens, robust=robust, pattern_px=pattern_px,
               kappa_pattern_k1=kappa_pattern_k1)
-    det = _detection(sides, edge, D.shape, **kw)
+    det = _detection(sides, edge, D.shape, lines=lines == "always" or (lines == "auto" and broken), **kw)
     if lines == "auto" and edge == "noses" and not broken and any(outer):
         # Another step within the noses' sub-pixel window (a shadow band inside the nose, narrower than
         # the window: the halfway crossing then falls between its edges); the lines take the outermost
         # step with a window narrower than such a band: when the two disagree beyond their errors
         # (PATHS_DISAGREE_Z), the lines'.
         try:
-            other = _detection(*cushion_lines(img, quad, contour, D, thr), D.shape, **kw)
+            other = _detection(*cushion_lines(img, quad, contour, D, thr), D.shape, lines=True, **kw)
         except CalibrationError:
             return det
         sig = math.sqrt((np.trace(det.corner_cov[:8, :8]) + np.trace(other.corner_cov[:8, :8])) / 8.0)
@@ -1484,7 +1488,8 @@ PATHS_DISAGREE_Z = 6.0
 
 
 def _detection(sides, edge: str, shape, *, K=None, dist=None, estimate_lens: bool = True, robust: bool = True,
-               pattern_px: float = EDGE_PATTERN_PX, kappa_pattern_k1: float = KAPPA_PATTERN_K1) -> Detection:
+               pattern_px: float = EDGE_PATTERN_PX, kappa_pattern_k1: float = KAPPA_PATTERN_K1,
+               lines: bool = False) -> Detection:
     """:func:`detect_corners`' corners, lens and errors from four sides' edge points in a frame of ``shape``."""
     h, w = shape[:2]
     centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
@@ -1508,7 +1513,7 @@ def _detection(sides, edge: str, shape, *, K=None, dist=None, estimate_lens: boo
         g = kappa_floor * np.append((corners_kappa - corners).ravel() / kappa_sigma, 1.0)
         cov += np.outer(g, g)
     return Detection(corners=corners, edge_rms=edge_rms, kappa=kappa, edge=edge, kappa_sigma=kappa_sigma,
-                     corners_kappa=corners_kappa, corner_cov=cov)
+                     corners_kappa=corners_kappa, corner_cov=cov, lines=lines)
 
 
 def assign_corners(quad: np.ndarray, size, table: Table, **kw) -> Calibration:
@@ -2043,8 +2048,13 @@ def calibrate_frame(frame: np.ndarray, table: Table = Table(), *, corners=None, 
         idx = [2 * ((j + s) % 4) + c for j in range(4) for c in (0, 1)] + [8]
         moves = covariance_moves(det.corner_cov[np.ix_(idx, idx)])
     cal = replace(cal, edge_rms_px=edge_rms, edge=det.edge)
-    return _focal_and_errors(cal, size, table, same, moves, frame=frame if use_balls else None,
-                             camera_height_sigma_m=camera_height_sigma_m)
+    cal = _focal_and_errors(cal, size, table, same, moves, frame=frame if use_balls else None,
+                            camera_height_sigma_m=camera_height_sigma_m)
+    if det.lines:       # said: the path a real pocketed table takes, measured on two real clips only
+        cal = replace(cal, notes=["the felt's outline is broken (pockets, markers, shadows along the cushions): "
+                                  "the cushions' lines were fitted instead (docs/calibration.md); check the "
+                                  "corners, and give --nose-height for a real table's noses"] + list(cal.notes))
+    return cal
 
 
 def _with_perturbed(cal: Calibration, size, table: Table, **kw) -> Calibration:

@@ -817,4 +817,5 @@ def test_a_shadow_band_inside_the_noses_is_not_taken_for_them():
         return float(np.sqrt(np.mean(np.sum(d**2, axis=1))))
     assert rms(detect_corners(img, lines="never")) > 1.0
     det = detect_corners(img)
-    assert det.edge == "noses" and rms(det) < AUTO_CORNER_RMS_PX
+    assert det.edge == "noses" and det.lines and rms(det) < AUTO_CORNER_RMS_PX
+    assert not detect_corners(synthetic_table_frame(true, seed=5, cushion_m=0.05, pockets=True)).lines   # no band
