@@ -19,7 +19,7 @@ from cuespin.fit.segment import Segments, segment_track
 from cuespin.physics.motion import BallParams, phases
 from cuespin.recover.measurements import (CUE_CLEAR_FRAMES, MAX_CODEC_NOISE_RATIO, Measurements, as_covariance,
                                           build_measurements, codec_excess, codec_noise_ratio, cue_clear_s,
-                                          fill_covariance, moving_scale)
+                                          fill_covariance, moving_scale, touched_run_s)
 from cuespin.recover.mle import (CodecCorrelation, MLEResult, ModelFit, ar1_from_residuals, correlated_codec_var,
                                  fit_model, fit_models, initial_guess, lag1_autocorrelation, result, slip_lr,
                                  with_profile_interval)
@@ -179,9 +179,10 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
     touched : ndarray of bool, shape (n,), optional
         Frames the tracker flags (``TrackResult.touched``: something beside
         the ball, the cue; or the ball leaving the spot it rested on): the
-        first frames after the strike (recover.measurements.cue_clear_s) are
-        left out only when a frame within ``CUE_CLEAR_FRAMES`` of the strike
-        is flagged.  Without it (simulated tracks, a shot with no cue
+        first frames after the strike (recover.measurements.cue_clear_s), and
+        the whole run of flagged frames from the first after the strike on
+        (recover.measurements.touched_run_s), are left out only when a frame
+        within ``CUE_CLEAR_FRAMES`` of the strike is flagged.  Without it (simulated tracks, a shot with no cue
         in view) none are: leaving them out of a cue-less shot cost free-slip
         answers their coverage (short_slide.py, seeds 8-9: 91.9% -> 83.9%).
     ar1_floor : float
@@ -239,7 +240,9 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         if touched is None or not np.isfinite(t0):
             return 0.0
         near = np.abs(t - t0) <= (CUE_CLEAR_FRAMES + 0.5) * frame_dt
-        return cue_clear_s(speed, params.R, frame_dt) if np.any(touched[near]) else 0.0
+        if not np.any(touched[near]):
+            return 0.0
+        return max(cue_clear_s(speed, params.R, frame_dt), touched_run_s(t, touched, t0, exposure_s, frame_dt))
 
     clear_s = cue_window(np.hypot(*starts[0][2]), seg.t0) if starts else 0.0
     meas1 = measure(seg.t0, clear_s)

@@ -68,6 +68,64 @@ def test_look_biases_no_longer_pass_for_slip(monkeypatch):
     assert slips >= 3, slips
 
 
+# Rolling-from-the-strike renders whose tracker flags a run of frames after
+# the strike (the window still holding the spot the ball left, the cue's
+# tip): realistic MJPG seed 41 (benchmarks/accuracy.py --preset case4
+# --max-seconds 1.0), shot 4: 18 flagged frames, frames 4-9 after the strike
+# 0.5-4.7 px behind the ball along its path, up to 10 stated errors.  Here
+# a milder run: RUN_FRAMES flagged, the first RUN_BEHIND_SIGMAS stated
+# errors behind, falling to half an error at the run's end.
+RUN_FRAMES = 8
+RUN_BEHIND_SIGMAS = 4.0
+
+
+def _pulled_back(tr):
+    """The track with the first RUN_FRAMES frames after the strike moved
+    back along the path, and those frames flagged."""
+    d = np.asarray(tr.shot.v0) / np.hypot(*tr.shot.v0)
+    after = np.flatnonzero(tr.t - 0.5 * tr.exposure_s > tr.shot.t0)[:RUN_FRAMES]
+    xy = tr.xy.copy()
+    xy[after] -= (np.linspace(RUN_BEHIND_SIGMAS, 0.5, len(after)) * tr.sigma)[:, None] * d
+    touched = np.zeros(len(tr.t), bool)
+    touched[after] = True
+    return xy, touched
+
+
+def test_the_touched_run_after_the_strike_is_left_out_whole(monkeypatch):
+    from cuespin.recover import estimate as estimate_module
+
+    tracks = list(null_rolling_tracks(4, 21, fps_grid=(240.0, 480.0), sigma_grid=(1.5e-4,)))
+    for tr in tracks:
+        xy, touched = _pulled_back(tr)
+        est = estimate(tr.t, xy, np.full(len(tr.t), tr.sigma), tr.params, tr.exposure_s, lossless=False,
+                       run_paper=False, touched=touched)
+        assert est.decided.clear_s > (RUN_FRAMES - 2) / tr.fps
+        m = est.mle
+        assert m.status == "ok" and m.model == "rolling", (m.status, m.model, m.slip_lr, m.reason)
+    # Before: at most CUE_CLEAR_FRAMES of the run left out.
+    monkeypatch.setattr(estimate_module, "touched_run_s", lambda *a, **k: 0.0)
+    slips = 0
+    for tr in tracks:
+        xy, touched = _pulled_back(tr)
+        est = estimate(tr.t, xy, np.full(len(tr.t), tr.sigma), tr.params, tr.exposure_s, lossless=False,
+                       run_paper=False, touched=touched)
+        slips += est.mle.model == "full"
+    assert slips >= 2, slips
+
+
+def test_the_touched_run_time():
+    t = np.arange(12) / 100.0
+    touched = np.zeros(12, bool)
+    touched[[3, 4, 5, 6, 9]] = True
+    # the run from the first frame after the strike (0.025 s): frames 3-6, not 9
+    s = measurements.touched_run_s(t, touched, 0.025, 0.0, 0.01)
+    assert 0.06 - 0.025 <= s < 0.07 - 0.025
+    assert measurements.strike_window(t, 0.025, 0.0, 0.01, s).nonzero()[0].tolist() == [3, 4, 5, 6]
+    # the first frame after the strike not flagged: no run
+    assert measurements.touched_run_s(t, touched, 0.065, 0.0, 0.01) == 0.0
+    assert measurements.touched_run_s(t, None, 0.025, 0.0, 0.01) == 0.0
+
+
 def test_no_cue_seen_no_frames_left_out():
     # A shot whose track shows nothing beside the ball at the strike (a
     # simulated one; a video with no cue in view) keeps every frame.
