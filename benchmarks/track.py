@@ -101,15 +101,18 @@ def scene_for(codec, seconds, fps=240.0, noise=5.0, px_per_m=500.0, blur=False, 
                               "felt_grey": 90.0, "ball_grey": 210.0})
 
 
-def colour_video(tmp, codec, n_frames, fps=240.0, rest=False):
+def colour_video(tmp, codec, n_frames, fps=240.0, rest=False, fresh=False):
     """A colour shot of ``n_frames`` written with PyAV (every frame rendered,
     the felt's noise from a bank of 16); (path, scene).  ``rest``: the
-    slower shot that comes to rest in view (:data:`REST_SCALE`)."""
+    slower shot that comes to rest in view (:data:`REST_SCALE`).  ``fresh``:
+    new noise in every frame, as a camera's sensor gives (the bank's rolled
+    noise lets x264 code a frame in ~450 bytes, so its decode is cheap)."""
     scene = scene_for(codec, n_frames / fps, fps=fps, v_scale=REST_SCALE if rest else 1.0)
     enc, pix, opts, ext, rate = CODECS[codec]
-    path = Path(tmp) / f"speed_{codec}_{n_frames}{'_rest' if rest else ''}.{ext}"
+    path = Path(tmp) / f"speed_{codec}_{n_frames}{'_rest' if rest else ''}{'_fresh' if fresh else ''}.{ext}"
     if not path.exists():
-        write_av(colour_frames(scene, (40, 200, 220), (40, 110, 30), noise=3.0, seed=1, noise_bank=16),
+        write_av(colour_frames(scene, (40, 200, 220), (40, 110, 30), noise=3.0, seed=1,
+                               noise_bank=0 if fresh else 16),
                  path, enc, pix, fps, options=opts, bit_rate=rate and rate * fps)
     return path, scene
 

@@ -15,7 +15,8 @@ import numpy as np
 
 from cuespin.track.background import DETECT_SIGMAS, SCORE_CAP, Background, box_score, box_size
 from cuespin.track.colour import GREY, Projection
-from cuespin.track.model import SphereLook, _model_rows, blur_nodes, fit_disc, streak_from_moments, streak_model
+from cuespin.track.model import (SphereLook, _coarse, _model_rows, block_patch, blur_nodes, fit_disc,
+                                 streak_from_moments, streak_model)
 from cuespin.track.outline import OUTLINE_REFIT_PX, OutlineCache, is_similarity
 from cuespin.track.radius import RadiusMap
 from cuespin.track.sphere import Sample, learn_sphere, mean_sample, still_members
@@ -200,6 +201,30 @@ RIM_MARK_BOX = 3
 # fit, shot 17's 97 frames counted 174-194, review 10c, and the 8 fits this
 # was first set at were about 4 frames).
 MARKED_BALL_FRAMES = 4
+# A ball at rest is not fitted again every frame (BallTracker._rest_step).
+# Once two consecutive frames' fits lie within REST_STEP_PX of each other,
+# the next frames are measured against the last one fitted (the reference)
+# by one Gauss-Newton step from its converged fit, on its window, pixels and
+# Jacobian: the change of every parameter is linear in the window's change
+# (``(J J^T)^-1 J (y - y_ref)``; J^T r_ref = 0 at the reference's minimum),
+# so each frame keeps its own noise in its centre (the recovery's rest rule
+# reads the rest's scatter: recover.measurements.group_covariance) for one
+# product with the window (a fit iterates, and the frame's search, cue,
+# markings and recentring passes are not run).  The step stands only while
+# it stays near the reference: a centre moved more than REST_STEP_PX from
+# it (sphere.STILL_PX: a resting ball's fitted centre scatters by
+# 0.002-0.03 px, a moving one moves >= 0.1 px a frame once it has left the
+# rest), a residual RMS above the reference's beyond REST_RMS_SIGMAS of its
+# spread (the ratio of two residual variances on ``dof`` each: sd
+# 2 / sqrt(dof)), or FOREIGN_MIN_PX or more pixels departing from the
+# stepped model beyond the foreign threshold where the reference's did not
+# (the cue reaching the ball, another ball) send the frame through the full
+# search and fit, which then becomes the reference.  A creeping ball is
+# thus followed by steps of at most REST_STEP_PX, whose linearisation
+# error is second order in them (measured by simulation: docs/measurements.md,
+# branch speed17).
+REST_STEP_PX = 0.05
+REST_RMS_SIGMAS = 6.0
 # Frames whose two fits (disc and shaded) decide the look (config.look "auto").
 LOOK_FRAMES = 12
 # The shaded look is kept when its pooled residual reduction exceeds the
@@ -826,6 +851,89 @@ def pulled_fits(rms: np.ndarray, ok: np.ndarray, still: np.ndarray | None = None
     return out
 
 
+class RestReference(NamedTuple):
+    """A resting ball's reference fit for :func:`rest_step`: the fit
+    (:class:`LastFit`), the side of the blocks it fitted (1: pixels;
+    :func:`~cuespin.track.model.block_patch`), its window's values as
+    fitted ``y`` (the projected pixels or their blocks' means, flat), the
+    residual ``res`` and model rows ``JT`` (k, len(y)) at its minimum,
+    ``P = (J J^T)^-1 J`` and ``p0 = P res``, the degrees of freedom, the
+    largest residual variance a step keeps (``var_max``, levels^2), the
+    values already beyond the foreign threshold ``thresh`` (``out``), and
+    the centre's stated error and covariance (px, px^2)."""
+    fit: LastFit
+    block: int
+    y: np.ndarray
+    res: np.ndarray
+    JT: np.ndarray
+    P: np.ndarray
+    p0: np.ndarray
+    dof: int
+    var_max: float
+    thresh: float
+    out: np.ndarray
+    stderr: np.ndarray
+    cov: np.ndarray
+
+
+def _rest_values(block: int, lf: LastFit, patch) -> np.ndarray:
+    """A window's values as the fit of ``lf`` saw them (flat float64): its
+    pixels, or its blocks' means (:func:`~cuespin.track.model.block_patch`)."""
+    if block > 1:
+        return np.ravel(block_patch(block, lf.pu, lf.pv, patch)[1][0])
+    return np.asarray(patch, np.float64).ravel()
+
+
+def rest_reference(patch, felt_image, lf: LastFit, obs, r: float, thresh: float,
+                   block: int = 1) -> RestReference | None:
+    """The :class:`RestReference` of a sharp fit ``lf`` (every pixel of its
+    window used, on ``block`` x ``block`` blocks' means if ``block`` > 1;
+    ``patch`` its window, ``obs`` its Observation, ``r`` the ball's radius
+    (px), ``thresh`` the foreign threshold, levels), or None if its rows are
+    singular.  The model is taken as :func:`~cuespin.track.model.fit_disc`
+    fits it: on the blocks' grid (``_coarse``), the lit sphere's look scaled
+    by the outline's radius where there is one."""
+    felt = felt_image[lf.pv:lf.pv + lf.ph, lf.pu:lf.pu + lf.pw]
+    c, b, ol, u0, v0 = lf.c, lf.b, lf.outline, lf.pu, lf.pv
+    if block > 1:
+        (u0, v0), (felt,) = block_patch(block, lf.pu, lf.pv, felt)
+        c, r, b, ol = _coarse(block, c, r, b, ol)
+    if lf.shade is not None and len(lf.shade) > 3 and ol is not None:
+        r = ol.radius
+    m, JT = _model_rows(c, b, lf.G, felt, r, u0, v0, blur_nodes(float(np.hypot(*b))), lf.shade, False, ol)
+    y = _rest_values(block, lf, patch)
+    res = y - np.asarray(felt, np.float64).ravel() - m.ravel()
+    try:
+        P = np.linalg.solve(JT @ JT.T, JT)
+    except np.linalg.LinAlgError:
+        return None
+    dof = max(res.size - JT.shape[0], 1)
+    var = max(float(obs.rms) ** 2, float(res @ res) / dof)
+    return RestReference(lf, int(block), y, res, JT, P, P @ res, dof,
+                         var * (1.0 + REST_RMS_SIGMAS * 2.0 / np.sqrt(dof)), thresh, np.abs(res) > thresh,
+                         np.asarray(obs.stderr, float), np.asarray(obs.cov, float))
+
+
+def rest_step(ref: RestReference, patch) -> tuple[np.ndarray, float] | None:
+    """One Gauss-Newton step from the reference fit ``ref`` on the window
+    ``patch`` (projected levels, the reference's window): the centre (px)
+    and the residual RMS (levels, on the blocks if the fit was), or None
+    where the ball has moved or its window changed (:data:`REST_STEP_PX`'s
+    rule)."""
+    d = _rest_values(ref.block, ref.fit, patch) - ref.y
+    theta = ref.p0 + ref.P @ d
+    dc = ref.block * theta[:2]  # the blocks' grid is block px a unit
+    if np.hypot(dc[0], dc[1]) > REST_STEP_PX:
+        return None
+    res = ref.res + d - ref.JT.T @ theta
+    var = float(res @ res) / ref.dof
+    if var > ref.var_max:
+        return None
+    if np.count_nonzero((np.abs(res) > ref.thresh) & ~ref.out) >= FOREIGN_MIN_PX:
+        return None
+    return ref.fit.c + dc, float(np.sqrt(var))
+
+
 def _lost(status: int) -> Observation:
     return Observation(status, np.full(2, np.nan), np.full(2, np.nan), np.full((2, 2), np.nan))
 
@@ -923,6 +1031,8 @@ class BallTracker:
         # The ball's outline from the camera; None: the disc everywhere.
         self.outline_of = None if is_similarity(camera) or R is None else OutlineCache(camera, R, self.r)
         self.outline = None  # this frame's (Ellipse or None)
+        self._rest = None  # the rest step's reference (RestReference), None: every frame fitted
+        self._rest_cand = None  # the last full fit that may become it: (k, patch, LastFit, Observation)
 
     # -- search ---------------------------------------------------------
     def _velocity(self, k: int):
@@ -1047,6 +1157,12 @@ class BallTracker:
         pred, vel = self._velocity(k)
         self._pred = pred
         blur = self._pred_blur = vel * self.exposure_frames
+        if self._rest is not None or self._rest_cand is not None:
+            obs = self._rest_step(k, frame)
+            if obs is not None:
+                self.history = (self.history + [(k, obs.uv)])[-2:]
+                return obs
+        self._rest = None
         r_here = self.radii.at(pred) if pred is not None else self.r
         reach = r_here + 0.5 * np.hypot(*blur) + self.cfg.search_margin_px + 0.5 * np.hypot(*vel)
         loc = None
@@ -1093,7 +1209,45 @@ class BallTracker:
             return _lost(NO_BALL)
         if obs.status == OK:
             self.history = (self.history + [(k, obs.uv)])[-2:]
+            self._rest_cand = (k, self.last_patch, self.last_fit, obs) if self._rest_eligible() else None
         return obs
+
+    # -- a ball at rest ---------------------------------------------------
+    def _rest_eligible(self) -> bool:
+        """Whether the frame just fitted may be the rest step's reference
+        (:data:`REST_STEP_PX`): the look settled, a sharp fit on the pixels
+        or their blocks (blur held), nothing left out (no cue,
+        markings or felt ghost in its window)."""
+        lf, lp = self.last_fit, self.last_patch
+        return (self.cfg.refine == "fit" and self.shade is not None and lf is not None
+                and lp is not None and not lf.fit_blur and lf.foreign is None and lf.marks is None
+                and self._ghost_of is not None and self._ghost_of[0] is lp[0] and self._ghost_of[2] is None)
+
+    def _rest_step(self, k: int, frame: np.ndarray) -> Observation | None:
+        """Frame ``k`` measured by one Gauss-Newton step from the rest's
+        reference fit (:data:`REST_STEP_PX`), or None: the frame is fitted
+        in full.  The reference is made from the last full fit when it and
+        the frame before it were fitted consecutively within REST_STEP_PX."""
+        if self._rest is None:
+            (kc, patch, lf, obs), self._rest_cand = self._rest_cand, None
+            if not (k == kc + 1 and len(self.history) == 2 and self.history[0][0] == kc - 1
+                    and np.hypot(*(self.history[1][1] - self.history[0][1])) <= REST_STEP_PX):
+                return None
+            self._rest = rest_reference(patch[0], self.bg.image, lf, obs, self.r,
+                                        foreign_threshold(self.bg.sigma, self.bg.contrast), self.block)
+            if self._rest is None:
+                return None
+        ref = self._rest
+        lf = ref.fit
+        patch = self.proj(frame, lf.pv, lf.pv + lf.ph, lf.pu, lf.pu + lf.pw)
+        step = rest_step(ref, patch)
+        if step is None:
+            self._rest = None
+            return None
+        c, rms = step
+        self.last_fit = lf._replace(c=c)
+        self.last_patch = (patch, lf.pu, lf.pv)
+        return Observation(OK, c, ref.stderr.copy(), ref.cov.copy(), rms)
 
     def _fit_disc(self, patch, felt, *args, valid=None, **kw):
         """:func:`~cuespin.track.model.fit_disc` without the window's pixels
