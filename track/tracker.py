@@ -860,10 +860,12 @@ class RestReference(NamedTuple):
     ``P = (J J^T)^-1 J`` and ``p0 = P res``, the degrees of freedom, the
     largest residual variance a step keeps (``var_max``, levels^2), the
     values already beyond the foreign threshold ``thresh`` (``out``), and
-    the centre's stated error and covariance (px, px^2)."""
+    the centre's stated error and covariance (px, px^2).  ``use`` (0/1,
+    flat) the values the fit used."""
     fit: LastFit
     block: int
     y: np.ndarray
+    use: np.ndarray
     res: np.ndarray
     JT: np.ndarray
     P: np.ndarray
@@ -885,31 +887,35 @@ def _rest_values(block: int, lf: LastFit, patch) -> np.ndarray:
 
 
 def rest_reference(patch, felt_image, lf: LastFit, obs, r: float, thresh: float,
-                   block: int = 1) -> RestReference | None:
+                   block: int = 1, valid=None) -> RestReference | None:
     """The :class:`RestReference` of a sharp fit ``lf`` (every pixel of its
     window used, on ``block`` x ``block`` blocks' means if ``block`` > 1;
     ``patch`` its window, ``obs`` its Observation, ``r`` the ball's radius
-    (px), ``thresh`` the foreign threshold, levels), or None if its rows are
+    (px), ``thresh`` the foreign threshold, levels; ``valid`` (bool, the
+    window's shape) the pixels it used, None: all), or None if its rows are
     singular.  The model is taken as :func:`~cuespin.track.model.fit_disc`
     fits it: on the blocks' grid (``_coarse``), the lit sphere's look scaled
     by the outline's radius where there is one."""
     felt = felt_image[lf.pv:lf.pv + lf.ph, lf.pu:lf.pu + lf.pw]
     c, b, ol, u0, v0 = lf.c, lf.b, lf.outline, lf.pu, lf.pv
     if block > 1:
-        (u0, v0), (felt,) = block_patch(block, lf.pu, lf.pv, felt)
+        (u0, v0), (felt, valid) = block_patch(block, lf.pu, lf.pv, felt,
+                                              None if valid is None else np.asarray(valid, bool))
         c, r, b, ol = _coarse(block, c, r, b, ol)
     if lf.shade is not None and len(lf.shade) > 3 and ol is not None:
         r = ol.radius
     m, JT = _model_rows(c, b, lf.G, felt, r, u0, v0, blur_nodes(float(np.hypot(*b))), lf.shade, False, ol)
     y = _rest_values(block, lf, patch)
     res = y - np.asarray(felt, np.float64).ravel() - m.ravel()
+    use = np.ones(res.size) if valid is None else np.asarray(valid, float).ravel()
+    Ju = JT * use
     try:
-        P = np.linalg.solve(JT @ JT.T, JT)
+        P = np.linalg.solve(Ju @ Ju.T, Ju)
     except np.linalg.LinAlgError:
         return None
-    dof = max(res.size - JT.shape[0], 1)
-    var = max(float(obs.rms) ** 2, float(res @ res) / dof)
-    return RestReference(lf, int(block), y, res, JT, P, P @ res, dof,
+    dof = max(int(use.sum()) - JT.shape[0], 1)
+    var = max(float(obs.rms) ** 2, float(use @ (res * res)) / dof)
+    return RestReference(lf, int(block), y, use, res, JT, P, P @ res, dof,
                          var * (1.0 + REST_RMS_SIGMAS * 2.0 / np.sqrt(dof)), thresh, np.abs(res) > thresh,
                          np.asarray(obs.stderr, float), np.asarray(obs.cov, float))
 
@@ -926,7 +932,7 @@ def rest_step(ref: RestReference, patch) -> tuple[np.ndarray, float] | None:
     if np.hypot(dc[0], dc[1]) > REST_STEP_PX:
         return None
     res = ref.res + d - ref.JT.T @ theta
-    var = float(res @ res) / ref.dof
+    var = float(ref.use @ (res * res)) / ref.dof
     if var > ref.var_max:
         return None
     if np.count_nonzero((np.abs(res) > ref.thresh) & ~ref.out) >= FOREIGN_MIN_PX:
@@ -1215,13 +1221,11 @@ class BallTracker:
     # -- a ball at rest ---------------------------------------------------
     def _rest_eligible(self) -> bool:
         """Whether the frame just fitted may be the rest step's reference
-        (:data:`REST_STEP_PX`): the look settled, a sharp fit on the pixels
-        or their blocks (blur held), nothing left out (no cue,
-        markings or felt ghost in its window)."""
-        lf, lp = self.last_fit, self.last_patch
+        (:data:`REST_STEP_PX`): the look settled and the blur held (a
+        ball at rest is fitted sharp)."""
+        lf = self.last_fit
         return (self.cfg.refine == "fit" and self.shade is not None and lf is not None
-                and lp is not None and not lf.fit_blur and lf.foreign is None and lf.marks is None
-                and self._ghost_of is not None and self._ghost_of[0] is lp[0] and self._ghost_of[2] is None)
+                and self.last_patch is not None and not lf.fit_blur)
 
     def _rest_step(self, k: int, frame: np.ndarray) -> Observation | None:
         """Frame ``k`` measured by one Gauss-Newton step from the rest's
@@ -1233,8 +1237,13 @@ class BallTracker:
             if not (k == kc + 1 and len(self.history) == 2 and self.history[0][0] == kc - 1
                     and np.hypot(*(self.history[1][1] - self.history[0][1])) <= REST_STEP_PX):
                 return None
-            self._rest = rest_reference(patch[0], self.bg.image, lf, obs, self.r,
-                                        foreign_threshold(self.bg.sigma, self.bg.contrast), self.block)
+            thresh = foreign_threshold(self.bg.sigma, self.bg.contrast)
+            # The pixels its fit used: the markings' and foreign ones left
+            # out, and the felt's ghost (_fit_disc's rule, asked again here).
+            felt = self.bg.image[lf.pv:lf.pv + lf.ph, lf.pu:lf.pu + lf.pw]
+            ghost = felt_ghost(patch[0], felt, self.pol, thresh)
+            valid = kept_pixels(lf.foreign, lf.marks, ghost)
+            self._rest = rest_reference(patch[0], self.bg.image, lf, obs, self.r, thresh, self.block, valid)
             if self._rest is None:
                 return None
         ref = self._rest
