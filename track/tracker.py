@@ -225,6 +225,15 @@ MARKED_BALL_FRAMES = 4
 # branch speed17).
 REST_STEP_PX = 0.05
 REST_RMS_SIGMAS = 6.0
+# The centre's step (px) of the central differences that give the Hessian's
+# centre rows (rest_reference): well inside REST_STEP_PX, and 1e-5 px of
+# second-order error for a model curving over a pixel.
+REST_HESSIAN_STEP_PX = 0.01
+# A rest is fitted in full again every REST_REFIT_EVERY frames, each fit the
+# new reference: the steps stay near the minimum they linearise, and the
+# stepped frames' stated covariance is the mean of the rest's full fits'
+# (one fit's sandwich varies by up to 50% frame to frame on MJPG's blocks).
+REST_REFIT_EVERY = 32
 # Frames whose two fits (disc and shaded) decide the look (config.look "auto").
 LOOK_FRAMES = 12
 # The shaded look is kept when its pooled residual reduction exceeds the
@@ -906,12 +915,32 @@ def rest_reference(patch, felt_image, lf: LastFit, obs, r: float, thresh: float,
         r = ol.radius
     m, JT = _model_rows(c, b, lf.G, felt, r, u0, v0, blur_nodes(float(np.hypot(*b))), lf.shade, False, ol)
     y = _rest_values(block, lf, patch)
-    res = y - np.asarray(felt, np.float64).ravel() - m.ravel()
+    f = np.asarray(felt, np.float64).ravel()
+    res = y - f - m.ravel()
     use = np.ones(res.size) if valid is None else np.asarray(valid, float).ravel()
     Ju = JT * use
+    # The minimum's response to the window's values, dc/dy = H^-1 J (the
+    # implicit function theorem), H the residual sum's Hessian: J J^T less
+    # sum r d2m, which a model that misses the ball by much more than the
+    # noise (MJPG's blocks: RMS 15 levels at noise 3) makes count; with
+    # J J^T alone (Gauss-Newton's) the step followed 0.7-0.8 of the fits'
+    # moves (branch speed17).  The model is linear in all but the centre:
+    # H's centre rows and columns by central differences of J^T r.
+    H = Ju @ JT.T
+    taus = blur_nodes(float(np.hypot(*b)))
+    for j in range(2):
+        e = np.zeros(2)
+        e[j] = REST_HESSIAN_STEP_PX / (block if block > 1 else 1)
+        g = []
+        for sgn in (1.0, -1.0):
+            mj, Jj = _model_rows(np.asarray(c, float) + sgn * e, b, lf.G, felt, r, u0, v0, taus, lf.shade, False, ol)
+            g.append((Jj * use) @ (y - f - mj.ravel()))
+        H[:, j] = H[j, :] = -(g[0] - g[1]) / (2.0 * e[j])
     try:
-        P = np.linalg.solve(Ju @ Ju.T, Ju)
+        P = np.linalg.solve(H, Ju)
     except np.linalg.LinAlgError:
+        return None
+    if not np.all(np.linalg.eigvalsh(0.5 * (H + H.T)) > 0):  # not a minimum's: fit in full
         return None
     dof = max(int(use.sum()) - JT.shape[0], 1)
     var = max(float(obs.rms) ** 2, float(use @ (res * res)) / dof)
@@ -1039,6 +1068,8 @@ class BallTracker:
         self.outline = None  # this frame's (Ellipse or None)
         self._rest = None  # the rest step's reference (RestReference), None: every frame fitted
         self._rest_cand = None  # the last full fit that may become it: (k, patch, LastFit, Observation)
+        self._rest_covs: list = []  # this rest's full fits' covariances (px^2), since its first step
+        self._rest_n = 0  # frames stepped from the reference
 
     # -- search ---------------------------------------------------------
     def _velocity(self, k: int):
@@ -1228,14 +1259,16 @@ class BallTracker:
                 and self.last_patch is not None and not lf.fit_blur)
 
     def _rest_step(self, k: int, frame: np.ndarray) -> Observation | None:
-        """Frame ``k`` measured by one Gauss-Newton step from the rest's
-        reference fit (:data:`REST_STEP_PX`), or None: the frame is fitted
-        in full.  The reference is made from the last full fit when it and
-        the frame before it were fitted consecutively within REST_STEP_PX."""
+        """Frame ``k`` measured by one step from the rest's reference fit
+        (:data:`REST_STEP_PX`), or None: the frame is fitted in full.  The
+        reference is made from the last full fit when it and the frame
+        before it lie within REST_STEP_PX; every REST_REFIT_EVERY frames a
+        full fit is made again (and becomes the reference)."""
         if self._rest is None:
             (kc, patch, lf, obs), self._rest_cand = self._rest_cand, None
             if not (k == kc + 1 and len(self.history) == 2 and self.history[0][0] == kc - 1
                     and np.hypot(*(self.history[1][1] - self.history[0][1])) <= REST_STEP_PX):
+                self._rest_covs = []
                 return None
             thresh = foreign_threshold(self.bg.sigma, self.bg.contrast)
             # The pixels its fit used: the markings' and foreign ones left
@@ -1245,18 +1278,26 @@ class BallTracker:
             valid = kept_pixels(lf.foreign, lf.marks, ghost)
             self._rest = rest_reference(patch[0], self.bg.image, lf, obs, self.r, thresh, self.block, valid)
             if self._rest is None:
+                self._rest_covs = []
                 return None
+            self._rest_covs.append(self._rest.cov)
+            self._rest_n = 0
+        if self._rest_n >= REST_REFIT_EVERY:
+            self._rest = None  # a full fit, the rest's next reference
+            return None
         ref = self._rest
         lf = ref.fit
         patch = self.proj(frame, lf.pv, lf.pv + lf.ph, lf.pu, lf.pu + lf.pw)
         step = rest_step(ref, patch)
         if step is None:
-            self._rest = None
+            self._rest, self._rest_covs = None, []
             return None
+        self._rest_n += 1
         c, rms = step
         self.last_fit = lf._replace(c=c)
         self.last_patch = (patch, lf.pu, lf.pv)
-        return Observation(OK, c, ref.stderr.copy(), ref.cov.copy(), rms)
+        cov = np.mean(self._rest_covs, axis=0)
+        return Observation(OK, c, np.sqrt(np.diag(cov)), cov, rms)
 
     def _fit_disc(self, patch, felt, *args, valid=None, **kw):
         """:func:`~cuespin.track.model.fit_disc` without the window's pixels
