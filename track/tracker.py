@@ -1253,10 +1253,17 @@ class BallTracker:
     def _rest_eligible(self) -> bool:
         """Whether the frame just fitted may be the rest step's reference
         (:data:`REST_STEP_PX`): the look settled and the blur held (a
-        ball at rest is fitted sharp)."""
+        ball at rest is fitted sharp), and not the lit sphere: its look has
+        kinks every ~0.02 px of the centre (model.KINK_STEP_PX), where no
+        linearisation holds (realistic seed 0 shot 12, FFV1: the rest's
+        stepped centres 0.29 of their stated errors from main's fits in
+        median, 3.1 at most), and track.video fits each of its frames again
+        once the
+        look is learnt again, so a step would save nothing there."""
         lf = self.last_fit
-        return (self.cfg.refine == "fit" and self.shade is not None and lf is not None
-                and self.last_patch is not None and not lf.fit_blur)
+        return (self.cfg.refine == "fit" and self.shade is not None and not isinstance(self.shade, SphereLook)
+                and lf is not None and self.last_patch is not None and not lf.fit_blur
+                and (lf.shade is None or len(lf.shade) <= 3))
 
     def _rest_step(self, k: int, frame: np.ndarray) -> Observation | None:
         """Frame ``k`` measured by one step from the rest's reference fit
