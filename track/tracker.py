@@ -1258,8 +1258,7 @@ class BallTracker:
         linearisation holds (realistic seed 0 shot 12, FFV1: the rest's
         stepped centres 0.29 of their stated errors from main's fits in
         median, 3.1 at most), and track.video fits each of its frames again
-        once the
-        look is learnt again, so a step would save nothing there."""
+        once the look is learnt again, so a step would save nothing there."""
         lf = self.last_fit
         return (self.cfg.refine == "fit" and self.shade is not None and not isinstance(self.shade, SphereLook)
                 and lf is not None and self.last_patch is not None and not lf.fit_blur
