@@ -204,10 +204,11 @@ MARKED_BALL_FRAMES = 4
 # A ball at rest is not fitted again every frame (BallTracker._rest_step).
 # Once two consecutive frames' fits lie within REST_STEP_PX of each other,
 # the next frames are measured against the last one fitted (the reference)
-# by one Gauss-Newton step from its converged fit, on its window, pixels and
-# Jacobian: the change of every parameter is linear in the window's change
-# (``(J J^T)^-1 J (y - y_ref)``; J^T r_ref = 0 at the reference's minimum),
-# so each frame keeps its own noise in its centre (the recovery's rest rule
+# by one step from its converged fit, on its window, used pixels and
+# Jacobian: the minimum's linear response to the window's change
+# (``H^-1 J (y - m_ref)``, H the Hessian: rest_reference; a lit sphere's
+# look is never stepped, _rest_eligible), so each frame keeps its own noise
+# in its centre (the recovery's rest rule
 # reads the rest's scatter: recover.measurements.group_covariance) for one
 # product with the window (a fit iterates, and the frame's search, cue,
 # markings and recentring passes are not run).  The step stands only while
