@@ -11,7 +11,9 @@ speed:    per codec (MJPG, FFV1, mp4v, H.264 written with PyAV's libx264) a
           With --rest, the slower shot that stops in view at frame 787 (the
           default one leaves the view at ~460 and rests off the table), and
           how the resting ball is followed: frames found, error against the
-          truth's centre, status codes.  --codecs picks codecs, --video-dir
+          truth's centre, status codes.  --fresh-noise: new noise in every
+          frame (a camera's sensor) instead of the rolled bank of 16, which
+          x264 codes in ~450 bytes a frame.  --codecs picks codecs, --video-dir
           keeps the files (a 10,000-frame render takes ~17 min on a loaded
           2-core machine).
           With --threads, each run's CPU split by thread (Linux: sampled
@@ -46,7 +48,8 @@ realistic: per look of the realistic renderer (uniform, shaded, highlight,
           absorbs), the same for MJPG, and grey-only against the luma bound.
 
 Usage: python benchmarks/track.py [speed] [memory] [colour] [accuracy] [realistic] [--quick] [--frames 1000 10000]
-                                  [--repeat 3] [--threads] [--codecs mjpg h264] [--rest] [--video-dir DIR]
+                                  [--repeat 3] [--threads] [--codecs mjpg h264] [--rest] [--fresh-noise]
+                                  [--video-dir DIR]
                                   [--n 60] [--seed 0] [--workers 2] [--seconds 0.6] [--csv out.csv]
                                   [--shots I ...] [--frames-out DIR] [--codecs ffv1 mjpg grey]
        python benchmarks/track.py realistic --summarize out.csv
@@ -101,15 +104,18 @@ def scene_for(codec, seconds, fps=240.0, noise=5.0, px_per_m=500.0, blur=False, 
                               "felt_grey": 90.0, "ball_grey": 210.0})
 
 
-def colour_video(tmp, codec, n_frames, fps=240.0, rest=False):
+def colour_video(tmp, codec, n_frames, fps=240.0, rest=False, fresh=False):
     """A colour shot of ``n_frames`` written with PyAV (every frame rendered,
     the felt's noise from a bank of 16); (path, scene).  ``rest``: the
-    slower shot that comes to rest in view (:data:`REST_SCALE`)."""
+    slower shot that comes to rest in view (:data:`REST_SCALE`).  ``fresh``:
+    new noise in every frame, as a camera's sensor gives (the bank's rolled
+    noise lets x264 code a frame in ~450 bytes, so its decode is cheap)."""
     scene = scene_for(codec, n_frames / fps, fps=fps, v_scale=REST_SCALE if rest else 1.0)
     enc, pix, opts, ext, rate = CODECS[codec]
-    path = Path(tmp) / f"speed_{codec}_{n_frames}{'_rest' if rest else ''}.{ext}"
+    path = Path(tmp) / f"speed_{codec}_{n_frames}{'_rest' if rest else ''}{'_fresh' if fresh else ''}.{ext}"
     if not path.exists():
-        write_av(colour_frames(scene, (40, 200, 220), (40, 110, 30), noise=3.0, seed=1, noise_bank=16),
+        write_av(colour_frames(scene, (40, 200, 220), (40, 110, 30), noise=3.0, seed=1,
+                               noise_bank=0 if fresh else 16),
                  path, enc, pix, fps, options=opts, bit_rate=rate and rate * fps)
     return path, scene
 
@@ -196,12 +202,13 @@ def _rest_line(res, scene):
           f"{dict(collections.Counter(res.status[at].tolist()))}")
 
 
-def speed(tmp, repeat, lengths, threads=False, codecs=tuple(CODECS), rest=False, keep=False):
-    print(f"\nspeed: 1280x640 colour, 240 fps (median of alternating runs){', ball at rest in view' if rest else ''}")
+def speed(tmp, repeat, lengths, threads=False, codecs=tuple(CODECS), rest=False, keep=False, fresh=False):
+    print(f"\nspeed: 1280x640 colour, 240 fps (median of alternating runs){', ball at rest in view' if rest else ''}"
+          f"{', new noise every frame' if fresh else ''}")
     print(f"{'codec':6} {'frames':>6} {'decode fps':>11} {'track fps':>10} {'ratio':>6} {'cpu':>5}  ok")
     for n in lengths:
         for codec in codecs:
-            video, scene = colour_video(tmp, codec, n, rest=rest)
+            video, scene = colour_video(tmp, codec, n, rest=rest, fresh=fresh)
             decs, trks, ratios, cpus = [], [], [], []
             splits = []
             for _ in range(repeat):  # interleaved: the machine is shared
@@ -241,13 +248,13 @@ print(json.dumps({"frames": res.n_frames, "maxrss_mb": resource.getrusage(resour
 """
 
 
-def memory(tmp, lengths, codec="MJPG", rest=False):
+def memory(tmp, lengths, codec="MJPG", rest=False, fresh=False):
     from cuespin.pipeline.io import write_scene
     print(f"\nmemory: peak RSS of a fresh tracking process ({codec}, colour"
           f"{', ball at rest in view' if rest else ''})")
     out = {}
     for n in lengths:
-        video, scene = colour_video(tmp, codec, n, rest=rest)
+        video, scene = colour_video(tmp, codec, n, rest=rest, fresh=fresh)
         sf = Path(tmp) / f"mem_{codec}_{n}.json"
         write_scene(sf, scene)
         r = subprocess.run([sys.executable, "-c", _CHILD, str(video), str(sf)], capture_output=True,
@@ -547,6 +554,9 @@ def main():
     ap.add_argument("--rest", action="store_true",
                     help="speed, memory: the slower shot that stops in view at frame 787 (the default shot "
                          "leaves the view at ~460); prints how the resting ball is followed")
+    ap.add_argument("--fresh-noise", action="store_true",
+                    help="speed, memory: new noise in every frame (a camera's sensor), not the rolled bank of 16 "
+                         "(x264 codes the bank's frames in ~450 bytes: a cheap decode)")
     ap.add_argument("--video-dir", default=None,
                     help="speed, memory: write the videos here and reuse them (default: a temporary directory)")
     ap.add_argument("--summarize", default=None, help="realistic: only print the table of a CSV written before")
@@ -574,10 +584,10 @@ def main():
         if "speed" in args.parts:
             speed(vdir, args.repeat, args.frames, args.threads,
                   codecs=[names[c] for c in args.codecs] if args.codecs else tuple(CODECS), rest=args.rest,
-                  keep=args.video_dir is not None or "memory" in args.parts)
+                  keep=args.video_dir is not None or "memory" in args.parts, fresh=args.fresh_noise)
         if "memory" in args.parts:
             for c in args.codecs or ["mjpg"]:
-                memory(vdir, args.frames, names[c], rest=args.rest)
+                memory(vdir, args.frames, names[c], rest=args.rest, fresh=args.fresh_noise)
         if "colour" in args.parts:
             colour(tmp, args.quick)
         if "accuracy" in args.parts:

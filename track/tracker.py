@@ -15,7 +15,8 @@ import numpy as np
 
 from cuespin.track.background import DETECT_SIGMAS, SCORE_CAP, Background, box_score, box_size
 from cuespin.track.colour import GREY, Projection
-from cuespin.track.model import SphereLook, _model_rows, blur_nodes, fit_disc, streak_from_moments, streak_model
+from cuespin.track.model import (SphereLook, _coarse, _model_rows, block_patch, blur_nodes, fit_disc,
+                                 streak_from_moments, streak_model)
 from cuespin.track.outline import OUTLINE_REFIT_PX, OutlineCache, is_similarity
 from cuespin.track.radius import RadiusMap
 from cuespin.track.sphere import Sample, learn_sphere, mean_sample, still_members
@@ -200,6 +201,40 @@ RIM_MARK_BOX = 3
 # fit, shot 17's 97 frames counted 174-194, review 10c, and the 8 fits this
 # was first set at were about 4 frames).
 MARKED_BALL_FRAMES = 4
+# A ball at rest is not fitted again every frame (BallTracker._rest_step).
+# Once two consecutive frames' fits lie within REST_STEP_PX of each other,
+# the next frames are measured against the last one fitted (the reference)
+# by one step from its converged fit, on its window, used pixels and
+# Jacobian: the minimum's linear response to the window's change
+# (``H^-1 J (y - m_ref)``, H the Hessian: rest_reference; a lit sphere's
+# look is never stepped, _rest_eligible), so each frame keeps its own noise
+# in its centre (the recovery's rest rule
+# reads the rest's scatter: recover.measurements.group_covariance) for one
+# product with the window (a fit iterates, and the frame's search, cue,
+# markings and recentring passes are not run).  The step stands only while
+# it stays near the reference: a centre moved more than REST_STEP_PX from
+# it (sphere.STILL_PX: a resting ball's fitted centre scatters by
+# 0.002-0.03 px, a moving one moves >= 0.1 px a frame once it has left the
+# rest), a residual RMS above the reference's beyond REST_RMS_SIGMAS of its
+# spread (the ratio of two residual variances on ``dof`` each: sd
+# 2 / sqrt(dof)), or FOREIGN_MIN_PX or more pixels departing from the
+# stepped model beyond the foreign threshold where the reference's did not
+# (the cue reaching the ball, another ball) send the frame through the full
+# search and fit, which then becomes the reference.  A creeping ball is
+# thus followed by steps of at most REST_STEP_PX, whose linearisation
+# error is second order in them (measured by simulation: docs/measurements.md,
+# branch speed17).
+REST_STEP_PX = 0.05
+REST_RMS_SIGMAS = 6.0
+# The centre's step (px) of the central differences that give the Hessian's
+# centre rows (rest_reference): well inside REST_STEP_PX, and 1e-5 px of
+# second-order error for a model curving over a pixel.
+REST_HESSIAN_STEP_PX = 0.01
+# A rest is fitted in full again every REST_REFIT_EVERY frames, each fit the
+# new reference: the steps stay near the minimum they linearise, and the
+# stepped frames' stated covariance is the mean of the rest's full fits'
+# (one fit's sandwich varies by up to 50% frame to frame on MJPG's blocks).
+REST_REFIT_EVERY = 32
 # Frames whose two fits (disc and shaded) decide the look (config.look "auto").
 LOOK_FRAMES = 12
 # The shaded look is kept when its pooled residual reduction exceeds the
@@ -826,6 +861,115 @@ def pulled_fits(rms: np.ndarray, ok: np.ndarray, still: np.ndarray | None = None
     return out
 
 
+class RestReference(NamedTuple):
+    """A resting ball's reference fit for :func:`rest_step`: the fit
+    (:class:`LastFit`), the side of the blocks it fitted (1: pixels;
+    :func:`~cuespin.track.model.block_patch`), its window's values as
+    fitted ``y`` (the projected pixels or their blocks' means, flat), the
+    residual ``res`` and model rows ``JT`` (k, len(y)) at its minimum,
+    ``P = (J J^T)^-1 J`` and ``p0 = P res``, the degrees of freedom, the
+    largest residual variance a step keeps (``var_max``, levels^2), the
+    values already beyond the foreign threshold ``thresh`` (``out``), and
+    the centre's stated error and covariance (px, px^2).  ``use`` (0/1,
+    flat) the values the fit used."""
+    fit: LastFit
+    block: int
+    y: np.ndarray
+    use: np.ndarray
+    res: np.ndarray
+    JT: np.ndarray
+    P: np.ndarray
+    p0: np.ndarray
+    dof: int
+    var_max: float
+    thresh: float
+    out: np.ndarray
+    stderr: np.ndarray
+    cov: np.ndarray
+
+
+def _rest_values(block: int, lf: LastFit, patch) -> np.ndarray:
+    """A window's values as the fit of ``lf`` saw them (flat float64): its
+    pixels, or its blocks' means (:func:`~cuespin.track.model.block_patch`)."""
+    if block > 1:
+        return np.ravel(block_patch(block, lf.pu, lf.pv, patch)[1][0])
+    return np.asarray(patch, np.float64).ravel()
+
+
+def rest_reference(patch, felt_image, lf: LastFit, obs, r: float, thresh: float,
+                   block: int = 1, valid=None) -> RestReference | None:
+    """The :class:`RestReference` of a sharp fit ``lf`` (every pixel of its
+    window used, on ``block`` x ``block`` blocks' means if ``block`` > 1;
+    ``patch`` its window, ``obs`` its Observation, ``r`` the ball's radius
+    (px), ``thresh`` the foreign threshold, levels; ``valid`` (bool, the
+    window's shape) the pixels it used, None: all), or None if its rows are
+    singular.  The model is taken as :func:`~cuespin.track.model.fit_disc`
+    fits it: on the blocks' grid (``_coarse``), the lit sphere's look scaled
+    by the outline's radius where there is one."""
+    felt = felt_image[lf.pv:lf.pv + lf.ph, lf.pu:lf.pu + lf.pw]
+    c, b, ol, u0, v0 = lf.c, lf.b, lf.outline, lf.pu, lf.pv
+    if block > 1:
+        (u0, v0), (felt, valid) = block_patch(block, lf.pu, lf.pv, felt,
+                                              None if valid is None else np.asarray(valid, bool))
+        c, r, b, ol = _coarse(block, c, r, b, ol)
+    if lf.shade is not None and len(lf.shade) > 3 and ol is not None:
+        r = ol.radius
+    m, JT = _model_rows(c, b, lf.G, felt, r, u0, v0, blur_nodes(float(np.hypot(*b))), lf.shade, False, ol)
+    y = _rest_values(block, lf, patch)
+    f = np.asarray(felt, np.float64).ravel()
+    res = y - f - m.ravel()
+    use = np.ones(res.size) if valid is None else np.asarray(valid, float).ravel()
+    Ju = JT * use
+    # The minimum's response to the window's values, dc/dy = H^-1 J (the
+    # implicit function theorem), H the residual sum's Hessian: J J^T less
+    # sum r d2m, which a model that misses the ball by much more than the
+    # noise (MJPG's blocks: RMS 15 levels at noise 3) makes count; with
+    # J J^T alone (Gauss-Newton's) the step followed 0.7-0.8 of the fits'
+    # moves (branch speed17).  The model is linear in all but the centre:
+    # H's centre rows and columns by central differences of J^T r.
+    H = Ju @ JT.T
+    taus = blur_nodes(float(np.hypot(*b)))
+    for j in range(2):
+        e = np.zeros(2)
+        e[j] = REST_HESSIAN_STEP_PX / (block if block > 1 else 1)
+        g = []
+        for sgn in (1.0, -1.0):
+            mj, Jj = _model_rows(np.asarray(c, float) + sgn * e, b, lf.G, felt, r, u0, v0, taus, lf.shade, False, ol)
+            g.append((Jj * use) @ (y - f - mj.ravel()))
+        H[:, j] = H[j, :] = -(g[0] - g[1]) / (2.0 * e[j])
+    try:
+        P = np.linalg.solve(H, Ju)
+    except np.linalg.LinAlgError:
+        return None
+    if not np.all(np.linalg.eigvalsh(0.5 * (H + H.T)) > 0):  # not a minimum's: fit in full
+        return None
+    dof = max(int(use.sum()) - JT.shape[0], 1)
+    var = max(float(obs.rms) ** 2, float(use @ (res * res)) / dof)
+    return RestReference(lf, int(block), y, use, res, JT, P, P @ res, dof,
+                         var * (1.0 + REST_RMS_SIGMAS * 2.0 / np.sqrt(dof)), thresh, np.abs(res) > thresh,
+                         np.asarray(obs.stderr, float), np.asarray(obs.cov, float))
+
+
+def rest_step(ref: RestReference, patch) -> tuple[np.ndarray, float] | None:
+    """One Gauss-Newton step from the reference fit ``ref`` on the window
+    ``patch`` (projected levels, the reference's window): the centre (px)
+    and the residual RMS (levels, on the blocks if the fit was), or None
+    where the ball has moved or its window changed (:data:`REST_STEP_PX`'s
+    rule)."""
+    d = _rest_values(ref.block, ref.fit, patch) - ref.y
+    theta = ref.p0 + ref.P @ d
+    dc = ref.block * theta[:2]  # the blocks' grid is block px a unit
+    if np.hypot(dc[0], dc[1]) > REST_STEP_PX:
+        return None
+    res = ref.res + d - ref.JT.T @ theta
+    var = float(ref.use @ (res * res)) / ref.dof
+    if var > ref.var_max:
+        return None
+    if np.count_nonzero((np.abs(res) > ref.thresh) & ~ref.out) >= FOREIGN_MIN_PX:
+        return None
+    return ref.fit.c + dc, float(np.sqrt(var))
+
+
 def _lost(status: int) -> Observation:
     return Observation(status, np.full(2, np.nan), np.full(2, np.nan), np.full((2, 2), np.nan))
 
@@ -923,6 +1067,10 @@ class BallTracker:
         # The ball's outline from the camera; None: the disc everywhere.
         self.outline_of = None if is_similarity(camera) or R is None else OutlineCache(camera, R, self.r)
         self.outline = None  # this frame's (Ellipse or None)
+        self._rest = None  # the rest step's reference (RestReference), None: every frame fitted
+        self._rest_cand = None  # the last full fit that may become it: (k, patch, LastFit, Observation)
+        self._rest_covs: list = []  # this rest's full fits' covariances (px^2), since its first step
+        self._rest_n = 0  # frames stepped from the reference
 
     # -- search ---------------------------------------------------------
     def _velocity(self, k: int):
@@ -1047,6 +1195,12 @@ class BallTracker:
         pred, vel = self._velocity(k)
         self._pred = pred
         blur = self._pred_blur = vel * self.exposure_frames
+        if self._rest is not None or self._rest_cand is not None:
+            obs = self._rest_step(k, frame)
+            if obs is not None:
+                self.history = (self.history + [(k, obs.uv)])[-2:]
+                return obs
+        self._rest = None
         r_here = self.radii.at(pred) if pred is not None else self.r
         reach = r_here + 0.5 * np.hypot(*blur) + self.cfg.search_margin_px + 0.5 * np.hypot(*vel)
         loc = None
@@ -1093,7 +1247,64 @@ class BallTracker:
             return _lost(NO_BALL)
         if obs.status == OK:
             self.history = (self.history + [(k, obs.uv)])[-2:]
+            self._rest_cand = (k, self.last_patch, self.last_fit, obs) if self._rest_eligible() else None
         return obs
+
+    # -- a ball at rest ---------------------------------------------------
+    def _rest_eligible(self) -> bool:
+        """Whether the frame just fitted may be the rest step's reference
+        (:data:`REST_STEP_PX`): the look settled and the blur held (a
+        ball at rest is fitted sharp), and not the lit sphere: its look has
+        kinks every ~0.02 px of the centre (model.KINK_STEP_PX), where no
+        linearisation holds (realistic seed 0 shot 12, FFV1: the rest's
+        stepped centres 0.29 of their stated errors from main's fits in
+        median, 3.1 at most), and track.video fits each of its frames again
+        once the look is learnt again, so a step would save nothing there."""
+        lf = self.last_fit
+        return (self.cfg.refine == "fit" and self.shade is not None and not isinstance(self.shade, SphereLook)
+                and lf is not None and self.last_patch is not None and not lf.fit_blur
+                and (lf.shade is None or len(lf.shade) <= 3))
+
+    def _rest_step(self, k: int, frame: np.ndarray) -> Observation | None:
+        """Frame ``k`` measured by one step from the rest's reference fit
+        (:data:`REST_STEP_PX`), or None: the frame is fitted in full.  The
+        reference is made from the last full fit when it and the frame
+        before it lie within REST_STEP_PX; every REST_REFIT_EVERY frames a
+        full fit is made again (and becomes the reference)."""
+        if self._rest is None:
+            (kc, patch, lf, obs), self._rest_cand = self._rest_cand, None
+            if not (k == kc + 1 and len(self.history) == 2 and self.history[0][0] == kc - 1
+                    and np.hypot(*(self.history[1][1] - self.history[0][1])) <= REST_STEP_PX):
+                self._rest_covs = []
+                return None
+            thresh = foreign_threshold(self.bg.sigma, self.bg.contrast)
+            # The pixels its fit used: the markings' and foreign ones left
+            # out, and the felt's ghost (_fit_disc's rule, asked again here).
+            felt = self.bg.image[lf.pv:lf.pv + lf.ph, lf.pu:lf.pu + lf.pw]
+            ghost = felt_ghost(patch[0], felt, self.pol, thresh)
+            valid = kept_pixels(lf.foreign, lf.marks, ghost)
+            self._rest = rest_reference(patch[0], self.bg.image, lf, obs, self.r, thresh, self.block, valid)
+            if self._rest is None:
+                self._rest_covs = []
+                return None
+            self._rest_covs.append(self._rest.cov)
+            self._rest_n = 0
+        if self._rest_n >= REST_REFIT_EVERY:
+            self._rest = None  # a full fit, the rest's next reference
+            return None
+        ref = self._rest
+        lf = ref.fit
+        patch = self.proj(frame, lf.pv, lf.pv + lf.ph, lf.pu, lf.pu + lf.pw)
+        step = rest_step(ref, patch)
+        if step is None:
+            self._rest, self._rest_covs = None, []
+            return None
+        self._rest_n += 1
+        c, rms = step
+        self.last_fit = lf._replace(c=c)
+        self.last_patch = (patch, lf.pu, lf.pv)
+        cov = np.mean(self._rest_covs, axis=0)
+        return Observation(OK, c, np.sqrt(np.diag(cov)), cov, rms)
 
     def _fit_disc(self, patch, felt, *args, valid=None, **kw):
         """:func:`~cuespin.track.model.fit_disc` without the window's pixels
