@@ -7,6 +7,8 @@ frame gets a status: ``OK`` or the reason it was flagged rather than guessed.
 
 from __future__ import annotations
 
+import os
+
 from dataclasses import dataclass, replace
 from typing import NamedTuple
 
@@ -30,6 +32,9 @@ REFINERS = ("fit", "moments")
 # length, not fitted: a symmetric smear moves no centroid, and its image
 # changes only to second order in the length, so fitting it is ill-posed.
 FIT_BLUR_PX = 3.0
+# A held blur this far (px) from the streak the fit's own step gives is
+# refitted at that streak (BallTracker._seen_blur).
+SEEN_BLUR_PX = 1.0
 # A blob within this distance (px) of one the previous frame's full search
 # found has not moved (the score's peak moves by a pixel or so with noise).
 STILL_PX = 1.5
@@ -1434,6 +1439,20 @@ class BallTracker:
         along = abs(float(np.dot(f.c - pred, f.b))) / (2.0 * half)
         return along >= half - STREAK_BEHIND_PX - 0.5 * np.hypot(*pred_blur)
 
+    def _seen_blur(self, f, blur, fit_blur) -> np.ndarray | None:
+        """The streak (px) the fit ``f``'s own step from the last found
+        centre gives over the exposure, where it departs from the held
+        ``blur`` (px; not fitted: ``fit_blur`` False) by more than
+        ``SEEN_BLUR_PX``; None otherwise (no fit, a fitted blur, no recent
+        centre)."""
+        if not f or fit_blur or self.exposure_frames <= 0 or not self.history:
+            return None
+        k1, c1 = self.history[-1]
+        if not 0 < self._k - k1 <= 3:
+            return None
+        seen = (f.c - c1) / (self._k - k1) * self.exposure_frames
+        return seen if np.hypot(*(seen - blur)) > SEEN_BLUR_PX else None
+
     def _departure_centre(self, frame, c, r_ball: float) -> np.ndarray:
         """Centroid (px) of the departure from the felt in either direction,
         beyond the noise, within ``r_ball + 2`` px of a centre iterated from
@@ -1505,6 +1524,23 @@ class BallTracker:
                 # the ball (realistic seed 0 shot 4, FFV1, frame 90: 2.2 px).
                 if not (g and m_fit_blur) or self._streak_leaves(g, self._pred, self._pred_blur):
                     f, blur, fit_blur = g, m_blur, m_fit_blur
+                    blurs.insert(0, (blur, fit_blur))
+            seen = self._seen_blur(f, blur, fit_blur)
+            if seen is not None:
+                # The fit's centre says the ball moved faster than the
+                # prediction's last two centres did (the frame after the
+                # strike's, whose centre had moved only part of a step): its
+                # streak is the one the fit's own step gives.  Held at the
+                # predicted length instead, realistic seed 0 shot 8's frame
+                # 53 (FFV1) took 144 of the streak's pixels for markings and
+                # stated 3 times its neighbours' error.
+                s_fit_blur = np.hypot(*seen) > FIT_BLUR_PX
+                g = self._fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=seen, fit_blur=s_fit_blur, shade=shade,
+                                   outline=ol, block=self.block)
+                if os.environ.get("F11LOG"):
+                    print("seen", self._k, np.round(blur, 2), np.round(seen, 2), round(f.rms, 3), g and round(g.rms, 3), flush=True)
+                if g and g.stated and g.rms < f.rms:
+                    f, blur, fit_blur = g, seen, s_fit_blur
                     blurs.insert(0, (blur, fit_blur))
             if not f:
                 # Started from the window's own level: the learnt contrast
