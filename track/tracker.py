@@ -1538,7 +1538,9 @@ class BallTracker:
                 # streak is the one the fit's own step gives.  Held at the
                 # predicted length instead, realistic seed 0 shot 8's frame
                 # 53 (FFV1) took 144 of the streak's pixels for markings and
-                # stated 3 times its neighbours' error.
+                # stated 3 times its neighbours' error (dropped, 0.13 px off;
+                # refitted 0.022 px), and shot 1's frame 27 fitted with RMS
+                # 12.9 against ~3.3 (dropped; refitted RMS 3.7, 0.0105 px off).
                 s_fit_blur = np.hypot(*seen) > FIT_BLUR_PX
                 g = self._fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=seen, fit_blur=s_fit_blur, shade=shade,
                                    outline=ol, block=self.block)
