@@ -98,7 +98,7 @@ def test_resting_balls_that_outshine_the_ball_are_not_tracked(tmp_path, shot, se
 NOT_YET = {
     (7, "FFV1"): "issue 10: shot 5 (red on red in a low light): 60 of 81 frames in view found, none off (largest "
                  "0.191 R; found11's measurement on 01267a5 and after: 0-9 at rest not found by the search or off "
-                 "the path, 9 lost in flight); xfailed again on found11 (3220 s)",
+                 "the path, 11 lost in flight); xfailed again on found11 (3220 s)",
 }
 
 
