@@ -96,9 +96,9 @@ def test_resting_balls_that_outshine_the_ball_are_not_tracked(tmp_path, shot, se
 # The sets whose targets are not met yet, as measured (README, Known
 # limits): strict, so that a fix shows as a pass to be unmarked.
 NOT_YET = {
-    (7, "FFV1"): "issue 10: shot 5 (red on red in a low light): 52 of 81 frames found, none off (largest 0.197 "
-                 "R; the ill-determined centres 0.25-0.31 R off now pulled, ILL_SE_FACTOR; red8's measurement): "
-                 "29 missing where 1% of the set is ~23",
+    (7, "FFV1"): "issue 10: shot 5 (red on red in a low light): 60 of 81 frames in view found, none off (largest "
+                 "0.191 R; found11's measurement on 01267a5 and after: 0-9 at rest not found by the search or off "
+                 "the path, 11 lost in flight); xfailed again on found11 (3220 s)",
 }
 
 
@@ -152,6 +152,25 @@ def test_dots_on_a_white_ball_do_not_pull_the_centre(tmp_path):
     found, err, tr = track_against_truth(scene, tmp_path / "dots.avi")
     assert found >= MIN_FOUND, tr.status_counts()
     assert err.size and err.max() < 0.1, f"a found centre {err.max():.3f} radii off"
+
+
+@pytest.mark.slow
+def test_the_frame_after_the_strike_is_fitted_at_its_own_streak(tmp_path):
+    # benchmarks/track.py realistic seed 0 shot 8: a white ball with a logo
+    # on green felt, 120 fps, exposure 0.53 frames, struck at t0 = 0.4314 s
+    # (frame 52 holds the strike in its exposure).  Frame 53's streak was
+    # predicted from frames 51-52 (52's centre had moved 1.9 px of a 7-px
+    # step): held at 1.0 px where it is 3.7 px, the fit took the streak's
+    # misfit for markings, stated 4.5 times the track's median error and
+    # was dropped as ill determined (0.13 px off; 95 of 97 found).  Refitted
+    # at the streak its own step gives (BallTracker._seen_blur): measured
+    # 0.022 px off and kept.  The strike's own frame may be left out (its
+    # ball accelerates within the exposure); every other frame must be found.
+    scene = sample_scenes(9, 0, look="realistic", codec="FFV1")[8]
+    scene.render.update(specular=0.0, psf_sigma=0.0, markings="logo", cue=False, balls=[], max_duration=0.8)
+    (found, frames), err, tr = track_against_truth(scene, tmp_path / "strike.avi", counts=True)
+    assert err.size and err.max() < MAX_ERR_RADII, f"a found centre {err.max():.2f} radii off"
+    assert tr.ok[53] and found >= frames - 1, (found, frames, tr.status[50:56])
 
 
 @pytest.mark.slow

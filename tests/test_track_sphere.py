@@ -2,6 +2,8 @@
 learnt from still frames, and the centre it gives on a rendered shaded,
 highlighted ball."""
 
+from functools import partial
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -120,6 +122,7 @@ def test_markings_stay_out_of_the_lights_learning():
     T = SimpleNamespace(cfg=TrackerConfig(), shade=None, _look_fits=[], r=R_PX, outline=None, block=1,
                         bg=SimpleNamespace(sigma=3.0),  # the noise the frames are drawn with
                         _fit_disc=fit_disc)  # no felt ghost: the felt is the frames' own
+    T._rim_unmarked = partial(BallTracker._rim_unmarked, T)  # the voting frames' rim markings (found11)
     fits = []
     for _ in range(12):
         img = np.clip(np.rint(clean + rng.normal(0, 3.0, clean.shape)), 0, 255)
