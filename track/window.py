@@ -605,6 +605,19 @@ def marks_beyond(patch, felt, m0, JT, use, inner, thresh):
     return bad, count, True
 
 
+@_jit()
+def add_levels(total, frame):
+    """``total += frame`` for a 16-bit sum and an 8-bit frame of the same
+    shape (h, w, c): numpy's mixed-type ``np.add`` casts the frame in
+    buffered chunks (0.6 ms a 1280 x 640 BGR frame against 0.37 here,
+    measured); whole numbers, the same sums."""
+    h, w, c = frame.shape
+    for i in range(h):
+        for j in range(w):
+            for q in range(c):
+                total[i, j, q] += frame[i, j, q]
+
+
 @intrinsic
 def _fma32(typingctx, a, b, c):
     """``a * b + c`` in float32 rounded once (LLVM's fma), as OpenBLAS's
@@ -740,11 +753,13 @@ def warm_up() -> None:
     P = project_bgr(frame[1:10, 1:10], np.ones(3, np.float32), np.float32(0.0))
     project_bgr(frame, np.ones(3, np.float32), np.float32(0.0))
     peak_score(P, felt, 1, np.float32(1.0), 3, 7, 2, 7, 2, 7)
+    add_levels(np.zeros((9, 9, 3), np.uint16), np.zeros((9, 9, 3), np.uint8))
+    add_levels(np.zeros((9, 9, 1), np.uint16), np.zeros((9, 9), np.uint8)[:, :, None])
     marks_beyond(D, felt, np.zeros((9, 9)), np.ones((6, 81)), np.ones(81, np.bool_), np.ones(81, np.bool_), 1.0)
     peak_score(D, felt, 1, np.float32(1.0), 3, 7, 2, 7, 2, 7)
 
 
-__all__ = ["block_all", "block_means", "centroid", "cluster_meat", "departure_centroid", "foreign_count",
+__all__ = ["add_levels", "block_all", "block_means", "centroid", "cluster_meat", "departure_centroid", "foreign_count",
            "felt_shift", "hidden_pixels", "jackknife_cov", "linear_fit", "marks_beyond", "peak_score", "project_bgr",
            "warm_up"]
 
