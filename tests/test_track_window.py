@@ -401,3 +401,96 @@ def test_felt_shift_is_the_numpy_form(look):
         got = refit_shift(old, new, 3, 5, c + (3, 5), b, 200.0, r, fit_blur, shade, valid=valid)
         ref = _refit_shift_numpy(old, new, 3, 5, c + (3, 5), b, 200.0, r, fit_blur, shade, valid)
         np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-12)
+
+
+def _blas_core():
+    """OpenBLAS's kernel set in use (numpy's scipy-openblas), or None."""
+    import ctypes
+    import glob
+    import os
+    for lib in glob.glob(os.path.join(os.path.dirname(np.__file__), os.pardir, "numpy.libs", "*openblas*")):
+        try:
+            f = ctypes.CDLL(lib).scipy_openblas_get_corename64_
+        except (OSError, AttributeError):
+            continue
+        f.restype = ctypes.c_char_p
+        return f().decode()
+    return None
+
+
+def test_project_bgr_is_blass_product_bit_for_bit():
+    # Every width of OpenBLAS's blocks (8, 4, 2, 1 pixels) and whole rows;
+    # windows cut from a frame (strided), random levels, weights, offsets.
+    # The blocks' order is SkylakeX's sgemv (the kernel set OpenBLAS picks
+    # on the project's machine, where it was found): bit for bit there;
+    # another kernel set sums the three products in its own order, within
+    # a few float32 roundings of the products' magnitude.
+    from cuespin.track.colour import Projection
+    exact = _blas_core() == "SkylakeX"
+    rng = np.random.default_rng(11)
+    frame = rng.integers(0, 256, (200, 1280, 3), dtype=np.uint8)
+    for n in list(range(2, 40)) + [61, 64, 127, 640, 1280]:
+        for h in (1, 23):
+            w = rng.normal(0, 0.4, 3).astype(np.float32)
+            off = float(rng.normal(0, 60))
+            v0, u0 = int(rng.integers(0, 200 - h)), int(rng.integers(0, 1280 - n + 1))
+            roi = frame[v0:v0 + h, u0:u0 + n]
+            ref = (roi.astype(np.float32) @ w + np.float32(off)).astype(np.float32)
+            size = roi.astype(np.float64) @ np.abs(w.astype(np.float64)) + abs(off)
+            for got in (window.project_bgr(roi, w, np.float32(off)),
+                        Projection(w=w, offset=off)(frame, v0, v0 + h, u0, u0 + n)):
+                if exact:
+                    assert np.array_equal(got, ref), (n, h)
+                else:  # 3 products and the offset: 4 roundings of 2^-24 each, twice
+                    assert np.all(np.abs(got.astype(np.float64) - ref) <= 8 * 2.0**-24 * size), (n, h)
+
+
+def test_peak_score_is_box_scores_bit_for_bit():
+    # The search's window: projected levels against the felt, clipped, the
+    # box score cut to the search's rows and columns; windows down to
+    # smaller than the ring (OpenCV's border reflected more than once).
+    from cuespin.track.background import box_score
+    rng = np.random.default_rng(12)
+    for i in range(600):
+        h, w = (int(x) for x in rng.integers(3, 90, 2))
+        k = int(rng.integers(1, 16)) | 1
+        K = (2 * k) | 1
+        P = (rng.normal(0, 8, (h, w)) + rng.uniform(0, 200)).astype(np.float32)
+        if i % 3 == 0:  # grey video: whole levels
+            P = np.round(P)
+        felt = (P.mean() + rng.normal(0, 10) + rng.normal(0, 2, (h + 2, w + 2))).astype(np.float32)[1:-1, 1:-1]
+        pol, cap = int(rng.choice([-1, 1])), np.float32(rng.uniform(5, 60))
+        ref = box_score(np.clip(pol * (P - felt), -cap, cap), k, K)
+        r0, c0 = int(rng.integers(0, h)), int(rng.integers(0, w))
+        r1, c1 = int(rng.integers(r0 + 1, h + 1)), int(rng.integers(c0 + 1, w + 1))
+        got = window.peak_score(P, felt, pol, cap, k, K, r0, r1, c0, c1)
+        assert np.array_equal(got, ref[r0:r1, c0:c1]), (h, w, k, r0, r1, c0, c1)
+
+
+def test_marks_beyond_is_the_numpy_form():
+    # The markings rule's two fits: a shaded ball, with and without a dark
+    # dot, blurred or not, some pixels not usable; the same pixels found.
+    from cuespin.track.model import _model_rows, blur_nodes
+    from cuespin.track.tracker import _marks_beyond, segment_distance
+    rng = np.random.default_rng(13)
+    found = 0
+    for t in range(120):
+        h = w = int(rng.integers(15, 45))
+        r = h / 3.0
+        c = np.array([w / 2 + rng.normal(), h / 2 + rng.normal()])
+        b = rng.normal(0, 2, 2) * (t % 2)
+        felt = (90 + rng.normal(0, 3, (h + 2, w + 2))).astype(np.float32)[1:-1, 1:-1]
+        m0, JT = _model_rows(c, b, 0.0, felt, r, 0, 0, blur_nodes(np.hypot(*b)), np.zeros(3), False, None)
+        ys, xs = np.mgrid[0:h, 0:w]
+        disc = (xs - c[0]) ** 2 + (ys - c[1]) ** 2 < r * r
+        patch = (felt + disc * (100 + 5 * (xs - c[0])) + rng.normal(0, 3, (h, w))).astype(np.float32)
+        if t % 3 == 0:
+            patch[(xs - c[0] - 2) ** 2 + (ys - c[1]) ** 2 < 4] -= 60
+        inner = segment_distance(felt.shape, 0, 0, c, b) < r - 2
+        use = np.ones(h * w, bool) if t % 4 else rng.random(h * w) > 0.1
+        thresh = float(rng.uniform(5, 40))
+        bad, n_bad, done = window.marks_beyond(patch, felt, m0, JT, use, inner.ravel(), thresh)
+        ref = _marks_beyond(patch, felt, m0, JT, use, inner, thresh)
+        assert done and n_bad == ref.sum() and np.array_equal(bad, ref), t
+        found += n_bad >= 3
+    assert found >= 20  # the dots are found: the rule's both branches compared

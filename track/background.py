@@ -559,7 +559,12 @@ class FeltAccumulator:
         more than ``tolerance``: the cue over the path at the strike."""
         if self._n_partial == FULL_CARRY:
             self._carry()
-        np.add(self._partial, frame, out=self._partial)
+        from cuespin.track import window
+        img = np.asarray(frame)  # (a PlanarFrame converted whole once)
+        if img.dtype == np.uint8 and img.shape == self._partial.shape:
+            window.add_levels(np.atleast_3d(self._partial), np.atleast_3d(img))  # compiled: the same sums
+        else:
+            np.add(self._partial, frame, out=self._partial)
         self._n_partial += 1
         self.n_full += 1
         H, W = self.total.shape
@@ -576,8 +581,6 @@ class FeltAccumulator:
         if reference is None or reference.dtype == np.float32:
             # Compiled: numpy's masks, nonzero and fancy indexing over the
             # window of FOREIGN_REACH_RADII were ~1 ms a call (track.window).
-            from cuespin.track import window
-            img = np.asarray(frame)  # (a PlanarFrame converted whole once, as np.add above did)
             three = np.atleast_3d  # a grey frame and its sum as one channel (views, written through)
             window.hidden_pixels(three(self._partial), self.full_hidden, three(img),
                                  _NO_WINDOW if P is None else P, P is not None,
