@@ -24,8 +24,10 @@ from cuespin.recover.measurements import MAX_CODEC_NOISE_RATIO, build_measuremen
 # The across-path acceleration must be this many of its standard errors off
 # zero for the slope to be named: a level table's rolling ball (a wrong
 # mu_r, which the acceleration's part along the path takes up) measured
-# |z| at most 2.1 on 36 generated level tracks (docs/measurements.md,
-# "corners17"); 5 leaves a margin and the real clips' 17-19.
+# |z| at most 2.6 on 48 generated level tracks with a wrong mu_r whose
+# sloped fit explained them (docs/measurements.md "corners17"); 5 leaves a
+# margin, under the 10-1476 of generated sloped tracks and the real
+# clips' 45-53.
 SLOPE_Z = 5.0
 # Fewer rolling frames than this leave the six parameters unmeasured.
 MIN_ROLLING_FRAMES = 12
@@ -75,11 +77,12 @@ class SlopeFit:
         u = self.a / size
         axis = ("+x" if u[0] > 0 else "-x") if abs(u[0]) > abs(u[1]) else ("+y" if u[1] > 0 else "-y")
         return (f"the table is not level: the rolling ball accelerates {size:.4f} m/s^2 towards {axis} "
-                f"(({u[0]:+.2f}, {u[1]:+.2f}) in table axes; {abs(self.a_across):.4f} m/s^2 across its path, "
-                f"{abs(self.z_across):.0f} standard errors, which no friction gives): a slope of "
-                f"{self.slope_mm_per_m:.1f} mm/m (5/7 g slope); the level model needed {self.ratio_level:.0f} "
-                f"times the tracker's stated error as codec noise, a slope {self.ratio_slope:.1f}; "
-                "cuespin models a level table")
+                f"(({u[0]:+.2f}, {u[1]:+.2f}) in table axes), a slope of {self.slope_mm_per_m:.1f} mm/m "
+                f"(a = 5/7 g slope); {abs(self.a_across):.4f} m/s^2 of it across the path "
+                f"({abs(self.z_across):.0f} standard errors), which no friction gives (its part along the path "
+                f"could be a wrong mu_r instead); the level model needed {self.ratio_level:.0f} times the "
+                f"tracker's stated error as codec noise, with the slope {self.ratio_slope:.1f}; cuespin models "
+                "a level table")
 
 
 def _sideways(t, T):
