@@ -24,6 +24,7 @@ from cuespin.recover.mle import (CodecCorrelation, MLEResult, ModelFit, ar1_from
                                  fit_model, fit_models, initial_guess, lag1_autocorrelation, result, slip_lr,
                                  with_profile_interval)
 from cuespin.recover.paper import PaperResult, paper_from_segments, ran_into_rest
+from cuespin.recover.slope import rolling_slope
 
 # The first fit's strike time is used to place the strike's window only
 # when within this many frames of the segmentation's (the segmentation
@@ -338,7 +339,8 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         breaks=(chosen.t0, float("inf") if runs_to_end(chosen) else chosen.t1) if chosen else None,
         hac=hac, verdicts=dict(mle.verdicts) or None, stop_apart=None if paper is None else paper.stop_apart,
         clear_s=clear_s, rest_scale=scale)
-    paper, mle = unexplained(paper, mle, meas, codec_var, sigma)
+    paper, mle = unexplained(paper, mle, meas, codec_var, sigma,
+                             lambda: rolling_fit(t, xy, cov, meas.px_to_m, params, mle, chosen, exposure_s, frame_dt, sigma))
     return Estimate(chosen, paper, mle, meas, codec_var, decisions,
                     {"fit": t_fit, "recover": time.perf_counter() - clock}, decided)
 
@@ -373,31 +375,59 @@ def _refit(keep: Decided, seg, t, xy, params, exposure_s, fit_friction, run_pape
         paper = paper_from_segments(chosen, t, xy, params, paper_sigma, frame_dt, keep.strike_seen, independent,
                                     curved=keep.curved, near=keep.paper, apart=keep.stop_apart, meas=meas,
                                     noise=mle_noise(mle))
-    paper, mle = unexplained(paper, mle, meas, keep.codec_var, sigma)
+    paper, mle = unexplained(paper, mle, meas, keep.codec_var, sigma,
+                             lambda: rolling_fit(t, xy, meas.cov, px_to_m=meas.px_to_m, params=params, mle=mle,
+                                                 seg=chosen or seg, exposure_s=exposure_s, frame_dt=frame_dt,
+                                                 sigma=sigma))
     return Estimate(chosen or seg, paper, mle, meas, keep.codec_var, decisions,
                     {"fit": t_fit, "recover": time.perf_counter() - clock}, keep)
 
 
-def unexplained(paper, mle, meas: Measurements, codec_var: float, sigma: float):
+def unexplained(paper, mle, meas: Measurements, codec_var: float, sigma: float, rolling=None):
     """Both methods' answers refused (``failed``) when the codec noise the
     recovery had to add to explain the track is over
     :data:`MAX_CODEC_NOISE_RATIO` times the tracker's stated error
     (recover.measurements.codec_noise_ratio): the model then does not
     explain the track, and the codec term hides the misfit from chi2.  Both
     methods weight by that noise (the paper's errors through
-    ``paper_sigma``), so one decision answers both.  Returns ``(paper,
-    mle)``, unchanged otherwise."""
+    ``paper_sigma``), so one decision answers both.  ``rolling``, called
+    only then, gives the rolling phase's fit with a slope
+    (:func:`rolling_fit`): when a slope explains the track
+    (:attr:`recover.slope.SlopeFit.explains`) the reason names it.  Returns
+    ``(paper, mle)``, unchanged otherwise."""
     ratio = codec_noise_ratio(meas, codec_var, sigma)
     if not ratio > MAX_CODEC_NOISE_RATIO:
         return paper, mle
-    why = (f"the model does not explain the track: the fit needed {ratio:.0f} times the tracker's stated error "
-           f"as codec noise (at most {MAX_CODEC_NOISE_RATIO:.0f} on correct answers): a wrong friction (mu_r; "
-           "--fit-friction or the cloth's value), a table not level, or a collision")
+    slope = rolling() if rolling is not None else None
+    if slope is not None and slope.explains:
+        why = f"the model does not explain the track: {slope.reason()}"
+    else:
+        why = (f"the model does not explain the track: the fit needed {ratio:.0f} times the tracker's stated "
+               f"error as codec noise (at most {MAX_CODEC_NOISE_RATIO:.0f} on correct answers): a wrong friction "
+               "(mu_r; --fit-friction or the cloth's value), a table not level, or a collision")
     if mle is not None and mle.status != "failed":
         mle = MLEResult("failed", why, chi2=mle.chi2, dof=mle.dof)
     if paper is not None and paper.status != "failed":
         paper = PaperResult("failed", why)
     return paper, mle
+
+
+def rolling_fit(t, xy, cov, px_to_m, params: BallParams, mle, seg, exposure_s: float, frame_dt: float, sigma: float):
+    """The rolling phase's fit with a slope (recover.slope.rolling_slope):
+    the frames from a frame after the fit's end of sliding (``mle.t1``, else
+    the segmentation's) to the segmentation's rest, under the friction the
+    fit used; None when neither places the end of sliding."""
+    t1 = getattr(mle, "t1", None)
+    if t1 is None or not np.isfinite(t1):
+        t1 = getattr(seg, "t1", float("nan"))
+    if not np.isfinite(t1):
+        return None
+    t2 = getattr(seg, "t2", None)
+    t2 = float("inf") if t2 is None or not np.isfinite(t2) else t2
+    sel = (t > t1 + 0.5 * exposure_s + frame_dt) & (t < t2 - 0.5 * exposure_s)
+    mu_r = getattr(mle, "mu_r", None) or params.mu_r
+    pm = None if px_to_m is None else np.asarray(px_to_m)[sel]
+    return rolling_slope(t[sel], xy[sel], cov[sel], 5.0 / 7.0 * mu_r * params.g, sigma, pm, params.g)
 
 
 def mle_noise(mle) -> tuple[float, float]:
