@@ -17,12 +17,12 @@ import numpy as np
 from cuespin.fit.decide import Decision, autocorrelated, sliding_ended, sliding_seen, strike_in_view, t1_in_view
 from cuespin.fit.segment import Segments, segment_track
 from cuespin.physics.motion import BallParams, phases
-from cuespin.recover.measurements import (CUE_CLEAR_FRAMES, MAX_CODEC_NOISE_RATIO, Measurements, as_covariance,
-                                          build_measurements, codec_excess, codec_noise_ratio, cue_clear_s,
-                                          fill_covariance, moving_scale, touched_run_s)
+from cuespin.recover.measurements import (CUE_CLEAR_FRAMES, MAX_CODEC_NOISE_RATIO, MAX_STEP_R, Measurements,
+                                          as_covariance, build_measurements, codec_excess, codec_noise_ratio,
+                                          cue_clear_s, fill_covariance, moving_scale, touched_run_s, track_step)
 from cuespin.recover.mle import (CodecCorrelation, MLEResult, ModelFit, ar1_from_residuals, correlated_codec_var,
-                                 fit_model, fit_models, initial_guess, lag1_autocorrelation, result, slip_lr,
-                                 with_profile_interval)
+                                 fit_model, fit_models, initial_guess, lag1_autocorrelation, model_track, result,
+                                 slip_lr, with_profile_interval)
 from cuespin.recover.paper import PaperResult, paper_from_segments, ran_into_rest
 from cuespin.recover.slope import rolling_slope
 
@@ -340,7 +340,8 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         hac=hac, verdicts=dict(mle.verdicts) or None, stop_apart=None if paper is None else paper.stop_apart,
         clear_s=clear_s, rest_scale=scale)
     paper, mle = unexplained(paper, mle, meas, codec_var, sigma,
-                             lambda: rolling_fit(t, xy, cov, meas.px_to_m, params, mle, chosen, exposure_s, frame_dt, sigma))
+                             lambda: rolling_fit(t, xy, cov, meas.px_to_m, params, mle, chosen, exposure_s, frame_dt, sigma),
+                             step=step_r(meas, fit, exposure_s, mle))
     return Estimate(chosen, paper, mle, meas, codec_var, decisions,
                     {"fit": t_fit, "recover": time.perf_counter() - clock}, decided)
 
@@ -354,7 +355,7 @@ def _refit(keep: Decided, seg, t, xy, params, exposure_s, fit_friction, run_pape
     chosen = kept_segments(seg, keep)
     meas = measure(keep.t0, keep.clear_s, group_rest=not keep.ar1, scale=keep.rest_scale).with_codec(keep.codec_var)
     decisions = {"sliding_ended": Decision(keep.sliding_ended, nan, nan)}
-    mle = None
+    mle, fit = None, None
     if keep.sliding_seen is None or keep.start is None:
         mle = MLEResult("failed", "the fit did not run on the first camera")
     else:
@@ -378,12 +379,22 @@ def _refit(keep: Decided, seg, t, xy, params, exposure_s, fit_friction, run_pape
     paper, mle = unexplained(paper, mle, meas, keep.codec_var, sigma,
                              lambda: rolling_fit(t, xy, meas.cov, px_to_m=meas.px_to_m, params=params, mle=mle,
                                                  seg=chosen or seg, exposure_s=exposure_s, frame_dt=frame_dt,
-                                                 sigma=sigma))
+                                                 sigma=sigma),
+                             step=step_r(meas, fit, exposure_s, mle))
     return Estimate(chosen or seg, paper, mle, meas, keep.codec_var, decisions,
                     {"fit": t_fit, "recover": time.perf_counter() - clock}, keep)
 
 
-def unexplained(paper, mle, meas: Measurements, codec_var: float, sigma: float, rolling=None):
+def step_r(meas: Measurements, fit: ModelFit | None, exposure_s: float, mle) -> float:
+    """The chosen fit's largest step along the track
+    (recover.measurements.track_step) in ball radii; 0 without a fit that
+    ran (``mle`` failed)."""
+    if fit is None or mle is None or mle.status == "failed" or meas is None:
+        return 0.0
+    return track_step(meas, model_track(fit.shot, fit.params, meas.t_used, exposure_s)) / fit.params.R
+
+
+def unexplained(paper, mle, meas: Measurements, codec_var: float, sigma: float, rolling=None, step: float = 0.0):
     """Both methods' answers refused (``failed``) when the codec noise the
     recovery had to add to explain the track is over
     :data:`MAX_CODEC_NOISE_RATIO` times the tracker's stated error
@@ -393,18 +404,26 @@ def unexplained(paper, mle, meas: Measurements, codec_var: float, sigma: float, 
     ``paper_sigma``), so one decision answers both.  ``rolling``, called
     only then, gives the rolling phase's fit with a slope
     (:func:`rolling_fit`): when a slope explains the track
-    (:attr:`recover.slope.SlopeFit.explains`) the reason names it.  Returns
-    ``(paper, mle)``, unchanged otherwise."""
+    (:attr:`recover.slope.SlopeFit.explains`) the reason names it.  Refused
+    too when the track steps (``step``, :func:`step_r`, over
+    :data:`~cuespin.recover.measurements.MAX_STEP_R` ball radii): the
+    frames either side are not one ball's.  Returns ``(paper, mle)``,
+    unchanged otherwise."""
     ratio = codec_noise_ratio(meas, codec_var, sigma)
-    if not ratio > MAX_CODEC_NOISE_RATIO:
+    if step > MAX_STEP_R:
+        why = (f"the track steps: the fit misses the frames either side of one point by {step:.1f} ball radii "
+               f"apart (at most {MAX_STEP_R:.0f} on correct answers): they are not the same ball's centre "
+               "(the cue's tip or another ball taken for it)")
+    elif not ratio > MAX_CODEC_NOISE_RATIO:
         return paper, mle
-    slope = rolling() if rolling is not None else None
-    if slope is not None and slope.explains:
-        why = f"the model does not explain the track: {slope.reason()}"
     else:
-        why = (f"the model does not explain the track: the fit needed {ratio:.0f} times the tracker's stated "
-               f"error as codec noise (at most {MAX_CODEC_NOISE_RATIO:.0f} on correct answers): a wrong friction "
-               "(mu_r; --fit-friction or the cloth's value), a table not level, or a collision")
+        slope = rolling() if rolling is not None else None
+        if slope is not None and slope.explains:
+            why = f"the model does not explain the track: {slope.reason()}"
+        else:
+            why = (f"the model does not explain the track: the fit needed {ratio:.0f} times the tracker's stated "
+                   f"error as codec noise (at most {MAX_CODEC_NOISE_RATIO:.0f} on correct answers): a wrong "
+                   "friction (mu_r; --fit-friction or the cloth's value), a table not level, or a collision")
     if mle is not None and mle.status != "failed":
         mle = MLEResult("failed", why, chi2=mle.chi2, dof=mle.dof)
     if paper is not None and paper.status != "failed":
