@@ -407,16 +407,11 @@ def unexplained(paper, mle, meas: Measurements, codec_var: float, sigma: float, 
     (:attr:`recover.slope.SlopeFit.explains`) the reason names it.  Refused
     too when the track steps (``step``, :func:`step_r`, over
     :data:`~cuespin.recover.measurements.MAX_STEP_R` ball radii): the
-    frames either side are not one ball's.  Returns ``(paper, mle)``,
+    frames either side are not one ball's (the codec guard's reason first
+    when both apply).  Returns ``(paper, mle)``,
     unchanged otherwise."""
     ratio = codec_noise_ratio(meas, codec_var, sigma)
-    if step > MAX_STEP_R:
-        why = (f"the track steps: the fit misses the frames either side of one point by {step:.1f} ball radii "
-               f"apart (at most {MAX_STEP_R:.0f} on correct answers): they are not the same ball's centre "
-               "(the cue's tip or another ball taken for it)")
-    elif not ratio > MAX_CODEC_NOISE_RATIO:
-        return paper, mle
-    else:
+    if ratio > MAX_CODEC_NOISE_RATIO:  # its reason first: a slope, friction or collision names the cause
         slope = rolling() if rolling is not None else None
         if slope is not None and slope.explains:
             why = f"the model does not explain the track: {slope.reason()}"
@@ -424,6 +419,12 @@ def unexplained(paper, mle, meas: Measurements, codec_var: float, sigma: float, 
             why = (f"the model does not explain the track: the fit needed {ratio:.0f} times the tracker's stated "
                    f"error as codec noise (at most {MAX_CODEC_NOISE_RATIO:.0f} on correct answers): a wrong "
                    "friction (mu_r; --fit-friction or the cloth's value), a table not level, or a collision")
+    elif step > MAX_STEP_R:
+        why = (f"the track steps: the fit misses the frames either side of one point by {step:.1f} ball radii "
+               f"apart (at most {MAX_STEP_R:.0f} on correct answers): they are not the same ball's centre "
+               "(the cue's tip or another ball taken for it), or a collision")
+    else:
+        return paper, mle
     if mle is not None and mle.status != "failed":
         mle = MLEResult("failed", why, chi2=mle.chi2, dof=mle.dof)
     if paper is not None and paper.status != "failed":

@@ -513,11 +513,15 @@ def test_a_track_that_steps_is_refused(seed):
     # 1.36, codec noise 3.4x stated) and both methods answered ok.  The same
     # here: frames to 10 after the strike 1.5 R behind the ball, the next 14
     # not found.  Refused by the step (MAX_STEP_R, 1 radius; correct answers
-    # measured at most 0.5); the clean track is answered.
+    # measured at most 0.5); the clean track is answered.  Not every such
+    # track is caught: seeds 1, 2, 4 and 5 bend the fit's path under a radius
+    # and are answered 63-174% off (docs/measurements.md "cov13").
     from cuespin.recover.api import recover_track
     from cuespin.recover.measurements import MAX_STEP_R
     shot, p = sample_shot(seed, "random")
-    stated, fps = 2e-5, 240.0
+    # 0.5 mm stated (shot 36's: 0.23 px at 2.4 mm/px), so the codec guard
+    # does not refuse first (it did at 0.02 mm: 46-68x).
+    stated, fps = 5e-4, 240.0
     t, xy = synthetic(shot, p, fps=fps, sigma=np.hypot(stated, 2 * stated), seed=seed,
                       t_cut=min(phases(shot, p).t2 + 0.3, 3.0))
     ok = np.ones(len(t), bool)
@@ -529,9 +533,11 @@ def test_a_track_that_steps_is_refused(seed):
     ok &= ~((t >= shot.t0 + 10 / fps) & (t < shot.t0 + 24 / fps))
     stepped = recover_track(t, xy, ok, np.full(len(t), stated), p, **kw)["methods"]
     assert 1.5 > MAX_STEP_R
+    # The paper's method may have failed on its own first (seed 3: the path
+    # not straight); failed either way.
     for name in ("paper", "mle"):
         assert stepped[name]["status"] == "failed", (name, stepped[name])
-        assert "the track steps" in stepped[name]["reason"], stepped[name]["reason"]
+    assert "the track steps" in stepped["mle"]["reason"], stepped["mle"]["reason"]
 
 
 @pytest.mark.slow
