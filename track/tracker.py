@@ -1085,6 +1085,7 @@ class BallTracker:
         self._marked = set()  # frames whose markings the rule found (a marked ball: MARKED_BALL_FRAMES)
         self._k = -1  # the frame step() tracks
         self._candidates: tuple = ()  # the last full search's blobs
+        self._at_departure = False  # this frame's search placed the ball at its departure's centroid
         self._bands = None  # the radius map's bands on the search mask (multi-scale search)
         self._pred = None  # this frame's predicted centre (px), None without history
         self._pred_blur = np.zeros(2)  # and the streak (px) its velocity predicts
@@ -1177,6 +1178,7 @@ class BallTracker:
         if self.mask is not None:
             sm[~self.mask] = -np.inf
         blobs = []  # the two best blobs that are not sticks (the cue's shaft), value and place
+        departed = []  # blobs placed at their departure's centroid: the fit starts there (_refine's at_loc)
         for _ in range(STICK_SKIPS + 2):
             _, val, _, at = cv2.minMaxLoc(sm)
             if val < self.thresh:
@@ -1184,8 +1186,20 @@ class BallTracker:
             loc = np.array(at, float)
             if not self._stick(frame, loc, blur):
                 blobs.append((val, loc))
-                if len(blobs) == 2:
-                    break
+            else:
+                # A shaded ball's dark rim, its lit middle on the felt's other
+                # side, peaks the score at the rim, and the window centred
+                # there cuts the crescent into a band (RESTART_RADII's shot,
+                # FFV1: the resting ball called a stick in 8 of its 10 frames
+                # before the strike).  The window centred on the departure's
+                # centroid in either direction holds the whole ball.
+                r_at = self.radii.at(loc)
+                alt = self._departure_centre(frame, loc, r_at)
+                if np.hypot(*(alt - loc)) > RESTART_RADII * r_at and not self._stick(frame, alt, blur):
+                    blobs.append((val, alt))
+                    departed.append(alt)
+            if len(blobs) == 2:
+                break
             # The next blob away from this one.
             mask = np.zeros_like(sm, dtype=np.uint8)
             cv2.circle(mask, (int(loc[0]), int(loc[1])), int(2.5 * self.radii.at(loc) + 4), 1, -1)
@@ -1193,6 +1207,7 @@ class BallTracker:
         if not blobs:
             return None, NO_BALL
         val, loc = blobs[0]
+        self._at_departure = any(loc is a for a in departed)
         val2, at2 = blobs[1] if len(blobs) == 2 else (-np.inf, None)
         # A second ball-like blob away from the first: flag, don't guess.
         if val2 >= max(self.thresh, 0.5 * val):
@@ -1218,6 +1233,7 @@ class BallTracker:
         if self.gone:
             return _lost(GONE)
         self._k = k
+        self._at_departure = False
         pred, vel = self._velocity(k)
         self._pred = pred
         blur = self._pred_blur = vel * self.exposure_frames
@@ -1261,9 +1277,10 @@ class BallTracker:
             blur = np.zeros(2) if not self.history else None
         self.last_fit = None
         self.last_patch = None
-        obs = self._refine(frame, loc, blur)
+        at_loc = self._at_departure
+        obs = self._refine(frame, loc, blur, at_loc=at_loc)
         if obs.status != OK and blur is not None and not self.history:
-            obs = self._refine(frame, loc, None)
+            obs = self._refine(frame, loc, None, at_loc=at_loc)
         if obs.status == OK and self.mask is not None and not self._on_surface(obs.uv):
             # The search's peak lies on the playing surface but the fit left
             # it: no ball's centre is there (a ball drawn rolling over the
