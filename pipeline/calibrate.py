@@ -2016,6 +2016,7 @@ def calibrate_frame(frame: np.ndarray, table: Table = Table(), *, corners=None, 
     K = None if intrinsics is None else np.asarray(intrinsics, dtype=float)
     dist = None if distortion is None else np.asarray(distortion, dtype=float).ravel()
     if corners is not None:
+        kw.setdefault("corner_height_m", nose_height_m)  # clicks at the noses (review 12a: was ignored here)
         return calibrate_clicked(corners, size, table, frame=frame, use_balls=use_balls, estimate_lens=estimate_lens,
                                  intrinsics=K, distortion=dist, camera_height_sigma_m=camera_height_sigma_m, **kw)
     det = detect_corners(frame, K, dist, estimate_lens=estimate_lens)

@@ -233,7 +233,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
 
     if keep is not None:
         codec = CodecCorrelation(keep.codec_var, frame_dt) if inter_frame and not lossless else None
-        return _refit(keep, seg, t, xy, params, exposure_s, fit_friction, run_paper, lossless, sigma,
+        return _refit(keep, seg, t, xy, cov, params, exposure_s, fit_friction, run_paper, lossless, sigma,
                       frame_dt, measure, codec, t_fit, clock, independent)
     starts = [initial_guess(s, params) for s in (seg, seg.unended, seg.rolling) if s is not None]
 
@@ -346,7 +346,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
                     {"fit": t_fit, "recover": time.perf_counter() - clock}, decided)
 
 
-def _refit(keep: Decided, seg, t, xy, params, exposure_s, fit_friction, run_paper, lossless, sigma,
+def _refit(keep: Decided, seg, t, xy, cov, params, exposure_s, fit_friction, run_paper, lossless, sigma,
            frame_dt, measure, codec, t_fit, clock, independent: bool) -> Estimate:
     """:func:`estimate` keeping an earlier recovery's decisions (``keep``):
     the same model fitted from the earlier answer, the same segmentation,
@@ -377,7 +377,9 @@ def _refit(keep: Decided, seg, t, xy, params, exposure_s, fit_friction, run_pape
                                     curved=keep.curved, near=keep.paper, apart=keep.stop_apart, meas=meas,
                                     noise=mle_noise(mle))
     paper, mle = unexplained(paper, mle, meas, keep.codec_var, sigma,
-                             lambda: rolling_fit(t, xy, meas.cov, px_to_m=meas.px_to_m, params=params, mle=mle,
+                             # the tracker's stated cov, as in estimate: rolling_slope measures the codec's
+                             # share itself (meas.cov already holds it; review 12b: ratios went negative)
+                             lambda: rolling_fit(t, xy, cov, px_to_m=meas.px_to_m, params=params, mle=mle,
                                                  seg=chosen or seg, exposure_s=exposure_s, frame_dt=frame_dt,
                                                  sigma=sigma),
                              step=step_r(meas, fit, exposure_s, mle))

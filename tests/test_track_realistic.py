@@ -95,11 +95,8 @@ def test_resting_balls_that_outshine_the_ball_are_not_tracked(tmp_path, shot, se
 
 # The sets whose targets are not met yet, as measured (README, Known
 # limits): strict, so that a fix shows as a pass to be unmarked.
-NOT_YET = {
-    (7, "FFV1"): "issue 10: shot 5 (red on red in a low light): 71 of 81 frames in view found on found12 (main "
-                 "3a88a64: 60), none off (largest 0.105 R); the set was 29 missing where 1% is ~23 with shot 5 at "
-                 "52, so found12 predicts a pass (not run: 3220 s): unmark when it XPASSes",
-}
+# [7-FFV1] unmarked: it passed (XPASS, strict) on main a7cd771 after found12 (lead, 342 s at low load).
+NOT_YET: dict = {}
 
 
 @pytest.mark.slow

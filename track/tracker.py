@@ -19,6 +19,7 @@ from cuespin.track.model import (SphereLook, _coarse, _model_rows, block_patch, 
                                  streak_from_moments, streak_model)
 from cuespin.track.outline import OUTLINE_REFIT_PX, OutlineCache, is_similarity
 from cuespin.track.radius import RadiusMap
+from cuespin.track.sphere import STILL_PX as STILL_PX_SPHERE
 from cuespin.track.sphere import Sample, learn_sphere, mean_sample, still_members
 
 OK, NO_BALL, PARTIAL, TWO_BLOBS, GONE, FIT_FAILED, PULLED, OFF_PATH, BLANK = 0, 1, 2, 3, 4, 5, 6, 7, 8
@@ -234,7 +235,7 @@ MARKED_BALL_FRAMES = 4
 # thus followed by steps of at most REST_STEP_PX, whose linearisation
 # error is second order in them (measured by simulation: docs/measurements.md,
 # branch speed17).
-REST_STEP_PX = 0.05
+REST_STEP_PX = STILL_PX_SPHERE
 REST_RMS_SIGMAS = 6.0
 # The centre's step (px) of the central differences that give the Hessian's
 # centre rows (rest_reference): well inside REST_STEP_PX, and 1e-5 px of
