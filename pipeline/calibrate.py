@@ -826,6 +826,14 @@ def edge_points(img: np.ndarray, quad: np.ndarray, contour: np.ndarray,
     return sides
 
 
+def _robust_keep(r: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """The points whose residuals ``r`` lie within 6 robust standard deviations
+    (1.4826 MAD of the ``keep`` ones; 0.05 px at least): the trimming rule of
+    :func:`_fit_line` and :func:`_curve_rms`."""
+    mad = np.median(np.abs(r[keep])) + 1e-3
+    return np.abs(r) < max(6.0 * 1.4826 * mad, 0.05)
+
+
 def _fit_line(pts):
     """Total-least-squares line, far points (a pocket, a ball on the edge) dropped:
     ``(centre, unit direction, residuals of the kept points)``."""
@@ -835,8 +843,7 @@ def _fit_line(pts):
         evals, evecs = np.linalg.eigh((pts[keep] - c).T @ (pts[keep] - c))
         dirn = evecs[:, 1]
         dist = (pts - c) @ np.array([-dirn[1], dirn[0]])
-        mad = np.median(np.abs(dist[keep])) + 1e-3
-        keep = np.abs(dist) < max(6.0 * 1.4826 * mad, 0.05)
+        keep = _robust_keep(dist, keep)
     return c, dirn, dist[keep]
 
 
@@ -1126,8 +1133,7 @@ def _curve_rms(pts: np.ndarray) -> float:
     keep = np.ones(len(pts), bool)
     for _ in range(3):
         r = o - np.polyval(np.polyfit(t_[keep], o[keep], 2), t_)
-        mad = np.median(np.abs(r[keep])) + 1e-3
-        keep = np.abs(r) < max(6.0 * 1.4826 * mad, 0.05)
+        keep = _robust_keep(r, keep)
     return float(np.sqrt(np.mean(r[keep] ** 2)))
 
 

@@ -1,5 +1,5 @@
 """The rest step (track.tracker.REST_STEP_PX): a resting ball measured by one
-Gauss-Newton step from a reference fit, against a full fit of the same
+Newton step (H^-1 J) from a reference fit, against a full fit of the same
 window, on the renderer's exact disc coverage with fresh noise."""
 
 import numpy as np

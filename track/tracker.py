@@ -976,7 +976,7 @@ def rest_reference(patch, felt_image, lf: LastFit, obs, r: float, thresh: float,
 
 
 def rest_step(ref: RestReference, patch) -> tuple[np.ndarray, float] | None:
-    """One Gauss-Newton step from the reference fit ``ref`` on the window
+    """One Newton step (``H^-1 J``, rest_reference) from the reference fit ``ref`` on the window
     ``patch`` (projected levels, the reference's window): the centre (px)
     and the residual RMS (levels, on the blocks if the fit was), or None
     where the ball has moved or its window changed (:data:`REST_STEP_PX`'s

@@ -634,7 +634,8 @@ def project_bgr(roi, w, off):
     """:class:`cuespin.track.colour.Projection` of a BGR window ``roi``
     (uint8, (h, n, 3), n >= 2): ``roi.astype(np.float32) @ w + off`` in
     float32, bit for bit.  numpy hands each row to OpenBLAS's sgemv, whose
-    Haswell kernel (``sgemv_t``, 3 rows) takes the row's pixels in blocks:
+    kernel on this machine (SkylakeX, the set OpenBLAS picks at run time;
+    numpy's build string says Haswell) (``sgemv_t``, 3 rows) takes the row's pixels in blocks:
     of 8 as ``fma(b2, w2, fma(b1, w1, b0 w0))``, one of 4 and the odd last
     pixel as ``fma(b2, w2, fma(b0, w0, b1 w1))``, a pair as ``(b0 w0 + b1
     w1) + b2 w2`` (found by comparing every width 2-129 and 640, 1280 on
