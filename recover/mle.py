@@ -665,15 +665,23 @@ def ar1_expected_lag1(meas: Measurements, jac, rho: float) -> float:
 def ar1_from_residuals(meas: Measurements, fit: ModelFit, rho1: float) -> float:
     """The AR(1) errors' lag-1 correlation from a fit's residual lag-1
     autocorrelation ``rho1`` (:func:`lag1_autocorrelation` of ``fit``'s
-    residuals, fitted as independent): the ``rho`` whose expected residual
-    autocorrelation (:func:`ar1_expected_lag1`) is ``rho1``, in ``[0,
-    MAX_AR1]``.  ``rho1`` itself is biased low: the fit absorbs the slowly
-    varying part of a correlated error (the lower, the shorter the track;
-    benchmarks/calibrate_tests.py --which ar1rho)."""
-    if not np.isfinite(rho1) or rho1 <= 0.0 or fit.jac is None:
+    residuals, fitted as independent): :func:`ar1_from_lag1` of its
+    Jacobian."""
+    return ar1_from_lag1(meas, fit.jac, rho1)
+
+
+def ar1_from_lag1(meas: Measurements, jac, rho1: float) -> float:
+    """The AR(1) errors' lag-1 correlation from the lag-1 autocorrelation
+    ``rho1`` of a fit's whitened residuals (:func:`lag1_autocorrelation`;
+    whitened Jacobian ``jac``, (2m, p), fitted as independent): the ``rho``
+    whose expected residual autocorrelation (:func:`ar1_expected_lag1`) is
+    ``rho1``, in ``[0, MAX_AR1]``.  ``rho1`` itself is biased low: the fit
+    absorbs the slowly varying part of a correlated error (the lower, the
+    shorter the track; benchmarks/calibrate_tests.py --which ar1rho)."""
+    if not np.isfinite(rho1) or rho1 <= 0.0 or jac is None:
         return 0.0
     try:
-        g = _ar1_lag1_terms(meas, fit.jac)
+        g = _ar1_lag1_terms(meas, jac)
         if rho1 <= g(0.0):
             return 0.0
         if g(MAX_AR1) <= rho1:
@@ -681,6 +689,18 @@ def ar1_from_residuals(meas: Measurements, fit: ModelFit, rho1: float) -> float:
         return float(brentq(lambda r: g(r) - rho1, 0.0, MAX_AR1, xtol=1e-4))
     except (np.linalg.LinAlgError, ValueError):
         return float(np.clip(rho1, 0.0, MAX_AR1))
+
+
+def ar1_sandwich(meas: Measurements, jac, rho: float) -> np.ndarray:
+    """The covariance of parameters fitted as if independent (whitened
+    Jacobian ``jac``, (2m, p)) when the whitened errors are AR(1) of lag-1
+    ``rho`` (:func:`_ar1_cov_times`): ``A J^T S J A``, ``A = (J^T J)^-1``
+    (:func:`info_inverse`).  ``rho`` 0 gives ``A``."""
+    J = np.asarray(jac, dtype=float)
+    A = info_inverse(J)
+    if not rho:
+        return A
+    return A @ (J.T @ _ar1_cov_times(meas, J, rho)) @ A
 
 
 def hac_covariance(jac, residuals, rho: float) -> np.ndarray:
