@@ -158,7 +158,9 @@ class MLEResult:
     sandwich (residual lag-1 autocorrelation ``rho1``).  ``verdicts`` the
     status rules' answers (``v0_determined``: v0's error within
     :data:`MAX_REL_STDERR_V0`; ``sliding_frames``: sliding seen in at least
-    :data:`MIN_SLIDING_FRAMES` frames), for a refit to keep (:func:`result`).
+    :data:`MIN_SLIDING_FRAMES` frames; ``slide_hidden``: a rolling answer's
+    frames left out after the strike cover the longest slide its speed
+    allows, :func:`slide_bound_s`), for a refit to keep (:func:`result`).
     """
 
     status: str
@@ -984,6 +986,24 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
                x2=ph.x2 if np.isfinite(ph.t2) else None,
                mu_s=pr.mu_s if fit_friction and not rolling else None,
                mu_r=pr.mu_r if fit_friction else None, **common)
+    if rolling:
+        # The frames found after the strike but left out (the strike's, and
+        # those the cue's tip touched: recover.estimate's cue window, the
+        # tracker's flagged run) cover all the time the ball could have slid
+        # at this speed: a slide hidden there is as likely as rolling from the
+        # strike, and the rolling answer is one of many (review 12b: the
+        # touched run has no upper limit).  Before the v0_determined rule,
+        # which the unseen slip's share trips too, with a reason that
+        # names the strike not being in view.
+        left, bound = left_out_after_strike_s(meas, float(shot.t0)), slide_bound_s(speed, pr)
+        if verdicts.get("slide_hidden") is None:
+            verdicts["slide_hidden"] = bool(left >= bound)
+        if verdicts["slide_hidden"]:
+            return MLEResult("degenerate",
+                             f"the frames in the {left * 1e3:.0f} ms after the strike are left out (the cue's "
+                             f"tip touched the ball there): a ball leaving at {speed:.3g} m/s slides at most "
+                             f"{bound * 1e3:.0f} ms (eq. 26), so rolling from the strike is not told from a "
+                             "slide hidden by the cue; v0 and w0 are not determined", **common)
     if not verdicts["v0_determined"]:
         return MLEResult("degenerate",
                          f"the track does not determine v0 (standard error {se_speed:.3g} m/s for "
@@ -1015,25 +1035,53 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
     return MLEResult("ok", note, **out)
 
 
+def unseen_gap_s(fit: ModelFit, meas: Measurements, se_t0: float) -> float:
+    """The time (s) after the strike with no measured moving frame: to the
+    first single-frame measurement after the fit's t0, plus 1.96 of t0's
+    standard error ``se_t0`` (s); a slide ending in it is not seen."""
+    t0 = float(fit.shot.t0)
+    t_m = meas.t_single
+    after = t_m[t_m > t0]
+    gap = float(after.min() - t0) if len(after) else 0.0
+    return gap + Z95 * (se_t0 if np.isfinite(se_t0) else 0.0)
+
+
+def left_out_after_strike_s(meas: Measurements, t0: float) -> float:
+    """How long (s) after the strike ``t0`` the frames found are left out
+    (the strike's and those the cue's tip touches,
+    recover.measurements.strike_window): to the last frame left out before
+    the first measured one after ``t0``; 0 when none is (a track that
+    starts later: the strike not in view)."""
+    t_m = meas.t_single
+    after = t_m[t_m > t0]
+    first = float(after.min()) if len(after) else float("inf")
+    left = meas.t[(meas.group < 0) & (meas.t > t0) & (meas.t < first)]
+    return float(left.max() - t0) if len(left) else 0.0
+
+
+def slide_bound_s(speed: float, params: BallParams) -> float:
+    """The longest a ball whose speed stays within ``speed`` (m/s) slides:
+    eqs. 25-26 give ``t1 = 2 |u0| / (7 mu_s g) = |v0 - v1| / (mu_s g)``,
+    at most ``speed / (mu_s g)`` (s) when ``v0`` and ``v1`` are both
+    within it (the time sliding friction takes to change the velocity by
+    the whole speed, as eq. 29's ``t3``)."""
+    return float(speed) / (params.mu_s * params.g)
+
+
 def unseen_slip(fit: ModelFit, meas: Measurements, se_t0: float) -> tuple[float, float]:
     """The largest change of v0 (m/s) and sliding time (s) of a slip that a
     track answered "rolling from the strike" cannot exclude.
 
     Sliding for ``tau1`` changes v by ``mu_s g tau1`` (eq. 3) and displaces
     the later rolling path by ``1/2 mu_s g tau1^2``.  The slip is not seen
-    when sliding ends before the first measured moving frame (``tau1`` up to
-    that frame's time after t0 plus 1.96 of t0's standard error
-    ``se_t0``, s) or when its displacement stays under
+    when sliding ends before the first measured moving frame
+    (:func:`unseen_gap_s`) or when its displacement stays under
     :data:`UNSEEN_SLIP_SIGMAS` per-axis position errors (the frames' median,
     scaled by the reduced chi-square when above 1).  Returns ``(dv, tau1)``.
     """
     pr = fit.params
     mu_g = pr.mu_s * pr.g
-    t0 = float(fit.shot.t0)
-    t_m = meas.t_single
-    after = t_m[t_m > t0]
-    gap = float(after.min() - t0) if len(after) else 0.0
-    tau_gap = gap + Z95 * (se_t0 if np.isfinite(se_t0) else 0.0)
+    tau_gap = unseen_gap_s(fit, meas, se_t0)
     sigma = meas.median_sigma() * np.sqrt(max(1.0, fit.chi2 / max(fit.dof, 1)))
     tau_noise = np.sqrt(2.0 * UNSEEN_SLIP_SIGMAS * sigma / mu_g)
     tau = max(tau_gap, float(tau_noise))
