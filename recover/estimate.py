@@ -327,6 +327,12 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         paper = paper_from_segments(chosen, t, xy, params, paper_sigma, frame_dt, strike_seen, independent,
                                     meas=meas, noise=mle_noise(mle))
         shape = paper.trajectory == "parabola" if paper.trajectory else None
+        if chosen is seg.rolling and mle.verdicts.get("slide_hidden") and paper.status == "ok":
+            # The paper's answer from the rolling segments rests on the same
+            # decision: a slide hidden by the cue's window is not excluded
+            # (recover.mle.result; sample_shot(1, "case5") at 60 fps, the
+            # window 1.1 times the bound: 29% off, answered ok).
+            paper = PaperResult("degenerate", mle.reason)
     seen = decisions.get("sliding_seen")
     fit = None if seen is None else (full if seen else roll)
     decided = Decided(

@@ -158,7 +158,9 @@ class MLEResult:
     sandwich (residual lag-1 autocorrelation ``rho1``).  ``verdicts`` the
     status rules' answers (``v0_determined``: v0's error within
     :data:`MAX_REL_STDERR_V0`; ``sliding_frames``: sliding seen in at least
-    :data:`MIN_SLIDING_FRAMES` frames), for a refit to keep (:func:`result`).
+    :data:`MIN_SLIDING_FRAMES` frames; ``slide_hidden``: a rolling answer's
+    frames left out after the strike cover the longest slide its speed
+    allows, :func:`slide_bound_s`), for a refit to keep (:func:`result`).
     """
 
     status: str
@@ -665,15 +667,23 @@ def ar1_expected_lag1(meas: Measurements, jac, rho: float) -> float:
 def ar1_from_residuals(meas: Measurements, fit: ModelFit, rho1: float) -> float:
     """The AR(1) errors' lag-1 correlation from a fit's residual lag-1
     autocorrelation ``rho1`` (:func:`lag1_autocorrelation` of ``fit``'s
-    residuals, fitted as independent): the ``rho`` whose expected residual
-    autocorrelation (:func:`ar1_expected_lag1`) is ``rho1``, in ``[0,
-    MAX_AR1]``.  ``rho1`` itself is biased low: the fit absorbs the slowly
-    varying part of a correlated error (the lower, the shorter the track;
-    benchmarks/calibrate_tests.py --which ar1rho)."""
-    if not np.isfinite(rho1) or rho1 <= 0.0 or fit.jac is None:
+    residuals, fitted as independent): :func:`ar1_from_lag1` of its
+    Jacobian."""
+    return ar1_from_lag1(meas, fit.jac, rho1)
+
+
+def ar1_from_lag1(meas: Measurements, jac, rho1: float) -> float:
+    """The AR(1) errors' lag-1 correlation from the lag-1 autocorrelation
+    ``rho1`` of a fit's whitened residuals (:func:`lag1_autocorrelation`;
+    whitened Jacobian ``jac``, (2m, p), fitted as independent): the ``rho``
+    whose expected residual autocorrelation (:func:`ar1_expected_lag1`) is
+    ``rho1``, in ``[0, MAX_AR1]``.  ``rho1`` itself is biased low: the fit
+    absorbs the slowly varying part of a correlated error (the lower, the
+    shorter the track; benchmarks/calibrate_tests.py --which ar1rho)."""
+    if not np.isfinite(rho1) or rho1 <= 0.0 or jac is None:
         return 0.0
     try:
-        g = _ar1_lag1_terms(meas, fit.jac)
+        g = _ar1_lag1_terms(meas, jac)
         if rho1 <= g(0.0):
             return 0.0
         if g(MAX_AR1) <= rho1:
@@ -681,6 +691,18 @@ def ar1_from_residuals(meas: Measurements, fit: ModelFit, rho1: float) -> float:
         return float(brentq(lambda r: g(r) - rho1, 0.0, MAX_AR1, xtol=1e-4))
     except (np.linalg.LinAlgError, ValueError):
         return float(np.clip(rho1, 0.0, MAX_AR1))
+
+
+def ar1_sandwich(meas: Measurements, jac, rho: float) -> np.ndarray:
+    """The covariance of parameters fitted as if independent (whitened
+    Jacobian ``jac``, (2m, p)) when the whitened errors are AR(1) of lag-1
+    ``rho`` (:func:`_ar1_cov_times`): ``A J^T S J A``, ``A = (J^T J)^-1``
+    (:func:`info_inverse`).  ``rho`` 0 gives ``A``."""
+    J = np.asarray(jac, dtype=float)
+    A = info_inverse(J)
+    if not rho:
+        return A
+    return A @ (J.T @ _ar1_cov_times(meas, J, rho)) @ A
 
 
 def hac_covariance(jac, residuals, rho: float) -> np.ndarray:
@@ -964,6 +986,24 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
                x2=ph.x2 if np.isfinite(ph.t2) else None,
                mu_s=pr.mu_s if fit_friction and not rolling else None,
                mu_r=pr.mu_r if fit_friction else None, **common)
+    if rolling:
+        # The frames found after the strike but left out (the strike's, and
+        # those the cue's tip touched: recover.estimate's cue window, the
+        # tracker's flagged run) cover all the time the ball could have slid
+        # at this speed: a slide hidden there is as likely as rolling from the
+        # strike, and the rolling answer is one of many (review 12b: the
+        # touched run has no upper limit).  Before the v0_determined rule,
+        # which the unseen slip's share trips too, with a reason that
+        # names the strike not being in view.
+        left, bound = left_out_after_strike_s(meas, float(shot.t0)), slide_bound_s(speed, pr)
+        if verdicts.get("slide_hidden") is None:
+            verdicts["slide_hidden"] = bool(left >= bound)
+        if verdicts["slide_hidden"]:
+            return MLEResult("degenerate",
+                             f"the frames in the {left * 1e3:.0f} ms after the strike are left out (the cue's "
+                             f"tip touched the ball there): a ball leaving at {speed:.3g} m/s slides at most "
+                             f"{bound * 1e3:.0f} ms (eq. 26), so rolling from the strike is not told from a "
+                             "slide hidden by the cue; v0 and w0 are not determined", **common)
     if not verdicts["v0_determined"]:
         return MLEResult("degenerate",
                          f"the track does not determine v0 (standard error {se_speed:.3g} m/s for "
@@ -995,25 +1035,53 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
     return MLEResult("ok", note, **out)
 
 
+def unseen_gap_s(fit: ModelFit, meas: Measurements, se_t0: float) -> float:
+    """The time (s) after the strike with no measured moving frame: to the
+    first single-frame measurement after the fit's t0, plus 1.96 of t0's
+    standard error ``se_t0`` (s); a slide ending in it is not seen."""
+    t0 = float(fit.shot.t0)
+    t_m = meas.t_single
+    after = t_m[t_m > t0]
+    gap = float(after.min() - t0) if len(after) else 0.0
+    return gap + Z95 * (se_t0 if np.isfinite(se_t0) else 0.0)
+
+
+def left_out_after_strike_s(meas: Measurements, t0: float) -> float:
+    """How long (s) after the strike ``t0`` the frames found are left out
+    (the strike's and those the cue's tip touches,
+    recover.measurements.strike_window): to the last frame left out before
+    the first measured one after ``t0``; 0 when none is (a track that
+    starts later: the strike not in view)."""
+    t_m = meas.t_single
+    after = t_m[t_m > t0]
+    first = float(after.min()) if len(after) else float("inf")
+    left = meas.t[(meas.group < 0) & (meas.t > t0) & (meas.t < first)]
+    return float(left.max() - t0) if len(left) else 0.0
+
+
+def slide_bound_s(speed: float, params: BallParams) -> float:
+    """The longest a ball whose speed stays within ``speed`` (m/s) slides:
+    eqs. 25-26 give ``t1 = 2 |u0| / (7 mu_s g) = |v0 - v1| / (mu_s g)``,
+    at most ``speed / (mu_s g)`` (s) when ``v0`` and ``v1`` are both
+    within it (the time sliding friction takes to change the velocity by
+    the whole speed, as eq. 29's ``t3``)."""
+    return float(speed) / (params.mu_s * params.g)
+
+
 def unseen_slip(fit: ModelFit, meas: Measurements, se_t0: float) -> tuple[float, float]:
     """The largest change of v0 (m/s) and sliding time (s) of a slip that a
     track answered "rolling from the strike" cannot exclude.
 
     Sliding for ``tau1`` changes v by ``mu_s g tau1`` (eq. 3) and displaces
     the later rolling path by ``1/2 mu_s g tau1^2``.  The slip is not seen
-    when sliding ends before the first measured moving frame (``tau1`` up to
-    that frame's time after t0 plus 1.96 of t0's standard error
-    ``se_t0``, s) or when its displacement stays under
+    when sliding ends before the first measured moving frame
+    (:func:`unseen_gap_s`) or when its displacement stays under
     :data:`UNSEEN_SLIP_SIGMAS` per-axis position errors (the frames' median,
     scaled by the reduced chi-square when above 1).  Returns ``(dv, tau1)``.
     """
     pr = fit.params
     mu_g = pr.mu_s * pr.g
-    t0 = float(fit.shot.t0)
-    t_m = meas.t_single
-    after = t_m[t_m > t0]
-    gap = float(after.min() - t0) if len(after) else 0.0
-    tau_gap = gap + Z95 * (se_t0 if np.isfinite(se_t0) else 0.0)
+    tau_gap = unseen_gap_s(fit, meas, se_t0)
     sigma = meas.median_sigma() * np.sqrt(max(1.0, fit.chi2 / max(fit.dof, 1)))
     tau_noise = np.sqrt(2.0 * UNSEEN_SLIP_SIGMAS * sigma / mu_g)
     tau = max(tau_gap, float(tau_noise))

@@ -504,7 +504,18 @@ def test_a_wrong_friction_is_refused_not_hidden_in_the_codec_noise():
         assert "does not explain the track" in wrong[name]["reason"], wrong[name]["reason"]
 
 
-@pytest.mark.parametrize("seed", [0, 3])
+# The generator's six cue-tip constructions (seeds 0-5): only 0 and 3 are
+# refused.  The others bend the fit's path under a radius (steps 0.73,
+# 0.58, 0.50, 0.13 R) and are answered ok 63-174% off (cov13, measured again
+# by stats12b on c8c871f); seed 5's clean track is degenerate as well.  A
+# threshold near 0.5 R would meet the renders' correct answers (0.51 R), so
+# they stay strict xfails: an XPASS says the rule now reaches them.
+_STEP_NOT_CAUGHT = pytest.mark.xfail(strict=True, reason="the fit bends through the tip's frames under MAX_STEP_R "
+                                     "and answers ok 63-174% off (docs/measurements.md cov13, stats12b)")
+
+
+@pytest.mark.parametrize("seed", [0, pytest.param(1, marks=_STEP_NOT_CAUGHT), pytest.param(2, marks=_STEP_NOT_CAUGHT),
+                                  3, pytest.param(4, marks=_STEP_NOT_CAUGHT), pytest.param(5, marks=_STEP_NOT_CAUGHT)])
 def test_a_track_that_steps_is_refused(seed):
     # H.264 realistic seed 23 shot 36 (docs/measurements.md "cov13"): the
     # tracker took the cue's tip, 1.4-2.7 radii behind the ball, for it
@@ -538,6 +549,40 @@ def test_a_track_that_steps_is_refused(seed):
     for name in ("paper", "mle"):
         assert stepped[name]["status"] == "failed", (name, stepped[name])
     assert "the track steps" in stepped["mle"]["reason"], stepped["mle"]["reason"]
+
+
+# The step rule's false refusals: at most this rate (stated), held when the
+# one-sided 95% upper bound of the count on STEP_NULL_TRACKS tracks without
+# a cue tip is under it (0 of 400: 0.75%).
+MAX_STEP_FALSE_REFUSAL = 0.01
+STEP_NULL_TRACKS = 400
+
+
+@pytest.mark.slow
+def test_the_step_rule_refuses_no_track_without_a_cue_tip():
+    # Out of sample for MAX_STEP_R (set on 133 realistic answers and 278
+    # generated ones of seeds 100-399, cov13): sample_shot seeds 1000-1399
+    # ("random"), 60-480 fps, stated 2e-5-5e-4 m with a codec adding twice
+    # it, inter-frame (H.264) and intra-frame (MJPG) alternately in runs of
+    # 12.  Measured (stats12b): 0 of 400 refused by the step, 389 MLE ok, 11
+    # degenerate; the largest step 0.11 R (the renders' correct answers
+    # reach 0.51 R: the generator has no tracker's outliers).  54 s.
+    from scipy.stats import beta
+
+    from cuespin.recover.api import recover_track
+    fps_grid, stated_grid = (60.0, 120.0, 240.0, 480.0), (2e-5, 1e-4, 5e-4)
+    refused = []
+    for i, seed in enumerate(range(1000, 1000 + STEP_NULL_TRACKS)):
+        shot, p = sample_shot(seed, "random")
+        fps, stated = fps_grid[i % 4], stated_grid[(i // 4) % 3]
+        t, xy = synthetic(shot, p, fps=fps, sigma=np.hypot(stated, 2 * stated), seed=seed,
+                          t_cut=min(phases(shot, p).t2 + 0.3, 3.0))
+        out = recover_track(t, xy, np.ones(len(t), bool), np.full(len(t), stated), p, lossless=False,
+                            inter_frame=bool((i // 12) % 2))["methods"]
+        if any("the track steps" in m["reason"] for m in out.values()):
+            refused.append(seed)
+    upper = beta.ppf(0.95, len(refused) + 1, STEP_NULL_TRACKS - len(refused))
+    assert upper < MAX_STEP_FALSE_REFUSAL, (refused, upper)
 
 
 @pytest.mark.slow
