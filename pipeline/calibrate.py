@@ -1272,7 +1272,10 @@ def cushion_lines(img: np.ndarray, quad: np.ndarray, contour: np.ndarray, D: np.
             sgn = np.sign(g[k])
         else:
             k, kind = k_out, "felt"
-            sgn = np.sign(np.mean(g_prof[max(k - 2 * w, 0):k]) - np.mean(g_prof[k + 1:k + 2 * w + 1]))
+            # the step's sign as g's (outward minus inward, the profile runs from the felt out): the step
+            # below takes the largest change of that sign (the reverse took a noise dip or the window's end:
+            # review 12a's frame, 1.99 px off the felt's outline stating 0.38)
+            sgn = np.sign(np.mean(g_prof[k + 1:k + 2 * w + 1]) - np.mean(g_prof[max(k - 2 * w, 0):k]))
         # each point's own step near the side's (a bowed nose, a reference curve a few px off), smoothed
         # along the side over 9 points; a quadratic through most of them (the pockets' gaps left out)
         win = np.arange(offs[k] - 6.0, offs[k] + 6.0 + 1e-9, 0.5)
