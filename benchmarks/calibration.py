@@ -354,6 +354,113 @@ def stated(args):
             row(f"realistic {label} s{sd}", img, truth)
 
 
+def random_table(seed: int):
+    """A drawn table (``synthetic_table_frame``) with its camera and look drawn
+    from ``seed`` (a local Generator): camera 1.5-3 m up, tilt 0-15 deg, k1
+    -0.25..+0.25, roll -3..+3 deg; half the tables with cushions 30-60 mm wide
+    (and pockets) in 0.75-1.10 x the felt's shade (from plain dark noses to
+    cloth-coloured cushions barely brighter than the felt), a third of those
+    with a shadow band 8-25 mm inside the noses (0.7-0.9 x the felt's shade);
+    frame noise 2-4 grey levels.  Every draw is made whatever is used, so a
+    seed's table stays the same when the distribution of one part changes.
+
+    Returns
+    -------
+    dict
+        ``camera``, ``frame`` (BGR uint8), ``noses`` (the playing surface's
+        corners, px) and ``felt`` (the felt-coloured outline's: the cushions'
+        outer edge when there are cushions), ``look`` (the drawing's keywords).
+    """
+    from cuespin.pipeline.calibrate import synthetic_table_frame
+
+    rng = np.random.default_rng([seed, 12])
+    height, tilt, k1, roll = rng.uniform(1.5, 3.0), rng.uniform(0.0, 15.0), rng.uniform(-0.25, 0.25), rng.uniform(-3, 3)
+    cushioned, cushion_m, shade = rng.uniform() < 0.5, rng.uniform(0.03, 0.06), rng.uniform(0.75, 1.10)
+    banded, band_m, band_shade = rng.uniform() < 1 / 3, rng.uniform(0.008, 0.025), rng.uniform(0.7, 0.9)
+    noise = rng.uniform(2.0, 4.0)
+    cam = pinhole_camera(height_m=height, tilt_deg=tilt, k1=k1, size=SIZE, fps=FPS, roll_deg=roll, R=0.028575)
+    look = dict(noise=noise)
+    if cushioned:
+        look.update(cushion_m=cushion_m, cushion_shade=shade, pockets=True)
+        if banded:
+            look.update(band_m=band_m, band_shade=band_shade)
+    frame = synthetic_table_frame(cam, seed=seed, **look)
+    return {"camera": cam, "frame": frame, "noses": cam.project(table_corners(Table())),
+            "felt": cam.project(table_corners(Table(), margin_m=look.get("cushion_m", 0.0))), "look": look,
+            "drawn": (height, tilt, k1, roll)}
+
+
+def tables(args):
+    """The automatic corners on random drawn tables (:func:`random_table`, seeds
+    ``--seed`` .. ``--seed + --n - 1``): each corner coordinate's error against
+    its stated standard error (the detection's covariance), the truth the edge
+    it says it found (``noses``: the playing surface; ``felt``: the felt's
+    outline); and the two paths apart (the outline's, ``lines="never"``, and
+    the cushions' lines, ``"always"``): each one's RMS error and their largest
+    corner difference over their combined stated error (``PATHS_DISAGREE_Z``'s
+    statistic)."""
+    import math
+
+    from cuespin.pipeline.calibrate import _felt_distance, _felt_quad, cushion_lines, detect_corners
+
+    def matched(det, truth):
+        k = min(range(4), key=lambda k: np.abs(np.roll(det.corners, -k, axis=0) - truth).max())
+        idx = np.roll(np.arange(8).reshape(4, 2), -k, axis=0).ravel()
+        return (np.roll(det.corners, -k, axis=0) - truth).ravel(), det.corner_cov[np.ix_(idx, idx)]
+
+    print("seed height tilt k1 roll | look | auto: edge lines rms_px stated_px inside2sd | outline: edge rms | "
+          "lines: edge rms | z | band inside the lines' noses (px)")
+    zs, within, e2, v2, shows = [], [], [], [], []
+    for seed in range(args.seed, args.seed + args.n):
+        t = random_table(seed)
+        look = ",".join(f"{k}={v:.3g}" for k, v in t["look"].items())
+        try:
+            det = detect_corners(t["frame"])
+        except CalibrationError as err:
+            print(f"{seed} refused: {err}", flush=True)
+            continue
+        e, C = matched(det, t[det.edge])
+        sd = np.sqrt(np.diag(C))
+        within.append(np.abs(e) <= 2.0 * sd)
+        # the noses show unless a band inside them is near the cushions' shade (within 0.1 of the felt's)
+        lk = t["look"]
+        shows.append(abs(lk.get("cushion_shade", 0.0) - lk.get("band_shade", 9.0)) >= 0.1)
+        e2.append(e**2)
+        v2.append(sd**2)
+        paths = {}
+        for mode in ("never", "always"):
+            try:
+                paths[mode] = detect_corners(t["frame"], lines=mode)
+            except CalibrationError:
+                paths[mode] = None
+        cols = []
+        for mode in ("never", "always"):
+            p = paths[mode]
+            cols.append("refused" if p is None else
+                        f"{p.edge} {math.sqrt(np.mean(matched(p, t[p.edge])[0] ** 2)):.3f}")
+        z = float("nan")
+        if all(p is not None for p in paths.values()):
+            a, b = paths["never"], paths["always"]
+            sig = math.sqrt((np.trace(a.corner_cov[:8, :8]) + np.trace(b.corner_cov[:8, :8])) / 8.0)
+            z = float(np.abs(a.corners - b.corners).max() / sig)
+            zs.append((seed, z, cols))
+        inside = []
+        try:
+            D, thr = _felt_distance(t["frame"])
+            cushion_lines(t["frame"], *_felt_quad(D, thr), D, thr, inside=inside)
+        except CalibrationError:
+            pass
+        crowd = min(inside, default=math.inf)
+        print(f"{seed} {t['drawn'][0]:.2f} {t['drawn'][1]:4.1f} {t['drawn'][2]:+.3f} {t['drawn'][3]:+.2f} | {look} | "
+              f"{det.edge} {det.lines} {math.sqrt(np.mean(e**2)):.3f} {math.sqrt(np.mean(sd**2)):.3f} "
+              f"{int(within[-1].sum())}/8 | {cols[0]} | {cols[1]} | {z:.2f} | {crowd:.1f}", flush=True)
+    for label, sel in (("", np.ones(len(within), bool)), (" whose noses show (no band within 0.1 of the cushions' "
+                                                           "shade)", np.array(shows))):
+        ins, ee, vv = (np.concatenate([a for a, s in zip(x, sel) if s]) for x in (within, e2, v2))
+        print(f"{int(sel.sum())} tables{label}: coordinates within 2 stated sd {ins.mean():.3f}; RMS z "
+              f"{math.sqrt(np.mean(ee / vv)):.2f}; RMS error / RMS stated {math.sqrt(ee.mean() / vv.mean()):.2f}")
+
+
 def clicked_calibration(corners_px, frame, sigma, **kw):
     """What ``cuespin calibrate --corners`` writes for these corners
     (:func:`calibrate_clicked`, the still balls read in ``frame``)."""
@@ -616,6 +723,8 @@ def main():
     ap.add_argument("--k1", type=float, default=-0.25, help="--diagnose: the lens's k1")
     ap.add_argument("--diagnose", action="store_true",
                     help="where the automatic camera's v0 error comes from (--height, --tilt, --k1)")
+    ap.add_argument("--tables", action="store_true",
+                    help="the automatic corners' errors against their stated ones on random drawn tables")
     ap.add_argument("--stated", action="store_true",
                     help="the automatic corners' stated error against their real one, per frame")
     ap.add_argument("--seeds", type=int, default=3, help="--stated: noise seeds per drawn camera")
@@ -651,6 +760,8 @@ def main():
         return shaded(args)
     if args.focal:
         return focal(args)
+    if args.tables:
+        return tables(args)
     if args.stated:
         return stated(args)
     if args.auto:
