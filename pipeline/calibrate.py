@@ -729,6 +729,16 @@ def _subpixel_edge(Ds, base, nrm, offs):
     return (base + x[:, None] * nrm)[good]
 
 
+# How far past the noses' sub-pixel window (px) a band's inner edge still
+# pulls the halfway crossing: the window's inside colour is read over its
+# first 2 px, and the frame's smoothing (1 px) and the step's own blur reach
+# further.  Measured (cushion12, 15-25 mm bands through 7 cameras): the
+# outline's noses 0.08-0.18 px off stating 0.03-0.05 with the band's edge 7-8
+# px in (the lines' profile), where the window reaches 7; 0.01-0.03 off at
+# 8.5 px and beyond.
+BAND_PULL_PX = 2.0
+
+
 def cushion_noses(img: np.ndarray, sides: list, search_frac: float = 0.08, reach_px: float = 4.0,
                   outer: list | None = None):
     """The cushions' noses inside the felt-coloured outline, when they show.
@@ -747,8 +757,9 @@ def cushion_noses(img: np.ndarray, sides: list, search_frac: float = 0.08, reach
 
     ``outer``, when given, gets one bool a side: whether another step of
     the same size rule lies within the sub-pixel window of the one taken
-    (``reach_px`` + 3 px): a band narrower than the window (a shadow inside
-    the nose), whose two edges the halfway crossing cannot tell apart.
+    (``reach_px`` + 3 px) or ``BAND_PULL_PX`` beyond it: a band narrower
+    than that (a shadow inside the nose), whose two edges the halfway
+    crossing cannot tell apart.
     """
     Ds = _smoothed(img)
     grey = Ds.mean(axis=2) if Ds.ndim == 3 else Ds
@@ -784,7 +795,7 @@ def cushion_noses(img: np.ndarray, sides: list, search_frac: float = 0.08, reach
         if outer is not None:
             peak = (g >= np.roll(g, 1)) & (g >= np.roll(g, -1)) & (g > max(3.0, 8.0 * noise))
             near = np.abs(np.arange(len(g)) - k)
-            outer.append(bool((peak & (near > w) & (near <= 2 * (reach_px + 3.0))).any()))
+            outer.append(bool((peak & (near > w) & (near <= 2 * (reach_px + 3.0 + BAND_PULL_PX))).any()))
         med = float(offs[k])
         nose = _subpixel_edge(Ds, base + med * nrm, nrm, np.arange(-reach_px - 3.0, reach_px + 3.0 + 1e-9, 0.25))
         if len(nose) < max(10, 0.3 * len(base)):

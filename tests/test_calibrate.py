@@ -860,3 +860,19 @@ def test_a_band_crowding_the_lines_noses_widens_the_stated_error():
     assert np.all(np.abs(e) < 2.0 * np.sqrt(np.diag(det.corner_cov)[idx])), (e, np.diag(det.corner_cov)[idx])
     alone = detect_corners(img, lines="always")          # the lines' own error states too little here
     assert np.sqrt(np.mean(e**2)) > 2.0 * np.sqrt(np.trace(alone.corner_cov[:8, :8]) / 8.0)
+
+
+def test_a_band_just_past_the_outlines_window_sends_the_noses_to_the_lines():
+    """A 20 mm shadow band whose inner edge lies 8 px inside the noses, just
+    past the outline's sub-pixel window (7 px): it still pulls the outline's
+    noses (measured 0.164 px RMS a coordinate off, stating 0.038), so the
+    straddle check reaches BAND_PULL_PX further, the lines are run and
+    taken (z 5.5 > PATHS_DISAGREE_Z; measured 0.036 px)."""
+    true = pinhole_camera(height_m=2.6, tilt_deg=11.0, k1=-0.12, R=R, size=SIZE, roll_deg=1.0)
+    img = synthetic_table_frame(true, seed=66, cushion_m=0.05, cushion_shade=1.05, pockets=True, band_m=0.020)
+    truth = true_corners(true)
+    outline = detect_corners(img, lines="never")
+    assert corner_errors(img, truth)[1] < 3 * 0.036
+    assert detect_corners(img).lines
+    d = min((np.roll(outline.corners, -s, axis=0) - truth for s in range(4)), key=lambda e: np.abs(e).max())
+    assert np.sqrt(np.mean(d**2)) > 0.1         # what the outline alone gives here
