@@ -40,6 +40,12 @@ bow from the drawn frame's edges, f by the one rule with its still balls,
 or the lens known); per camera the real v0 and R w0 errors beside the stated
 ones with the calibration's share, their RMS z and the coverage.
 
+With ``--tables`` (``--seed 12000 --n 40``): the automatic corners on random
+drawn tables (``calibrate.random_table``) against the edge each names, their
+coverage by the stated covariance, and the outline's and the lines' paths
+apart (each one's error, their ``PATHS_DISAGREE_Z`` statistic, how near a
+band lies inside the lines' noses).
+
 With ``--diagnose`` (``--height 2 --tilt 0 --k1 -0.25``): the automatic
 camera's v0 error split into its parts (corners, k1, focal length), each
 camera built from the true values but one.
@@ -57,6 +63,7 @@ frame, so that a row's coverage is over many frames' corner errors, with a
 with two at 2-3 degrees of tilt, where the corners' f meets the balls').
 
 Usage: python benchmarks/calibration.py [--n 40] [--seed 0] [--track-px 0.03] [--auto] [--diagnose] [--stated] [--shaded]
+    [--tables]
 """
 
 import argparse
@@ -354,44 +361,8 @@ def stated(args):
             row(f"realistic {label} s{sd}", img, truth)
 
 
-def random_table(seed: int):
-    """A drawn table (``synthetic_table_frame``) with its camera and look drawn
-    from ``seed`` (a local Generator): camera 1.5-3 m up, tilt 0-15 deg, k1
-    -0.25..+0.25, roll -3..+3 deg; half the tables with cushions 30-60 mm wide
-    (and pockets) in 0.75-1.10 x the felt's shade (from plain dark noses to
-    cloth-coloured cushions barely brighter than the felt), a third of those
-    with a shadow band 8-25 mm inside the noses (0.7-0.9 x the felt's shade);
-    frame noise 2-4 grey levels.  Every draw is made whatever is used, so a
-    seed's table stays the same when the distribution of one part changes.
-
-    Returns
-    -------
-    dict
-        ``camera``, ``frame`` (BGR uint8), ``noses`` (the playing surface's
-        corners, px) and ``felt`` (the felt-coloured outline's: the cushions'
-        outer edge when there are cushions), ``look`` (the drawing's keywords).
-    """
-    from cuespin.pipeline.calibrate import synthetic_table_frame
-
-    rng = np.random.default_rng([seed, 12])
-    height, tilt, k1, roll = rng.uniform(1.5, 3.0), rng.uniform(0.0, 15.0), rng.uniform(-0.25, 0.25), rng.uniform(-3, 3)
-    cushioned, cushion_m, shade = rng.uniform() < 0.5, rng.uniform(0.03, 0.06), rng.uniform(0.75, 1.10)
-    banded, band_m, band_shade = rng.uniform() < 1 / 3, rng.uniform(0.008, 0.025), rng.uniform(0.7, 0.9)
-    noise = rng.uniform(2.0, 4.0)
-    cam = pinhole_camera(height_m=height, tilt_deg=tilt, k1=k1, size=SIZE, fps=FPS, roll_deg=roll, R=0.028575)
-    look = dict(noise=noise)
-    if cushioned:
-        look.update(cushion_m=cushion_m, cushion_shade=shade, pockets=True)
-        if banded:
-            look.update(band_m=band_m, band_shade=band_shade)
-    frame = synthetic_table_frame(cam, seed=seed, **look)
-    return {"camera": cam, "frame": frame, "noses": cam.project(table_corners(Table())),
-            "felt": cam.project(table_corners(Table(), margin_m=look.get("cushion_m", 0.0))), "look": look,
-            "drawn": (height, tilt, k1, roll)}
-
-
 def tables(args):
-    """The automatic corners on random drawn tables (:func:`random_table`, seeds
+    """The automatic corners on random drawn tables (``calibrate.random_table``, seeds
     ``--seed`` .. ``--seed + --n - 1``): each corner coordinate's error against
     its stated standard error (the detection's covariance), the truth the edge
     it says it found (``noses``: the playing surface; ``felt``: the felt's
@@ -401,7 +372,7 @@ def tables(args):
     statistic)."""
     import math
 
-    from cuespin.pipeline.calibrate import _felt_distance, _felt_quad, cushion_lines, detect_corners
+    from cuespin.pipeline.calibrate import _felt_distance, _felt_quad, cushion_lines, detect_corners, random_table
 
     def matched(det, truth):
         k = min(range(4), key=lambda k: np.abs(np.roll(det.corners, -k, axis=0) - truth).max())

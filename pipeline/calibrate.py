@@ -37,7 +37,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from cuespin.physics.camera import Camera, as_tuple, distort, undistort
+from cuespin.physics.camera import Camera, as_tuple, distort, pinhole_camera, undistort
 from cuespin.physics.scene import SCHEMA, Table, camera_to_dict
 from cuespin.pipeline.io import InputError
 
@@ -2252,6 +2252,41 @@ def synthetic_table_frame(cam, table=Table(), seed=0, noise=3.0, ss=4, felt=(40,
         img = img * (1 - c) + colour * c
     img += rng.normal(0.0, noise, img.shape)
     return np.clip(np.round(img), 0, 255).astype(np.uint8)
+
+
+def random_table(seed: int):
+    """A drawn table (``synthetic_table_frame``) with its camera and look drawn
+    from ``seed`` (a local Generator): camera 1.5-3 m up, tilt 0-15 deg, k1
+    -0.25..+0.25, roll -3..+3 deg; half the tables with cushions 30-60 mm wide
+    (and pockets) in 0.75-1.10 x the felt's shade (from plain dark noses to
+    cloth-coloured cushions barely brighter than the felt), a third of those
+    with a shadow band 8-25 mm inside the noses (0.7-0.9 x the felt's shade);
+    frame noise 2-4 grey levels.  Every draw is made whatever is used, so a
+    seed's table stays the same when the distribution of one part changes.
+
+    Returns
+    -------
+    dict
+        ``camera``, ``frame`` (BGR uint8), ``noses`` (the playing surface's
+        corners, px) and ``felt`` (the felt-coloured outline's: the cushions'
+        outer edge when there are cushions), ``look`` (the drawing's keywords).
+    """
+    rng = np.random.default_rng([seed, 12])
+    height, tilt, k1, roll = rng.uniform(1.5, 3.0), rng.uniform(0.0, 15.0), rng.uniform(-0.25, 0.25), rng.uniform(-3, 3)
+    cushioned, cushion_m, shade = rng.uniform() < 0.5, rng.uniform(0.03, 0.06), rng.uniform(0.75, 1.10)
+    banded, band_m, band_shade = rng.uniform() < 1 / 3, rng.uniform(0.008, 0.025), rng.uniform(0.7, 0.9)
+    noise = rng.uniform(2.0, 4.0)
+    cam = pinhole_camera(height_m=height, tilt_deg=tilt, k1=k1, size=(1280, 720), fps=240.0, roll_deg=roll,
+                         R=0.028575)
+    look = dict(noise=noise)
+    if cushioned:
+        look.update(cushion_m=cushion_m, cushion_shade=shade, pockets=True)
+        if banded:
+            look.update(band_m=band_m, band_shade=band_shade)
+    frame = synthetic_table_frame(cam, seed=seed, **look)
+    return {"camera": cam, "frame": frame, "noses": cam.project(table_corners(Table())),
+            "felt": cam.project(table_corners(Table(), margin_m=look.get("cushion_m", 0.0))), "look": look,
+            "drawn": (height, tilt, k1, roll)}
 
 
 # --------------------------------------------------------------------------- command line
