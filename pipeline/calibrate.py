@@ -1459,7 +1459,9 @@ def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = Tru
         the felt's outline is not a smooth curve (``OUTLINE_STRAIGHT_PX``: a
         pocketed real table) or its edge is not found along a side, and
         when the outline's noses and the lines' disagree beyond their
-        errors (``PATHS_DISAGREE_Z``: a shadow band inside the noses);
+        errors (``PATHS_DISAGREE_Z``: a shadow band inside the noses), a
+        band crowding the lines' noses stated as the two's difference
+        (``LINES_CROWDED_PX``); decided in :func:`_outline_or_lines`.
         ``always`` or ``never``.
     robust : bool
         Drop the edge points ``STRAY_EDGE_Z`` robust standard deviations or
