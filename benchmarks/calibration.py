@@ -40,6 +40,12 @@ bow from the drawn frame's edges, f by the one rule with its still balls,
 or the lens known); per camera the real v0 and R w0 errors beside the stated
 ones with the calibration's share, their RMS z and the coverage.
 
+With ``--tables`` (``--seed 12000 --n 40``): the automatic corners on random
+drawn tables (``calibrate.random_table``) against the edge each names, their
+coverage by the stated covariance, and the outline's and the lines' paths
+apart (each one's error, their ``PATHS_DISAGREE_Z`` statistic, how near a
+band lies inside the lines' noses).
+
 With ``--diagnose`` (``--height 2 --tilt 0 --k1 -0.25``): the automatic
 camera's v0 error split into its parts (corners, k1, focal length), each
 camera built from the true values but one.
@@ -57,6 +63,7 @@ frame, so that a row's coverage is over many frames' corner errors, with a
 with two at 2-3 degrees of tilt, where the corners' f meets the balls').
 
 Usage: python benchmarks/calibration.py [--n 40] [--seed 0] [--track-px 0.03] [--auto] [--diagnose] [--stated] [--shaded]
+    [--tables]
 """
 
 import argparse
@@ -354,6 +361,77 @@ def stated(args):
             row(f"realistic {label} s{sd}", img, truth)
 
 
+def tables(args):
+    """The automatic corners on random drawn tables (``calibrate.random_table``, seeds
+    ``--seed`` .. ``--seed + --n - 1``): each corner coordinate's error against
+    its stated standard error (the detection's covariance), the truth the edge
+    it says it found (``noses``: the playing surface; ``felt``: the felt's
+    outline); and the two paths apart (the outline's, ``lines="never"``, and
+    the cushions' lines, ``"always"``): each one's RMS error and their largest
+    corner difference over their combined stated error (``PATHS_DISAGREE_Z``'s
+    statistic)."""
+    import math
+
+    from cuespin.pipeline.calibrate import _felt_distance, _felt_quad, cushion_lines, detect_corners, random_table
+
+    def matched(det, truth):
+        k = min(range(4), key=lambda k: np.abs(np.roll(det.corners, -k, axis=0) - truth).max())
+        idx = np.roll(np.arange(8).reshape(4, 2), -k, axis=0).ravel()
+        return (np.roll(det.corners, -k, axis=0) - truth).ravel(), det.corner_cov[np.ix_(idx, idx)]
+
+    print("seed height tilt k1 roll | look | auto: edge lines rms_px stated_px inside2sd | outline: edge rms | "
+          "lines: edge rms | z | band inside the lines' noses (px)")
+    zs, within, e2, v2, shows = [], [], [], [], []
+    for seed in range(args.seed, args.seed + args.n):
+        t = random_table(seed)
+        look = ",".join(f"{k}={v:.3g}" for k, v in t["look"].items())
+        try:
+            det = detect_corners(t["frame"])
+        except CalibrationError as err:
+            print(f"{seed} refused: {err}", flush=True)
+            continue
+        e, C = matched(det, t[det.edge])
+        sd = np.sqrt(np.diag(C))
+        within.append(np.abs(e) <= 2.0 * sd)
+        # the noses show unless a band inside them is near the cushions' shade (within 0.1 of the felt's)
+        lk = t["look"]
+        shows.append(abs(lk.get("cushion_shade", 0.0) - lk.get("band_shade", 9.0)) >= 0.1)
+        e2.append(e**2)
+        v2.append(sd**2)
+        paths = {}
+        for mode in ("never", "always"):
+            try:
+                paths[mode] = detect_corners(t["frame"], lines=mode)
+            except CalibrationError:
+                paths[mode] = None
+        cols = []
+        for mode in ("never", "always"):
+            p = paths[mode]
+            cols.append("refused" if p is None else
+                        f"{p.edge} {math.sqrt(np.mean(matched(p, t[p.edge])[0] ** 2)):.3f}")
+        z = float("nan")
+        if all(p is not None for p in paths.values()):
+            a, b = paths["never"], paths["always"]
+            sig = math.sqrt((np.trace(a.corner_cov[:8, :8]) + np.trace(b.corner_cov[:8, :8])) / 8.0)
+            z = float(np.abs(a.corners - b.corners).max() / sig)
+            zs.append((seed, z, cols))
+        inside = []
+        try:
+            D, thr = _felt_distance(t["frame"])
+            cushion_lines(t["frame"], *_felt_quad(D, thr), D, thr, inside=inside)
+        except CalibrationError:
+            pass
+        crowd = min(inside, default=math.inf)
+        print(f"{seed} {t['drawn'][0]:.2f} {t['drawn'][1]:4.1f} {t['drawn'][2]:+.3f} {t['drawn'][3]:+.2f} | {look} | "
+              f"{det.edge} {det.lines} {math.sqrt(np.mean(e**2)):.3f} {math.sqrt(np.mean(sd**2)):.3f} "
+              f"{int(within[-1].sum())}/8 | {cols[0]} | {cols[1]} | {z:.2f} | {crowd:.1f}", flush=True)
+    for label, sel in (("", np.ones(len(within), bool)), (" whose noses show (no band within 0.1 of the cushions' "
+                                                           "shade)", np.array(shows))):
+        ins, ee, vv = (np.concatenate([a for a, s in zip(x, sel) if s]) for x in (within, e2, v2))
+        print(f"{int(sel.sum())} tables{label}: coordinates within 2 stated sd {ins.mean():.3f}; RMS z "
+              f"{math.sqrt(np.mean(ee / vv)):.2f}; RMS error / RMS stated {math.sqrt(ee.mean() / vv.mean()):.2f}")
+
+
 def clicked_calibration(corners_px, frame, sigma, **kw):
     """What ``cuespin calibrate --corners`` writes for these corners
     (:func:`calibrate_clicked`, the still balls read in ``frame``)."""
@@ -616,6 +694,8 @@ def main():
     ap.add_argument("--k1", type=float, default=-0.25, help="--diagnose: the lens's k1")
     ap.add_argument("--diagnose", action="store_true",
                     help="where the automatic camera's v0 error comes from (--height, --tilt, --k1)")
+    ap.add_argument("--tables", action="store_true",
+                    help="the automatic corners' errors against their stated ones on random drawn tables")
     ap.add_argument("--stated", action="store_true",
                     help="the automatic corners' stated error against their real one, per frame")
     ap.add_argument("--seeds", type=int, default=3, help="--stated: noise seeds per drawn camera")
@@ -651,6 +731,8 @@ def main():
         return shaded(args)
     if args.focal:
         return focal(args)
+    if args.tables:
+        return tables(args)
     if args.stated:
         return stated(args)
     if args.auto:
