@@ -891,8 +891,9 @@ def covariance(fit: ModelFit, meas: Measurements, codec: CodecCorrelation | None
     variance was measured: the tracker's own error is shared between frames
     too), the sandwich of its correlation model (:func:`codec_sandwich`)
     instead: that error is shared over tens of frames and much of it looks
-    like the motion, so the residuals cannot show it (H.264 at CRF 20: residual lag-1 autocorrelation 0.0-0.2 while
-    the errors' long-run variance is about 6 times the per-frame one).
+    like the motion, so the residuals cannot show it (H.264 at CRF 20:
+    residual lag-1 autocorrelation 0.0-0.2 while the errors' long-run
+    variance is about 6 times the per-frame one).
     With ``still_codec`` (an intra-frame lossy codec, MJPG), first the
     sandwich of its error shared by frames that show the ball at nearly the
     same place (:func:`still_codec_sandwich`), never below the former.
