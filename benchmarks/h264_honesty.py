@@ -16,8 +16,9 @@ standard errors (1 when honest).
 k apart, pooled over the shots' moving frames (truth sidecar's projected
 centres against the tracker's, the tracker's stated variance taken off),
 and its fit ``a exp(-k / tau_long) + b exp(-k / tau)`` (lags 1-200 weighted by
-their pair counts): how recover.mle.INTER_CODEC_ACF was measured (``--seed
-0 --n 12``).
+their pair counts): how recover.mle.INTER_CODEC_ACF was measured before
+h264cov (``--seed 0 --n 12``; in frames, the codec's share only).  It is now
+the whole error's correlation in time: benchmarks/h264_acf.py.
 """
 
 from __future__ import annotations

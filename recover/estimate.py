@@ -290,11 +290,11 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
                                         exposure_s, fit_friction,
                                         (roll.shot.x0, roll.shot.t0, roll.shot.v0, roll.shot.w0),
                                         ar1=max(rho, ar1_floor))
-        elif codec.var <= 0:
-            # No codec error measured to model: the residuals' autocorrelation,
-            # asked once here, is answered by the HAC sandwich.
-            decisions["autocorrelated"] = autocorrelated(*lag1_autocorrelation(meas, full.residuals))
-            hac = bool(decisions["autocorrelated"])
+        # An inter-frame codec: the whole error's correlation in time states
+        # the errors (recover.mle.codec_sandwich), whatever codec variance the
+        # first fit measured (a negative one too: the tracker's own error is
+        # shared between neighbouring frames as much; docs/measurements.md
+        # h264cov), so no HAC question is asked.
     except FIT_ERRORS as exc:
         mle = MLEResult("failed", f"the fit did not run: {exc}")
     if mle is None:

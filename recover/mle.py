@@ -64,19 +64,26 @@ LM_TOL = 1e-7
 # between 1e-14 and 1e-12).
 FD_REL_STEP = 1e-7
 RANK_DEFICIENT_EIG = 1e-13
-# An inter-frame codec's error (H.264: motion-compensated prediction from
-# earlier frames) is shared by neighbouring frames: the correlation of its
-# per-axis error between frames k apart, rho(k) = a exp(-k / tau_long) +
-# b exp(-k / tau) for k >= 1.  Measured with the shots of
-# benchmarks/h264_honesty.py --seed 0 (12 shots, libx264 CRF 20 veryfast,
-# 120 fps, noise 3, 250 px/m; the truth sidecar's projected centres
-# against the tracker's, moving frames, the tracker's stated variance
-# taken off), fit to lags 1-200 weighted by their pair counts: a = 0.27,
-# tau_long = 118 frames, b = 0.10, tau = 7 frames (lags 1, 10, 40, 100,
-# 200: 0.31, 0.27, 0.17, 0.10, 0.02).  A fit with a constant instead of
-# the slow part (lags 1-60 only) gave too narrow intervals: a constant is
-# absorbed by x0, a drift over a second is not.
-INTER_CODEC_ACF = (0.27, 0.10, 7.0, 118.0)
+# An inter-frame codec (H.264: motion-compensated prediction from earlier
+# frames) makes a frame's whole centre error, the tracker's share with the
+# codec's, shared by the frames near it in time: the correlation of the
+# per-axis whitened error between single-frame measurements dt seconds
+# apart, rho(dt) = a exp(-dt / tau_long) + b exp(-dt / tau).  In seconds,
+# not frames: on realistic H.264 renders (CRF 20) at 60-480 fps the
+# errors' correlation at one time apart roughly agrees across frame rates
+# (16.7 ms: 0.38-0.45 at 60-480 fps) while at one lag in frames it does not
+# (lag 1: 0.38 at 60 fps, 0.71 at 480).  The whole error, not the codec's
+# excess alone: the lag-1 covariance exceeds the codec's excess variance
+# (cov12).  Fitted by benchmarks/h264_acf.py --seed 31 --fit to the true
+# errors of 80 realistic 1.5-s renders of accuracy.py's seed 31 (lags to
+# 0.8 s, each frame rate weighted alike; the fit's mean misfit per rate
+# -0.04 to +0.07); the previous constants (0.27 exp(-k/118) + 0.10
+# exp(-k/7), frames, the codec's share only, measured at 120 fps on plain
+# balls) gave 95% intervals covering 79.4% on seeds 31-32, these 85.1%
+# (docs/measurements.md, h264cov).  A shot's slow drift varies from shot to
+# shot (0.2-0.5 px over 0.1-0.5 s on some): the pooled correlation does not
+# hold every shot's.
+INTER_CODEC_ACF = (0.244, 0.392, 0.0210, 2.845)
 # The AR(1) error model's lag-1 correlation is capped here: nearer 1 the
 # prewhitened residuals are differences of neighbouring frames and the fit
 # loses what little the level says (0.67 measured on MJPG at low noise).
@@ -526,7 +533,7 @@ def slip_lr(full: ModelFit, roll: ModelFit, meas: Measurements | None = None,
     correlation in); None: asked here of ``full``'s residuals.
     """
     scale = max(1.0, full.chi2 / full.dof)
-    if meas is not None and codec is not None and codec.var > 0:
+    if meas is not None and codec is not None:
         try:
             base = info_inverse(full.jac)
             wide = codec_sandwich(full, meas, codec)
@@ -730,16 +737,30 @@ def hac_covariance(jac, residuals, rho: float) -> np.ndarray:
 
 @dataclass(frozen=True)
 class CodecCorrelation:
-    """An inter-frame codec's error shared between frames: its per-axis
-    variance ``var`` (px^2 through the measurements' ``px_to_m``, else m^2;
-    measured from the first fit's residuals, :func:`correlated_codec_var`),
-    the frame interval ``frame_dt``
-    (s) and its correlation ``acf = (a, b, tau, tau_long)`` (frames)
+    """An inter-frame codec's error shared between frames: the codec's
+    per-axis variance ``var`` (px^2 through the measurements' ``px_to_m``,
+    else m^2; measured from the first fit's residuals,
+    :func:`correlated_codec_var`), the frame interval ``frame_dt`` (s) and
+    the correlation ``acf = (a, b, tau, tau_long)`` (tau in s) of each
+    single frame's whole whitened error with another's
     (:data:`INTER_CODEC_ACF`)."""
 
     var: float
     frame_dt: float
     acf: tuple = INTER_CODEC_ACF
+
+
+def shared_rho(meas: Measurements, acf=INTER_CODEC_ACF) -> np.ndarray:
+    """rho(dt) of :data:`INTER_CODEC_ACF` between the single-frame
+    measurements (dt from their times, s), shape (s, s) over ``meas.single``
+    in order, zero on the diagonal (a measurement's own variance is the
+    stated one)."""
+    a, b, tau, tau_long = acf
+    t = meas.t_means[meas.single]
+    dt = np.abs(t[:, None] - t[None, :])
+    rho = a * np.exp(-dt / tau_long) + b * np.exp(-dt / tau)
+    np.fill_diagonal(rho, 0.0)
+    return rho
 
 
 def _codec_G(J, meas: Measurements) -> np.ndarray:
@@ -751,25 +772,27 @@ def _codec_G(J, meas: Measurements) -> np.ndarray:
     return np.einsum("mba,mbp->map", WF, J.reshape(m, 2, p))
 
 
-def _codec_scores(J, meas: Measurements, acf, frame_dt: float) -> np.ndarray:
-    """``J^T M J`` with ``M`` the whitened measurements' covariance per unit
-    codec variance: ``W_i F_i F_i^T W_i^T`` on the diagonal,
-    ``rho(k_ij) W_i F_i F_j^T W_j^T`` between single-frame measurements
-    i != j (k_ij frames apart, from their times; rests are independent of
-    the rest); ``F_i`` carries the codec's pixel error to metres at that
-    measurement (Measurements.codec_factor)."""
-    t_m = meas.t_means
-    G = _codec_G(J, meas)
-    out = np.einsum("map,maq->pq", G, G)
+def _shared_terms(J, meas: Measurements, acf) -> tuple[np.ndarray, np.ndarray]:
+    """The shared error's ``J^T C_off J`` in the measurements' whitening
+    (the codec's share not in it, as in the first fit), split as ``S0 + var
+    S1``: between single-frame measurements i != j the whitened error's
+    covariance is ``rho_ij (V_i V_j)^(1/2)`` with ``V_i = I + var M_i``
+    (``M_i = W_i F_i F_i^T W_i^T``, the codec's whitened shape), taken as
+    ``rho_ij (I + var (M_i + M_j) / 2)`` (exact where neighbouring frames'
+    ``M`` agree, as they do within the correlation's reach).  Returns
+    ``(S0, S1)``, each (p, p)."""
+    m, p = len(J) // 2, J.shape[1]
     single = meas.single
-    if single.sum() > 1 and frame_dt > 0:
-        a, b, tau, tau_long = acf
-        k = np.abs(t_m[single][:, None] - t_m[single][None, :]) / frame_dt
-        rho = a * np.exp(-k / tau_long) + b * np.exp(-k / tau)
-        np.fill_diagonal(rho, 0.0)
-        Gs = G[single]
-        out = out + sum(Gs[:, d, :].T @ rho @ Gs[:, d, :] for d in (0, 1))
-    return out
+    if single.sum() < 2:
+        return np.zeros((p, p)), np.zeros((p, p))
+    rho = shared_rho(meas, acf)
+    Js = J.reshape(m, 2, p)[single]
+    Q = np.tensordot(rho, Js, axes=(1, 0))
+    S0 = np.einsum("iap,iaq->pq", Js, Q)
+    WF = (meas.W @ meas.codec_factor())[single]
+    M = WF @ np.swapaxes(WF, -1, -2)
+    T = np.einsum("iap,iab,ibq->pq", Js, M, Q)
+    return S0, 0.5 * (T + T.T)
 
 
 def correlated_codec_var(fit: ModelFit, meas: Measurements, frame_dt: float,
@@ -777,10 +800,14 @@ def correlated_codec_var(fit: ModelFit, meas: Measurements, frame_dt: float,
     """Per-axis variance (px^2 through the measurements' ``px_to_m``, else
     m^2) of an inter-frame codec's error, from a fit's residuals
     (measurements without the codec's share): solves
-    ``E[r^T r] = (2m - p) + var tr((I - H) M)`` (``H`` the fit's hat matrix,
-    ``M`` as in :func:`_codec_scores`).  recover.measurements.codec_excess
-    assumes independent errors; a correlated error is partly absorbed by
-    the fit (measured on H.264: that one came out 40% low).  Signed."""
+    ``E[r^T r] = tr((I - H) C)`` for ``var``, ``H`` the fit's hat matrix and
+    ``C = I + var M + C_off`` the whitened errors' covariance (``M`` the
+    codec's whitened shape per measurement, ``C_off`` the whole error's
+    correlation between frames, :func:`_shared_terms`): the fit absorbs
+    part of a correlated error, so the residuals alone understate it.
+    recover.measurements.codec_excess assumes independent errors (measured
+    on H.264: that one came out 40% low).  ``frame_dt`` is unused (the
+    correlation is in seconds); kept for callers.  Signed."""
     J = np.asarray(fit.jac, dtype=float)
     m, p = len(J) // 2, J.shape[1]
     if 2 * m <= p + 2:
@@ -791,29 +818,32 @@ def correlated_codec_var(fit: ModelFit, meas: Measurements, frame_dt: float,
     # not ones that are small because of their units.
     s = _column_norms(J)
     A = np.linalg.pinv((J / s).T @ (J / s)) / s[:, None] / s[None, :]
+    G = _codec_G(J, meas)
     WF = meas.W @ meas.codec_factor()
     trM = float(np.einsum("mab,mab->", WF, WF))
-    tr_free = trM - float(np.trace(A @ _codec_scores(J, meas, acf, frame_dt)))
+    S0, S1 = _shared_terms(J, meas, acf)
+    tr_free = trM - float(np.trace(A @ (np.einsum("map,maq->pq", G, G) + S1)))
     if not tr_free > 0:
         return 0.0
-    return float((fit.chi2 - (2 * m - p)) / tr_free)
+    return float((fit.chi2 - (2 * m - p) + float(np.trace(A @ S0))) / tr_free)
 
 
 def codec_sandwich(fit: ModelFit, meas: Measurements, codec: CodecCorrelation) -> np.ndarray:
-    """The parameters' covariance when the codec's error is correlated
-    between frames: ``A J^T C J A`` with ``A = (J^T J)^-1`` and ``C`` the
-    whitened measurements' covariance: the identity (the stated errors,
-    the codec's variance included) plus ``var rho(k_ij) W_i W_j^T`` between
-    single-frame measurements i != j (:func:`_codec_scores` less its
-    diagonal, already in the stated errors).  Raises LinAlgError when
-    ``J^T J`` is singular."""
+    """The parameters' covariance when an inter-frame codec shares each
+    frame's error with its neighbours in time: ``A J^T C J A`` with ``A =
+    (J^T J)^-1`` and ``C`` the whitened measurements' covariance: the
+    identity (the stated errors, the codec's variance included) plus
+    ``rho(dt_ij) I`` between single-frame measurements i != j
+    (:func:`shared_rho`).  Raises LinAlgError when ``J^T J`` is singular."""
     J = np.asarray(fit.jac, dtype=float)
     A = info_inverse(J)
-    if codec.var <= 0 or codec.frame_dt <= 0:
+    m, p = len(J) // 2, J.shape[1]
+    single = meas.single
+    if single.sum() < 2:
         return A
-    G = _codec_G(J, meas)
-    off = _codec_scores(J, meas, codec.acf, codec.frame_dt) - np.einsum("map,maq->pq", G, G)
-    return A @ (J.T @ J + codec.var * off) @ A
+    Js = J.reshape(m, 2, p)[single]
+    off = np.einsum("iap,iaq->pq", Js, np.tensordot(shared_rho(meas, codec.acf), Js, axes=(1, 0)))
+    return A @ (J.T @ J + off) @ A
 
 
 def still_codec_pairs(meas: Measurements, length: float = STILL_CODEC_LENGTH_PX):
@@ -879,12 +909,13 @@ def covariance(fit: ModelFit, meas: Measurements, codec: CodecCorrelation | None
     chi-square when that exceeds 1, or, when the residuals show lag-1
     autocorrelation, the HAC sandwich (its variances never below the
     former's: a sandwich estimated from one track can come out small by
-    chance).  With an inter-frame codec (``codec`` given, its measured
-    variance positive), the sandwich of its correlation model
-    (:func:`codec_sandwich`) instead: that error is shared over tens of
-    frames and much of it looks like the motion, so the residuals cannot
-    show it (H.264 at CRF 20: residual lag-1 autocorrelation 0.0-0.2 while
-    the errors' long-run variance is about 6 times the per-frame one).
+    chance).  With an inter-frame codec (``codec`` given, whatever codec
+    variance was measured: the tracker's own error is shared between frames
+    too), the sandwich of its correlation model (:func:`codec_sandwich`)
+    instead: that error is shared over tens of frames and much of it looks
+    like the motion, so the residuals cannot show it (H.264 at CRF 20:
+    residual lag-1 autocorrelation 0.0-0.2 while the errors' long-run
+    variance is about 6 times the per-frame one).
     With ``still_codec`` (an intra-frame lossy codec, MJPG), first the
     sandwich of its error shared by frames that show the ball at nearly the
     same place (:func:`still_codec_sandwich`), never below the former.
@@ -895,7 +926,7 @@ def covariance(fit: ModelFit, meas: Measurements, codec: CodecCorrelation | None
     rho, z = lag1_autocorrelation(meas, fit.residuals)
     scale = max(1.0, fit.chi2 / fit.dof)
     base = info_inverse(fit.jac) * scale
-    if codec is not None and codec.var > 0:
+    if codec is not None:
         return codec_sandwich(fit, meas, codec) * scale, True, rho
     widened = False
     if still_codec:
