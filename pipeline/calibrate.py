@@ -741,6 +741,28 @@ def _subpixel_edge(Ds, base, nrm, offs):
 # stating 0.02-0.05 on 5 of those frames.
 BAND_PULL_PX = 2.0
 
+# The outline's noses are refused when the median over the four sides of
+# the largest step between them and the outline's edge, too small for the
+# step rule, reaches this many times the flat felt's step scatter
+# (cushion_noses' ``hidden``): a band inside the noses in nearly the
+# cushions' shade shows only there, and its inner edge is taken for the
+# noses.  Measured (cushion13, docs/measurements.md): the random drawn
+# tables 12000-12039 and 13000-13039 whose noses show (35 taking noses)
+# 0-2.5, the renderer's realistic table (textured felt, rails, 7 cameras x
+# seeds 1-2) 0.32-1.87; the 5 whose band has the cushions' shade (4.2-8.8
+# px off stating 0.02-0.06) 6.0-34.8.  4 is about the geometric middle of
+# 2.5 and 6.0.  A band narrower than 6 px in the image is not seen (its
+# step lies in the nose's own window).
+HIDDEN_NOSE_Z = 4.0
+
+# The least step scatter (grey levels) that ratio is taken over: a frame's
+# integer levels.  A noise-free drawn frame's median profile scatters 0.001
+# (the estimate's own floor) and the drawing's pattern puts 0.009-0.014
+# levels of step outside its noses (2 m overhead, k1 -0.25, 4x and 16x
+# supersampled), 10x the rule on a correct answer; the noisy drawn tables'
+# sides scatter 0.02-0.14.
+HIDDEN_NOISE_FLOOR = 0.02
+
 
 def cushion_noses(img: np.ndarray, sides: list, search_frac: float = 0.08, reach_px: float = 4.0,
                   outer: list | None = None, hidden: list | None = None):
@@ -762,7 +784,8 @@ def cushion_noses(img: np.ndarray, sides: list, search_frac: float = 0.08, reach
     the same size rule lies within the sub-pixel window of the one taken
     (``reach_px`` + 3 px) or ``BAND_PULL_PX`` beyond it: a band narrower
     than that (a shadow inside the nose), whose two edges the halfway
-    crossing cannot tell apart.
+    crossing cannot tell apart; or anywhere outside it (the step taken,
+    the largest, is then a band's inner edge, not the nose).
 
     ``hidden``, when given, gets one float a side: the largest step
     between the nose taken and the outline's own edge (from 6 px out, past
@@ -807,12 +830,15 @@ def cushion_noses(img: np.ndarray, sides: list, search_frac: float = 0.08, reach
         if outer is not None:
             peak = (g >= np.roll(g, 1)) & (g >= np.roll(g, -1)) & (g > max(3.0, 8.0 * noise))
             near = np.abs(np.arange(len(g)) - k)
-            outer.append(bool((peak & (near > w) & (near <= 2 * (reach_px + 3.0 + BAND_PULL_PX))).any()))
+            # or anywhere out to the outline's edge: the outermost step is the nose (the lines' rule), and
+            # one outside this says a band's inner edge was taken (random table 14018: 9.4 px off)
+            out_ = (np.arange(len(g)) >= k + 2 * w) & (np.arange(len(g)) < len(g) - 14)   # as ``hidden``'s zone
+            outer.append(bool((peak & (near > w) & ((near <= 2 * (reach_px + 3.0 + BAND_PULL_PX)) | out_)).any()))
         if hidden is not None:
             zone = g[k + 2 * w: len(g) - 14]
             top = float(zone.max()) if len(zone) else 0.0
             # a step the rule sees there is a band's edge in sight (the paths' cross-check), not a hidden one
-            hidden.append(top / noise if top <= max(3.0, 8.0 * noise) else 0.0)
+            hidden.append(top / max(noise, HIDDEN_NOISE_FLOOR) if top <= max(3.0, 8.0 * noise) else 0.0)
         med = float(offs[k])
         nose = _subpixel_edge(Ds, base + med * nrm, nrm, np.arange(-reach_px - 3.0, reach_px + 3.0 + 1e-9, 0.25))
         if len(nose) < max(10, 0.3 * len(base)):
@@ -1618,20 +1644,6 @@ def _outline_or_lines(outline, straddled: bool, cushions, lines: str = "auto", h
 # px, the lines 0.02-0.03) at z 4.82-28.4.  4 lies between 3.73 and 4.82;
 # an agreeing pair past it swaps one right answer for another.
 PATHS_DISAGREE_Z = 4.0
-
-# The outline's noses are refused when the median over the four sides of
-# the largest step between them and the outline's edge, too small for the
-# step rule, reaches this many times the flat felt's step scatter
-# (cushion_noses' ``hidden``): a band inside the noses in nearly the
-# cushions' shade shows only there, and its inner edge is taken for the
-# noses.  Measured (cushion13, docs/measurements.md): the random drawn
-# tables 12000-12039 and 13000-13039 whose noses show (35 taking noses)
-# 0-2.5, the renderer's realistic table (textured felt, rails, 7 cameras x
-# seeds 1-2) 0.32-1.87; the 5 whose band has the cushions' shade (4.2-8.8
-# px off stating 0.02-0.06) 6.0-34.8.  4 is about the geometric middle of
-# 2.5 and 6.0.  A band narrower than 6 px in the image is not seen (its
-# step lies in the nose's own window).
-HIDDEN_NOSE_Z = 4.0
 
 # A band's inner edge this near inside the lines' noses (px) lies within
 # reach of their sub-pixel window too (reach_px 1 + 3 px, and the frame's
