@@ -44,7 +44,8 @@ With ``--tables`` (``--seed 12000 --n 40``): the automatic corners on random
 drawn tables (``calibrate.random_table``) against the edge each names, their
 coverage by the stated covariance, and the outline's and the lines' paths
 apart (each one's error, their ``PATHS_DISAGREE_Z`` statistic, how near a
-band lies inside the lines' noses).
+band lies inside the lines' noses); and the refusals and the confident
+wrong answers (over 1 px and 5 stated errors off).
 
 With ``--diagnose`` (``--height 2 --tilt 0 --k1 -0.25``): the automatic
 camera's v0 error split into its parts (corners, k1, focal length), each
@@ -381,7 +382,7 @@ def tables(args):
 
     print("seed height tilt k1 roll | look | auto: edge lines rms_px stated_px inside2sd | outline: edge rms | "
           "lines: edge rms | z | band inside the lines' noses (px)")
-    zs, within, e2, v2, shows = [], [], [], [], []
+    zs, within, e2, v2, shows, refused, wrong = [], [], [], [], [], [], []
     for seed in range(args.seed, args.seed + args.n):
         t = random_table(seed)
         look = ",".join(f"{k}={v:.3g}" for k, v in t["look"].items())
@@ -389,6 +390,7 @@ def tables(args):
             det = detect_corners(t["frame"])
         except CalibrationError as err:
             print(f"{seed} refused: {err}", flush=True)
+            refused.append(seed)
             continue
         e, C = matched(det, t[det.edge])
         sd = np.sqrt(np.diag(C))
@@ -398,6 +400,8 @@ def tables(args):
         shows.append(abs(lk.get("cushion_shade", 0.0) - lk.get("band_shade", 9.0)) >= 0.1)
         e2.append(e**2)
         v2.append(sd**2)
+        if math.sqrt(np.mean(e**2)) > 1.0 and math.sqrt(np.mean(e**2)) > 5.0 * math.sqrt(np.mean(sd**2)):
+            wrong.append(seed)      # a confident wrong answer: over 1 px and 5 stated errors off (cushion13)
         paths = {}
         for mode in ("never", "always"):
             try:
@@ -430,6 +434,7 @@ def tables(args):
         ins, ee, vv = (np.concatenate([a for a, s in zip(x, sel) if s]) for x in (within, e2, v2))
         print(f"{int(sel.sum())} tables{label}: coordinates within 2 stated sd {ins.mean():.3f}; RMS z "
               f"{math.sqrt(np.mean(ee / vv)):.2f}; RMS error / RMS stated {math.sqrt(ee.mean() / vv.mean()):.2f}")
+    print(f"refused {len(refused)} {refused}; confident wrong answers (over 1 px and 5 stated errors) {len(wrong)} {wrong}")
 
 
 def clicked_calibration(corners_px, frame, sigma, **kw):
