@@ -1050,8 +1050,14 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
                              f"tip touched the ball there): a ball leaving at {speed:.3g} m/s slides at most "
                              f"{bound * 1e3:.0f} ms (eq. 26), so rolling from the strike is not told from a "
                              "slide hidden by the cue; v0 and w0 are not determined", **common)
+    if not verdicts["v0_determined"]:
+        return MLEResult("degenerate",
+                         f"the track does not determine v0 (standard error {se_speed:.3g} m/s for "
+                         f"|v0| = {speed:.3g} m/s): the strike at t0 is not in view, or the ball "
+                         f"was tracked in too few frames", **common)
     # The strike in view by the paper's rule (fit.decide.strike_in_view) on
-    # the frames the fit uses: with none still before t0, t0 trades off
+    # the frames the fit uses, after v0_determined (whose reason stands when
+    # both refuse: it names the strike too): with none still before t0, t0 trades off
     # against x0 and v0 along the path (any later point of a slide starts
     # the same motion), and a frame straddling t0 in its exposure pins it
     # falsely (realistic H.264, the cue's run left out from the first frame
@@ -1065,11 +1071,6 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
                          f"the strike is not in view: {n_still} measured frame(s) show the ball before the fitted "
                          f"t0 = {shot.t0:.4f} s (at least {MIN_STILL_FRAMES} needed), so t0, x0 and v0 at the "
                          "strike are not measured", **common)
-    if not verdicts["v0_determined"]:
-        return MLEResult("degenerate",
-                         f"the track does not determine v0 (standard error {se_speed:.3g} m/s for "
-                         f"|v0| = {speed:.3g} m/s): the strike at t0 is not in view, or the ball "
-                         f"was tracked in too few frames", **common)
     if rolling:
         # Rolling from the strike is told from sliding only by what a slide
         # leaves after the best rolling path; a slide that outlasts every

