@@ -327,7 +327,8 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         paper = paper_from_segments(chosen, t, xy, params, paper_sigma, frame_dt, strike_seen, independent,
                                     meas=meas, noise=mle_noise(mle))
         shape = paper.trajectory == "parabola" if paper.trajectory else None
-        if chosen is seg.rolling and mle.verdicts.get("slide_hidden") and paper.status == "ok":
+        if chosen is seg.rolling and paper.status == "ok" and (mle.verdicts.get("slide_hidden")
+                                                               or mle.verdicts.get("slide_outlasts")):
             # The paper's answer from the rolling segments rests on the same
             # decision: a slide hidden by the cue's window is not excluded
             # (recover.mle.result; sample_shot(1, "case5") at 60 fps, the

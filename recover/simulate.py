@@ -150,3 +150,32 @@ def short_slip_tracks(n: int, seed: int, frames=(0.2, 1.0), fps_grid=(60.0, 120.
         exposure = _exposure(rng, fps, blur)
         yield simulate_track(s, params, fps, sigma, rng, exposure,
                              t_end=phases(s, params).t2 + 0.3 if to_rest else None)
+
+
+def leaves_table_tracks(n: int, seed: int, fps_grid=FPS_GRID, sigma_grid=SIGMA_GRID_M, blur: bool = True,
+                        preset: str = "leaves_table"):
+    """``n`` tracks of the sampler's fast shots at a near cushion (preset
+    ``leaves_table``: 2.5-5 m/s from near the middle, spin up to v0 / R in
+    any direction, so sliding often outlasts the track), each ending when
+    the ball's centre comes within a radius of the cushion (the frames the
+    ball is seen before it leaves the table, about 0.1-0.3 s after the
+    strike); ``preset`` ``case4`` gives the same tracks rolling from the
+    strike (v0 kept).  Cycles over frame rates and noise levels as the
+    others.  Yields :class:`SimTrack`."""
+    from cuespin.physics.motion import positions, z_cross
+    from cuespin.physics.scene import Table
+    rng = np.random.default_rng(seed)
+    width = Table().width
+    for i in range(n):
+        fps, sigma = _grid_point(i, fps_grid, sigma_grid)
+        shot, params = sample_shot(rng, "leaves_table")
+        if preset == "case4":  # rolling from the strike: w0 = z x v0 / R (eq. 8)
+            shot = Shot(x0=shot.x0, v0=shot.v0, w0=z_cross(np.asarray(shot.v0, float)) / params.R, t0=shot.t0)
+        exposure = _exposure(rng, fps, blur)
+        # The time the centre reaches a radius from the cushion it heads for
+        # (the shot is along y), on a 1 ms grid.
+        t = shot.t0 + np.arange(0.0, MAX_AFTER_STRIKE_S, 1e-3)
+        y = positions(shot, params, t)[:, 1]
+        out = (y <= params.R) | (y >= width - params.R)
+        t_end = float(t[np.argmax(out)]) if np.any(out) else None
+        yield simulate_track(shot, params, fps, sigma, rng, exposure, t_end=t_end)

@@ -250,8 +250,9 @@ def test_shared_errors_on_a_lossless_codec_measure_no_codec_share():
 
 def test_paper_degenerate_when_the_strike_is_not_in_view():
     # The track starts mid-slide: the paper's method has no x0 (it said
-    # "ok" with a wrong v0 before issue 11); the fit may still extrapolate
-    # the strike through the known sliding dynamics.
+    # "ok" with a wrong v0 before issue 11); nor does the fit extrapolate the
+    # strike (recover.mle's strike_seen, gross13: any later point of a slide
+    # starts the same motion, so t0 trades off against x0 and v0).
     shot, p = sample_shot(12, "masse")
     ph = phases(shot, p)
     tr = simulate_track(shot, p, 240.0, SIGMA, 2, t_start=shot.t0 + 0.3 * (ph.t1 - shot.t0),
@@ -260,6 +261,7 @@ def test_paper_degenerate_when_the_strike_is_not_in_view():
     paper = out["methods"]["paper"]
     assert paper["status"] == "degenerate" and "strike is not in view" in paper["reason"]
     assert out["best"] == ("mle" if out["methods"]["mle"]["status"] == "ok" else None)
+    assert out["methods"]["mle"]["status"] == "degenerate"
 
 
 def test_best_is_null_when_no_method_answers():

@@ -1,0 +1,100 @@
+"""A rolling answer from a ball seen too briefly to show a slide
+(recover.mle.SLIDE_THROUGH_TAU): a fast shot leaving the table 0.1-0.3 s
+after the strike may slide through every frame seen, and "rolling from
+the strike" then stated w0 10-53 errors off on realistic H.264 renders
+(docs/measurements.md gross13).  Such answers are degenerate (w0 not
+determined); true rolling shots seen long enough stay ok.  And a track
+whose strike is not in view (no frame the fit uses shows the ball still
+before t0: fit.decide.strike_in_view) is degenerate, not extrapolated."""
+
+import numpy as np
+import pytest
+
+import cuespin.recover.mle as mle_module
+from cuespin.recover.estimate import estimate
+from cuespin.recover.simulate import leaves_table_tracks, null_rolling_tracks
+
+# A miss this many stated errors off is a confident wrong number, not chance.
+GROSS_Z = 10.0
+
+
+def _recover(tr):
+    return estimate(tr.t, tr.xy, np.full(len(tr.t), tr.sigma), tr.params, tr.exposure_s, run_paper=False).mle
+
+
+def _rolling_z(tr, m):
+    """The rolling ok answer's largest |error| in stated errors, else None."""
+    if m.status != "ok" or m.model != "rolling":
+        return None
+    err = np.r_[m.v0 - tr.shot.v0, m.w0 - tr.shot.w0]
+    return float(np.max(np.abs(err) / np.r_[m.stderr["v0"], m.stderr["w0"]]))
+
+
+# The noisiest generator level: where the rule acted on benchmarks/leaves_table.py
+# (seed 31: 3 of 80 answered rolling, all > 10 errors off, before; none after).
+TRACKS = dict(n=48, seed=0, sigma_grid=(6e-4,))
+
+
+def test_slide_through_the_track_is_not_answered_rolling(monkeypatch):
+    tracks = list(leaves_table_tracks(**TRACKS))
+    # Without the rule these tracks give confident wrong rolling answers (the
+    # case this is about; the assertion below fails on the code before it).
+    with monkeypatch.context() as mp:
+        mp.setattr(mle_module, "SLIDE_THROUGH_TAU", 0.0)
+        before = [_rolling_z(tr, _recover(tr)) for tr in tracks]
+    assert sum(z is not None and z > GROSS_Z for z in before) >= 2, before
+    refused = 0
+    for tr in tracks:
+        m = _recover(tr)
+        z = _rolling_z(tr, m)
+        assert z is None or z <= GROSS_Z, (tr.fps, z, m.reason)
+        if m.verdicts.get("slide_outlasts"):
+            refused += 1
+            assert m.status == "degenerate" and m.w0 is None and "not told from sliding" in m.reason
+            assert m.v0 is not None  # v0 is still given
+    assert refused >= 2
+
+
+def test_rolling_shots_seen_long_enough_stay_ok():
+    # Rolling from the strike, leaving the table at 1e-4 m noise: none refused
+    # (benchmarks/leaves_table.py --rolling, seed 31: 0 of 160 at 2e-5 and 1e-4 m;
+    # 17 of 80 at 6e-4 m, seen too briefly to tell rolling from sliding).
+    for tr in leaves_table_tracks(16, 1, sigma_grid=(1e-4,), preset="case4"):
+        m = _recover(tr)
+        assert not m.verdicts.get("slide_outlasts"), (tr.fps, m.reason)
+
+
+@pytest.mark.slow
+def test_full_length_rolling_tracks_never_refused():
+    # 400 generator tracks rolling from the strike (seed 31): none refused
+    # by the rule (measured: 398 ok, 2 degenerate for v0).
+    for tr in null_rolling_tracks(400, 31):
+        assert not _recover(tr).verdicts.get("slide_outlasts")
+
+
+def test_a_track_starting_after_the_strike_is_degenerate():
+    # A track that starts 0.2-20 frames after the strike, with an exposure of
+    # half a frame: no frame shows the ball still, t0 trades off against x0
+    # and v0 along the path, and the frame straddling the fit's t0 pinned it
+    # falsely (realistic H.264 32/31, 32/57: 168 and 17 errors off; measured
+    # here on 40 such tracks: 6 answered ok, 36-408 errors off, before the
+    # rule; none after).  The paper's rule (fit.decide.strike_in_view) on the
+    # frames the fit uses.
+    from cuespin.data_gen.sampler import sample_shot
+    from cuespin.physics import phases
+    from cuespin.recover.simulate import simulate_track
+    by_rule = 0
+    for k in range(12):
+        rng = np.random.default_rng(k)
+        shot, p = sample_shot(rng, ("masse", "random", "case3", "case1")[k % 4])
+        ph = phases(shot, p)
+        fps = (120.0, 240.0, 480.0)[k % 3]
+        t_start = shot.t0 + float(rng.uniform(0.2, 20)) / fps
+        tr = simulate_track(shot, p, fps, 1e-4, rng, 0.5 / fps, t_start=t_start,
+                            t_end=min(ph.t2 + 0.3, ph.t1 + 1.0))
+        m = _recover(tr)
+        assert m.status == "degenerate", (k, m.status, m.reason)
+        # v0 not determined (its reason first), or the strike not in view
+        assert m.verdicts.get("v0_determined") is False or m.verdicts.get("strike_seen") is False, m.reason
+        by_rule += m.verdicts.get("strike_seen") is False
+    assert by_rule >= 1  # the rule, not another, refused some (measured: 1 of these 12, the one ok before)
