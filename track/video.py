@@ -25,7 +25,7 @@ import numpy as np
 from cuespin.physics.scene import Scene
 from cuespin.videoio import quiet_native_stderr
 from cuespin.track.background import Background, FeltAccumulator, learn_background
-from cuespin.track.colour import GREY, Projection, learn_projection
+from cuespin.track.colour import FELT_SHADE_MIN, GREY, Projection, learn_projection, shade_match
 from cuespin.track.projection import projected_centres
 from cuespin.track.misfit import LookMisfit, codec_variance, error_ar1, look_misfit
 from cuespin.track.path import off_path
@@ -311,6 +311,13 @@ def learn_model(frames: list, radius_px, n_samples: int,
     proj = learn_projection(samples, radius_px, lossless) if colour else GREY
     P = proj.many(samples) if colour else samples
     bg = learn_background(P, radius_px, where)
+    if colour and not lossless and proj.luma_blind and \
+            FELT_SHADE_MIN < shade_match(proj, bg.polarity, bg.contrast) < 1.0:
+        # The ball's shaded side fades into the felt in the codec's chroma
+        # (colour.FELT_SHADE_MIN): the channel blind to the felt's colour.
+        proj = learn_projection(samples, radius_px, lossless, blind_to_felt=True)
+        P = proj.many(samples)
+        bg = learn_background(P, radius_px, where)
     if bg.weak_samples.any():
         # Sample the stretch whose frames showed the hidden felt, reaching
         # half a spacing beyond it on each side.
