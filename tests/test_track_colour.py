@@ -73,3 +73,27 @@ def test_a_highlight_on_grey_felt_is_seen_and_a_lit_side_is_not():
     ci = c.copy()
     ci[:20] = 0.9 * b + hl + rng.standard_normal((20, 3))
     assert off_colour_plane(ci, f[None], b[None], L) >= 20
+
+
+def test_the_felt_blind_channel_sees_a_shaded_ball_nowhere_at_the_felts_level():
+    # A red ball on red felt (render.look's colours, BGR), shaded from
+    # ambient 0.2 to lit: in the white-free channel the felt's level lies at
+    # 0.67 of the lit ball's (shade_match), so the ball's darker side passes
+    # through it; in the felt-blind channel the felt is at 0 and every
+    # shading of the ball is on one side of it, a share of the lit level.
+    from cuespin.track.colour import FELT_LEVEL, FELT_SHADE_MIN, Projection, felt_blind, shade_match, white_free
+
+    ball, felt = np.array([45.0, 40.0, 200.0]), np.array([45.0, 45.0, 150.0])
+    S = np.diag([4.0, 5.0, 6.0])  # unequal channel noise: the constraint holds in any metric
+    d = ball - felt
+    for w, fades in ((white_free(d, S), True), (felt_blind(d, S, felt), False)):
+        w = w if w @ d > 0 else -w
+        proj = Projection(w=w, offset=FELT_LEVEL - float(w @ felt))
+        match = shade_match(proj, 1, float(w @ d))
+        assert (FELT_SHADE_MIN < match < 1.0) == fades, match
+        shades = np.linspace(0.2, 1.0, 9)
+        levels = (shades[:, None] * ball) @ w - felt @ w  # each shading's level less the felt's
+        assert np.all(levels > 0) != fades
+    assert abs(felt_blind(d, S, felt) @ felt) < 1e-9 * np.linalg.norm(felt_blind(d, S, felt)) * np.linalg.norm(felt)
+    # Nothing left when the ball is the felt's colour scaled (brightness only).
+    assert felt_blind(0.5 * felt, S, felt) is None

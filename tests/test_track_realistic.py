@@ -136,6 +136,24 @@ def test_cue_tip_at_the_strike_is_not_the_ball(tmp_path):
     assert found >= 0.95, tr.status_counts()
 
 
+def test_a_shaded_red_ball_on_red_felt_in_mjpg_is_not_fitted_towards_its_lit_side(tmp_path):
+    # benchmarks/track.py realistic seed 8 shot 19 (a red ball on red felt,
+    # lens blur 0.962 px, 120 fps, noise 2.9), written as MJPG and cut to
+    # 0.5 s (the rest, the strike at 0.41 s, 11 frames rolling).  In the
+    # white-free channel (MJPG's chroma) the felt lies at 0.63 of the lit
+    # ball's level: the ball's darker side faded into the felt, the codec
+    # kept its lit side, and the 0.8-s clip was fitted 0.17-0.26 radii
+    # towards the light in every frame (48 of 97 beyond a quarter radius).
+    # Now the channel is blind to the felt's colour (colour.FELT_SHADE_MIN).
+    # Measured on this clip: before, 10 of 61 frames found, 4 of them
+    # 0.25-0.43 radii off; after, 61 of 61, the largest error 0.079 radii.
+    scene = sample_scenes(20, 8, look="realistic", codec="MJPG")[19]
+    assert (scene.render["ball_name"], scene.render["felt_name"]) == ("red", "red")
+    scene.render.update(specular=0.0, markings="none", psf_sigma=0.962, cue=False, balls=[], max_duration=0.5)
+    found, err, tr = track_against_truth(scene, tmp_path / "red.avi")
+    assert_issue_targets(found, err, tr, "seed 8 shot 19 MJPG")
+
+
 @pytest.mark.slow
 def test_dots_on_a_white_ball_do_not_pull_the_centre(tmp_path):
     # benchmarks/track.py realistic seed 0 shot 18: a white ball with dots

@@ -83,6 +83,27 @@ FELT_LEVEL = 100.0
 # the lit side; blind to white (keeping ~0.45 of the separation) none were,
 # the largest error 0.09 radii.
 WHITE_FREE_MIN = 0.4
+# A lossy codec's white-free channel is its chroma, and the codec loses a
+# ball's faint chroma first (MJPG: subsampled 2 x 2, quantised in 16 x 16
+# blocks).  A shaded ball's colour is its albedo times its shading, so in a
+# channel where the felt's level lies between black and the ball's (the
+# felt a dimmer copy of the ball there: red on red) its darker side fades
+# into the felt and what the codec keeps is its lit side: realistic seed 8
+# shot 19 (red on red, lens blur, 120 fps, MJPG; the felt at 0.63 of the lit
+# ball's level) was fitted 0.17-0.26 radii towards the light in every
+# frame, 48 of 97 beyond a quarter radius, in the white-free, Fisher's and
+# the lit sphere's fits alike.  Where the ball matches the felt at a shading
+# (shade_match) above FELT_SHADE_MIN, the channel blind to the felt's colour
+# (felt_blind) is learnt instead: there the felt lies at 0 and the ball at
+# its shading times its lit level: shot 19 0 false, 0.27 px RMSE (FFV1's
+# gradients' channel: 0.044).  The value lies in the gap of the white-free
+# channel's shade_match over the 27 realistic shots judged (seed 8's 20 and
+# seed 0's 3-6, 9, 13, 17, MJPG): red on red 0.63 and 0.72, then 0.26
+# (orange on red) and below.  The rule reads colours, not shading: an
+# unshaded red ball on red felt (seed 0 shot 5, the uniform look) passes it
+# and pays 0.15 -> 0.30 px RMSE, its stated errors following
+# (docs/measurements.md, fp13).
+FELT_SHADE_MIN = 0.5
 # The ball's gradients are taken within this many radii of the positions
 # that voted on its colour (those lie within ~0.5 radii of its centre, where
 # a box the ball fills departs most): the rim and the PSF's spread in.
@@ -478,6 +499,38 @@ def white_free(d: np.ndarray, S: np.ndarray) -> np.ndarray | None:
     return Sd - (a / b) * S1
 
 
+def felt_blind(d: np.ndarray, S: np.ndarray, felt: np.ndarray) -> np.ndarray | None:
+    """Fisher's weights for a ball departing from the felt along ``d`` (BGR)
+    under noise ``S``, constrained to see none of the felt's colour ``felt``
+    (BGR levels; ``w . felt = 0``: :func:`white_free`'s form with the felt's
+    colour for white), ``w = S^-1 (d - l f)``, ``l = f' S^-1 d / f' S^-1 f``.
+    A ball's colour is its albedo times its shading, so in this channel the
+    felt lies at 0 and the ball at its shading times its lit level: no part
+    of it, however dark, matches the felt.  None when nothing is left (``d``
+    along the felt's colour)."""
+    f = np.asarray(felt, float)
+    Sd, Sf = np.linalg.solve(S, d), np.linalg.solve(S, f)
+    ff = float(f @ Sf)
+    if ff <= 0:
+        return None
+    w = Sd - (float(f @ Sd) / ff) * Sf
+    return w if float(w @ d) > 1e-9 * float(d @ Sd) else None
+
+
+def shade_match(proj: Projection, polarity: int, contrast: float) -> float:
+    """The shading (a share of the ball's lit level) at which the ball
+    matches the felt in the channel ``proj`` (the felt at ``FELT_LEVEL``,
+    the ball's lit middle ``polarity`` x ``contrast`` from it: the
+    background's, :class:`~cuespin.track.background.Background`): the felt's
+    level over the lit ball's, both from black (the channel at a black
+    pixel, ``proj.offset``).  Between 0 and 1 the ball's darker side (its
+    colour times a shading under 1) passes through the felt's level; NaN
+    without a ball (``polarity`` 0) or at black's level."""
+    felt = FELT_LEVEL - float(proj.offset)
+    ball = felt + polarity * float(contrast)
+    return felt / ball if polarity and ball != 0 else float("nan")
+
+
 def ball_gradients(samples: np.ndarray, ys: np.ndarray, xs: np.ndarray, votes: np.ndarray,
                    radius_px, L: np.ndarray | None = None, highlight: list | None = None) -> np.ndarray | None:
     """The colour image's gradients' second moments at the ball (3 x 3,
@@ -565,7 +618,8 @@ def best_channel(A: np.ndarray, S: np.ndarray) -> np.ndarray:
     return np.linalg.solve(L.T, v)
 
 
-def channel_rule(d: np.ndarray, S: np.ndarray, gradients, lossless: bool = True) -> tuple[np.ndarray, bool]:
+def channel_rule(d: np.ndarray, S: np.ndarray, gradients, lossless: bool = True,
+                 felt: np.ndarray | None = None) -> tuple[np.ndarray, bool]:
     """Which combination of the channels the ball is fitted in (the rule,
     in one place): the weights (BGR) and whether they are blind to white.
 
@@ -598,6 +652,9 @@ def channel_rule(d: np.ndarray, S: np.ndarray, gradients, lossless: bool = True)
       channel was measured on lossless video only: on a lossy codec the
       white-free channel stays, by the codec, not by the codec's error
       tripping the highlight test (review 11b; docs/measurements.md, shade9).
+      With ``felt`` (BGR levels; given where the white-free channel's ball
+      fades into the felt, :func:`shade_match` over ``FELT_SHADE_MIN``):
+      the channel blind to the felt's colour (:func:`felt_blind`) instead.
     - Luma (None here) where no ball was seen.
     """
     w = np.linalg.solve(S, d)
@@ -605,6 +662,8 @@ def channel_rule(d: np.ndarray, S: np.ndarray, gradients, lossless: bool = True)
     if blind is None:
         return w, False
     if not lossless:
+        if felt is not None and (fb := felt_blind(d, S, felt)) is not None:
+            return (fb if fb @ d > 0 else -fb), False
         return (blind if blind @ d > 0 else -blind), True
     hl: list = []
     A = gradients(hl)
@@ -614,7 +673,7 @@ def channel_rule(d: np.ndarray, S: np.ndarray, gradients, lossless: bool = True)
     return (g if g @ d > 0 else -g), False
 
 
-def learn_projection(samples: np.ndarray, radius_px, lossless: bool = True) -> Projection:
+def learn_projection(samples: np.ndarray, radius_px, lossless: bool = True, blind_to_felt: bool = False) -> Projection:
     """The channel combination that best separates the moving ball from the felt.
 
     Parameters
@@ -627,6 +686,10 @@ def learn_projection(samples: np.ndarray, radius_px, lossless: bool = True) -> P
         count (a cue's or a shadow's colour is not the ball's).
     lossless : bool
         The video's codec is lossless (:func:`channel_rule`).
+    blind_to_felt : bool
+        On a lossy codec, the channel blind to the felt's colour (the
+        samples' first frame's median) rather than to white
+        (:func:`channel_rule`'s ``felt``; chosen by :func:`shade_match`).
 
     Returns
     -------
@@ -647,12 +710,13 @@ def learn_projection(samples: np.ndarray, radius_px, lossless: bool = True) -> P
     luma = np.array([0.114, 0.587, 0.299])
     w = None
     blind = False
+    felt = median_counts(samples[0].reshape(-1, 3))
     if len(ys):
         votes: list = []
         e = ball_direction(samples, ys, xs, radius_px, L, votes)
         if e is not None:
             w, blind = channel_rule(L @ e, S, lambda hl: ball_gradients(samples, ys, xs, votes[0], radius_px, L, hl),
-                                    lossless)
+                                    lossless, felt if blind_to_felt else None)
     if w is None:
         w = luma / np.sqrt(luma @ S @ luma)
     # Projected noise variance w^T S w = 1 here; give it the channels' mean
@@ -660,7 +724,6 @@ def learn_projection(samples: np.ndarray, radius_px, lossless: bool = True) -> P
     w = w / np.sqrt(w @ S @ w) * np.sqrt(np.trace(S) / 3.0)
     if not blind and w.sum() < 0:  # keep bright things bright where it costs nothing (grey-like w)
         w = -w
-    felt = median_counts(samples[0].reshape(-1, 3))
     return Projection(w=w.astype(np.float32), offset=float(FELT_LEVEL - felt @ w), noise_cov=S)
 
 

@@ -25,7 +25,7 @@ import numpy as np
 from cuespin.physics.scene import Scene
 from cuespin.videoio import quiet_native_stderr
 from cuespin.track.background import Background, FeltAccumulator, learn_background
-from cuespin.track.colour import GREY, Projection, learn_projection
+from cuespin.track.colour import FELT_SHADE_MIN, GREY, Projection, learn_projection, shade_match
 from cuespin.track.projection import projected_centres
 from cuespin.track.misfit import LookMisfit, codec_variance, error_ar1, look_misfit
 from cuespin.track.path import off_path
@@ -284,13 +284,16 @@ def _warm_up() -> None:
 
 
 def learn_model(frames: list, radius_px, n_samples: int,
-                where: np.ndarray | None = None, lossless: bool = True) -> tuple[Projection, Background]:
+                where: np.ndarray | None = None, lossless: bool = True,
+                blind_to_felt: bool = False) -> tuple[Projection, Background]:
     """The projection and the background from ``n_samples`` frames spread over
     ``frames`` (the look-ahead), plus as many again where a resting ball hid
     the felt from most of the first ones.  ``radius_px``: the ball's radius
     (px) or its :class:`~cuespin.track.radius.RadiusMap`; ``where``: the
     playing surface (:func:`search_mask`); ``lossless``: the video's codec
-    is lossless (:func:`~cuespin.track.colour.channel_rule`).  Blank frames
+    is lossless (:func:`~cuespin.track.colour.channel_rule`);
+    ``blind_to_felt``: on a lossy codec the channel blind to the felt's
+    colour (:func:`~cuespin.track.colour.learn_projection`).  Blank frames
     (:func:`~cuespin.track.reader.blank_frame`: a black lead-in, a fade) are
     left out: they would teach a felt and a colour projection of black."""
     n = len(frames)
@@ -308,7 +311,7 @@ def learn_model(frames: list, radius_px, n_samples: int,
         idx = idx[seen]
     colour = frames[0].ndim == 3
     samples = np.stack([frames[i] for i in idx])
-    proj = learn_projection(samples, radius_px, lossless) if colour else GREY
+    proj = learn_projection(samples, radius_px, lossless, blind_to_felt) if colour else GREY
     P = proj.many(samples) if colour else samples
     bg = learn_background(P, radius_px, where)
     if bg.weak_samples.any():
@@ -422,6 +425,18 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
             # The smallest ball in view: under perspective a far ball moving a
             # diameter sweeps less than the image centre's would.
             if bg.polarity and bg.moved_px >= LEARN_MOVED_AREA * np.pi * radii.r_min**2:
+                # The ball's shaded side fades into the felt in the codec's
+                # chroma (colour.FELT_SHADE_MIN): the channel blind to the
+                # felt's colour, judged on the model that saw the ball move
+                # (on a look-ahead where it rested, another mover's colours
+                # are judged: sample_scenes(6, 5, realistic, MJPG)[5]'s
+                # first look-ahead read 0.92, and the felt-blind channel
+                # learnt there tracked something 68 radii off).
+                if proj.luma_blind and not info.lossless and \
+                        FELT_SHADE_MIN < shade_match(proj, bg.polarity, bg.contrast) < 1.0:
+                    fb = learn_model(buf, radii, max(config.n_background, 2), mask, False, blind_to_felt=True)
+                    if fb[1].polarity and fb[1].moved_px >= LEARN_MOVED_AREA * np.pi * radii.r_min**2:
+                        proj, bg = fb
                 break
             if ended:  # the ball never moved a diameter: the most it did
                 if best is not None:
