@@ -1454,13 +1454,15 @@ class BallTracker:
                 return g, marks, fb
         return f, None, fit_blur
 
-    def _rim_unmarked(self, patch, felt, u0, v0, f, r, fit_blur, ol, marks, foreign):
+    def _rim_unmarked(self, patch, felt, u0, v0, f, r, fit_blur, ol, marks, foreign, pred=None):
         """The lit sphere's fit ``f`` of a marked frame again without the
         markings at its rim (:func:`rim_marking_pixels`, at most
         :data:`RIM_MARK_PASSES` times, each from the last refit): (fit,
         markings with those at the rim), or ``(f, marks)`` when there are
         none, a refit fails or it moves more than
-        :data:`SPHERE_MARK_MOVE_RADII`."""
+        :data:`SPHERE_MARK_MOVE_RADII` and lands no nearer than
+        :data:`MARK_RETRY_RADII` to the prediction ``pred`` (px; None: not
+        known)."""
         if self.block > 1:
             return f, marks
         left = kept_pixels(marks, foreign)
@@ -1475,7 +1477,13 @@ class BallTracker:
             if not (h and h.stated):
                 break
             g, rim = h, add
-        if rim is None or np.hypot(*(g.c - f.c)) > SPHERE_MARK_MOVE_RADII * r:
+        # A refit that moves farther than a refinement does is kept only
+        # where the ball's motion puts it: a logo lying on the rim pulled the
+        # first fit 1.3-2.3 px (0.11-0.2 R), and without it the refit landed
+        # 0.03-0.05 px from the truth, beside the prediction (realistic seed
+        # 7 shot 3, FFV1, frames 36-41, dropped as pulled before).
+        if rim is None or (np.hypot(*(g.c - f.c)) > SPHERE_MARK_MOVE_RADII * r
+                           and (pred is None or np.hypot(*(g.c - pred)) > MARK_RETRY_RADII * r)):
             return f, marks
         return g, rim if marks is None else marks | rim
 
@@ -1834,13 +1842,22 @@ class BallTracker:
             if shade and marks is None:
                 f, marks, fit_blur = self._unmarked(patch, felt, u0, v0, f, r, fit_blur, ol, foreign, shade=mark_look)
             pred = self._pred
-            if marks is not None and pred is not None and np.hypot(*(f.c - pred)) > MARK_RETRY_RADII * r \
+            # On a marked ball a frame whose markings were not found (or
+            # whose refit without them explained less) may be as pulled: a
+            # logo lying on the rim moved the first fit 1.7-2.5 px (0.14-0.21
+            # R), its pixels judged from there were refused, and the frame
+            # was dropped as pulled (realistic seed 7 shot 3, FFV1, frames
+            # 19-21 and 36-41; from the prediction the fit lands 0.05 px off).
+            marked_ball = len(self._marked) >= MARKED_BALL_FRAMES
+            if (marks is not None or marked_ball) and pred is not None \
+                    and np.hypot(*(f.c - pred)) > MARK_RETRY_RADII * r \
                     and u0 <= pred[0] <= u1 - 1 and v0 <= pred[1] <= v1 - 1:
                 # Markings' pixels judged from a centre they pulled are not
                 # theirs alone: from the prediction too, the better kept.
                 g, m2, fb2 = self._unmarked(patch, felt, u0, v0, replace(f, c=np.array(pred, float)), r, fit_blur,
                                             ol, foreign, shade=mark_look)
-                if m2 is not None and self._explains_better(patch, felt, u0, v0, g, f, marks | m2, foreign, r,
+                if m2 is not None and self._explains_better(patch, felt, u0, v0, g, f,
+                                                            m2 if marks is None else marks | m2, foreign, r,
                                                             fit_blur, mark_look, ol, self.block):
                     f, marks, fit_blur = g, m2, fb2
             if marks is not None and isinstance(shade, SphereLook):
@@ -1854,9 +1871,9 @@ class BallTracker:
                              valid=kept_pixels(marks, foreign), outline=ol, block=self.block)
                 if g and g.stated and g.rms < f.rms and np.hypot(*(g.c - f.c)) <= SPHERE_MARK_MOVE_RADII * r:
                     f = g
-                    f, marks = self._rim_unmarked(patch, felt, u0, v0, f, r, fit_blur, ol, marks, foreign)
-            elif marks is None and isinstance(shade, SphereLook) and len(self._marked) >= MARKED_BALL_FRAMES:
-                f, marks = self._rim_unmarked(patch, felt, u0, v0, f, r, fit_blur, ol, None, foreign)
+                    f, marks = self._rim_unmarked(patch, felt, u0, v0, f, r, fit_blur, ol, marks, foreign, pred)
+            elif marks is None and isinstance(shade, SphereLook) and marked_ball:
+                f, marks = self._rim_unmarked(patch, felt, u0, v0, f, r, fit_blur, ol, None, foreign, pred)
             if marks is not None:
                 self._marked.add(self._k)
             if recentre:
@@ -1881,7 +1898,16 @@ class BallTracker:
                     other = self._refine(frame, alt, f.b, recentre=False, at_loc=True)
                     self.outline = ol
                     apart = other.status != OK or np.hypot(*(other.uv - f.c)) > RESTART_RADII * r_ball
-                    if apart and other.status == OK and other.rms < f.rms:
+                    # Agreeing once the look is learnt, they are two fits of
+                    # the same ball and the one that explains its window
+                    # better is the measurement: a logo on the rim, the
+                    # first 0.23 px off at RMS 20.4 (then dropped as
+                    # pulled), the second 0.01 px at 7.9, the track's
+                    # typical 7.8 (realistic seed 7 shot 3 FFV1, frame 39).
+                    # Not while the look is voted on: the second's fit has
+                    # voted already, and the swap changed the learnt look
+                    # (that shot's rest: 3 more frames dropped, measured).
+                    if other.status == OK and other.rms < f.rms and (apart or self.shade is not None):
                         return other
                     if apart:
                         self.last_fit = self.last_patch = None
