@@ -772,6 +772,31 @@ def _codec_G(J, meas: Measurements) -> np.ndarray:
     return np.einsum("mba,mbp->map", WF, J.reshape(m, 2, p))
 
 
+def _shared_rows(J, meas: Measurements, acf) -> tuple[np.ndarray, np.ndarray]:
+    """The single-frame measurements' whitened Jacobian rows ``Js`` (s, 2,
+    p) and ``Q = rho Js`` (:func:`shared_rho`), from which the shared
+    error's terms are made; None for both with fewer than two."""
+    m, p = len(J) // 2, J.shape[1]
+    single = meas.single
+    if single.sum() < 2:
+        return None, None
+    Js = J.reshape(m, 2, p)[single]
+    return Js, np.tensordot(shared_rho(meas, acf), Js, axes=(1, 0))
+
+
+def shared_info(J, meas: Measurements, acf) -> np.ndarray:
+    """``J^T C_off J`` (p, p): the whitened Jacobian ``J`` (2m, p) seen
+    through the shared error's correlation between single-frame
+    measurements i != j, ``rho(dt_ij) I`` (:func:`shared_rho`); zeros with
+    fewer than two."""
+    return _shared_S0(*_shared_rows(J, meas, acf), J.shape[1])
+
+
+def _shared_S0(Js, Q, p: int) -> np.ndarray:
+    """:func:`shared_info` from :func:`_shared_rows`' output."""
+    return np.zeros((p, p)) if Js is None else np.einsum("iap,iaq->pq", Js, Q)
+
+
 def _shared_terms(J, meas: Measurements, acf) -> tuple[np.ndarray, np.ndarray]:
     """The shared error's ``J^T C_off J`` in the measurements' whitening
     (the codec's share not in it, as in the first fit), split as ``S0 + var
@@ -780,19 +805,15 @@ def _shared_terms(J, meas: Measurements, acf) -> tuple[np.ndarray, np.ndarray]:
     (``M_i = W_i F_i F_i^T W_i^T``, the codec's whitened shape), taken as
     ``rho_ij (I + var (M_i + M_j) / 2)`` (exact where neighbouring frames'
     ``M`` agree, as they do within the correlation's reach).  Returns
-    ``(S0, S1)``, each (p, p)."""
-    m, p = len(J) // 2, J.shape[1]
-    single = meas.single
-    if single.sum() < 2:
+    ``(S0, S1)``, each (p, p); ``S0`` is :func:`shared_info`."""
+    p = J.shape[1]
+    Js, Q = _shared_rows(J, meas, acf)
+    if Js is None:
         return np.zeros((p, p)), np.zeros((p, p))
-    rho = shared_rho(meas, acf)
-    Js = J.reshape(m, 2, p)[single]
-    Q = np.tensordot(rho, Js, axes=(1, 0))
-    S0 = np.einsum("iap,iaq->pq", Js, Q)
-    WF = (meas.W @ meas.codec_factor())[single]
+    WF = (meas.W @ meas.codec_factor())[meas.single]
     M = WF @ np.swapaxes(WF, -1, -2)
     T = np.einsum("iap,iab,ibq->pq", Js, M, Q)
-    return S0, 0.5 * (T + T.T)
+    return _shared_S0(Js, Q, p), 0.5 * (T + T.T)
 
 
 def correlated_codec_var(fit: ModelFit, meas: Measurements, frame_dt: float,
@@ -830,20 +851,26 @@ def correlated_codec_var(fit: ModelFit, meas: Measurements, frame_dt: float,
 
 def codec_sandwich(fit: ModelFit, meas: Measurements, codec: CodecCorrelation) -> np.ndarray:
     """The parameters' covariance when an inter-frame codec shares each
-    frame's error with its neighbours in time: ``A J^T C J A`` with ``A =
-    (J^T J)^-1`` and ``C`` the whitened measurements' covariance: the
-    identity (the stated errors, the codec's variance included) plus
-    ``rho(dt_ij) I`` between single-frame measurements i != j
-    (:func:`shared_rho`).  Raises LinAlgError when ``J^T J`` is singular."""
-    J = np.asarray(fit.jac, dtype=float)
+    frame's error with its neighbours in time: :func:`shared_sandwich` of
+    the fit's whitened Jacobian under ``codec.acf``.  Raises LinAlgError
+    when ``J^T J`` is singular."""
+    return shared_sandwich(meas, fit.jac, codec.acf)
+
+
+def shared_sandwich(meas: Measurements, jac, acf=INTER_CODEC_ACF) -> np.ndarray:
+    """The covariance of parameters fitted as if independent (whitened
+    Jacobian ``jac``, (2m, p)) when each frame's whole error is shared with
+    its neighbours in time (an inter-frame codec): ``A J^T C J A`` with
+    ``A = (J^T J)^-1`` (:func:`info_inverse`) and ``C`` the whitened
+    measurements' covariance: the identity (the stated errors, a codec's
+    variance included) plus ``rho(dt_ij) I`` between single-frame
+    measurements i != j (:func:`shared_info`).  Raises LinAlgError when
+    ``J^T J`` is singular."""
+    J = np.asarray(jac, dtype=float)
     A = info_inverse(J)
-    m, p = len(J) // 2, J.shape[1]
-    single = meas.single
-    if single.sum() < 2:
+    if meas.single.sum() < 2:
         return A
-    Js = J.reshape(m, 2, p)[single]
-    off = np.einsum("iap,iaq->pq", Js, np.tensordot(shared_rho(meas, codec.acf), Js, axes=(1, 0)))
-    return A @ (J.T @ J + off) @ A
+    return A @ (J.T @ J + shared_info(J, meas, acf)) @ A
 
 
 def still_codec_pairs(meas: Measurements, length: float = STILL_CODEC_LENGTH_PX):

@@ -20,7 +20,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from cuespin.recover.measurements import MAX_CODEC_NOISE_RATIO, build_measurements, codec_excess, codec_noise_ratio
-from cuespin.recover.mle import ar1_from_lag1, ar1_sandwich, lag1_autocorrelation
+from cuespin.recover.mle import ar1_from_lag1, ar1_sandwich, lag1_autocorrelation, shared_sandwich
 
 # The across-path acceleration must be this many of its standard errors off
 # zero for the slope to be named: a level table's rolling ball (a wrong
@@ -128,7 +128,8 @@ def rolling_path(p, t, k):
     return p[:2] + s[:, None] * u + (float(a @ n) * _sideways(t, T))[:, None] * n
 
 
-def rolling_slope(t, xy, cov, k: float, sigma: float, px_to_m=None, g: float = 9.81) -> SlopeFit | None:
+def rolling_slope(t, xy, cov, k: float, sigma: float, px_to_m=None, g: float = 9.81,
+                  acf=None) -> SlopeFit | None:
     """Fit the rolling frames ``t, xy`` (from the end of sliding to the
     rest) level and sloped, each once, weighted by the stated covariances.
 
@@ -147,6 +148,13 @@ def rolling_slope(t, xy, cov, k: float, sigma: float, px_to_m=None, g: float = 9
         guard's ratio uses.
     px_to_m : ndarray, shape (n, 2, 2), optional
         Metres per pixel (the codec's error lives in the image).
+    g : float
+        Gravity (m/s^2).
+    acf : tuple, optional
+        An inter-frame codec's correlation of the whole error in time
+        (recover.mle.INTER_CODEC_ACF, tau in s): the errors' covariance is
+        that model's (recover.mle.shared_sandwich).  None: AR(1), its
+        lag-1 correlation read from the residuals.
 
     Returns
     -------
@@ -182,10 +190,20 @@ def rolling_slope(t, xy, cov, k: float, sigma: float, px_to_m=None, g: float = 9
     # at rho 0.8 the plain (J^T J)^-1 put the level table's |z| over
     # SLOPE_Z on 35 of 400 tracks.  Its covariance is the AR(1) sandwich
     # at the errors' correlation read from the residuals (as the MLE's
-    # AR(1) model reads it, recover.mle.ar1_from_lag1).
+    # AR(1) model reads it, recover.mle.ar1_from_lag1).  An inter-frame
+    # codec's error is shared on two time scales (0.02 s and 2.8 s), and
+    # its slow part looks like the motion, so the residuals cannot show it
+    # and no one rho states it: there its measured correlation in time (the
+    # MLE's, recover.mle.codec_sandwich).  On 200 level tracks with that
+    # error the AR(1) sandwich put |z| over 1.96 on 50 and over SLOPE_Z on
+    # 4 (480 fps; docs/measurements.md "rev13s").
+    rho = 0.0
     try:
-        rho = ar1_from_lag1(meas, J, lag1_autocorrelation(meas, sloped.fun.reshape(-1, 2))[0])
-        C = ar1_sandwich(meas, J, rho) * scale
+        if acf is not None:
+            C = shared_sandwich(meas, J, acf) * scale
+        else:
+            rho = ar1_from_lag1(meas, J, lag1_autocorrelation(meas, sloped.fun.reshape(-1, 2))[0])
+            C = ar1_sandwich(meas, J, rho) * scale
     except np.linalg.LinAlgError:
         return None
     speed = float(np.hypot(*p[2:4]))
