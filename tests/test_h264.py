@@ -90,9 +90,11 @@ def test_codec_variance_measured_with_the_shared_error():
         est = estimate(tr.t, model_track(tr.shot, tr.params, tr.t, tr.exposure_s) + err, np.full(n, tr.sigma),
                        tr.params, lossless=False, run_paper=False, inter_frame=True)
         ratios.append(est.codec_var / c)
-    # About 2.3 standard errors of a 12-track mean (per-track scatter 0.098)
-    # either side of 0.946.
-    assert 0.88 < np.mean(ratios) < 1.01
+    # The standard error of a 12-track mean: 0.098 / sqrt(12) = 0.028.
+    # Above: 2.3 of them over the truth (1), so an unbiased estimator passes
+    # too.  Below: 2.3 of them under the estimator's measured mean (0.946,
+    # 24 tracks; the fit absorbs part of the shared error), its bias allowed.
+    assert 0.88 < np.mean(ratios) < 1.065
 
 
 @pytest.mark.slow
