@@ -166,8 +166,8 @@ class MLEResult:
     status rules' answers (``v0_determined``: v0's error within
     :data:`MAX_REL_STDERR_V0`; ``sliding_frames``: sliding seen in at least
     :data:`MIN_SLIDING_FRAMES` frames; ``slide_hidden``: a rolling answer's
-    frames left out after the strike cover the longest slide its speed
-    allows, :func:`slide_bound_s`), for a refit to keep (:func:`result`).
+    frames left out after the strike last as long as sliding friction
+    needs to change its velocity by its speed, :func:`slide_bound_s`), for a refit to keep (:func:`result`).
     """
 
     status: str
@@ -1047,21 +1047,30 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
     if rolling:
         # The frames found after the strike but left out (the strike's, and
         # those the cue's tip touched: recover.estimate's cue window, the
-        # tracker's flagged run) cover all the time the ball could have slid
-        # at this speed: a slide hidden there is as likely as rolling from the
-        # strike, and the rolling answer is one of many (review 12b: the
-        # touched run has no upper limit).  Before the v0_determined rule,
-        # which the unseen slip's share trips too, with a reason that
-        # names the strike not being in view.
+        # tracker's flagged run): a slide ending in them is not seen, and
+        # sliding for tau changes the velocity by mu_s g tau (eq. 3).  When
+        # they last the time sliding friction needs to change it by the
+        # rolling answer's whole speed (slide_bound_s), a hidden slide
+        # fitting the same rolling path may have started at any speed from
+        # near zero to twice this one: v0 is not determined to within its
+        # own size (as the v0_determined rule asks) and rolling from the
+        # strike is one answer of many (review 12b: the touched run has no
+        # upper limit).  Not a bound on how long a shot can slide (a stun or
+        # draw shot's t1 exceeds |v1| / (mu_s g) up to 12 times in the
+        # sampler: review 13's bound.py).  Before the v0_determined rule,
+        # which the unseen slip's share trips too, with a reason that names
+        # the cue rather than the strike not being in view.
         left, bound = left_out_after_strike_s(meas, float(shot.t0)), slide_bound_s(speed, pr)
         if verdicts.get("slide_hidden") is None:
             verdicts["slide_hidden"] = bool(left >= bound)
         if verdicts["slide_hidden"]:
             return MLEResult("degenerate",
                              f"the frames in the {left * 1e3:.0f} ms after the strike are left out (the cue's "
-                             f"tip touched the ball there): a ball leaving at {speed:.3g} m/s slides at most "
-                             f"{bound * 1e3:.0f} ms (eq. 26), so rolling from the strike is not told from a "
-                             "slide hidden by the cue; v0 and w0 are not determined", **common)
+                             f"tip touched the ball there), at least the {bound * 1e3:.0f} ms in which sliding "
+                             f"friction changes the velocity by the rolling answer's whole {speed:.3g} m/s (eq. 3): "
+                             "rolling from the strike is not told from a slide hidden by the cue, which could "
+                             "have started at any speed up to twice that; v0 and w0 are not determined",
+                             **common)
     if not verdicts["v0_determined"]:
         return MLEResult("degenerate",
                          f"the track does not determine v0 (standard error {se_speed:.3g} m/s for "
@@ -1118,11 +1127,14 @@ def left_out_after_strike_s(meas: Measurements, t0: float) -> float:
 
 
 def slide_bound_s(speed: float, params: BallParams) -> float:
-    """The longest a ball whose speed stays within ``speed`` (m/s) slides:
-    eqs. 25-26 give ``t1 = 2 |u0| / (7 mu_s g) = |v0 - v1| / (mu_s g)``,
-    at most ``speed / (mu_s g)`` (s) when ``v0`` and ``v1`` are both
-    within it (the time sliding friction takes to change the velocity by
-    the whole speed, as eq. 29's ``t3``)."""
+    """The time (s) sliding friction takes to change a ball's velocity by
+    ``speed`` (m/s): ``speed / (mu_s g)`` (eq. 3, ``|dv| = mu_s g t``; as
+    eq. 29's ``t3``).  A slide hidden this long before a rolling path of
+    that speed could have started at any speed up to twice it, so the
+    rolling answer does not determine v0 (:func:`result`'s
+    ``slide_hidden``).  Not the longest a ball can slide: eq. 26's ``t1 =
+    2 |u0| / (7 mu_s g)`` exceeds ``|v1| / (mu_s g)`` on stun and draw
+    shots (up to 12 times in the sampler)."""
     return float(speed) / (params.mu_s * params.g)
 
 
