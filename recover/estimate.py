@@ -253,7 +253,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         if independent:
             scale = moving_scale(meas1, first.residuals, len(first.x))
         if not lossless and inter_frame:
-            codec_var = correlated_codec_var(first, meas1, frame_dt)
+            codec_var = correlated_codec_var(first, meas1)
         elif not lossless:
             codec_var = codec_excess(meas1, first.residuals, len(first.x))
         if abs(first.shot.t0 - seg.t0) < MAX_T0_SHIFT_FRAMES * frame_dt:

@@ -816,8 +816,7 @@ def _shared_terms(J, meas: Measurements, acf) -> tuple[np.ndarray, np.ndarray]:
     return _shared_S0(Js, Q, p), 0.5 * (T + T.T)
 
 
-def correlated_codec_var(fit: ModelFit, meas: Measurements, frame_dt: float,
-                         acf=INTER_CODEC_ACF) -> float:
+def correlated_codec_var(fit: ModelFit, meas: Measurements, acf=INTER_CODEC_ACF) -> float:
     """Per-axis variance (px^2 through the measurements' ``px_to_m``, else
     m^2) of an inter-frame codec's error, from a fit's residuals
     (measurements without the codec's share): solves
@@ -827,8 +826,7 @@ def correlated_codec_var(fit: ModelFit, meas: Measurements, frame_dt: float,
     correlation between frames, :func:`_shared_terms`): the fit absorbs
     part of a correlated error, so the residuals alone understate it.
     recover.measurements.codec_excess assumes independent errors (measured
-    on H.264: that one came out 40% low).  ``frame_dt`` is unused (the
-    correlation is in seconds); kept for callers.  Signed."""
+    on H.264: that one came out 40% low).  Signed."""
     J = np.asarray(fit.jac, dtype=float)
     m, p = len(J) // 2, J.shape[1]
     if 2 * m <= p + 2:
@@ -1102,14 +1100,21 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
     return MLEResult("ok", note, **out)
 
 
+def first_measured_after(meas: Measurements, t0: float) -> float:
+    """The time (s) of the first single-frame measurement after ``t0`` (s);
+    inf when none is."""
+    t_m = meas.t_single
+    after = t_m[t_m > t0]
+    return float(after.min()) if len(after) else float("inf")
+
+
 def unseen_gap_s(fit: ModelFit, meas: Measurements, se_t0: float) -> float:
     """The time (s) after the strike with no measured moving frame: to the
     first single-frame measurement after the fit's t0, plus 1.96 of t0's
     standard error ``se_t0`` (s); a slide ending in it is not seen."""
     t0 = float(fit.shot.t0)
-    t_m = meas.t_single
-    after = t_m[t_m > t0]
-    gap = float(after.min() - t0) if len(after) else 0.0
+    first = first_measured_after(meas, t0)
+    gap = first - t0 if np.isfinite(first) else 0.0
     return gap + Z95 * (se_t0 if np.isfinite(se_t0) else 0.0)
 
 
@@ -1119,9 +1124,7 @@ def left_out_after_strike_s(meas: Measurements, t0: float) -> float:
     recover.measurements.strike_window): to the last frame left out before
     the first measured one after ``t0``; 0 when none is (a track that
     starts later: the strike not in view)."""
-    t_m = meas.t_single
-    after = t_m[t_m > t0]
-    first = float(after.min()) if len(after) else float("inf")
+    first = first_measured_after(meas, t0)
     left = meas.t[(meas.group < 0) & (meas.t > t0) & (meas.t < first)]
     return float(left.max() - t0) if len(left) else 0.0
 
