@@ -224,40 +224,68 @@ def one_shot(args):
     return row
 
 
-def wilson(k: int, n: int, z: float = 1.959964):
+# The components' intra-shot correlation coverage_interval assumes at
+# least (the data's when larger, shot_icc): measured 0.11-0.46 (median
+# 0.33) on h264cov's realistic H.264 accuracy sets (seeds 31-33, 9-52 ok
+# shots each) and 0.14-0.33 on review 13's simulated shots (boot.py).
+# With 0.2 those simulated intervals held the truth 94.4-97.5% at 10-40
+# shots (two seeds); with 0.46 96.4-98.7% (wider than needed); the shot
+# bootstrap before 87.3-99.5% (docs/measurements.md "rev13s").
+SHOT_ICC_FLOOR = 0.2
+
+
+def wilson(k: float, n: float, z: float = 1.959964):
     """Wilson score interval (95%) of a proportion k / n."""
     p, d = k / n, 1.0 + z * z / n
     c, h = (p + z * z / (2 * n)) / d, z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / d
     return c - h, c + h
 
 
-def coverage_interval(hit, idx):
+def shot_icc(hit) -> float:
+    """The intra-shot correlation of ``hit`` (shots, components) of bool:
+    the one-way ANOVA estimator ``(MSB - MSW) / (MSB + (c - 1) MSW)`` over
+    shots of ``c`` components each; NaN when every component is alike."""
+    y = np.asarray(hit, float)
+    m, c = y.shape
+    share, p = y.mean(axis=1), y.mean()
+    msb = c * float(np.sum((share - p) ** 2)) / max(m - 1, 1)
+    msw = float(np.sum((y - share[:, None]) ** 2)) / (m * (c - 1))
+    d = msb + (c - 1) * msw
+    return (msb - msw) / d if d > 0 else float("nan")
+
+
+def coverage_interval(hit):
     """95% interval of the share of components covered, ``hit`` (shots,
-    components) of bool, by a cluster bootstrap over shots (``idx``, (draws,
-    shots): the shots each draw takes; percentile interval).  A shot's v0 and
-    w0 errors are strongly correlated, so its components are not independent
-    trials (Wilson's interval over all components was too narrow:
-    docs/measurements.md "stats12b").  When every component is covered (or
-    none) the bootstrap has nothing to resample: Wilson's interval counting
-    each shot once, the components as one trial."""
+    components) of bool: Wilson's interval over the components counted as
+    ``shots * components / deff`` independent trials, the design effect
+    ``deff = 1 + (components - 1) icc`` of the components' correlation
+    within a shot (a shot's v0 and w0 errors are strongly correlated, so
+    its components are not independent trials: Wilson over all
+    components was too narrow, docs/measurements.md "stats12b").  ``icc``
+    is the data's (:func:`shot_icc`) and at least :data:`SHOT_ICC_FLOOR`:
+    one estimated from a few misses is noisy, and every component covered
+    gives none; the floor keeps the interval with a miss from being
+    narrower than with none (the shot bootstrap's was)."""
     hit = np.asarray(hit, bool)
-    if hit.all() or not hit.any():
-        return wilson(int(hit.all()) * len(hit), len(hit))
-    share = hit.mean(axis=1)[idx].mean(axis=1)
-    lo, hi = np.percentile(share, [2.5, 97.5])
-    return float(lo), float(hi)
+    m, c = hit.shape
+    icc = shot_icc(hit) if m > 1 and c > 1 else float("nan")
+    icc = SHOT_ICC_FLOOR if not np.isfinite(icc) else min(max(icc, SHOT_ICC_FLOOR), 1.0)
+    n_eff = m * c / (1.0 + (c - 1) * icc)
+    return wilson(float(hit.mean()) * n_eff, n_eff)
 
 
 def intervals(rows, n_boot: int = 4000, seed: int = 0, m: str = "mle"):
     """The MLE's (``m``; the paper's method: ``paper``, without the bound)
     coverage, RMS error in stated errors and RMS error / bound
     per noise band, with 95% intervals: coverage counts each component of
-    v0 and w0 (each its own interval, estimate +/- 1.96 stated errors);
-    every interval resamples shots (a cluster bootstrap, percentile
-    interval, ``n_boot`` draws; :func:`coverage_interval`): a shot's
-    components are not independent trials."""
+    v0 and w0 (each its own interval, estimate +/- 1.96 stated errors):
+    Wilson's with the shots' design effect (:func:`coverage_interval`);
+    the RMS intervals resample shots (a cluster bootstrap, percentile
+    interval, ``n_boot`` draws): a shot's components are not independent
+    trials."""
     rng = np.random.default_rng(seed)
-    print(f"\n{'MLE' if m == 'mle' else m} with 95% intervals (components of v0, w0; bootstrap over shots)")
+    print(f"\n{'MLE' if m == 'mle' else m} with 95% intervals (components of v0, w0; coverage: Wilson with "
+          "the shots' design effect; RMS: bootstrap over shots)")
     # Free slip apart: a rolling answer's errors hold the bound of a slip too
     # short to see (recover.mle.unseen_slip), not a standard error, so its
     # components sit near 0 stated errors and pull the RMS of "all" down.
@@ -280,9 +308,9 @@ def intervals(rows, n_boot: int = 4000, seed: int = 0, m: str = "mle"):
         boot = {name: np.percentile([f(A[i]) for i in idx], [2.5, 97.5]) for name, f, A in (
             ("rms", lambda a: np.sqrt(np.nanmean(a * a)), Z), ("crb", lambda a: np.sqrt(np.nanmean(a * a)), K))
             if name != "crb" or m == "mle"}
-        lo, hi = coverage_interval(hit, idx)
+        lo, hi = coverage_interval(hit)
         print(f"  {band}: {len(ok)} ok; coverage {k}/{n} = {k / n:.1%} (95% {lo:.1%}-{hi:.1%}, "
-              f"shots resampled); RMS / stated error "
+              f"design effect of the shots); RMS / stated error "
               f"{np.sqrt(np.mean(Z * Z)):.2f} ({boot['rms'][0]:.2f}-{boot['rms'][1]:.2f})"
               + (f"; RMS / bound {np.sqrt(np.nanmean(K * K)):.2f} ({boot['crb'][0]:.2f}-{boot['crb'][1]:.2f}); "
                  f"chi2/dof median {np.nanmedian([r['chi2_per_dof'] for r in ok]):.2f}" if m == "mle" else ""))

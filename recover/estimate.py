@@ -253,7 +253,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         if independent:
             scale = moving_scale(meas1, first.residuals, len(first.x))
         if not lossless and inter_frame:
-            codec_var = correlated_codec_var(first, meas1, frame_dt)
+            codec_var = correlated_codec_var(first, meas1)
         elif not lossless:
             codec_var = codec_excess(meas1, first.residuals, len(first.x))
         if abs(first.shot.t0 - seg.t0) < MAX_T0_SHIFT_FRAMES * frame_dt:
@@ -347,7 +347,8 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         hac=hac, verdicts=dict(mle.verdicts) or None, stop_apart=None if paper is None else paper.stop_apart,
         clear_s=clear_s, rest_scale=scale)
     paper, mle = unexplained(paper, mle, meas, codec_var, sigma,
-                             lambda: rolling_fit(t, xy, cov, meas.px_to_m, params, mle, chosen, exposure_s, frame_dt, sigma),
+                             lambda: rolling_fit(t, xy, cov, meas.px_to_m, params, mle, chosen, exposure_s, frame_dt, sigma,
+                                                 acf=None if codec is None else codec.acf),
                              step=step_r(meas, fit, exposure_s, mle))
     return Estimate(chosen, paper, mle, meas, codec_var, decisions,
                     {"fit": t_fit, "recover": time.perf_counter() - clock}, decided)
@@ -388,7 +389,7 @@ def _refit(keep: Decided, seg, t, xy, cov, params, exposure_s, fit_friction, run
                              # share itself (meas.cov already holds it; review 12b: ratios went negative)
                              lambda: rolling_fit(t, xy, cov, px_to_m=meas.px_to_m, params=params, mle=mle,
                                                  seg=chosen or seg, exposure_s=exposure_s, frame_dt=frame_dt,
-                                                 sigma=sigma),
+                                                 sigma=sigma, acf=None if codec is None else codec.acf),
                              step=step_r(meas, fit, exposure_s, mle))
     return Estimate(chosen or seg, paper, mle, meas, keep.codec_var, decisions,
                     {"fit": t_fit, "recover": time.perf_counter() - clock}, keep)
@@ -441,11 +442,14 @@ def unexplained(paper, mle, meas: Measurements, codec_var: float, sigma: float, 
     return paper, mle
 
 
-def rolling_fit(t, xy, cov, px_to_m, params: BallParams, mle, seg, exposure_s: float, frame_dt: float, sigma: float):
+def rolling_fit(t, xy, cov, px_to_m, params: BallParams, mle, seg, exposure_s: float, frame_dt: float, sigma: float,
+                acf=None):
     """The rolling phase's fit with a slope (recover.slope.rolling_slope):
     the frames from a frame after the fit's end of sliding (``mle.t1``, else
     the segmentation's) to the segmentation's rest, under the friction the
-    fit used; None when neither places the end of sliding."""
+    fit used; None when neither places the end of sliding.  ``acf``: an
+    inter-frame codec's correlation in time (the recovery's
+    CodecCorrelation.acf), None otherwise."""
     t1 = getattr(mle, "t1", None)
     if t1 is None or not np.isfinite(t1):
         t1 = getattr(seg, "t1", float("nan"))
@@ -456,7 +460,7 @@ def rolling_fit(t, xy, cov, px_to_m, params: BallParams, mle, seg, exposure_s: f
     sel = (t > t1 + 0.5 * exposure_s + frame_dt) & (t < t2 - 0.5 * exposure_s)
     mu_r = getattr(mle, "mu_r", None) or params.mu_r
     pm = None if px_to_m is None else np.asarray(px_to_m)[sel]
-    return rolling_slope(t[sel], xy[sel], cov[sel], 5.0 / 7.0 * mu_r * params.g, sigma, pm, params.g)
+    return rolling_slope(t[sel], xy[sel], cov[sel], 5.0 / 7.0 * mu_r * params.g, sigma, pm, params.g, acf=acf)
 
 
 def mle_noise(mle) -> tuple[float, float]:

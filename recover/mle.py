@@ -177,12 +177,12 @@ class MLEResult:
     status rules' answers (``v0_determined``: v0's error within
     :data:`MAX_REL_STDERR_V0`; ``sliding_frames``: sliding seen in at least
     :data:`MIN_SLIDING_FRAMES` frames; ``slide_hidden``: a rolling answer's
-    frames left out after the strike cover the longest slide its speed
-    allows, :func:`slide_bound_s`; ``slide_outlasts``: a rolling answer's
-    frames after the strike too few in time to show a slide that lasts
-    through all of them, :data:`SLIDE_THROUGH_TAU`; ``strike_seen``: at
-    least MIN_STILL_FRAMES used frames before t0), for a refit to keep
-    (:func:`result`).
+    frames left out after the strike last as long as sliding friction
+    needs to change its velocity by its speed, :func:`slide_bound_s`;
+    ``slide_outlasts``: a rolling answer's frames after the strike too few
+    in time to show a slide that lasts through all of them,
+    :data:`SLIDE_THROUGH_TAU`; ``strike_seen``: at least MIN_STILL_FRAMES
+    used frames before t0), for a refit to keep (:func:`result`).
     """
 
     status: str
@@ -787,6 +787,31 @@ def _codec_G(J, meas: Measurements) -> np.ndarray:
     return np.einsum("mba,mbp->map", WF, J.reshape(m, 2, p))
 
 
+def _shared_rows(J, meas: Measurements, acf) -> tuple[np.ndarray, np.ndarray]:
+    """The single-frame measurements' whitened Jacobian rows ``Js`` (s, 2,
+    p) and ``Q = rho Js`` (:func:`shared_rho`), from which the shared
+    error's terms are made; None for both with fewer than two."""
+    m, p = len(J) // 2, J.shape[1]
+    single = meas.single
+    if single.sum() < 2:
+        return None, None
+    Js = J.reshape(m, 2, p)[single]
+    return Js, np.tensordot(shared_rho(meas, acf), Js, axes=(1, 0))
+
+
+def shared_info(J, meas: Measurements, acf) -> np.ndarray:
+    """``J^T C_off J`` (p, p): the whitened Jacobian ``J`` (2m, p) seen
+    through the shared error's correlation between single-frame
+    measurements i != j, ``rho(dt_ij) I`` (:func:`shared_rho`); zeros with
+    fewer than two."""
+    return _shared_S0(*_shared_rows(J, meas, acf), J.shape[1])
+
+
+def _shared_S0(Js, Q, p: int) -> np.ndarray:
+    """:func:`shared_info` from :func:`_shared_rows`' output."""
+    return np.zeros((p, p)) if Js is None else np.einsum("iap,iaq->pq", Js, Q)
+
+
 def _shared_terms(J, meas: Measurements, acf) -> tuple[np.ndarray, np.ndarray]:
     """The shared error's ``J^T C_off J`` in the measurements' whitening
     (the codec's share not in it, as in the first fit), split as ``S0 + var
@@ -795,23 +820,18 @@ def _shared_terms(J, meas: Measurements, acf) -> tuple[np.ndarray, np.ndarray]:
     (``M_i = W_i F_i F_i^T W_i^T``, the codec's whitened shape), taken as
     ``rho_ij (I + var (M_i + M_j) / 2)`` (exact where neighbouring frames'
     ``M`` agree, as they do within the correlation's reach).  Returns
-    ``(S0, S1)``, each (p, p)."""
-    m, p = len(J) // 2, J.shape[1]
-    single = meas.single
-    if single.sum() < 2:
+    ``(S0, S1)``, each (p, p); ``S0`` is :func:`shared_info`."""
+    p = J.shape[1]
+    Js, Q = _shared_rows(J, meas, acf)
+    if Js is None:
         return np.zeros((p, p)), np.zeros((p, p))
-    rho = shared_rho(meas, acf)
-    Js = J.reshape(m, 2, p)[single]
-    Q = np.tensordot(rho, Js, axes=(1, 0))
-    S0 = np.einsum("iap,iaq->pq", Js, Q)
-    WF = (meas.W @ meas.codec_factor())[single]
+    WF = (meas.W @ meas.codec_factor())[meas.single]
     M = WF @ np.swapaxes(WF, -1, -2)
     T = np.einsum("iap,iab,ibq->pq", Js, M, Q)
-    return S0, 0.5 * (T + T.T)
+    return _shared_S0(Js, Q, p), 0.5 * (T + T.T)
 
 
-def correlated_codec_var(fit: ModelFit, meas: Measurements, frame_dt: float,
-                         acf=INTER_CODEC_ACF) -> float:
+def correlated_codec_var(fit: ModelFit, meas: Measurements, acf=INTER_CODEC_ACF) -> float:
     """Per-axis variance (px^2 through the measurements' ``px_to_m``, else
     m^2) of an inter-frame codec's error, from a fit's residuals
     (measurements without the codec's share): solves
@@ -821,8 +841,7 @@ def correlated_codec_var(fit: ModelFit, meas: Measurements, frame_dt: float,
     correlation between frames, :func:`_shared_terms`): the fit absorbs
     part of a correlated error, so the residuals alone understate it.
     recover.measurements.codec_excess assumes independent errors (measured
-    on H.264: that one came out 40% low).  ``frame_dt`` is unused (the
-    correlation is in seconds); kept for callers.  Signed."""
+    on H.264: that one came out 40% low).  Signed."""
     J = np.asarray(fit.jac, dtype=float)
     m, p = len(J) // 2, J.shape[1]
     if 2 * m <= p + 2:
@@ -845,20 +864,26 @@ def correlated_codec_var(fit: ModelFit, meas: Measurements, frame_dt: float,
 
 def codec_sandwich(fit: ModelFit, meas: Measurements, codec: CodecCorrelation) -> np.ndarray:
     """The parameters' covariance when an inter-frame codec shares each
-    frame's error with its neighbours in time: ``A J^T C J A`` with ``A =
-    (J^T J)^-1`` and ``C`` the whitened measurements' covariance: the
-    identity (the stated errors, the codec's variance included) plus
-    ``rho(dt_ij) I`` between single-frame measurements i != j
-    (:func:`shared_rho`).  Raises LinAlgError when ``J^T J`` is singular."""
-    J = np.asarray(fit.jac, dtype=float)
+    frame's error with its neighbours in time: :func:`shared_sandwich` of
+    the fit's whitened Jacobian under ``codec.acf``.  Raises LinAlgError
+    when ``J^T J`` is singular."""
+    return shared_sandwich(meas, fit.jac, codec.acf)
+
+
+def shared_sandwich(meas: Measurements, jac, acf=INTER_CODEC_ACF) -> np.ndarray:
+    """The covariance of parameters fitted as if independent (whitened
+    Jacobian ``jac``, (2m, p)) when each frame's whole error is shared with
+    its neighbours in time (an inter-frame codec): ``A J^T C J A`` with
+    ``A = (J^T J)^-1`` (:func:`info_inverse`) and ``C`` the whitened
+    measurements' covariance: the identity (the stated errors, a codec's
+    variance included) plus ``rho(dt_ij) I`` between single-frame
+    measurements i != j (:func:`shared_info`).  Raises LinAlgError when
+    ``J^T J`` is singular."""
+    J = np.asarray(jac, dtype=float)
     A = info_inverse(J)
-    m, p = len(J) // 2, J.shape[1]
-    single = meas.single
-    if single.sum() < 2:
+    if meas.single.sum() < 2:
         return A
-    Js = J.reshape(m, 2, p)[single]
-    off = np.einsum("iap,iaq->pq", Js, np.tensordot(shared_rho(meas, codec.acf), Js, axes=(1, 0)))
-    return A @ (J.T @ J + off) @ A
+    return A @ (J.T @ J + shared_info(J, meas, acf)) @ A
 
 
 def still_codec_pairs(meas: Measurements, length: float = STILL_CODEC_LENGTH_PX):
@@ -1035,21 +1060,30 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
     if rolling:
         # The frames found after the strike but left out (the strike's, and
         # those the cue's tip touched: recover.estimate's cue window, the
-        # tracker's flagged run) cover all the time the ball could have slid
-        # at this speed: a slide hidden there is as likely as rolling from the
-        # strike, and the rolling answer is one of many (review 12b: the
-        # touched run has no upper limit).  Before the v0_determined rule,
-        # which the unseen slip's share trips too, with a reason that
-        # names the strike not being in view.
+        # tracker's flagged run): a slide ending in them is not seen, and
+        # sliding for tau changes the velocity by mu_s g tau (eq. 3).  When
+        # they last the time sliding friction needs to change it by the
+        # rolling answer's whole speed (slide_bound_s), a hidden slide
+        # fitting the same rolling path may have started at any speed from
+        # near zero to twice this one: v0 is not determined to within its
+        # own size (as the v0_determined rule asks) and rolling from the
+        # strike is one answer of many (review 12b: the touched run has no
+        # upper limit).  Not a bound on how long a shot can slide (a stun or
+        # draw shot's t1 exceeds |v1| / (mu_s g) up to 12 times in the
+        # sampler: review 13's bound.py).  Before the v0_determined rule,
+        # which the unseen slip's share trips too, with a reason that names
+        # the cue rather than the strike not being in view.
         left, bound = left_out_after_strike_s(meas, float(shot.t0)), slide_bound_s(speed, pr)
         if verdicts.get("slide_hidden") is None:
             verdicts["slide_hidden"] = bool(left >= bound)
         if verdicts["slide_hidden"]:
             return MLEResult("degenerate",
                              f"the frames in the {left * 1e3:.0f} ms after the strike are left out (the cue's "
-                             f"tip touched the ball there): a ball leaving at {speed:.3g} m/s slides at most "
-                             f"{bound * 1e3:.0f} ms (eq. 26), so rolling from the strike is not told from a "
-                             "slide hidden by the cue; v0 and w0 are not determined", **common)
+                             f"tip touched the ball there), at least the {bound * 1e3:.0f} ms in which sliding "
+                             f"friction changes the velocity by the rolling answer's whole {speed:.3g} m/s (eq. 3): "
+                             "rolling from the strike is not told from a slide hidden by the cue, which could "
+                             "have started at any speed up to twice that; v0 and w0 are not determined",
+                             **common)
     if not verdicts["v0_determined"]:
         return MLEResult("degenerate",
                          f"the track does not determine v0 (standard error {se_speed:.3g} m/s for "
@@ -1116,14 +1150,21 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
     return MLEResult("ok", note, **out)
 
 
+def first_measured_after(meas: Measurements, t0: float) -> float:
+    """The time (s) of the first single-frame measurement after ``t0`` (s);
+    inf when none is."""
+    t_m = meas.t_single
+    after = t_m[t_m > t0]
+    return float(after.min()) if len(after) else float("inf")
+
+
 def unseen_gap_s(fit: ModelFit, meas: Measurements, se_t0: float) -> float:
     """The time (s) after the strike with no measured moving frame: to the
     first single-frame measurement after the fit's t0, plus 1.96 of t0's
     standard error ``se_t0`` (s); a slide ending in it is not seen."""
     t0 = float(fit.shot.t0)
-    t_m = meas.t_single
-    after = t_m[t_m > t0]
-    gap = float(after.min() - t0) if len(after) else 0.0
+    first = first_measured_after(meas, t0)
+    gap = first - t0 if np.isfinite(first) else 0.0
     return gap + Z95 * (se_t0 if np.isfinite(se_t0) else 0.0)
 
 
@@ -1133,19 +1174,20 @@ def left_out_after_strike_s(meas: Measurements, t0: float) -> float:
     recover.measurements.strike_window): to the last frame left out before
     the first measured one after ``t0``; 0 when none is (a track that
     starts later: the strike not in view)."""
-    t_m = meas.t_single
-    after = t_m[t_m > t0]
-    first = float(after.min()) if len(after) else float("inf")
+    first = first_measured_after(meas, t0)
     left = meas.t[(meas.group < 0) & (meas.t > t0) & (meas.t < first)]
     return float(left.max() - t0) if len(left) else 0.0
 
 
 def slide_bound_s(speed: float, params: BallParams) -> float:
-    """The longest a ball whose speed stays within ``speed`` (m/s) slides:
-    eqs. 25-26 give ``t1 = 2 |u0| / (7 mu_s g) = |v0 - v1| / (mu_s g)``,
-    at most ``speed / (mu_s g)`` (s) when ``v0`` and ``v1`` are both
-    within it (the time sliding friction takes to change the velocity by
-    the whole speed, as eq. 29's ``t3``)."""
+    """The time (s) sliding friction takes to change a ball's velocity by
+    ``speed`` (m/s): ``speed / (mu_s g)`` (eq. 3, ``|dv| = mu_s g t``; as
+    eq. 29's ``t3``).  A slide hidden this long before a rolling path of
+    that speed could have started at any speed up to twice it, so the
+    rolling answer does not determine v0 (:func:`result`'s
+    ``slide_hidden``).  Not the longest a ball can slide: eq. 26's ``t1 =
+    2 |u0| / (7 mu_s g)`` exceeds ``|v1| / (mu_s g)`` on stun and draw
+    shots (up to 12 times in the sampler)."""
     return float(speed) / (params.mu_s * params.g)
 
 

@@ -13,7 +13,7 @@ import numpy as np
 
 from cuespin.data_gen.sampler import sample_shot
 from cuespin.physics.motion import BallParams, Shot, phases
-from cuespin.recover.mle import model_track
+from cuespin.recover.mle import INTER_CODEC_ACF, model_track
 
 # Frame rates and per-axis centre noise (m) the calibration spans: the
 # sampler's frame rates, and the tracker's stated errors at 500 px/m from
@@ -54,14 +54,33 @@ def simulate_track(shot: Shot, params: BallParams, fps: float, sigma: float, rng
     if t_end is None:
         t_end = min(ph.t2 + 0.3, shot.t0 + MAX_AFTER_STRIKE_S)
     t = np.arange(np.ceil(t_start * fps), np.floor(t_end * fps) + 1) / fps
-    e = rng.standard_normal((len(t), 2))
+    xy = model_track(shot, params, t, exposure_s) + sigma * ar1_errors(len(t), rho, rng)
+    return SimTrack(t, xy, float(sigma), shot, params, float(exposure_s), float(fps))
+
+
+def ar1_errors(n: int, rho: float, rng) -> np.ndarray:
+    """(n, 2) errors of unit variance per axis, AR(1) along the rows with
+    lag-1 correlation ``rho`` (``rho^k`` k rows apart; 0: independent),
+    independent between axes: ``e_k = rho e_(k-1) + sqrt(1 - rho^2) w_k``,
+    started stationary.  Draws ``(n, 2)`` normals from ``rng``."""
+    e = rng.standard_normal((n, 2))
     if rho:
-        # e_k = rho e_(k-1) + sqrt(1 - rho^2) w_k, started stationary.
         from scipy.signal import lfilter
         e[1:] *= np.sqrt(1.0 - rho**2)
         e = lfilter([1.0], [1.0, -rho], e, axis=0)
-    xy = model_track(shot, params, t, exposure_s) + sigma * e
-    return SimTrack(t, xy, float(sigma), shot, params, float(exposure_s), float(fps))
+    return e
+
+
+def shared_errors(n: int, fps: float, rng, acf=INTER_CODEC_ACF) -> np.ndarray:
+    """(n, 2) errors of unit variance per axis at frames ``1 / fps`` s apart,
+    correlated in time as an inter-frame codec's whole error is
+    (recover.mle.INTER_CODEC_ACF ``(a, b, tau, tau_long)``: ``a
+    exp(-dt / tau_long) + b exp(-dt / tau)``): the sum of two AR(1)
+    (:func:`ar1_errors`) and an independent part."""
+    a, b, tau, tau_long = acf
+    return (np.sqrt(a) * ar1_errors(n, np.exp(-1.0 / (tau_long * fps)), rng)
+            + np.sqrt(b) * ar1_errors(n, np.exp(-1.0 / (tau * fps)), rng)
+            + np.sqrt(1.0 - a - b) * rng.standard_normal((n, 2)))
 
 
 def _grid_point(i: int, fps_grid, sigma_grid):

@@ -14,8 +14,8 @@ from scipy.stats import chi2
 from cuespin.data_gen.sampler import sample_scene
 from cuespin.pipeline.run import run_recover
 from cuespin.recover.estimate import estimate
-from cuespin.recover.mle import INTER_CODEC_ACF, model_track
-from cuespin.recover.simulate import sliding_tracks
+from cuespin.recover.mle import model_track
+from cuespin.recover.simulate import shared_errors, sliding_tracks
 from cuespin.render.video import render_video
 from cuespin.track.reader import VideoInfo
 
@@ -40,16 +40,6 @@ def z_of(m, shot) -> np.ndarray:
     return np.r_[(m.v0 - shot.v0) / m.stderr["v0"], (m.w0 - shot.w0) / m.stderr["w0"]]
 
 
-def ar1(n: int, tau: float, rng) -> np.ndarray:
-    """(n, 2) AR(1) of unit variance, correlation exp(-k / tau) k steps apart."""
-    phi = np.exp(-1.0 / tau)
-    x = np.zeros((n, 2))
-    x[0] = rng.standard_normal(2)
-    for k in range(1, n):
-        x[k] = phi * x[k - 1] + np.sqrt(1 - phi**2) * rng.standard_normal(2)
-    return x
-
-
 def test_correlated_codec_error_is_in_the_standard_errors():
     """Simulated tracks with an error of the measured H.264 kind (a part the
     tracker states plus the codec's, 3 times its variance, as measured on
@@ -57,7 +47,6 @@ def test_correlated_codec_error_is_in_the_standard_errors():
     apart as recover.mle.INTER_CODEC_ACF says): with the inter-frame model
     the errors are about one stated standard error; treated as independent
     they are not."""
-    a, b, tau, tau_long = INTER_CODEC_ACF
     rng = np.random.default_rng(7)
     z = {True: [], False: []}
     # 11: the 12th (v0 0.23 m/s at 120 fps) ends at a wrong optimum with
@@ -67,8 +56,7 @@ def test_correlated_codec_error_is_in_the_standard_errors():
         n = len(tr.t)
         # The whole error, 4 sigma^2 (the stated sigma^2 and the codec's 3),
         # correlated in time, on the track's exact centres.
-        err = 2.0 * tr.sigma * (np.sqrt(a) * ar1(n, tau_long * tr.fps, rng) + np.sqrt(b) * ar1(n, tau * tr.fps, rng)
-                                + np.sqrt(1 - a - b) * rng.standard_normal((n, 2)))
+        err = 2.0 * tr.sigma * shared_errors(n, tr.fps, rng)
         xy = model_track(tr.shot, tr.params, tr.t, tr.exposure_s)
         for inter in (True, False):
             m = estimate(tr.t, xy + err, np.full(n, tr.sigma), tr.params, lossless=False,
@@ -92,22 +80,21 @@ def test_codec_variance_measured_with_the_shared_error():
     absorbs part of it.  Measured on 24 such tracks (seed 4, 60-240 fps): mean
     ratio 0.946 (s.e. 0.020); these 12: 0.976; the estimator before h264cov
     (only the codec's share correlated) 0.823 on the 24, 0.853 on these 12."""
-    a, b, tau, tau_long = INTER_CODEC_ACF
     rng = np.random.default_rng(11)
     ratios = []
     for tr in sliding_tracks(12, seed=4, presets=("case3", "random"), fps_grid=(60.0, 120.0, 240.0),
                              sigma_grid=(1e-4,), blur=False):
         n = len(tr.t)
         c = 3.0 * tr.sigma**2
-        err = np.sqrt(tr.sigma**2 + c) * (np.sqrt(a) * ar1(n, tau_long * tr.fps, rng)
-                                          + np.sqrt(b) * ar1(n, tau * tr.fps, rng)
-                                          + np.sqrt(1 - a - b) * rng.standard_normal((n, 2)))
+        err = np.sqrt(tr.sigma**2 + c) * shared_errors(n, tr.fps, rng)
         est = estimate(tr.t, model_track(tr.shot, tr.params, tr.t, tr.exposure_s) + err, np.full(n, tr.sigma),
                        tr.params, lossless=False, run_paper=False, inter_frame=True)
         ratios.append(est.codec_var / c)
-    # About 2.3 standard errors of a 12-track mean (per-track scatter 0.098)
-    # either side of 0.946.
-    assert 0.88 < np.mean(ratios) < 1.01
+    # The standard error of a 12-track mean: 0.098 / sqrt(12) = 0.028.
+    # Above: 2.3 of them over the truth (1), so an unbiased estimator passes
+    # too.  Below: 2.3 of them under the estimator's measured mean (0.946,
+    # 24 tracks; the fit absorbs part of the shared error), its bias allowed.
+    assert 0.88 < np.mean(ratios) < 1.065
 
 
 @pytest.mark.slow

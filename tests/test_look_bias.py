@@ -116,11 +116,13 @@ def test_the_touched_run_after_the_strike_is_left_out_whole(monkeypatch):
 @pytest.mark.parametrize("preset", ["case3", "case4"])
 def test_a_touched_run_longer_than_any_slide_is_degenerate_naming_the_cue(preset):
     # sample_shot(6, case3): a stun shot sliding; case4 one rolling from the
-    # strike; 60 fps to rest.  The tracker flags 1.1 times the bound |v0| /
-    # (mu_s g) (eq. 26) after the strike: every frame a slide could end in
-    # is left out, so rolling from the strike is not told from a hidden
-    # slide.  Both methods degenerate, the reason naming the cue.  Before:
-    # the MLE degenerate as "the strike at t0 is not in view" and the
+    # strike; 60 fps to rest.  The tracker flags 1.1 times |v0| / (mu_s g)
+    # (recover.mle.slide_bound_s: the time sliding friction takes to change
+    # the velocity by the speed, eq. 3) after the strike: a slide hidden
+    # there could have started at any speed up to twice the rolling one, so
+    # rolling from the strike is not told from it.  Both methods
+    # degenerate, the reason naming the cue.  Before: the MLE degenerate
+    # as "the strike at t0 is not in view" and the
     # paper's answer from the rolling segments ok, case3 32% off.  A run
     # of 0.3 times the bound does not trip it (docs/measurements.md "stats12b").
     from cuespin.data_gen.sampler import sample_shot
@@ -136,7 +138,7 @@ def test_a_touched_run_longer_than_any_slide_is_degenerate_naming_the_cue(preset
                             touched=touched)["methods"]
         for m in out.values():
             if frac > 1:
-                assert m["status"] == "degenerate" and "cue's tip" in m["reason"] and "eq. 26" in m["reason"], m
+                assert m["status"] == "degenerate" and "cue's tip" in m["reason"] and "eq. 3" in m["reason"], m
             else:
                 assert "cue's tip" not in m["reason"], m["reason"]
 
