@@ -2384,6 +2384,31 @@ def synthetic_table_frame(cam, table=Table(), seed=0, noise=3.0, ss=4, felt=(40,
     return np.clip(np.round(img), 0, 255).astype(np.uint8)
 
 
+def matched_corner_errors(corners: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Detected corners' errors against the true ones, whatever corner they start at.
+
+    A detection's first corner is wherever the felt's outline starts, so the
+    corners are matched by the rotation (of the four) that puts them nearest
+    ``truth`` (the largest coordinate difference least).
+
+    Parameters
+    ----------
+    corners, truth : ndarray, shape (4, 2)
+        Detected and true corners (px), in the same sense of rotation.
+
+    Returns
+    -------
+    errors : ndarray, shape (4, 2)
+        The matched corners less ``truth`` (px).
+    idx : ndarray, shape (8,)
+        Where each matched coordinate lies in ``corners.ravel()`` (and so in
+        a detection's ``corner_cov``): ``corner_cov[np.ix_(idx, idx)]`` is
+        the errors' covariance (px^2).
+    """
+    k = min(range(4), key=lambda k: np.abs(np.roll(corners, -k, axis=0) - truth).max())
+    return np.roll(corners, -k, axis=0) - truth, np.roll(np.arange(8).reshape(4, 2), -k, axis=0).ravel()
+
+
 def random_table(seed: int):
     """A drawn table (``synthetic_table_frame``) with its camera and look drawn
     from ``seed`` (a local Generator): camera 1.5-3 m up, tilt 0-15 deg, k1
