@@ -322,13 +322,13 @@ def stated(args):
     from cuespin.data_gen.sampler import make_scene
     from cuespin.physics.camera import Camera
     from cuespin.physics.motion import Shot
-    from cuespin.pipeline.calibrate import detect_corners, synthetic_table_frame
+    from cuespin.pipeline.calibrate import detect_corners, matched_corner_errors, synthetic_table_frame
     from cuespin.render.draw import FrameRenderer
 
     def row(label, img, truth):
         kw = {} if args.pattern_px is None else {"pattern_px": args.pattern_px}
         det = detect_corners(img, robust=not args.no_robust, **kw)
-        d = min((np.roll(det.corners, -s, axis=0) - truth for s in range(4)), key=lambda e: np.abs(e).max())
+        d = matched_corner_errors(det.corners, truth)[0]
         h, w = img.shape[:2]
         naive = det.edge_rms * math.sqrt(4.0 / ((w + h) / 4.0))     # the scatter over the points' number
         jk = math.sqrt(np.trace(det.corner_cov[:8, :8]) / 8.0)
@@ -373,12 +373,18 @@ def tables(args):
     statistic)."""
     import math
 
-    from cuespin.pipeline.calibrate import _felt_distance, _felt_quad, cushion_lines, detect_corners, random_table
+    from cuespin.pipeline.calibrate import (
+        _felt_distance,
+        _felt_quad,
+        cushion_lines,
+        detect_corners,
+        matched_corner_errors,
+        random_table,
+    )
 
     def matched(det, truth):
-        k = min(range(4), key=lambda k: np.abs(np.roll(det.corners, -k, axis=0) - truth).max())
-        idx = np.roll(np.arange(8).reshape(4, 2), -k, axis=0).ravel()
-        return (np.roll(det.corners, -k, axis=0) - truth).ravel(), det.corner_cov[np.ix_(idx, idx)]
+        e, idx = matched_corner_errors(det.corners, truth)
+        return e.ravel(), det.corner_cov[np.ix_(idx, idx)]
 
     print("seed height tilt k1 roll | look | auto: edge lines rms_px stated_px inside2sd | outline: edge rms | "
           "lines: edge rms | z | band inside the lines' noses (px)")
