@@ -778,6 +778,24 @@ def shared_rho(meas: Measurements, acf=INTER_CODEC_ACF) -> np.ndarray:
     return rho
 
 
+def time_correlation(t, acf=INTER_CODEC_ACF, rho: float | None = None, frame_dt: float | None = None) -> np.ndarray:
+    """The per-axis correlation (k, k) of the errors of frames at times
+    ``t`` (s), unit diagonal: an inter-frame codec's whole error,
+    ``a exp(-dt / tau_long) + b exp(-dt / tau)`` off the diagonal
+    (:data:`INTER_CODEC_ACF`, :func:`shared_rho`'s), or, with ``rho``,
+    AR(1) errors of lag-1 correlation ``rho`` at ``frame_dt`` (s):
+    ``rho^(dt / frame_dt)``.  For fit.segment.correlated_end_F."""
+    t = np.asarray(t, dtype=float)
+    dt = np.abs(t[:, None] - t[None, :])
+    if rho is not None:
+        C = float(rho) ** (dt / float(frame_dt))
+    else:
+        a, b, tau, tau_long = acf
+        C = a * np.exp(-dt / tau_long) + b * np.exp(-dt / tau)
+    np.fill_diagonal(C, 1.0)
+    return C
+
+
 def _codec_G(J, meas: Measurements) -> np.ndarray:
     """``(W_i F_i)^T J_i`` per measurement, shape (m, 2, p): the whitened
     Jacobian seen from the codec's pixel error (``F_i`` its metres per pixel,
