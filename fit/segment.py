@@ -20,6 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import solve_triangular
 
 from cuespin.fit.decide import T1_END_MARGIN_FRAMES
 
@@ -581,7 +582,8 @@ def correlated_end_F(seg: Segments, t, xy, corr) -> float:
     ----------
     seg : Segments
         The segmentation of ``(t, xy)`` (its breakpoint in view: ``t1``
-        finite and ``unended`` set); otherwise ``seg.end_F`` is returned.
+        finite and ``unended`` set, no rest in view); otherwise
+        ``seg.end_F`` is returned.
     t : ndarray, shape (n,)
         Frame times (s) given to :func:`segment_track`.
     xy : ndarray, shape (n, 2)
@@ -597,7 +599,9 @@ def correlated_end_F(seg: Segments, t, xy, corr) -> float:
         The F statistic (dimensionless), 0 when the whitened breakpoint
         fit is no better than the unended one.
     """
-    if seg.unended is None or not np.isfinite(seg.t1) or seg.geometry_cov is None:
+    if seg.unended is None or not np.isfinite(seg.t1) or seg.geometry_cov is None or seg.t2 is not None:
+        # Nothing to test, or the rest in view (fit.decide.sliding_ended does
+        # not ask then): the k x k correlation is not worth making.
         return float(seg.end_F)
     t = np.asarray(t, dtype=float)
     xy = np.asarray(xy, dtype=float)
@@ -605,7 +609,6 @@ def correlated_end_F(seg: Segments, t, xy, corr) -> float:
     t, xy = t[good], xy[good]
     k = seg.geometry_cov["frames"]
     tf, xf = t[k], xy[k]
-    from scipy.linalg import solve_triangular
     try:
         L = np.linalg.cholesky(np.asarray(corr(tf), dtype=float))
     except np.linalg.LinAlgError:

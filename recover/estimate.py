@@ -279,6 +279,9 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         if codec is not None:
             return time_correlation(tf, codec.acf)
         return time_correlation(tf, rho=end_rho, frame_dt=frame_dt)
+
+    def end_F():  # None: independent errors, the segmentation's own end_F
+        return None if codec is None and end_rho is None else correlated_end_F(seg, t, xy, end_corr)
     try:
         start = (first.shot.x0, first.shot.t0, first.shot.v0, first.shot.w0) if first else starts[0]
         full, roll = fit_models(meas, params, start, exposure_s, fit_friction,
@@ -316,13 +319,13 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         if decisions["sliding_seen"]:
             decisions["sliding_ended"] = sliding_ended(
                 seg, t, phases(full.shot, full.params).t1, friction_known=not fit_friction,
-                end_F=None if codec is None and end_rho is None else correlated_end_F(seg, t, xy, end_corr))
+                end_F=end_F())
             mle = with_profile_interval(result(full, meas, lr, decisions["sliding_ended"].yes, codec, still, hac),
                                         full, meas, exposure_s)
         else:
             mle = result(roll, meas, lr, True, codec, still, hac)
     else:
-        decisions["sliding_ended"] = sliding_ended(seg, t)
+        decisions["sliding_ended"] = sliding_ended(seg, t, end_F=end_F())
     chosen = seg
     if "sliding_seen" in decisions and not decisions["sliding_seen"]:
         chosen = seg.rolling
