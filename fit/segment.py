@@ -20,7 +20,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import solve_triangular
 
 from cuespin.fit.decide import T1_END_MARGIN_FRAMES
 
@@ -562,7 +561,7 @@ def _geometry_cov(tf, xf, t0, t1, beyond, decel, v1, s2, n_rest, v0=None):
     return out
 
 
-def correlated_end_F(seg: Segments, t, xy, corr) -> float:
+def correlated_end_F(seg: Segments, t, xy, whiten) -> float:
     """``seg.end_F`` with the frames' errors correlated in time.
 
     The segmentation's ``end_F`` (its breakpoint against "still sliding at
@@ -588,10 +587,11 @@ def correlated_end_F(seg: Segments, t, xy, corr) -> float:
         Frame times (s) given to :func:`segment_track`.
     xy : ndarray, shape (n, 2)
         Ball centres (m) given to :func:`segment_track`.
-    corr : callable
-        ``corr(t_fit)``: the errors' correlation matrix (k, k) between the
-        fitted frames at times ``t_fit`` (s), unit diagonal, the same for
-        both axes (recover.mle.time_correlation).
+    whiten : callable
+        ``whiten(t_fit, M)``: ``L^-1 M`` for the rows of ``M`` (k, c) at the
+        fitted frames' times ``t_fit`` (s), ``L L^T`` the errors' correlation
+        between them (unit diagonal, the same for both axes;
+        recover.mle.time_whitener).
 
     Returns
     -------
@@ -601,7 +601,7 @@ def correlated_end_F(seg: Segments, t, xy, corr) -> float:
     """
     if seg.unended is None or not np.isfinite(seg.t1) or seg.geometry_cov is None or seg.t2 is not None:
         # Nothing to test, or the rest in view (fit.decide.sliding_ended does
-        # not ask then): the k x k correlation is not worth making.
+        # not ask then).
         return float(seg.end_F)
     t = np.asarray(t, dtype=float)
     xy = np.asarray(xy, dtype=float)
@@ -609,11 +609,6 @@ def correlated_end_F(seg: Segments, t, xy, corr) -> float:
     t, xy = t[good], xy[good]
     k = seg.geometry_cov["frames"]
     tf, xf = t[k], xy[k]
-    try:
-        L = np.linalg.cholesky(np.asarray(corr(tf), dtype=float))
-    except np.linalg.LinAlgError:
-        return float(seg.end_F)
-
     def whitened_sse(t0, t1, a_r):
         tau = np.maximum(tf - t0, 0.0)
         tau1 = max(min(t1, tf[-1] + 1.0) - t0, 0.0)
@@ -621,8 +616,8 @@ def correlated_end_F(seg: Segments, t, xy, corr) -> float:
         tr = tau - ts
         X = np.stack([np.ones_like(tau), tau, 0.5 * ts**2 + tau1 * tr], axis=1)
         y = xf - (0.5 * tr**2)[:, None] * a_r[None, :]  # rolling's known deceleration (eq. 18)
-        Xw = solve_triangular(L, X, lower=True)
-        yw = solve_triangular(L, y, lower=True)
+        w = whiten(tf, np.concatenate([X, y], axis=1))
+        Xw, yw = w[:, :3], w[:, 3:]
         beta = np.linalg.lstsq(Xw, yw, rcond=None)[0]
         r = yw - Xw @ beta
         return float(np.sum(r * r))

@@ -21,7 +21,7 @@ from cuespin.recover.measurements import (CUE_CLEAR_FRAMES, MAX_CODEC_NOISE_RATI
                                           as_covariance, build_measurements, codec_excess, codec_noise_ratio,
                                           cue_clear_s, fill_covariance, moving_scale, touched_run_s, track_step)
 from cuespin.recover.mle import (MAX_AR1, CodecCorrelation, MLEResult, ModelFit, ar1_from_residuals,
-                                 correlated_codec_var, time_correlation,
+                                 correlated_codec_var, time_whitener,
                                  fit_model, fit_models, initial_guess, lag1_autocorrelation, model_track, result,
                                  slip_lr, with_profile_interval)
 from cuespin.recover.paper import PaperResult, paper_from_segments, ran_into_rest
@@ -275,13 +275,11 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
     # gross13 class A, endf13).
     end_rho = None  # the AR(1) errors' lag-1 correlation, when the residuals show one
 
-    def end_corr(tf):
-        if codec is not None:
-            return time_correlation(tf, codec.acf)
-        return time_correlation(tf, rho=end_rho, frame_dt=frame_dt)
-
     def end_F():  # None: independent errors, the segmentation's own end_F
-        return None if codec is None and end_rho is None else correlated_end_F(seg, t, xy, end_corr)
+        if codec is None and end_rho is None:
+            return None
+        whiten = time_whitener(codec.acf) if codec is not None else time_whitener(rho=end_rho, frame_dt=frame_dt)
+        return correlated_end_F(seg, t, xy, whiten)
     try:
         start = (first.shot.x0, first.shot.t0, first.shot.v0, first.shot.w0) if first else starts[0]
         full, roll = fit_models(meas, params, start, exposure_s, fit_friction,

@@ -13,7 +13,7 @@ from cuespin.fit.decide import LEVEL, sliding_ended
 from cuespin.fit.segment import correlated_end_F, segment_track
 from cuespin.physics import phases
 from cuespin.recover.estimate import estimate
-from cuespin.recover.mle import model_track, time_correlation
+from cuespin.recover.mle import model_track, time_correlation, time_whitener
 from cuespin.recover.paper import path_shape
 from cuespin.recover.simulate import (FPS_GRID, SIGMA_GRID_M, ar1_errors, mixed_tracks, null_rolling_tracks,
                                       shared_errors, simulate_track, sliding_tracks)
@@ -111,18 +111,12 @@ def false_ended_correlated(n, seed, errors, fps_grid=FPS_GRID):
         i += 1
         t = np.arange(0, np.floor(cut * fps) + 1) / fps
         if errors == "codec":
-            e = shared_errors(len(t), fps, rng)
-
-            def corr(tf):
-                return time_correlation(tf)
+            e, whiten = shared_errors(len(t), fps, rng), time_whitener()
         else:
-            e = ar1_errors(len(t), END_TEST_RHO, rng)
-
-            def corr(tf, fps=fps):
-                return time_correlation(tf, rho=END_TEST_RHO, frame_dt=1 / fps)
+            e, whiten = ar1_errors(len(t), END_TEST_RHO, rng), time_whitener(rho=END_TEST_RHO, frame_dt=1 / fps)
         xy = model_track(shot, p, t, exposure) + sigma * e
         seg = segment_track(t, xy, 5 / 7 * p.mu_r * p.g, sigma, exposure)
-        hits += bool(seg) and sliding_ended(seg, t, end_F=correlated_end_F(seg, t, xy, corr)).yes
+        hits += bool(seg) and sliding_ended(seg, t, end_F=correlated_end_F(seg, t, xy, whiten)).yes
     return hits
 
 
@@ -130,8 +124,19 @@ def test_correlated_end_F_is_end_F_for_independent_errors():
     tr = next(still_sliding_tracks(1, 3))
     p = tr.params
     seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, tr.sigma, tr.exposure_s)
-    F = correlated_end_F(seg, tr.t, tr.xy, lambda tf: np.eye(len(tf)))
+    F = correlated_end_F(seg, tr.t, tr.xy, lambda tf, M: M)
     assert np.isclose(F, seg.end_F, rtol=1e-6, atol=1e-9), (F, seg.end_F)
+
+
+@pytest.mark.parametrize("kw", [{}, {"rho": 0.7, "frame_dt": 1 / 240}])
+def test_time_whitener_is_the_cholesky_whitening(kw):
+    # The O(k) Kalman whitening against L^-1 M by the k x k Cholesky factor,
+    # on frames at irregular times (a track with frames lost).
+    rng = np.random.default_rng(4)
+    t = np.sort(rng.choice(np.arange(600) / 240, 300, replace=False))
+    M = rng.standard_normal((300, 5))
+    L = np.linalg.cholesky(time_correlation(t, **kw))
+    assert np.allclose(time_whitener(**kw)(t, M), np.linalg.solve(L, M), atol=1e-10)
 
 
 def test_false_sliding_ended_rate_codec_480fps_small():
