@@ -4,7 +4,9 @@
   (paper case 4)?  :func:`sliding_seen`, from the likelihood ratio of the
   maximum-likelihood fit's two models (recover.mle.slip_lr).
 - Did sliding end in view?  :func:`sliding_ended`, from the segmentation's
-  F statistic of its breakpoint against "still sliding at the end".
+  F statistic of its breakpoint against "still sliding at the end" (under
+  the errors' correlation in time when they share one:
+  fit.segment.correlated_end_F).
 - Is the sliding path curved or straight?  :func:`curved`, from the F
   statistic of the orthogonal-distance parabola against the line
   (fit.conics).
@@ -49,6 +51,12 @@ LEVEL = 0.01
 SLIP_FACTOR = 1.0
 # - sliding ended: the segmentation's end_F on 219 tracks that end while
 #   still sliding: 1 above the nominal point (0.46%), at most 1 per cell;
+#   with errors correlated in time (an inter-frame codec's, AR(1)) end_F is
+#   the one made under that correlation (fit.segment.correlated_end_F), on
+#   the same point: 1,594 tracks per error model (docs/measurements.md,
+#   endf13) 0.56% (INTER_CODEC_ACF) / 0.50% (AR(1) 0.7), at most 1.0% at
+#   any frame rate; the independent errors' end_F there read 3.4% / 3.8%,
+#   up to 7.6% at 480 fps;
 END_FACTOR = 1.0
 # - curved: the conics F on straight sliding paths (cases 1, 3, 5): the
 #   parabola's curvature runs to zero and F stays near 0 (see
