@@ -90,15 +90,15 @@ def test_false_sliding_ended_rate_400():
 END_TEST_RHO = 0.7
 
 
-def false_ended_correlated(n, seed, errors, fps_grid=FPS_GRID):
-    """False "sliding ended" on ``n`` tracks cut mid-slide (as
-    :func:`still_sliding_tracks` draws them) whose errors are correlated in
-    time: ``errors`` "codec" (an inter-frame codec's whole error,
-    recover.mle.INTER_CODEC_ACF, recover.simulate.shared_errors) or "ar1"
-    (AR(1), lag-1 :data:`END_TEST_RHO`), decided under that correlation
-    (fit.segment.correlated_end_F), as recover.estimate asks it."""
+def correlated_still_sliding_tracks(n, seed, errors, fps_grid=FPS_GRID):
+    """``n`` tracks cut mid-slide (as :func:`still_sliding_tracks` draws
+    them) whose errors are correlated in time: ``errors`` "codec" (an
+    inter-frame codec's whole error, recover.mle.INTER_CODEC_ACF,
+    recover.simulate.shared_errors) or "ar1" (AR(1), lag-1
+    :data:`END_TEST_RHO`).  Yields ``(t, xy, params, sigma, exposure_s,
+    whiten, shot)``, ``whiten`` that correlation's (recover.mle.time_whitener)."""
     rng = np.random.default_rng(seed)
-    hits = i = 0
+    i = 0
     while i < n:
         fps = fps_grid[i % len(fps_grid)]
         sigma = SIGMA_GRID_M[(i // len(fps_grid)) % len(SIGMA_GRID_M)]
@@ -114,10 +114,31 @@ def false_ended_correlated(n, seed, errors, fps_grid=FPS_GRID):
             e, whiten = shared_errors(len(t), fps, rng), time_whitener()
         else:
             e, whiten = ar1_errors(len(t), END_TEST_RHO, rng), time_whitener(rho=END_TEST_RHO, frame_dt=1 / fps)
-        xy = model_track(shot, p, t, exposure) + sigma * e
+        yield t, model_track(shot, p, t, exposure) + sigma * e, p, sigma, exposure, whiten, shot
+
+
+def false_ended_correlated(n, seed, errors, fps_grid=FPS_GRID):
+    """False "sliding ended" on :func:`correlated_still_sliding_tracks`,
+    decided under their correlation (fit.segment.correlated_end_F), as
+    recover.estimate asks it."""
+    hits = 0
+    for t, xy, p, sigma, exposure, whiten, _ in correlated_still_sliding_tracks(n, seed, errors, fps_grid):
         seg = segment_track(t, xy, 5 / 7 * p.mu_r * p.g, sigma, exposure)
         hits += bool(seg) and sliding_ended(seg, t, end_F=correlated_end_F(seg, t, xy, whiten)).yes
     return hits
+
+
+def test_estimate_withholds_w0_of_a_codec_track_cut_mid_slide():
+    # The 17th of test_false_sliding_ended_rate_codec_480fps_small's tracks:
+    # with the segmentation's end_F, recover.estimate read "ended" (F 9.35
+    # against 6.69) and stated w0 (70.6, 44.0) rad/s for the true (185.9,
+    # 83.0); under the codec's correlation its slide runs to the end.
+    tracks = correlated_still_sliding_tracks(17, 202, "codec", fps_grid=(480.0,))
+    t, xy, p, sigma, exposure, _, _ = list(tracks)[-1]
+    est = estimate(t, xy, np.full(len(t), sigma), p, exposure, lossless=False, inter_frame=True,
+                   run_paper=False)
+    assert not est.decisions["sliding_ended"]
+    assert est.mle.status == "degenerate", est.mle.status
 
 
 def test_correlated_end_F_is_end_F_for_independent_errors():
