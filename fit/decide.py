@@ -4,7 +4,9 @@
   (paper case 4)?  :func:`sliding_seen`, from the likelihood ratio of the
   maximum-likelihood fit's two models (recover.mle.slip_lr).
 - Did sliding end in view?  :func:`sliding_ended`, from the segmentation's
-  F statistic of its breakpoint against "still sliding at the end".
+  F statistic of its breakpoint against "still sliding at the end" (under
+  the errors' correlation in time when they share one:
+  fit.segment.correlated_end_F).
 - Is the sliding path curved or straight?  :func:`curved`, from the F
   statistic of the orthogonal-distance parabola against the line
   (fit.conics).
@@ -49,6 +51,12 @@ LEVEL = 0.01
 SLIP_FACTOR = 1.0
 # - sliding ended: the segmentation's end_F on 219 tracks that end while
 #   still sliding: 1 above the nominal point (0.46%), at most 1 per cell;
+#   with errors correlated in time (an inter-frame codec's, AR(1)) end_F is
+#   the one made under that correlation (fit.segment.correlated_end_F), on
+#   the same point: 1,594 tracks per error model (docs/measurements.md,
+#   endf13) 0.56% (INTER_CODEC_ACF) / 0.50% (AR(1) 0.7), at most 1.0% at
+#   any frame rate; the independent errors' end_F there read 3.4% / 3.8%,
+#   up to 7.6% at 480 fps;
 END_FACTOR = 1.0
 # - curved: the conics F on straight sliding paths (cases 1, 3, 5): the
 #   parabola's curvature runs to zero and F stays near 0 (see
@@ -128,7 +136,8 @@ def t1_in_view(t1: float, t) -> bool:
     return bool(t1 <= t[-1] - T1_END_MARGIN_FRAMES * dt)
 
 
-def sliding_ended(seg, t, t1_fit: float | None = None, friction_known: bool = True) -> Decision:
+def sliding_ended(seg, t, t1_fit: float | None = None, friction_known: bool = True,
+                  end_F: float | None = None) -> Decision:
     """Did sliding end in view?  The segmentation's breakpoint against
     "still sliding when the track ended" (its ``end_F``, F(1, ``end_dof``)),
     with the breakpoint in view (:func:`t1_in_view`), both the
@@ -140,9 +149,17 @@ def sliding_ended(seg, t, t1_fit: float | None = None, friction_known: bool = Tr
     not hold and only the fit's ``t1_fit`` in view is asked for.  With no
     rest in view, a breakpoint held on the slide's deceleration bound
     (``seg.t1_bound``) is no: sliding's end is not identified.
+
+    ``end_F``, when given, replaces ``seg.end_F``: the same statistic with
+    the track's errors correlated in time (fit.segment.correlated_end_F;
+    an inter-frame codec's or AR(1) errors), on the same reference F(1,
+    ``end_dof``).  Independent errors' ``seg.end_F`` read "ended" on 8% of
+    480-fps tracks cut mid-slide with H.264's correlation (docs/measurements.md,
+    gross13, endf13).
     """
     thr = END_FACTOR * float(f_dist.isf(LEVEL, 1, max(seg.end_dof, 1)))
-    F = float(seg.end_F) if np.isfinite(seg.end_F) else 0.0
+    F = float(seg.end_F if end_F is None else end_F)
+    F = F if np.isfinite(F) else 0.0
     fit_in_view = t1_fit is None or t1_in_view(t1_fit, t)
     if seg.t2 is not None:  # the ball is seen at rest: sliding ended (at the latest there, case 2)
         return Decision(bool(fit_in_view), F, thr)

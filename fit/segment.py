@@ -559,3 +559,70 @@ def _geometry_cov(tf, xf, t0, t1, beyond, decel, v1, s2, n_rest, v0=None):
     if n_rest:
         out["x2"] = s2 / n_rest * I2
     return out
+
+
+def correlated_end_F(seg: Segments, t, xy, whiten) -> float:
+    """``seg.end_F`` with the frames' errors correlated in time.
+
+    The segmentation's ``end_F`` (its breakpoint against "still sliding at
+    the end", F(1, ``end_dof``)) assumes independent errors; errors shared
+    by neighbouring frames (an inter-frame codec's slow drift, an AR(1)
+    error) bend the track's last frames as a slide's end would, and the
+    test then reads "ended" far more often than its level (fit.decide's
+    END_FACTOR comment; docs/measurements.md, gross13 class A and endf13).
+    Here both fits, at the segmentation's breakpoints (``(seg.t0, seg.t1)``
+    and ``(seg.unended.t0, end)``) and its rolling acceleration, are made
+    again by generalised least squares: each axis's design ``[1, tau,
+    c2]`` (:func:`_solve_many`) and data whitened by the Cholesky factor of
+    the errors' correlation; the F statistic is the whitened one, on the
+    same degrees of freedom.
+
+    Parameters
+    ----------
+    seg : Segments
+        The segmentation of ``(t, xy)`` (its breakpoint in view: ``t1``
+        finite and ``unended`` set, no rest in view); otherwise
+        ``seg.end_F`` is returned.
+    t : ndarray, shape (n,)
+        Frame times (s) given to :func:`segment_track`.
+    xy : ndarray, shape (n, 2)
+        Ball centres (m) given to :func:`segment_track`.
+    whiten : callable
+        ``whiten(t_fit, M)``: ``L^-1 M`` for the rows of ``M`` (k, c) at the
+        fitted frames' times ``t_fit`` (s), ``L L^T`` the errors' correlation
+        between them (unit diagonal, the same for both axes;
+        recover.mle.time_whitener).
+
+    Returns
+    -------
+    float
+        The F statistic (dimensionless), 0 when the whitened breakpoint
+        fit is no better than the unended one.
+    """
+    if seg.unended is None or not np.isfinite(seg.t1) or seg.geometry_cov is None or seg.t2 is not None:
+        # Nothing to test, or the rest in view (fit.decide.sliding_ended does
+        # not ask then).
+        return float(seg.end_F)
+    t = np.asarray(t, dtype=float)
+    xy = np.asarray(xy, dtype=float)
+    good = np.all(np.isfinite(xy), axis=1) & np.isfinite(t)
+    t, xy = t[good], xy[good]
+    k = seg.geometry_cov["frames"]
+    tf, xf = t[k], xy[k]
+    def whitened_sse(t0, t1, a_r):
+        tau = np.maximum(tf - t0, 0.0)
+        tau1 = max(min(t1, tf[-1] + 1.0) - t0, 0.0)
+        ts = np.minimum(tau, tau1)
+        tr = tau - ts
+        X = np.stack([np.ones_like(tau), tau, 0.5 * ts**2 + tau1 * tr], axis=1)
+        y = xf - (0.5 * tr**2)[:, None] * a_r[None, :]  # rolling's known deceleration (eq. 18)
+        w = whiten(tf, np.concatenate([X, y], axis=1))
+        Xw, yw = w[:, :3], w[:, 3:]
+        beta = np.linalg.lstsq(Xw, yw, rcond=None)[0]
+        r = yw - Xw @ beta
+        return float(np.sum(r * r))
+
+    sse = whitened_sse(seg.t0, seg.t1, np.asarray(seg.a_roll, dtype=float))
+    sse_un = whitened_sse(seg.unended.t0, np.inf, np.zeros(2))
+    dof = max(int(seg.end_dof), 1)
+    return max(sse_un - sse, 0.0) / max(sse / dof, 1e-300)

@@ -15,12 +15,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cuespin.fit.decide import Decision, autocorrelated, sliding_ended, sliding_seen, strike_in_view, t1_in_view
-from cuespin.fit.segment import Segments, segment_track
+from cuespin.fit.segment import Segments, correlated_end_F, segment_track
 from cuespin.physics.motion import BallParams, phases
 from cuespin.recover.measurements import (CUE_CLEAR_FRAMES, MAX_CODEC_NOISE_RATIO, MAX_STEP_R, Measurements,
                                           as_covariance, build_measurements, codec_excess, codec_noise_ratio,
                                           cue_clear_s, fill_covariance, moving_scale, touched_run_s, track_step)
-from cuespin.recover.mle import (CodecCorrelation, MLEResult, ModelFit, ar1_from_residuals, correlated_codec_var,
+from cuespin.recover.mle import (MAX_AR1, CodecCorrelation, MLEResult, ModelFit, ar1_from_residuals,
+                                 correlated_codec_var, time_whitener,
                                  fit_model, fit_models, initial_guess, lag1_autocorrelation, model_track, result,
                                  slip_lr, with_profile_interval)
 from cuespin.recover.paper import PaperResult, paper_from_segments, ran_into_rest
@@ -267,6 +268,18 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
     decisions: dict[str, Decision] = {}
     mle = None
     hac = False  # no HAC sandwich: not autocorrelated, or the AR(1) model took it in
+    # The errors' correlation in time, when they share it (an inter-frame
+    # codec's, or AR(1) residuals): "sliding ended" is asked under it
+    # (fit.segment.correlated_end_F), else a slide outlasting the track,
+    # bent by its last frames' drift, reads as ended (docs/measurements.md,
+    # gross13 class A, endf13).
+    end_rho = None  # the AR(1) errors' lag-1 correlation, when the residuals show one
+
+    def end_F():  # None: independent errors, the segmentation's own end_F
+        if codec is None and end_rho is None:
+            return None
+        whiten = time_whitener(codec.acf) if codec is not None else time_whitener(rho=end_rho, frame_dt=frame_dt)
+        return correlated_end_F(seg, t, xy, whiten)
     try:
         start = (first.shot.x0, first.shot.t0, first.shot.v0, first.shot.w0) if first else starts[0]
         full, roll = fit_models(meas, params, start, exposure_s, fit_friction,
@@ -290,6 +303,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
                                         exposure_s, fit_friction,
                                         (roll.shot.x0, roll.shot.t0, roll.shot.v0, roll.shot.w0),
                                         ar1=max(rho, ar1_floor))
+                end_rho = float(np.clip(max(rho, ar1_floor), 0.0, MAX_AR1))  # as fit_model takes it
         # An inter-frame codec: the whole error's correlation in time states
         # the errors (recover.mle.codec_sandwich), whatever codec variance the
         # first fit measured (a negative one too: the tracker's own error is
@@ -301,14 +315,15 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         lr = slip_lr(full, roll, meas, codec, hac)
         decisions["sliding_seen"] = sliding_seen(lr)
         if decisions["sliding_seen"]:
-            decisions["sliding_ended"] = sliding_ended(seg, t, phases(full.shot, full.params).t1,
-                                                       friction_known=not fit_friction)
+            decisions["sliding_ended"] = sliding_ended(
+                seg, t, phases(full.shot, full.params).t1, friction_known=not fit_friction,
+                end_F=end_F())
             mle = with_profile_interval(result(full, meas, lr, decisions["sliding_ended"].yes, codec, still, hac),
                                         full, meas, exposure_s)
         else:
             mle = result(roll, meas, lr, True, codec, still, hac)
     else:
-        decisions["sliding_ended"] = sliding_ended(seg, t)
+        decisions["sliding_ended"] = sliding_ended(seg, t, end_F=end_F())
     chosen = seg
     if "sliding_seen" in decisions and not decisions["sliding_seen"]:
         chosen = seg.rolling
