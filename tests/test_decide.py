@@ -48,14 +48,16 @@ def test_false_sliding_rate_400_every_cell():
         assert sum(v) <= allowed(len(v)), (k, sum(v), len(v))
 
 
-def still_sliding_tracks(n, seed):
-    """Tracks that end while the ball still slides (masse and random shots,
-    cut 40-95% of the way through sliding)."""
+def mid_slide_draws(n, seed, fps_grid=FPS_GRID):
+    """``n`` shots that end while the ball still slides (masse and random
+    shots, cut 40-95% of the way through sliding), one per frame rate and
+    noise level in turn: ``(rng, shot, params, fps, sigma, exposure_s,
+    cut)``; the caller draws the errors from ``rng`` before the next."""
     rng = np.random.default_rng(seed)
     i = 0
     while i < n:
-        fps = FPS_GRID[i % len(FPS_GRID)]
-        sigma = SIGMA_GRID_M[(i // len(FPS_GRID)) % len(SIGMA_GRID_M)]
+        fps = fps_grid[i % len(fps_grid)]
+        sigma = SIGMA_GRID_M[(i // len(fps_grid)) % len(SIGMA_GRID_M)]
         shot, p = sample_shot(rng, ("masse", "random")[i % 2])
         ph = phases(shot, p)
         if ph.t1 - shot.t0 < 12 / fps:
@@ -63,6 +65,12 @@ def still_sliding_tracks(n, seed):
         cut = shot.t0 + float(rng.uniform(0.4, 0.95)) * (ph.t1 - shot.t0)
         exposure = float(rng.uniform(0.3, 1.0) / fps) if rng.random() < 0.5 else 0.0
         i += 1
+        yield rng, shot, p, fps, sigma, exposure, cut
+
+
+def still_sliding_tracks(n, seed):
+    """Tracks of :func:`mid_slide_draws` with independent errors."""
+    for rng, shot, p, fps, sigma, exposure, cut in mid_slide_draws(n, seed):
         yield simulate_track(shot, p, fps, sigma, rng, exposure, t_end=cut)
 
 
@@ -97,18 +105,7 @@ def correlated_still_sliding_tracks(n, seed, errors, fps_grid=FPS_GRID):
     recover.simulate.shared_errors) or "ar1" (AR(1), lag-1
     :data:`END_TEST_RHO`).  Yields ``(t, xy, params, sigma, exposure_s,
     whiten, shot)``, ``whiten`` that correlation's (recover.mle.time_whitener)."""
-    rng = np.random.default_rng(seed)
-    i = 0
-    while i < n:
-        fps = fps_grid[i % len(fps_grid)]
-        sigma = SIGMA_GRID_M[(i // len(fps_grid)) % len(SIGMA_GRID_M)]
-        shot, p = sample_shot(rng, ("masse", "random")[i % 2])
-        ph = phases(shot, p)
-        if ph.t1 - shot.t0 < 12 / fps:
-            continue
-        cut = shot.t0 + float(rng.uniform(0.4, 0.95)) * (ph.t1 - shot.t0)
-        exposure = float(rng.uniform(0.3, 1.0) / fps) if rng.random() < 0.5 else 0.0
-        i += 1
+    for rng, shot, p, fps, sigma, exposure, cut in mid_slide_draws(n, seed, fps_grid):
         t = np.arange(0, np.floor(cut * fps) + 1) / fps
         if errors == "codec":
             e, whiten = shared_errors(len(t), fps, rng), time_whitener()
