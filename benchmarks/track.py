@@ -486,6 +486,8 @@ def realistic(args):
     from multiprocessing import Pool
 
     rows = []
+    if args.frames_out:  # each worker writes its shot's npz there
+        Path(args.frames_out).mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp, Pool(args.workers) as pool:
         shots = args.shots if args.shots else range(args.n)
         jobs = [(i, args.seed, args.seconds, tmp, args.frames_out, args.codecs) for i in shots]
