@@ -131,6 +131,20 @@ class Segments:
         return self.ok
 
 
+def _path_basis(t, t0s, t1s):
+    """The fixed-breakpoint path's basis (eq. 18's sliding-then-rolling
+    form) at times ``t`` (n,) for breakpoints ``t0s``, ``t1s`` (K,): the
+    time since the strike ``tau`` (K, n), the sliding time ``tau1`` (K, 1),
+    the sliding acceleration's coefficient ``c2 = ts^2 / 2 + tau1 tr`` and
+    the rolling one's ``tr^2 / 2`` (K, n), ``ts`` the time sliding, ``tr``
+    rolling."""
+    tau = np.maximum(t[None, :] - t0s[:, None], 0.0)   # (K, n)
+    tau1 = np.maximum(t1s - t0s, 0.0)[:, None]         # (K, 1)
+    ts = np.minimum(tau, tau1)
+    tr = tau - ts                                      # time rolling
+    return tau, tau1, 0.5 * ts**2 + tau1 * tr, 0.5 * tr**2
+
+
 def _solve_many(t, xy, t0s, t1s, decel):
     """Least squares for fixed breakpoints, for many ``(t0, t1)`` at once.
 
@@ -148,12 +162,7 @@ def _solve_many(t, xy, t0s, t1s, decel):
     """
     t0s, t1s = np.broadcast_arrays(np.atleast_1d(np.asarray(t0s, dtype=float)),
                                    np.atleast_1d(np.asarray(t1s, dtype=float)))
-    tau = np.maximum(t[None, :] - t0s[:, None], 0.0)   # (K, n)
-    tau1 = np.maximum(t1s - t0s, 0.0)[:, None]         # (K, 1)
-    ts = np.minimum(tau, tau1)
-    tr = tau - ts                                      # time rolling
-    c2 = 0.5 * ts**2 + tau1 * tr
-    roll = 0.5 * tr**2
+    tau, tau1, c2, roll = _path_basis(t, t0s, t1s)
     K, n = c2.shape
     AtA = np.empty((K, 3, 3))
     AtA[:, 0, 0] = n
@@ -573,7 +582,7 @@ def correlated_end_F(seg: Segments, t, xy, whiten) -> float:
     Here both fits, at the segmentation's breakpoints (``(seg.t0, seg.t1)``
     and ``(seg.unended.t0, end)``) and its rolling acceleration, are made
     again by generalised least squares: each axis's design ``[1, tau,
-    c2]`` (:func:`_solve_many`) and data whitened by the Cholesky factor of
+    c2]`` (:func:`_path_basis`, as :func:`_solve_many`'s) and data whitened by the Cholesky factor of
     the errors' correlation; the F statistic is the whitened one, on the
     same degrees of freedom.
 
@@ -610,12 +619,10 @@ def correlated_end_F(seg: Segments, t, xy, whiten) -> float:
     k = seg.geometry_cov["frames"]
     tf, xf = t[k], xy[k]
     def whitened_sse(t0, t1, a_r):
-        tau = np.maximum(tf - t0, 0.0)
-        tau1 = max(min(t1, tf[-1] + 1.0) - t0, 0.0)
-        ts = np.minimum(tau, tau1)
-        tr = tau - ts
-        X = np.stack([np.ones_like(tau), tau, 0.5 * ts**2 + tau1 * tr], axis=1)
-        y = xf - (0.5 * tr**2)[:, None] * a_r[None, :]  # rolling's known deceleration (eq. 18)
+        tau, _, c2, roll = (v[0] for v in _path_basis(tf, np.array([float(t0)]),
+                                                      np.array([min(t1, tf[-1] + 1.0)])))
+        X = np.stack([np.ones_like(tau), tau, c2], axis=1)
+        y = xf - roll[:, None] * a_r[None, :]  # rolling's known deceleration (eq. 18)
         w = whiten(tf, np.concatenate([X, y], axis=1))
         Xw, yw = w[:, :3], w[:, 3:]
         beta = np.linalg.lstsq(Xw, yw, rcond=None)[0]

@@ -847,25 +847,28 @@ def cushion_noses(img: np.ndarray, sides: list, search_frac: float = 0.08, reach
         inner = g[w: max(len(offs) // 3, w + 4)]
         noise = np.median(inner) + 1.4826 * np.median(np.abs(inner - np.median(inner))) + 1e-3
         # a cushion's face or top: a step of at least 3 grey levels, 8x the flat felt's
-        if not (g[k] > max(3.0, 8.0 * noise)):
+        step_min = max(STEP_MIN_LEVELS, STEP_MIN_NOISE * noise)
+        # the faint-step zone's inner end: 7 px inside the outline, where its edge's blur ends
+        end = len(g) - 14
+        if not (g[k] > step_min):
             return None
         if outer is not None:
-            peak = (g >= np.roll(g, 1)) & (g >= np.roll(g, -1)) & (g > max(3.0, 8.0 * noise))
+            peak = (g >= np.roll(g, 1)) & (g >= np.roll(g, -1)) & (g > step_min)
             near = np.abs(np.arange(len(g)) - k)
             # or anywhere out to the outline's edge: the outermost step is the nose (the lines' rule), and
             # one outside this says a band's inner edge was taken (random table 14018: 9.4 px off)
-            out_ = (np.arange(len(g)) >= k + 2 * w) & (np.arange(len(g)) < len(g) - 14)   # as ``hidden``'s zone
+            out_ = (np.arange(len(g)) >= k + 2 * w) & (np.arange(len(g)) < end)   # as ``hidden``'s zone
             outer.append(bool((peak & (near > w) & ((near <= 2 * (reach_px + 3.0 + BAND_PULL_PX)) | out_)).any()))
         if hidden is not None:
-            zone = g[k + 2 * w: len(g) - 14]
+            zone = g[k + 2 * w: end]
             top = float(zone.max()) if len(zone) else 0.0
             # the same offsets mirrored to the felt's side of the nose, where g is defined
-            mirror = 2 * k - np.arange(k + 2 * w, len(g) - 14)
+            mirror = 2 * k - np.arange(k + 2 * w, end)
             mirror = g[mirror[mirror >= w]]
             ring = float(mirror.max()) if len(mirror) else 0.0
             scale = max(noise, HIDDEN_NOISE_FLOOR)
             # a step the rule sees there is a band's edge in sight (the paths' cross-check), not a hidden one
-            hidden.append((top / scale, top / max(ring, scale)) if top <= max(3.0, 8.0 * noise) else (0.0, 0.0))
+            hidden.append((top / scale, top / max(ring, scale)) if top <= step_min else (0.0, 0.0))
         med = float(offs[k])
         nose = _subpixel_edge(Ds, base + med * nrm, nrm, np.arange(-reach_px - 3.0, reach_px + 3.0 + 1e-9, 0.25))
         if len(nose) < max(10, 0.3 * len(base)):

@@ -345,9 +345,10 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         if chosen is seg.rolling and paper.status == "ok" and (mle.verdicts.get("slide_hidden")
                                                                or mle.verdicts.get("slide_outlasts")):
             # The paper's answer from the rolling segments rests on the same
-            # decision: a slide hidden by the cue's window is not excluded
-            # (recover.mle.result; sample_shot(1, "case5") at 60 fps, the
-            # window 1.1 times the bound: 29% off, answered ok).
+            # decision: a slide hidden by the cue's window (sample_shot(1,
+            # "case5") at 60 fps, the window 1.1 times the bound: 29% off,
+            # answered ok) or outlasting every frame seen is not excluded
+            # (recover.mle.result's slide_hidden, slide_outlasts).
             paper = PaperResult("degenerate", mle.reason)
     seen = decisions.get("sliding_seen")
     fit = None if seen is None else (full if seen else roll)

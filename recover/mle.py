@@ -770,10 +770,7 @@ def shared_rho(meas: Measurements, acf=INTER_CODEC_ACF) -> np.ndarray:
     measurements (dt from their times, s), shape (s, s) over ``meas.single``
     in order, zero on the diagonal (a measurement's own variance is the
     stated one)."""
-    a, b, tau, tau_long = acf
-    t = meas.t_means[meas.single]
-    dt = np.abs(t[:, None] - t[None, :])
-    rho = a * np.exp(-dt / tau_long) + b * np.exp(-dt / tau)
+    rho = time_correlation(meas.t_means[meas.single], acf)
     np.fill_diagonal(rho, 0.0)
     return rho
 
@@ -784,7 +781,8 @@ def time_correlation(t, acf=INTER_CODEC_ACF, rho: float | None = None, frame_dt:
     ``a exp(-dt / tau_long) + b exp(-dt / tau)`` off the diagonal
     (:data:`INTER_CODEC_ACF`, :func:`shared_rho`'s), or, with ``rho``,
     AR(1) errors of lag-1 correlation ``rho`` at ``frame_dt`` (s):
-    ``rho^(dt / frame_dt)``.  For fit.segment.correlated_end_F."""
+    ``rho^(dt / frame_dt)``.  The matrix :func:`time_whitener` whitens by
+    (without forming it) and, off its diagonal, :func:`shared_rho`."""
     t = np.asarray(t, dtype=float)
     dt = np.abs(t[:, None] - t[None, :])
     if rho is not None:

@@ -491,12 +491,19 @@ def white_free(d: np.ndarray, S: np.ndarray) -> np.ndarray | None:
     ``d' S^-1 d`` (it keeps ``1 - (1' S^-1 d)^2 / (1' S^-1 1 d' S^-1 d)``:
     the squared sine of the angle between ``d`` and white in the noise's
     metric), as for a ball that differs from the felt mainly in brightness."""
-    one = np.ones(3)
-    Sd, S1 = np.linalg.solve(S, d), np.linalg.solve(S, one)
-    full, a, b = float(d @ Sd), float(one @ Sd), float(one @ S1)
+    w, full, a, b = _blind_to(d, S, np.ones(3))
     if full <= 0 or 1.0 - a * a / (b * full) < WHITE_FREE_MIN:
         return None
-    return Sd - (a / b) * S1
+    return w
+
+
+def _blind_to(d: np.ndarray, S: np.ndarray, f: np.ndarray):
+    """Fisher's weights for ``d`` under ``S`` with ``w . f = 0``:
+    ``(w, d' S^-1 d, f' S^-1 d, f' S^-1 f)``, ``w = S^-1 (d - l f)``,
+    ``l = f' S^-1 d / f' S^-1 f``; ``w`` None when ``f' S^-1 f <= 0``."""
+    Sd, Sf = np.linalg.solve(S, d), np.linalg.solve(S, f)
+    full, a, b = float(d @ Sd), float(f @ Sd), float(f @ Sf)
+    return (Sd - (a / b) * Sf if b > 0 else None), full, a, b
 
 
 def felt_blind(d: np.ndarray, S: np.ndarray, felt: np.ndarray) -> np.ndarray | None:
@@ -508,13 +515,8 @@ def felt_blind(d: np.ndarray, S: np.ndarray, felt: np.ndarray) -> np.ndarray | N
     felt lies at 0 and the ball at its shading times its lit level: no part
     of it, however dark, matches the felt.  None when nothing is left (``d``
     along the felt's colour)."""
-    f = np.asarray(felt, float)
-    Sd, Sf = np.linalg.solve(S, d), np.linalg.solve(S, f)
-    ff = float(f @ Sf)
-    if ff <= 0:
-        return None
-    w = Sd - (float(f @ Sd) / ff) * Sf
-    return w if float(w @ d) > 1e-9 * float(d @ Sd) else None
+    w, full, _, _ = _blind_to(d, S, np.asarray(felt, float))
+    return w if w is not None and float(w @ d) > 1e-9 * full else None
 
 
 def shade_match(proj: Projection, polarity: int, contrast: float) -> float:

@@ -418,13 +418,17 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
             buf.append(img)
         n_dropped = 0
         best = None  # the model of the look-ahead where the ball moved most
+
+        def saw_move(bg) -> bool:
+            # The smallest ball in view: under perspective a far ball moving a
+            # diameter sweeps less than the image centre's would.
+            return bool(bg.polarity) and bg.moved_px >= LEARN_MOVED_AREA * np.pi * radii.r_min**2
+
         while True:
             proj, bg = learn_model(buf, radii, max(config.n_background, 2), mask, bool(info.lossless))
             if bg.polarity and (best is None or bg.moved_px > best[1].moved_px):
                 best = (proj, bg)
-            # The smallest ball in view: under perspective a far ball moving a
-            # diameter sweeps less than the image centre's would.
-            if bg.polarity and bg.moved_px >= LEARN_MOVED_AREA * np.pi * radii.r_min**2:
+            if saw_move(bg):
                 # The ball's shaded side fades into the felt in the codec's
                 # chroma (colour.FELT_SHADE_MIN): the channel blind to the
                 # felt's colour, judged on the model that saw the ball move
@@ -435,7 +439,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
                 if proj.luma_blind and not info.lossless and \
                         FELT_SHADE_MIN < shade_match(proj, bg.polarity, bg.contrast) < 1.0:
                     fb = learn_model(buf, radii, max(config.n_background, 2), mask, False, blind_to_felt=True)
-                    if fb[1].polarity and fb[1].moved_px >= LEARN_MOVED_AREA * np.pi * radii.r_min**2:
+                    if saw_move(fb[1]):
                         proj, bg = fb
                 break
             if ended:  # the ball never moved a diameter: the most it did
