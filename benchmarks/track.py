@@ -51,7 +51,7 @@ Usage: python benchmarks/track.py [speed] [memory] [colour] [accuracy] [realisti
                                   [--repeat 3] [--threads] [--codecs mjpg h264] [--rest] [--fresh-noise]
                                   [--video-dir DIR]
                                   [--n 60] [--seed 0] [--workers 2] [--seconds 0.6] [--csv out.csv]
-                                  [--shots I ...] [--frames-out DIR] [--codecs ffv1 mjpg grey]
+                                  [--shots I ...] [--frames-out DIR] [--codecs ffv1 mjpg grey] [--mix]
        python benchmarks/track.py realistic --summarize out.csv
 """
 
@@ -362,15 +362,21 @@ REALISTIC_LOOKS = {
 LUMA = (0.114, 0.587, 0.299)  # OpenCV's BGR-to-grey weights
 
 
-def realistic_scene(i, seed, seconds):
-    """Shot ``i`` of the realistic benchmark and its look's name."""
+def realistic_scene(i, seed, seconds, mix=False):
+    """Shot ``i`` of the realistic benchmark and its look's name.
+
+    ``mix`` keeps the sampler's cue (half the scenes) and 0-4 resting balls,
+    which the look table otherwise removes so that the looks compare alone.
+    """
     from cuespin.data_gen.sampler import sample_scenes
 
     scene = sample_scenes(i + 1, seed, look="realistic", codec="FFV1")[i]
     look = list(REALISTIC_LOOKS)[i % len(REALISTIC_LOOKS)]
     rng = np.random.default_rng([seed, i, 10])
     r = scene.render
-    r.update(REALISTIC_LOOKS[look], cue=False, balls=[], max_duration=seconds)
+    r.update(REALISTIC_LOOKS[look], max_duration=seconds)
+    if not mix:
+        r.update(cue=False, balls=[])
     if look == "highlight":
         r["specular"] = round(float(rng.uniform(0.3, 0.7)), 3)
     elif look == "markings":
@@ -380,13 +386,20 @@ def realistic_scene(i, seed, seconds):
     return scene, look
 
 
-def _errors(res, tuv, t, t0, r, cam):
+def _errors(res, tuv, t, t0, r, cam, cloth=None):
     """Moving, wholly-in-view frames: found share, false positives, and the
-    errors (px), stated errors and look factor of the good ones."""
+    errors (px), stated errors and look factor of the good ones.
+
+    ``cloth``: per frame, whether the ball lies wholly on the playing surface
+    (issue 10 counts frames "wholly in view and on open cloth"; a ball whose
+    centre is past the cushion's nose rides the rail in the render).
+    """
     n = min(res.n_frames, len(tuv))
     tuv, t = tuv[:n], t[:n]
     view = ((tuv[:, 0] >= r) & (tuv[:, 0] <= cam.width - 1 - r)
             & (tuv[:, 1] >= r) & (tuv[:, 1] <= cam.height - 1 - r))
+    if cloth is not None:
+        view &= cloth[:n]
     moving = view & (t > t0 + 0.02)
     ok = res.ok[:n]
     err = res.uv[:n] - tuv
@@ -395,8 +408,8 @@ def _errors(res, tuv, t, t0, r, cam):
     return ok[view].mean(), int(bad.sum()), err[good], res.stderr_px[:n][good], good
 
 
-def _track_stats(res, tuv, t, t0, r, cam):
-    found, fp, e, se, good = _errors(res, tuv, t, t0, r, cam)
+def _track_stats(res, tuv, t, t0, r, cam, cloth=None):
+    found, fp, e, se, good = _errors(res, tuv, t, t0, r, cam, cloth)
     out = {"found": found, "fp": fp, "n": len(e)}
     if len(e) < 4:
         return out, good
@@ -414,7 +427,7 @@ def _track_stats(res, tuv, t, t0, r, cam):
 
 def realistic_shot(args):
     """Render, transcode, track three ways and bound one realistic shot: one CSV row."""
-    i, seed, seconds, tmp, frames_dir, codecs = args
+    i, seed, seconds, tmp, frames_dir, codecs, mix = args
     import pandas as pd
 
     from cuespin.render import render_video
@@ -422,12 +435,13 @@ def realistic_shot(args):
     from cuespin.track.bound import centroid_crb_realistic
     from cuespin.track.tracker import FIT_BLUR_PX, TrackerConfig
 
-    scene, look = realistic_scene(i, seed, seconds)
+    scene, look = realistic_scene(i, seed, seconds, mix)
     cam = scene.camera
     path = Path(tmp) / f"real_{i}.avi"
     render_video(scene, path)
     truth = pd.read_csv(path.with_suffix(".truth.csv"))
     tuv, t = np.c_[truth.uc_px.values, truth.vc_px.values], truth.t.values
+    cloth = scene.table.contains(np.c_[truth.x_m.values, truth.y_m.values], scene.physics.R)
     cap = cv2.VideoCapture(str(path))
     mj, grey = Path(tmp) / f"real_{i}_mjpg.avi", Path(tmp) / f"real_{i}_grey.avi"
     wm = wg = None
@@ -453,7 +467,7 @@ def realistic_shot(args):
         if name not in codecs:
             continue
         res = track_video(video, scene, cfg)
-        stats, goods[name] = _track_stats(res, tuv, t, scene.truth.t0, res.radius_px, cam)
+        stats, goods[name] = _track_stats(res, tuv, t, scene.truth.t0, res.radius_px, cam, cloth)
         row.update({f"{name}_{k}": v for k, v in stats.items()})
         if frames_dir:
             n = min(res.n_frames, len(tuv))
@@ -490,7 +504,7 @@ def realistic(args):
         Path(args.frames_out).mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp, Pool(args.workers) as pool:
         shots = args.shots if args.shots else range(args.n)
-        jobs = [(i, args.seed, args.seconds, tmp, args.frames_out, args.codecs) for i in shots]
+        jobs = [(i, args.seed, args.seconds, tmp, args.frames_out, args.codecs, args.mix) for i in shots]
         out = None
         for row in pool.imap_unordered(realistic_shot, jobs):
             rows.append(row)
@@ -546,6 +560,8 @@ def main():
     ap.add_argument("--csv", default=None, help="realistic: write every shot's row here")
     ap.add_argument("--shots", type=int, nargs="+", default=None,
                     help="realistic: only these shots (indices of the --n set's sample)")
+    ap.add_argument("--mix", action="store_true",
+                    help="realistic: keep the sampler's cue and resting balls (default: removed, the looks alone)")
     ap.add_argument("--frames-out", default=None,
                     help="realistic: a directory to write each shot's per-frame track (npz) into")
     ap.add_argument("--codecs", nargs="+", default=None, type=str.lower,
