@@ -942,6 +942,23 @@ def test_a_jpeg_compressed_band_of_the_cushions_shade_is_still_refused():
         detect_corners(_jpeg(frame, 70))
 
 
+def test_a_band_the_codec_erased_is_refused():
+    """Random drawn table 14014 (a band at 0.800 x the felt inside cushions
+    of 0.792: a 0.5-level step) drawn at frame noise 0.5 and through JPEG
+    at quality 70: the codec quantises the step away (the strip between the
+    band's inner edge and the outline reads 50.7 levels flat on every side),
+    so no faint-step rule can see it, and it was answered 9.8 px off stating
+    0.053 (rev13v).  The felt's pixels equal their neighbours on 0.999 of
+    the samples and the nose rings (0.18 levels): a codec's flat cloth
+    (CODEC_FLAT_SHARE, CODEC_RING_LEVELS) is refused, naming --corners."""
+    from cuespin.pipeline.calibrate import random_table
+
+    t = random_table(14014)
+    frame = synthetic_table_frame(t["camera"], seed=14014, **dict(t["look"], noise=0.5))
+    with pytest.raises(CalibrationError, match="compression flattened.*give --corners"):
+        detect_corners(_jpeg(frame, 70))
+
+
 def test_paths_disagreeing_with_nothing_to_say_which_refuse():
     """The two paths' noses 9.2 combined errors apart on random table 12006
     (a band of the cushions' shade: both wrong, 6.1 and 5.8 px) with no band
