@@ -783,6 +783,27 @@ HIDDEN_NOISE_FLOOR = 0.02
 # 71/82 -> 50/82.  Raw frames: no decision changes.
 HIDDEN_MIRROR_Z = 1.3
 
+# A lossy codec's flat cloth is refused (``_codec_flattened``, jpeg12 in
+# docs/measurements.md): where the frame's noise is too small to dither the
+# codec's quantisation, a band's faint step under the quantum is erased
+# (random table 14014 at noise 0.5 + JPEG 70: a 0.5-level step read 50.7
+# flat on every side, answered 9.8 px off stating 0.053; no step statistic
+# can refuse it).  Flat: the felt's pixels (inside the noses) equal their
+# right-hand neighbours in every channel on at least CODEC_FLAT_SHARE of
+# the samples (median over the sides).  Measured on random tables 14014,
+# 16005 and (fresh) 18000-18059: noise 0.5 + JPEG 70 0.964-1.0 (the erased
+# case 0.999); noise 2-4 (as drawn) + JPEG 50 0.85-0.996, JPEG 70 0.51-0.91,
+# JPEG 95 0.09-0.23; noise 1 + JPEG 85 0.91-0.945; noise 0.5 + JPEG 95
+# 0.84-0.88, raw 0.14; a noise-free raw frame 1.00.  Cost on 18000-18059
+# (tables taking noses): noise 0.5 + JPEG 70 refusals 4 -> 17 of 21 whose
+# noses show, noise 2-4 + JPEG 50 10 -> 11 of 21, JPEG 70 and 95 none.  Ringing: the largest
+# step on the felt's side of the nose (grey levels, median over the sides)
+# at least CODEC_RING_LEVELS: a noise-free raw frame 0.007-0.010 (it keeps
+# a faint step: 14014 drawn noise-free is refused by HIDDEN_NOSE_Z, 13.2),
+# noise 0.5 raw 0.016-0.022, JPEG-flat frames 0.17-0.38.
+CODEC_FLAT_SHARE = 0.99
+CODEC_RING_LEVELS = 0.1
+
 
 def cushion_noses(img: np.ndarray, sides: list, search_frac: float = 0.08, reach_px: float = 4.0,
                   outer: list | None = None, hidden: list | None = None):
@@ -807,16 +828,19 @@ def cushion_noses(img: np.ndarray, sides: list, search_frac: float = 0.08, reach
     crossing cannot tell apart; or anywhere outside it (the step taken,
     the largest, is then a band's inner edge, not the nose).
 
-    ``hidden``, when given, gets one pair of floats a side: the largest
-    step between the nose taken and the outline's own edge (from 6 px out,
-    past the nose step's own window, to 7 px inside the outline, where the
+    ``hidden``, when given, gets four floats a side: the largest step
+    between the nose taken and the outline's own edge (from 6 px out, past
+    the nose step's own window, to 7 px inside the outline, where the
     outline edge's blur ends) too small for the step rule, in units of the
     flat felt's step scatter (the rule's ``noise``), and in units of the
     largest step at the same offsets on the felt's side of the nose (a
     codec's ringing beside the nose edge shows on both sides): a band
     inside the noses in nearly the cushions' shade, whose inner edge was
-    taken for them (``_hidden_z``); (0, 0) with no room between or a step
-    the rule sees there (a band's edge in sight: the paths' cross-check's).
+    taken for them (``_hidden_z``); these two 0 with no room between or a
+    step the rule sees there (a band's edge in sight: the paths'
+    cross-check's).  Then that largest step on the felt's side (grey
+    levels) and the felt's flat share (:func:`_flat_share`;
+    ``_codec_flattened``).
     """
     Ds = _smoothed(img)
     grey = Ds.mean(axis=2) if Ds.ndim == 3 else Ds
@@ -867,14 +891,32 @@ def cushion_noses(img: np.ndarray, sides: list, search_frac: float = 0.08, reach
             mirror = g[mirror[mirror >= w]]
             ring = float(mirror.max()) if len(mirror) else 0.0
             scale = max(noise, HIDDEN_NOISE_FLOOR)
+            # the felt's own pixels beside their neighbours (unsmoothed), inside the nose: a codec's flat blocks
+            flat = _flat_share(img, P[:, : max(len(offs) // 3, 2)])
             # a step the rule sees there is a band's edge in sight (the paths' cross-check), not a hidden one
-            hidden.append((top / scale, top / max(ring, scale)) if top <= step_min else (0.0, 0.0))
+            hidden.append((top / scale, top / max(ring, scale), ring, flat) if top <= step_min
+                          else (0.0, 0.0, ring, flat))
         med = float(offs[k])
         nose = _subpixel_edge(Ds, base + med * nrm, nrm, np.arange(-reach_px - 3.0, reach_px + 3.0 + 1e-9, 0.25))
         if len(nose) < max(10, 0.3 * len(base)):
             return None
         out.append(nose)
     return out
+
+
+def _flat_share(img: np.ndarray, P: np.ndarray) -> float:
+    """The share of the pixels at sample points ``P`` (px, any shape x 2) equal
+    in every channel to their right-hand neighbour: near 1 where a lossy codec
+    flattened the cloth into constant blocks, low on noisy raw frames."""
+    im = np.asarray(img)
+    if im.ndim == 2:
+        im = im[:, :, None]
+    h, w = im.shape[:2]
+    q = np.rint(P.reshape(-1, 2)).astype(int)
+    q = q[(q[:, 0] >= 0) & (q[:, 0] < w - 1) & (q[:, 1] >= 0) & (q[:, 1] < h)]
+    if len(q) == 0:
+        return 0.0
+    return float(np.all(im[q[:, 1], q[:, 0]] == im[q[:, 1], q[:, 0] + 1], axis=-1).mean())
 
 
 def edge_points(img: np.ndarray, quad: np.ndarray, contour: np.ndarray,
@@ -1576,8 +1618,9 @@ def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = Tru
         return _detection(*cushion_lines(img, quad, contour, D, thr, noses=noses, inside=inside), D.shape,
                           lines=True, **kw)
 
-    hidden_z = _hidden_z(hidden) if outline is not None and outline.edge == "noses" else 0.0
-    return _outline_or_lines(outline, straddled, cushions, lines, hidden_z=hidden_z)
+    on_noses = outline is not None and outline.edge == "noses"
+    return _outline_or_lines(outline, straddled, cushions, lines, hidden_z=_hidden_z(hidden) if on_noses else 0.0,
+                             flattened=on_noses and _codec_flattened(hidden))
 
 
 def _hidden_z(hidden: list) -> float:
@@ -1585,10 +1628,11 @@ def _hidden_z(hidden: list) -> float:
 
     Parameters
     ----------
-    hidden : list of (float, float)
-        ``cushion_noses``' ``hidden``, a pair a side: the faint step over the
-        felt's step scatter, and over the largest step at the same offsets on
-        the felt's side of the nose.
+    hidden : list of tuples
+        ``cushion_noses``' ``hidden``, one a side: the faint step over the
+        felt's step scatter, over the largest step at the same offsets on
+        the felt's side of the nose, that largest step (grey levels) and
+        the felt's flat share (:func:`_flat_share`).
 
     Returns
     -------
@@ -1600,11 +1644,24 @@ def _hidden_z(hidden: list) -> float:
     """
     if not hidden:
         return 0.0
-    over_scatter, over_ringing = np.median(np.asarray(hidden, dtype=float), axis=0)
+    over_scatter, over_ringing = np.median(np.asarray(hidden, dtype=float)[:, :2], axis=0)
     return float(over_scatter) if over_ringing >= HIDDEN_MIRROR_Z else 0.0
 
 
-def _outline_or_lines(outline, straddled: bool, cushions, lines: str = "auto", hidden_z: float = 0.0) -> Detection:
+def _codec_flattened(hidden: list) -> bool:
+    """Whether a lossy codec flattened the cloth past seeing a band in the
+    cushions' shade: the felt's pixels equal to their neighbours on at least
+    ``CODEC_FLAT_SHARE`` (median over the sides) while the felt's side of
+    the nose rings by ``CODEC_RING_LEVELS`` or more (a noise-free raw frame
+    is flat too, but does not ring, and keeps a faint step)."""
+    if not hidden:
+        return False
+    h = np.asarray(hidden, dtype=float)
+    return bool(np.median(h[:, 3]) >= CODEC_FLAT_SHARE and np.median(h[:, 2]) >= CODEC_RING_LEVELS)
+
+
+def _outline_or_lines(outline, straddled: bool, cushions, lines: str = "auto", hidden_z: float = 0.0,
+                      flattened: bool = False) -> Detection:
     """Which path's corners :func:`detect_corners` answers: the felt's outline's
     or the cushions' lines' (the one place this is decided).
 
@@ -1630,6 +1687,10 @@ def _outline_or_lines(outline, straddled: bool, cushions, lines: str = "auto", h
         ``_hidden_z`` of ``cushion_noses``' ``hidden`` when the outline's
         noses were found (0 otherwise): a faint step between them and the
         outline's edge.
+    flattened : bool
+        ``_codec_flattened`` of the same when the outline's noses were
+        found: a lossy codec flattened the cloth, so a band in nearly the
+        cushions' shade would leave no faint step to see.
 
     Returns
     -------
@@ -1650,7 +1711,8 @@ def _outline_or_lines(outline, straddled: bool, cushions, lines: str = "auto", h
     ------
     CalibrationError
         ``auto``, the outline's noses with a faint step outside them
-        (``hidden_z`` at least ``HIDDEN_NOSE_Z``), or the two paths'
+        (``hidden_z`` at least ``HIDDEN_NOSE_Z``) or a codec's flat cloth
+        that could not show one (``flattened``), or the two paths'
         corners disagreeing on the same edge with nothing to say which is
         wrong: the reason says so and asks for ``--corners``.
     """
@@ -1662,6 +1724,10 @@ def _outline_or_lines(outline, straddled: bool, cushions, lines: str = "auto", h
         raise CalibrationError(f"a faint step ({hidden_z:.1f} x the cloth's scatter) lies between the noses found "
                                "and the felt's outline: a band inside the cushions in nearly their shade may hide "
                                "the noses, whose inner edge would be taken for them; give --corners")
+    if flattened:
+        raise CalibrationError("the video's compression flattened the cloth into constant blocks: a band inside the "
+                               "cushions in nearly their shade, whose inner edge would be taken for the noses, could "
+                               "not be seen; give --corners (or a less compressed frame)")
     inside = []
     try:
         other = cushions(inside)

@@ -942,6 +942,57 @@ def test_a_jpeg_compressed_band_of_the_cushions_shade_is_still_refused():
         detect_corners(_jpeg(frame, 70))
 
 
+def test_a_band_the_codec_erased_is_refused():
+    """Random drawn table 14014 (a band at 0.800 x the felt inside cushions
+    of 0.792: a 0.5-level step) drawn at frame noise 0.5 and through JPEG
+    at quality 70: the codec quantises the step away (the strip between the
+    band's inner edge and the outline reads 50.7 levels flat on every side),
+    so no faint-step rule can see it, and it was answered 9.8 px off stating
+    0.053 (rev13v).  The felt's pixels equal their neighbours on 0.999 of
+    the samples and the nose rings (0.18 levels): a codec's flat cloth
+    (CODEC_FLAT_SHARE, CODEC_RING_LEVELS) is refused, naming --corners."""
+    from cuespin.pipeline.calibrate import random_table
+
+    t = random_table(14014)
+    frame = synthetic_table_frame(t["camera"], seed=14014, **dict(t["look"], noise=0.5))
+    with pytest.raises(CalibrationError, match="compression flattened.*give --corners"):
+        detect_corners(_jpeg(frame, 70))
+
+
+@pytest.mark.slow
+def test_the_codec_flat_rule_spares_noisy_jpeg_and_raw_frames():
+    """The codec's flat-cloth rule (``_codec_flattened``) on the random drawn
+    tables 16000-16019 whose outline takes noses: off on every one at the
+    drawn noise (2-4 levels) raw and through JPEG 70 (flat shares 0.51-0.91
+    on 18000-18059, under CODEC_FLAT_SHARE 0.99: measured 0 of 6 and 0 of 7
+    here), on for most at noise 0.5 through JPEG 70 (0.964-1.0 on
+    18000-18059; measured 6 of 7 here), where a band's faint step under the
+    codec's quantum is erased (14014)."""
+    from cuespin.pipeline.calibrate import (
+        _codec_flattened,
+        _felt_distance,
+        _felt_quad,
+        cushion_noses,
+        edge_points,
+        random_table,
+    )
+
+    seen = {"raw": [], "jpeg70": [], "n05 jpeg70": []}
+    for seed in range(16000, 16020):
+        t = random_table(seed)
+        if "cushion_m" not in t["look"]:
+            continue
+        quiet = synthetic_table_frame(t["camera"], seed=seed, **dict(t["look"], noise=0.5))
+        for name, img in (("raw", t["frame"]), ("jpeg70", _jpeg(t["frame"], 70)), ("n05 jpeg70", _jpeg(quiet, 70))):
+            D, thr = _felt_distance(img)
+            quad, contour = _felt_quad(D, thr)
+            hidden = []
+            if cushion_noses(img, edge_points(img, quad, contour), hidden=hidden) is not None:
+                seen[name].append(_codec_flattened(hidden))
+    assert len(seen["raw"]) >= 5 and not any(seen["raw"]) and not any(seen["jpeg70"]), seen
+    assert len(seen["n05 jpeg70"]) >= 5 and np.mean(seen["n05 jpeg70"]) >= 0.5, seen
+
+
 def test_paths_disagreeing_with_nothing_to_say_which_refuse():
     """The two paths' noses 9.2 combined errors apart on random table 12006
     (a band of the cushions' shade: both wrong, 6.1 and 5.8 px) with no band
