@@ -342,14 +342,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         paper = paper_from_segments(chosen, t, xy, params, paper_sigma, frame_dt, strike_seen, independent,
                                     meas=meas, noise=mle_noise(mle, codec))
         shape = paper.trajectory == "parabola" if paper.trajectory else None
-        if chosen is seg.rolling and paper.status == "ok" and (mle.verdicts.get("slide_hidden")
-                                                               or mle.verdicts.get("slide_outlasts")):
-            # The paper's answer from the rolling segments rests on the same
-            # decision: a slide hidden by the cue's window (sample_shot(1,
-            # "case5") at 60 fps, the window 1.1 times the bound: 29% off,
-            # answered ok) or outlasting every frame seen is not excluded
-            # (recover.mle.result's slide_hidden, slide_outlasts).
-            paper = PaperResult("degenerate", mle.reason)
+        paper = paper_verdicts(paper, mle, chosen is seg.rolling)
     seen = decisions.get("sliding_seen")
     fit = None if seen is None else (full if seen else roll)
     decided = Decided(
@@ -400,6 +393,7 @@ def _refit(keep: Decided, seg, t, xy, cov, params, exposure_s, fit_friction, run
         paper = paper_from_segments(chosen, t, xy, params, paper_sigma, frame_dt, keep.strike_seen, independent,
                                     curved=keep.curved, near=keep.paper, apart=keep.stop_apart, meas=meas,
                                     noise=mle_noise(mle, codec))
+        paper = paper_verdicts(paper, mle, keep.segments == "rolling")
     paper, mle = unexplained(paper, mle, meas, keep.codec_var, sigma,
                              # the tracker's stated cov, as in estimate: rolling_slope measures the codec's
                              # share itself (meas.cov already holds it; review 12b: ratios went negative)
@@ -409,6 +403,29 @@ def _refit(keep: Decided, seg, t, xy, cov, params, exposure_s, fit_friction, run
                              step=step_r(meas, fit, exposure_s, mle))
     return Estimate(chosen or seg, paper, mle, meas, keep.codec_var, decisions,
                     {"fit": t_fit, "recover": time.perf_counter() - clock}, keep)
+
+
+def paper_verdicts(paper, mle, rolling: bool):
+    """The paper's answer ``paper``, or ``degenerate`` with the fit's reason
+    where the fit's verdicts (recover.mle.result, asked of the frames the
+    recovery trusts) say the frames cannot know what the paper's answer
+    rests on.  From the rolling segments (``rolling``): a slide hidden by
+    the cue's window (sample_shot(1, "case5") at 60 fps, the window 1.1
+    times the bound: 29% off, answered ok) or outlasting every frame seen
+    is not excluded (``slide_hidden``, ``slide_outlasts``).  Any segments:
+    v0 not determined, or the strike not in view, by the frames left after
+    the cue's touched run (``v0_determined``, ``strike_seen``): the paper's
+    segmentation takes x0 and the slide's start from all frames, those
+    touched by the cue too (realistic H.264 seed 32 shot 0: the cue's run
+    frames 31-57, the segmentation's t1 26 ms early, v0 19% off at 10 of its
+    stated errors; docs/measurements.md, paper11)."""
+    if paper is None or paper.status != "ok" or mle is None:
+        return paper
+    v = mle.verdicts or {}
+    if (rolling and (v.get("slide_hidden") or v.get("slide_outlasts"))) \
+            or v.get("v0_determined") is False or v.get("strike_seen") is False:
+        return PaperResult("degenerate", mle.reason)
+    return paper
 
 
 def step_r(meas: Measurements, fit: ModelFit | None, exposure_s: float, mle) -> float:
