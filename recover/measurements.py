@@ -507,7 +507,8 @@ def group_shares(frame_cov_used, g, m: int, scatter, min_share: float = 0.0, sca
     return c, share
 
 
-def linear_covariance(meas: Measurements, weights, ar1: float = 0.0, scale: float = 1.0) -> np.ndarray:
+def linear_covariance(meas: Measurements, weights, ar1: float = 0.0, scale: float = 1.0,
+                      acf: tuple | None = None) -> np.ndarray:
     """Covariance (m^2) of estimates linear in the track's centres, ``x_a =
     sum_i weights[a, i] xy[i]`` (the same weights on both axes), or with
     per-axis weights (shape (k, n, 2)) the scalars ``q_a = sum_i weights[a,
@@ -517,8 +518,10 @@ def linear_covariance(meas: Measurements, weights, ar1: float = 0.0, scale: floa
     measurement (the strike's) independent.  With ``ar1``, the moving
     ball's frames (measured one by one) correlated as the maximum-likelihood
     fit has them (recover.mle.ar1_prewhiten: ``ar1^k`` between frames ``k``
-    apart, in their whitened errors); all of it times ``scale`` (the fit's
-    ``max(1, chi2/dof)``).
+    apart, in their whitened errors); with ``acf``, as an inter-frame
+    codec shares them (recover.mle.codec_sandwich: ``rho(dt)`` of
+    recover.mle.time_correlation between their whitened errors); all of it
+    times ``scale`` (the fit's ``max(1, chi2/dof)``).
 
     Parameters
     ----------
@@ -530,6 +533,10 @@ def linear_covariance(meas: Measurements, weights, ar1: float = 0.0, scale: floa
         The errors' lag-1 correlation between neighbouring frames (0: independent).
     scale : float
         Factor on the stated variances (the fit's residuals' own, when larger).
+    acf : tuple, optional
+        An inter-frame codec's correlation in time,
+        ``(a, b, tau, tau_long)`` (recover.mle.INTER_CODEC_ACF, the
+        recovery's CodecCorrelation.acf); None: none.
 
     Returns
     -------
@@ -559,7 +566,34 @@ def linear_covariance(meas: Measurements, weights, ar1: float = 0.0, scale: floa
         out += np.einsum("amj,mjk,bmk->ab", S, fc, S) - np.einsum("aij,ijk,bik->ab", Gu, fc[g], Gu)
         if ar1 > 0:
             out += _ar1_extra(meas, G, float(ar1))
+        if acf is not None:
+            out += _shared_extra(meas, G, acf)
     return scale * out
+
+
+def _single_frames(meas: Measurements, G):
+    """The frames measured one by one (the moving ball's), in frame order,
+    and each estimate's share of their whitened errors, ``Y`` (frames, k, 2):
+    ``L_i^T G_a,i`` with ``L_i`` the frame's Cholesky factor."""
+    used = np.flatnonzero(meas.used)
+    one = used[meas.single[meas.group[used]]]
+    L = np.linalg.cholesky(meas.cov[one] + 1e-30 * np.eye(2))
+    return one, np.einsum("aij,ijl->ial", G[:, one], L)
+
+
+def _shared_extra(meas: Measurements, G, acf) -> np.ndarray:
+    """What an inter-frame codec's error shared in time adds to
+    :func:`linear_covariance`'s independent sum, shape (k, k): ``sum_(i !=
+    j) rho(t_j - t_i) (L_i^T G_a,i) . (L_j^T G_b,j)`` over the single-frame
+    measurements, ``rho`` recover.mle.time_correlation's off its diagonal,
+    as the fit's recover.mle.shared_sandwich has it between them."""
+    from cuespin.recover.mle import time_correlation
+    one, Y = _single_frames(meas, G)
+    if len(one) < 2:
+        return 0.0
+    rho = time_correlation(meas.t[one], acf)
+    np.fill_diagonal(rho, 0.0)
+    return np.einsum("ial,ij,jbl->ab", Y, rho, Y)
 
 
 def _ar1_extra(meas: Measurements, G, rho: float) -> np.ndarray:
@@ -568,13 +602,10 @@ def _ar1_extra(meas: Measurements, G, rho: float) -> np.ndarray:
     ``sum_(i != j) rho^|k_i - k_j| (L_i^T G_a,i) . (L_j^T G_b,j)`` with
     ``L_i`` each frame's Cholesky factor, over the frame lattice as
     recover.mle._ar1_cov_times sums it (a forward and a backward filter)."""
-    used = np.flatnonzero(meas.used)
-    one = used[meas.single[meas.group[used]]]
+    one, Y = _single_frames(meas, G)  # Y: estimate a's share of frame i's whitened errors
     if len(one) < 2:
         return 0.0
     pos = frame_lattice(meas.t[one])
-    L = np.linalg.cholesky(meas.cov[one] + 1e-30 * np.eye(2))
-    Y = np.einsum("aij,ijl->ial", G[:, one], L)  # (frames, k, 2): estimate a's share of frame i's whitened errors
     S = lattice_ar1_sums(pos, Y, rho, own=0)  # sum over j != i of rho^|i - j| Y_j
     return np.einsum("ial,ibl->ab", Y, S)
 

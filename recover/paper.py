@@ -299,8 +299,8 @@ def inputs_covariance(seg, meas, names, noise=(0.0, 1.0)) -> np.ndarray | None:
     with the codec's share, a rest's frames sharing theirs as the
     maximum-likelihood fit has them: recover.measurements.linear_covariance),
     plus the breakpoints' own shares (:func:`breakpoint_shares`); None
-    without the weights.  ``noise``: the maximum-likelihood fit's ``(ar1, scale)``, its errors'
-    lag-1 correlation and ``max(1, chi2/dof)`` (linear_covariance)."""
+    without the weights.  ``noise``: the maximum-likelihood fit's ``(ar1, scale[, acf])``
+    (recover.estimate.mle_noise; linear_covariance's arguments)."""
     from cuespin.recover.measurements import linear_covariance
     w = segment_weights(seg, len(meas.t)) if meas is not None else None
     if w is None or any(k not in w for k in names):
@@ -491,11 +491,13 @@ def paper_from_segments(seg, t, xy, params: BallParams, sigma: float, frame_dt: 
         the same ``t``, as the maximum-likelihood fit uses them): the errors
         of ``x0``, ``x1`` and ``x2`` follow from its per-frame covariances
         and rests (:func:`geometry_covariance`); without it, from ``sigma``.
-    noise : tuple of float
-        ``(ar1, scale)``: the maximum-likelihood fit's error model over
-        ``meas``, its errors' lag-1 correlation between frames and
-        ``max(1, chi2/dof)``; the paper's inputs are measured by the same
-        frames, so their errors follow the same model.
+    noise : tuple
+        ``(ar1, scale[, acf])`` (recover.estimate.mle_noise): the
+        maximum-likelihood fit's error model over ``meas``, its errors'
+        lag-1 correlation between frames, ``max(1, chi2/dof)`` and an
+        inter-frame codec's correlation in time; the paper's inputs are
+        measured by the same frames, so their errors follow the same model
+        (recover.measurements.linear_covariance).
     """
     res = _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, near, apart, meas, noise)
     return sliding_time_check(res, seg, params, sigma, frame_dt)

@@ -360,6 +360,38 @@ def test_linear_covariance_carries_the_fits_ar1_errors_and_scale():
     assert np.allclose(linear_covariance(meas, G, rho, scale), got, rtol=1e-12, atol=1e-22)
 
 
+def test_linear_covariance_carries_an_inter_frame_codecs_correlation():
+    # On H.264 the fit states its errors with each frame's whole error
+    # shared with its neighbours in time (recover.mle.shared_sandwich:
+    # rho(dt) of time_correlation between the moving frames' whitened
+    # errors); the paper's inputs, measured by the same frames, must carry
+    # it too (paper11: without it the paper's 95% intervals covered 75.0%
+    # on realistic H.264 seed 34).  Checked against the full frame
+    # covariance, rho(dt_ij) L_i L_j^T between the moving frames, by brute force.
+    from cuespin.recover.measurements import linear_covariance
+    from cuespin.recover.mle import INTER_CODEC_ACF, time_correlation
+    rng = np.random.default_rng(6)
+    t = np.arange(60) / 120.0
+    xy = np.c_[np.where(t < 0.2, 0.0, 0.3 * (t - 0.2)), np.zeros(60)] + 1e-4 * rng.standard_normal((60, 2))
+    cov = rng.uniform(0.5e-4, 2e-4, 60)
+    meas = build_measurements(t, xy, cov, t0=0.2, frame_dt=1 / 120.0)
+    one = np.flatnonzero(meas.used)
+    one = one[meas.single[meas.group[one]]]
+    assert len(one) >= 20
+    W = np.zeros((3, 60))
+    W[0, one] = 1.0 / len(one)
+    W[1, one[5]] = 1.0
+    W[2, one] = np.linspace(-1.0, 1.0, len(one)) / len(one)
+    base = linear_covariance(meas, W)
+    L = np.linalg.cholesky(meas.cov[one])
+    R = time_correlation(meas.t[one], INTER_CODEC_ACF) - np.eye(len(one))
+    Y = np.einsum("ai,ijk->aijk", W[:, one], L)
+    extra = np.einsum("aipl,ij,bjql->apbq", Y, R, Y).reshape(6, 6)
+    got = linear_covariance(meas, W, 0.0, 1.5, acf=INTER_CODEC_ACF)
+    assert np.allclose(got, 1.5 * (base + extra), rtol=1e-9, atol=1e-20)
+    assert got[0, 0] > 1.5 * 3 * base[0, 0]  # a mean of tens of frames: several times less precise
+
+
 def test_parabola_weights_are_the_converged_fits_linearisation():
     # recover.paper.parabola_weights: the orthogonal fit's (log a, theta,
     # vertex) move with its points as G . dp; checked against refits of
