@@ -211,6 +211,11 @@ def one_shot(args):
             for key, indep in (("mle_crb_z_indep", True), ("mle_crb_z", False)):
                 kw_ar1 = {"ar1": float(getattr(est.mle, "ar1", 0.0) or 0.0)} \
                     if "ar1" in inspect.signature(mle_bound).parameters else {}
+                # An inter-frame codec: its frames' errors correlated in time as
+                # the fit's covariance takes them (recover.mle.INTER_CODEC_ACF).
+                if tr.inter_frame and not tr.lossless and "acf" in inspect.signature(mle_bound).parameters:
+                    from cuespin.recover.mle import INTER_CODEC_ACF
+                    kw_ar1["acf"] = INTER_CODEC_ACF
                 cov, rolling = mle_bound(scene, est.meas, independent=indep, **kw_ar1)
                 idx = [3, 4] if rolling else [3, 4, 5, 6]
                 e = err[:2] if rolling else err
