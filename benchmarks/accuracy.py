@@ -408,7 +408,8 @@ def summarize(rows, seed=0):
               f"{pct([r[f'{m}_ev'] for r in ok], 95):9.2e} {pct([r[f'{m}_ew'] for r in ok], 50):9.2e} "
               f"{pct([r[f'{m}_ew'] for r in ok], 95):9.2e}  {other}")
     ok = [r for r in rows if r["mle_status"] == "ok"]
-    for key, what in (("mle_crb_z", "the fit's own measurements (recover.measurements)"),
+    for key, what in (("mle_crb_z", "the fit's own measurements (recover.measurements; on inter-frame video "
+                                    "correlated in time as the fit's covariance takes them)"),
                       ("mle_crb_z_indep", "tracker's errors, every frame independent (reference)")):
         crb_z = np.array([r[key] for r in ok if np.isfinite(r[key])])
         if len(crb_z):
