@@ -211,6 +211,11 @@ def one_shot(args):
             for key, indep in (("mle_crb_z_indep", True), ("mle_crb_z", False)):
                 kw_ar1 = {"ar1": float(getattr(est.mle, "ar1", 0.0) or 0.0)} \
                     if "ar1" in inspect.signature(mle_bound).parameters else {}
+                # An inter-frame codec: its frames' errors correlated in time as
+                # the fit's covariance takes them (recover.mle.INTER_CODEC_ACF).
+                if tr.inter_frame and not tr.lossless and "acf" in inspect.signature(mle_bound).parameters:
+                    from cuespin.recover.mle import INTER_CODEC_ACF
+                    kw_ar1["acf"] = INTER_CODEC_ACF
                 cov, rolling = mle_bound(scene, est.meas, independent=indep, **kw_ar1)
                 idx = [3, 4] if rolling else [3, 4, 5, 6]
                 e = err[:2] if rolling else err
@@ -403,7 +408,8 @@ def summarize(rows, seed=0):
               f"{pct([r[f'{m}_ev'] for r in ok], 95):9.2e} {pct([r[f'{m}_ew'] for r in ok], 50):9.2e} "
               f"{pct([r[f'{m}_ew'] for r in ok], 95):9.2e}  {other}")
     ok = [r for r in rows if r["mle_status"] == "ok"]
-    for key, what in (("mle_crb_z", "the fit's own measurements (recover.measurements)"),
+    for key, what in (("mle_crb_z", "the fit's own measurements (recover.measurements; on inter-frame video "
+                                    "correlated in time as the fit's covariance takes them)"),
                       ("mle_crb_z_indep", "tracker's errors, every frame independent (reference)")):
         crb_z = np.array([r[key] for r in ok if np.isfinite(r[key])])
         if len(crb_z):

@@ -65,7 +65,8 @@ def tracker_accuracy(scene: Scene, video: Path, refine: str = "fit", n_eval: int
                            stated_z=float(np.sqrt(np.mean(z**2))))
 
 
-def mle_bound(scene: Scene, track, mle: dict | None = None, independent: bool = False, ar1: float | None = None):
+def mle_bound(scene: Scene, track, mle: dict | None = None, independent: bool = False, ar1: float | None = None,
+              acf=None):
     """Cramer-Rao covariance of ``(x0, t0, v0[, w0])`` at the scene's truth.
 
     The inverse Fisher information of the maximum-likelihood fit's model
@@ -79,7 +80,9 @@ def mle_bound(scene: Scene, track, mle: dict | None = None, independent: bool = 
     camera, or ``codec_noise_m`` when it has none); nothing is
     segmented again.  Under the error model the fit used: its AR(1)
     correlation ``ar1`` (default the JSON's ``mle["ar1"]``; 0 when neither
-    gives one).  With ``independent``, the tracker's errors with every
+    gives one); with ``acf`` (an inter-frame codec's correlation in time,
+    recover.mle.INTER_CODEC_ACF) the frames' errors correlated as the fit's
+    covariance takes them (recover.mle.crb_covariance).  With ``independent``, the tracker's errors with every
     frame its own, independent measurement, the bound a lossy codec's
     shared errors put out of reach (a reference).
 
@@ -131,4 +134,4 @@ def mle_bound(scene: Scene, track, mle: dict | None = None, independent: bool = 
     if ar1 is None:
         ar1 = (mle or {}).get("ar1") or 0.0
     return crb_covariance(truth, p, meas, cam.exposure_s, rolling=rolling,
-                          ar1=0.0 if independent else float(ar1)), rolling
+                          ar1=0.0 if independent else float(ar1), acf=None if independent else acf), rolling
