@@ -182,9 +182,11 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         Frames the tracker flags (``TrackResult.touched``: something beside
         the ball, the cue; or the ball leaving the spot it rested on): the
         first frames after the strike (recover.measurements.cue_clear_s), and
-        the whole run of flagged frames from the first after the strike on
-        (recover.measurements.touched_run_s), are left out only when a frame
-        within ``CUE_CLEAR_FRAMES`` of the strike is flagged.  Without it (simulated tracks, a shot with no cue
+        the whole run of flagged frames from the first after the strike on,
+        its holes of up to ``TOUCHED_GAP_FRAMES`` bridged
+        (recover.measurements.touched_run_s), are left out only when that run
+        is found or a frame within ``CUE_CLEAR_FRAMES`` of the strike is
+        flagged.  Without it (simulated tracks, a shot with no cue
         in view) none are: leaving them out of a cue-less shot cost free-slip
         answers their coverage (short_slide.py, seeds 8-9: 91.9% -> 83.9%).
     ar1_floor : float
