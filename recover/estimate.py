@@ -182,9 +182,11 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         Frames the tracker flags (``TrackResult.touched``: something beside
         the ball, the cue; or the ball leaving the spot it rested on): the
         first frames after the strike (recover.measurements.cue_clear_s), and
-        the whole run of flagged frames from the first after the strike on
-        (recover.measurements.touched_run_s), are left out only when a frame
-        within ``CUE_CLEAR_FRAMES`` of the strike is flagged.  Without it (simulated tracks, a shot with no cue
+        the whole run of flagged frames from the first after the strike on,
+        its holes of up to ``TOUCHED_GAP_FRAMES`` bridged
+        (recover.measurements.touched_run_s), are left out only when that run
+        is found or a frame within ``CUE_CLEAR_FRAMES`` of the strike is
+        flagged.  Without it (simulated tracks, a shot with no cue
         in view) none are: leaving them out of a cue-less shot cost free-slip
         answers their coverage (short_slide.py, seeds 8-9: 91.9% -> 83.9%).
     ar1_floor : float
@@ -241,10 +243,15 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
     def cue_window(speed, t0):
         if touched is None or not np.isfinite(t0):
             return 0.0
+        # The run reached from t0 counts as the cue's as well: a first fit's
+        # t0 placed most of a frame early put the run's first flagged frame
+        # outside `near`, and the window, found from the segmentation's t0,
+        # fell to nothing (docs/measurements.md, slip11: seed 43 shot 17).
+        run = touched_run_s(t, touched, t0, exposure_s, frame_dt)
         near = np.abs(t - t0) <= (CUE_CLEAR_FRAMES + 0.5) * frame_dt
-        if not np.any(touched[near]):
+        if run <= 0 and not np.any(touched[near]):
             return 0.0
-        return max(cue_clear_s(speed, params.R, frame_dt), touched_run_s(t, touched, t0, exposure_s, frame_dt))
+        return max(cue_clear_s(speed, params.R, frame_dt), run)
 
     clear_s = cue_window(np.hypot(*starts[0][2]), seg.t0) if starts else 0.0
     meas1 = measure(seg.t0, clear_s)

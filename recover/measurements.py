@@ -91,6 +91,20 @@ STRIKE_MARGIN_FRAMES = 0.25
 # degenerate, coverage 95.8% -> 95.7%.
 CUE_CLEAR_R = 1.0
 CUE_CLEAR_FRAMES = 2.0
+# The tracker's flags after the strike come with holes: on fresh realistic
+# case4 MJPG clips (seed 43, 26 kept tracks; docs/measurements.md, slip11)
+# the run began 1-3 frames after the strike on 8 (the first frame's ball
+# still inside the strike's blur, not flagged) and was broken by one
+# unflagged frame on 2 (shot 0, shot 20 at 480 fps), so the run "unbroken
+# from the first frame after the strike" left out none or one frame of it
+# and the cue's tip, pulling the centre 0.2-0.5 px forward for 20 frames,
+# was fitted (shot 20: slip LR 81.6, free slip).  A run now bridges at most
+# this many unflagged frames, at its start too: 2 reaches every run seen
+# but one starting 3 frames late (shot 10, 480 fps, LR 1.8 either way),
+# and no flagged frame further on (shot 23's flicker stops at its first 4
+# unflagged frames; shot 15's flags from 8 frames after the strike on, the
+# spot the ball left, are not reached).
+TOUCHED_GAP_FRAMES = 2
 # A codec's measured share may lower the stated errors (see codec_excess)
 # to no less than this fraction of them: MJPG at low noise measured the
 # tracker's stated errors 1.2-1.4 times the real ones (README), so 0.5 is
@@ -665,22 +679,27 @@ def cue_clear_s(speed: float, R: float, frame_dt: float) -> float:
 
 def touched_run_s(t, touched, t0: float, exposure_s: float, frame_dt: float) -> float:
     """Time (s) after the strike ``t0`` through which the frames the tracker
-    flags (``touched``) run unbroken from the first frame after it: a window
-    :func:`strike_window` given it leaves out that whole run, the cue's
-    tip or the spot the ball left still in its window (0 when that first
-    frame is not flagged).  Used beside :func:`cue_clear_s`'s distance rule
-    (recover.estimate), not capped by :data:`CUE_CLEAR_FRAMES`: the flags
-    are the tracker's, frame by frame, not a guess from the speed."""
+    flags (``touched``) run from the first frame after it, bridging at most
+    :data:`TOUCHED_GAP_FRAMES` unflagged frames in a row (before the first
+    flagged one too): a window :func:`strike_window` given it leaves out
+    that whole run, the cue's tip or the spot the ball left still in its
+    window (0 when no flagged frame is reached).  Used beside
+    :func:`cue_clear_s`'s distance rule (recover.estimate), not capped by
+    :data:`CUE_CLEAR_FRAMES`: the flags are the tracker's, frame by frame,
+    not a guess from the speed."""
     t = np.asarray(t, dtype=float)
     if touched is None or t0 is None or not np.isfinite(t0) or len(t) == 0:
         return 0.0
     touched = np.asarray(touched, dtype=bool)
     after = np.flatnonzero(t > t0)
-    last = None
+    last, gap = None, 0
     for k in after:
-        if not touched[k]:
+        if touched[k]:
+            last, gap = k, 0
+            continue
+        gap += 1
+        if gap > TOUCHED_GAP_FRAMES:
             break
-        last = k
     if last is None:
         return 0.0
     # just past the last flagged frame's exposure start, short of the next's

@@ -146,14 +146,30 @@ def test_a_touched_run_longer_than_any_slide_is_degenerate_naming_the_cue(preset
 def test_the_touched_run_time():
     t = np.arange(12) / 100.0
     touched = np.zeros(12, bool)
-    touched[[3, 4, 5, 6, 9]] = True
-    # the run from the first frame after the strike (0.025 s): frames 3-6, not 9
+    touched[[3, 4, 5, 6, 10]] = True
+    # the run from the first frame after the strike (0.025 s): frames 3-6, not 10
+    # (3 unflagged frames before it, more than TOUCHED_GAP_FRAMES)
     s = measurements.touched_run_s(t, touched, 0.025, 0.0, 0.01)
     assert 0.06 - 0.025 <= s < 0.07 - 0.025
     assert measurements.strike_window(t, 0.025, 0.0, 0.01, s).nonzero()[0].tolist() == [3, 4, 5, 6]
-    # the first frame after the strike not flagged: no run
+    # the first flagged frame after the strike beyond TOUCHED_GAP_FRAMES (2) unflagged ones: no run
+    assert measurements.TOUCHED_GAP_FRAMES == 2
     assert measurements.touched_run_s(t, touched, 0.065, 0.0, 0.01) == 0.0
     assert measurements.touched_run_s(t, None, 0.025, 0.0, 0.01) == 0.0
+
+
+def test_the_touched_run_bridges_the_flags_holes():
+    # Realistic MJPG clips (slip11, seed 43): the run starts a frame or two
+    # after the strike and is broken by single unflagged frames; the run
+    # bridges up to TOUCHED_GAP_FRAMES unflagged frames, at its start too.
+    t = np.arange(16) / 100.0
+    touched = np.zeros(16, bool)
+    touched[[5, 6, 7, 9, 10, 11, 15]] = True  # strike at 0.025: frames 3, 4 and 8 not flagged
+    s = measurements.touched_run_s(t, touched, 0.025, 0.0, 0.01)
+    assert 0.11 - 0.025 <= s < 0.12 - 0.025  # through frame 11, not 15 (3 unflagged before it)
+    assert measurements.strike_window(t, 0.025, 0.0, 0.01, s).nonzero()[0].tolist() == list(range(3, 12))
+    # three unflagged frames after the strike: no run
+    assert measurements.touched_run_s(t, touched, 0.015, 0.0, 0.01) == 0.0
 
 
 def test_no_cue_seen_no_frames_left_out():
