@@ -504,3 +504,26 @@ def test_the_felts_ghost_of_a_resting_ball_is_left_out_not_a_dark_rim():
     assert felt_ghost(shaded, felt, 1, thresh) is None
     # Nor a dark ball (polarity -1) against its own clean felt.
     assert felt_ghost(2 * level - shaded, 2 * level - felt, -1, thresh) is None
+
+
+@pytest.mark.parametrize("layout", ["bgr0 view", "grey"])
+def test_felt_accumulator_sums_any_frame_layout(layout):
+    """add_frame's compiled sum reads a frame's levels in memory order: a
+    4-channel frame's BGR view (not contiguous) and a grey frame sum as
+    numpy sums them."""
+    from cuespin.track.background import FeltAccumulator
+
+    rng = np.random.default_rng(5)
+    shape = (24, 32, 3) if layout == "bgr0 view" else (24, 32)
+    felt = FeltAccumulator(shape)
+    ref = np.zeros(shape, np.float64)
+    for _ in range(5):
+        raw = rng.integers(0, 256, (24, 32, 4) if layout == "bgr0 view" else shape, dtype=np.uint8)
+        frame = raw[:, :, :3] if layout == "bgr0 view" else raw
+        centre = rng.uniform((0.0, 0.0), (32.0, 24.0))
+        felt.add_frame(frame, centre, 4.0)
+        out = FeltAccumulator._disc(0, 0, 24, 32, centre, 4.0)
+        ref += frame
+        ref[out] -= frame[out]
+    felt._carry()
+    assert np.array_equal(felt.full, ref.astype(np.float32))

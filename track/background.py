@@ -562,7 +562,9 @@ class FeltAccumulator:
         from cuespin.track import window
         img = np.asarray(frame)  # (a PlanarFrame converted whole once)
         if img.dtype == np.uint8 and img.shape == self._partial.shape:
-            window.add_levels(np.atleast_3d(self._partial), np.atleast_3d(img))  # compiled: the same sums
+            # compiled, over the levels in memory order (a 4-channel frame's
+            # BGR view copied first): the same sums
+            window.add_levels(self._partial.reshape(-1), np.ascontiguousarray(img).reshape(-1))
         else:
             np.add(self._partial, frame, out=self._partial)
         self._n_partial += 1
