@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from cuespin.track.model import SphereLook, fit_disc, streak_model
-from cuespin.track.sphere import Sample, learn_sphere
+from cuespin.track.sphere import Sample, learn_sphere, relearn_both_sides
 from cuespin.track.tracker import BallTracker, TrackerConfig, marking_pixels
 
 H = W = 37
@@ -276,3 +276,82 @@ def test_sphere_look_scaled_by_the_outline():
         assert f
         z.append((f.c - c) / f.stderr)
     assert np.sqrt(np.mean(np.square(z))) < 1.5
+
+
+def _imprinted_still_ball(seed: int, white: bool):
+    """A small blurred matte ball (r 7.6 px, PSF 0.5-1.0 px) at rest, lit
+    from a random side (elevation 0.87-1.4, data_gen's range), as the tracker
+    hands it to the light's two learnings: twelve frames fitted with the
+    quadratic look against a first felt that holds half of the resting
+    ball's shading 1 px aside (s19: realistic seed 8 shot 19's first felt,
+    sd 4.6 levels inside the disc with a gradient across it, against 8
+    levels of contrast), and the better (true) felt.  ``white``: found13's
+    white ball on blue felt (felt 117, ambient 141, diffuse 217, noise
+    2.5); else shot 19's case, the ball 5-10 levels above the felt (diffuse
+    10-20) at noise 2-3.  (the samples, the better felt, the light's image
+    azimuth); None when a quadratic fit fails."""
+    from cuespin.render.draw import gaussian
+    rng = np.random.default_rng([seed, 19])
+    shape, r = (23, 23), 7.6
+    c = np.array([U0 + 11.0, V0 + 11.0]) + rng.uniform(-0.5, 0.5, 2)
+    az, el, psf = rng.uniform(0, 2 * np.pi), rng.uniform(0.87, 1.4), rng.uniform(0.5, 1.0)
+    if white:
+        level, noise, contrast, a = 117.0, 2.5, None, 217.0
+    else:
+        level, noise, contrast, a = 150.0, rng.uniform(2, 3), rng.uniform(5, 10), rng.uniform(10, 20)
+    felt = level + rng.normal(0, 2, shape)
+    geo = np.r_[a, 0.0, 0.0, SphereLook(az, el, 40.0).geometry()]
+    G = 141.0
+    if contrast is not None:  # the ambient that puts the disc's mean ``contrast`` above the felt
+        d0 = streak_model(c, np.zeros(2), level, felt, r, U0, V0, np.zeros(1), geo)[0]
+        G = level + contrast - float(np.mean(d0[np.abs(d0) > 1e-9]))
+    ball = streak_model(c, np.zeros(2), G, felt, r, U0, V0, np.zeros(1), geo)[0]
+    clean = felt + gaussian(ball, psf, constant=True)
+    aside = rng.uniform(0, 2 * np.pi)
+    ghost = streak_model(c + [np.cos(aside), np.sin(aside)], np.zeros(2), G, felt, r, U0, V0, np.zeros(1), geo)[0]
+    disc = np.abs(ghost) > 1e-9
+    first = felt + 0.5 * gaussian(np.where(disc, ghost - ghost[disc].mean(), 0.0), psf, constant=True)
+    samples = []
+    for _ in range(12):
+        img = clean + rng.normal(0, noise, shape)
+        f = fit_disc(img, first, U0, V0, c + [0.3, -0.2], r, G + 30.0, shade=True)
+        if not f:
+            return None
+        samples.append(Sample(img, first, U0, V0, f.c, f.b, f.G, False, f.shade, None))
+    return samples, felt, az
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("white, most_after, before", [(True, 0, 15), (False, 2, 12)])
+def test_relearn_searches_both_sides_of_the_light(white, most_after, before):
+    # sphere.relearn_both_sides (s19, realistic seed 8 shot 19): the light
+    # learnt first against a felt that holds the resting ball's shading may
+    # land on the wrong side (azimuth ~pi off); learnt again against the
+    # better felt from that look only, it stayed there.  Twenty seeds of
+    # _imprinted_still_ball each, the learnt azimuth more than pi/2 from the
+    # render's counted (a relearn that fails keeps the first look, as
+    # BallTracker.relearn_sphere does), measured: white on blue, first look
+    # 15 of 20 wrong, relearnt from it 15, from both sides 0; shot 19's low
+    # contrast, 12 of 20, 12 and 2 (seed 8: right from its start, the
+    # mirror converges lower; seed 15: wrong both ways; the objectives are
+    # on three single noisy frames there, the quadratic centres scattering
+    # more than sphere.STILL_PX).
+    # Asserted: the measured counts (the seeds are fixed; the relearn is
+    # deterministic).
+    wrong = {"one side": 0, "both sides": 0}
+    n = 0
+    for seed in range(20):
+        got = _imprinted_still_ball(seed, white)
+        if got is None:
+            continue
+        samples, felt, az = got
+        n += 1
+        first, _ = learn_sphere(samples, 7.6)
+        better = [s._replace(felt=felt) for s in samples]
+        for name, (look, _) in (("one side", learn_sphere(better, 7.6, start=first)),
+                                ("both sides", relearn_both_sides(better, 7.6, first))):
+            look = first if look is None else look
+            wrong[name] += abs(np.angle(np.exp(1j * (look.azimuth - az)))) > np.pi / 2
+    assert n == 20
+    assert wrong["one side"] == before
+    assert wrong["both sides"] <= most_after

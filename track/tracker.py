@@ -20,7 +20,7 @@ from cuespin.track.model import (SphereLook, _coarse, _model_rows, block_patch, 
 from cuespin.track.outline import OUTLINE_REFIT_PX, OutlineCache, is_similarity
 from cuespin.track.radius import RadiusMap
 from cuespin.track.sphere import STILL_PX as STILL_PX_SPHERE
-from cuespin.track.sphere import Sample, learn_sphere, mean_sample, still_members
+from cuespin.track.sphere import Sample, learn_sphere, mean_sample, relearn_both_sides, still_members
 
 OK, NO_BALL, PARTIAL, TWO_BLOBS, GONE, FIT_FAILED, PULLED, OFF_PATH, BLANK = 0, 1, 2, 3, 4, 5, 6, 7, 8
 STATUS_TEXT = {OK: "ok", NO_BALL: "no ball", PARTIAL: "ball partly out of the frame",
@@ -1659,7 +1659,7 @@ class BallTracker:
             return None
         samples = [s._replace(felt=felt[s.v0:s.v0 + s.patch.shape[0], s.u0:s.u0 + s.patch.shape[1]])
                    for s in self._sphere_samples]
-        look, _ = learn_sphere(samples, self.r, self._sphere_outline, start=self.shade, block=self.block)
+        look, _ = relearn_both_sides(samples, self.r, self.shade, self._sphere_outline, self.block)
         if look is not None:
             # The rim's markings against the better felt too (realistic seed 0
             # shot 13: the elevation 1.353 -> 1.329 rad, the renderer's
