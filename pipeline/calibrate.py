@@ -804,9 +804,33 @@ HIDDEN_MIRROR_Z = 1.3
 CODEC_FLAT_SHARE = 0.99
 CODEC_RING_LEVELS = 0.1
 
+# The outline's noses are refused on a frame no lossy codec touched when the
+# four sides' faint steps, added where a band's outer edge would lie (the
+# same share of the way to the outline on every side, the same sign:
+# ``_coherent_z``), reach BAND_COHERENT_Z, and their sum there is at least
+# HIDDEN_MIRROR_Z times the same sum mirrored to the felt's side of the nose.
+# Random table 16030 (cushions 0.765 of the felt's shade, a band at 0.749)
+# was answered 3.98 px off stating 0.024 on raw frames, its faint step 3.10
+# x the scatter, under HIDDEN_NOSE_Z, while visible tables reach 2.52 there
+# (nose16, docs/measurements.md).  Measured on raw frames of the random drawn
+# tables 12000-17059 taking noses (jpeg12's saved profiles): the 92 whose
+# noses show 0-3.07 (16025; 13007 2.73), the 16 hidden 5.80 (16030, at 0.23
+# of the way, mirror 1.99) and 8.75-above; 4.2 is about the geometric middle
+# of 3.07 and 5.80.  Noise 0.5 raw: showing up to 2.07, hidden 21.7 and
+# above.  Not on JPEG: a codec's ringing adds up coherently too (visible
+# tables at JPEG 95 up to 6.18, 14015; 16030 3.72), so the rule is kept to
+# frames whose felt is nowhere flat (``_flat_share`` at most RAW_FLAT_SHARE:
+# noise 2-4 raw 0.000-0.002, JPEG 95 0.076-0.23, noise 0.5 raw 0.14).  Held
+# out, 19000-19059 raw: the 13 frames whose noses show and are answered
+# 0-2.73, the 3 hidden ones refused already 20.7-114.5; no answer changed.
+# The renderer's realistic table (textured felt, rails; 6 cameras x seeds
+# 1-3, raw): 0.13-2.03.
+BAND_COHERENT_Z = 4.2
+RAW_FLAT_SHARE = 0.05
+
 
 def cushion_noses(img: np.ndarray, sides: list, search_frac: float = 0.08, reach_px: float = 4.0,
-                  outer: list | None = None, hidden: list | None = None):
+                  outer: list | None = None, hidden: list | None = None, coherent: list | None = None):
     """The cushions' noses inside the felt-coloured outline, when they show.
 
     A table's cushions are often cloth of the felt's colour, so the outline
@@ -841,6 +865,12 @@ def cushion_noses(img: np.ndarray, sides: list, search_frac: float = 0.08, reach
     cross-check's).  Then that largest step on the felt's side (grey
     levels) and the felt's flat share (:func:`_flat_share`;
     ``_codec_flattened``).
+
+    ``coherent``, when given, gets one tuple a side for :func:`_coherent_z`:
+    the signed step profile in units of the flat felt's step scatter (the
+    nose's step positive), the nose's index, the outline's end of the
+    profile and the faint-step zone's inner end; None for a side whose
+    zone holds a step the rule sees.
     """
     Ds = _smoothed(img)
     grey = Ds.mean(axis=2) if Ds.ndim == 3 else Ds
@@ -896,6 +926,13 @@ def cushion_noses(img: np.ndarray, sides: list, search_frac: float = 0.08, reach
             # a step the rule sees there is a band's edge in sight (the paths' cross-check), not a hidden one
             hidden.append((top / scale, top / max(ring, scale), ring, flat) if top <= step_min
                           else (0.0, 0.0, ring, flat))
+        if coherent is not None:
+            zone = g[k + 2 * w: end]
+            signed = np.zeros_like(med_prof)
+            signed[w:-w] = ((cs[2 * w + 1:] - cs[w + 1:-w]) - (cs[w:-w - 1] - cs[:-2 * w - 1])) / w
+            ok = len(zone) and zone.max() <= step_min
+            coherent.append((signed * np.sign(signed[k]) / max(noise, HIDDEN_NOISE_FLOOR), k, len(g) - 5, end)
+                            if ok else None)
         med = float(offs[k])
         nose = _subpixel_edge(Ds, base + med * nrm, nrm, np.arange(-reach_px - 3.0, reach_px + 3.0 + 1e-9, 0.25))
         if len(nose) < max(10, 0.3 * len(base)):
@@ -1597,14 +1634,14 @@ def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = Tru
     quad, contour = _felt_quad(D, thr)
     kw = dict(K=K, dist=dist, estimate_lens=estimate_lens, robust=robust, pattern_px=pattern_px,
               kappa_pattern_k1=kappa_pattern_k1)
-    outline, straddled, hidden = None, False, []
+    outline, straddled, hidden, coherent = None, False, [], []
     if lines != "always":
         try:
             sides = edge_points(img, quad, contour)
             edge = "felt"
             outer = []
             if noses:
-                inner = cushion_noses(img, sides, outer=outer, hidden=hidden)
+                inner = cushion_noses(img, sides, outer=outer, hidden=hidden, coherent=coherent)
                 if inner is not None:
                     sides, edge = inner, "noses"
             straddled = any(outer)
@@ -1620,7 +1657,20 @@ def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = Tru
 
     on_noses = outline is not None and outline.edge == "noses"
     return _outline_or_lines(outline, straddled, cushions, lines, hidden_z=_hidden_z(hidden) if on_noses else 0.0,
-                             flattened=on_noses and _codec_flattened(hidden))
+                             flattened=on_noses and _codec_flattened(hidden),
+                             band_z=_band_z(hidden, coherent) if on_noses else 0.0)
+
+
+def _band_z(hidden: list, coherent: list) -> float:
+    """The four sides' faint steps added where a band's outer edge would lie
+    (:func:`_coherent_z`), on a frame no lossy codec touched (the felt's flat
+    share, median over the sides, at most ``RAW_FLAT_SHARE``) and at least
+    ``HIDDEN_MIRROR_Z`` times the same sum on the felt's side of the nose;
+    else 0.  Compared with ``BAND_COHERENT_Z``."""
+    if not hidden or np.median(np.asarray(hidden, dtype=float)[:, 3]) > RAW_FLAT_SHARE:
+        return 0.0
+    z = _coherent_z(coherent)
+    return z if z >= HIDDEN_MIRROR_Z * max(_coherent_z(coherent, mirror=True), 1.0) else 0.0
 
 
 def _hidden_z(hidden: list) -> float:
@@ -1648,6 +1698,52 @@ def _hidden_z(hidden: list) -> float:
     return float(over_scatter) if over_ringing >= HIDDEN_MIRROR_Z else 0.0
 
 
+def _coherent_z(coherent: list, mirror: bool = False) -> float:
+    """The four sides' faint steps added at one common place between the noses and the outline.
+
+    A band inside the noses in nearly the cushions' shade has its outer edge
+    at the same share of the way from the noses taken (its inner edge) to
+    the felt's outline (the cushions' outer edge) on every side, band and
+    cushion widths being the same all round, and its step has the same sign
+    there; the flat felt's noise does neither.  So the sides' signed steps
+    (``cushion_noses``' ``coherent``, in units of each side's scatter) are
+    summed at each share r of that way (0-1, steps of 0.005), over the sides
+    whose faint-step zone holds it (at least 3), and divided by the root of
+    their number: about 1 on noise, about twice a side's own step on a band.
+
+    Parameters
+    ----------
+    coherent : list
+        ``cushion_noses``' ``coherent``.
+    mirror : bool
+        The same offsets mirrored to the felt's side of the nose (a codec's
+        ringing beside the nose edge shows on both sides).
+
+    Returns
+    -------
+    float
+        The largest such sum over r (0 when a side's zone holds a step the
+        rule sees, or fewer than 3 sides hold r).
+    """
+    if len(coherent) != 4 or any(c is None for c in coherent):
+        return 0.0
+    r = np.linspace(0.0, 1.0, 201)
+    tot, cnt = np.zeros_like(r), np.zeros_like(r)
+    for prof, k, n, end in coherent:
+        span = n - k
+        idx = k + r * span
+        if mirror:
+            idx = 2 * k - idx
+            ok = (idx >= 6) & (r * span >= 12)
+        else:
+            ok = (idx >= k + 12) & (idx <= end)
+        tot += np.where(ok, np.interp(idx, np.arange(len(prof)), prof), 0.0)
+        cnt += ok
+    v = np.abs(tot) / np.sqrt(np.maximum(cnt, 1.0))
+    v[cnt < 3] = 0.0
+    return float(v.max())
+
+
 def _codec_flattened(hidden: list) -> bool:
     """Whether a lossy codec flattened the cloth past seeing a band in the
     cushions' shade: the felt's pixels equal to their neighbours on at least
@@ -1661,7 +1757,7 @@ def _codec_flattened(hidden: list) -> bool:
 
 
 def _outline_or_lines(outline, straddled: bool, cushions, lines: str = "auto", hidden_z: float = 0.0,
-                      flattened: bool = False) -> Detection:
+                      flattened: bool = False, band_z: float = 0.0) -> Detection:
     """Which path's corners :func:`detect_corners` answers: the felt's outline's
     or the cushions' lines' (the one place this is decided).
 
@@ -1691,6 +1787,9 @@ def _outline_or_lines(outline, straddled: bool, cushions, lines: str = "auto", h
         ``_codec_flattened`` of the same when the outline's noses were
         found: a lossy codec flattened the cloth, so a band in nearly the
         cushions' shade would leave no faint step to see.
+    band_z : float
+        ``_band_z`` of the same: the four sides' faint steps added where a
+        band's outer edge would lie, on an uncompressed frame.
 
     Returns
     -------
@@ -1711,7 +1810,8 @@ def _outline_or_lines(outline, straddled: bool, cushions, lines: str = "auto", h
     ------
     CalibrationError
         ``auto``, the outline's noses with a faint step outside them
-        (``hidden_z`` at least ``HIDDEN_NOSE_Z``) or a codec's flat cloth
+        (``hidden_z`` at least ``HIDDEN_NOSE_Z``, or ``band_z`` at least
+        ``BAND_COHERENT_Z``) or a codec's flat cloth
         that could not show one (``flattened``), or the two paths'
         corners disagreeing on the same edge with nothing to say which is
         wrong: the reason says so and asks for ``--corners``.
@@ -1724,6 +1824,11 @@ def _outline_or_lines(outline, straddled: bool, cushions, lines: str = "auto", h
         raise CalibrationError(f"a faint step ({hidden_z:.1f} x the cloth's scatter) lies between the noses found "
                                "and the felt's outline: a band inside the cushions in nearly their shade may hide "
                                "the noses, whose inner edge would be taken for them; give --corners")
+    if band_z >= BAND_COHERENT_Z:
+        raise CalibrationError(f"faint steps at the same place on all four sides ({band_z:.1f} x the cloth's "
+                               "scatter) lie between the noses found and the felt's outline: a band inside the "
+                               "cushions in nearly their shade may hide the noses, whose inner edge would be taken "
+                               "for them; give --corners")
     if flattened:
         raise CalibrationError("the video's compression flattened the cloth into constant blocks: a band inside the "
                                "cushions in nearly their shade, whose inner edge would be taken for the noses, could "

@@ -993,6 +993,65 @@ def test_the_codec_flat_rule_spares_noisy_jpeg_and_raw_frames():
     assert len(seen["n05 jpeg70"]) >= 5 and np.mean(seen["n05 jpeg70"]) >= 0.5, seen
 
 
+def test_a_band_faint_on_every_side_at_one_place_is_refused():
+    """Random drawn table 16030 (cushions 0.765 x the felt's shade, a band at
+    0.749 inside them: a 1-level step), raw: its faint step is 3.10 x the
+    scatter (under HIDDEN_NOSE_Z 4), and the outline took the band's inner
+    edge for the noses, answered 3.98 px off stating 0.024 (jpeg12).  The
+    four sides' steps at the same share of the way to the outline (0.23)
+    add up to 5.8 x (BAND_COHERENT_Z 4.2): refused, naming --corners."""
+    from cuespin.pipeline.calibrate import random_table
+
+    with pytest.raises(CalibrationError, match="same place on all four sides.*give --corners"):
+        detect_corners(random_table(16030)["frame"])
+
+
+@pytest.mark.slow
+def test_the_coherent_band_rule_spares_tables_whose_noses_show():
+    """The coherent faint-step rule (``_band_z``) on the raw frames of the
+    random drawn tables 16000-16059 whose outline takes noses: off on every
+    one whose noses show (measured on 12000-17059: 92 showing, 0-3.07
+    against BAND_COHERENT_Z 4.2; here 0 refused), and on for the hidden
+    ones that the faint step alone let through or refuses (16024, 16030,
+    16043: 5.8 and over).  Through JPEG 95 the rule is off (the felt's flat
+    share over RAW_FLAT_SHARE)."""
+    from cuespin.pipeline.calibrate import (
+        BAND_COHERENT_Z,
+        _band_z,
+        _felt_distance,
+        _felt_quad,
+        cushion_noses,
+        edge_points,
+        random_table,
+    )
+
+    showing, hidden_z, jpeg = [], {}, []
+    for seed in range(16000, 16060):
+        t = random_table(seed)
+        look = t["look"]
+        if "cushion_m" not in look:
+            continue
+        hides = abs(look["cushion_shade"] - look.get("band_shade", 9.0)) < 0.1
+        for name, img in (("raw", t["frame"]), ("jpeg95", _jpeg(t["frame"], 95))):
+            if name == "jpeg95" and seed % 4:
+                continue                                    # a quarter of them: the gate, not the statistic
+            D, thr = _felt_distance(img)
+            quad, contour = _felt_quad(D, thr)
+            hidden, coherent = [], []
+            if cushion_noses(img, edge_points(img, quad, contour), hidden=hidden, coherent=coherent) is None:
+                continue
+            z = _band_z(hidden, coherent)
+            if name == "jpeg95":
+                jpeg.append(z)
+            elif hides:
+                hidden_z[seed] = z
+            else:
+                showing.append((seed, z))
+    assert len(showing) >= 15 and all(z < BAND_COHERENT_Z for _, z in showing), showing
+    assert hidden_z.get(16030, 0.0) >= BAND_COHERENT_Z, hidden_z
+    assert jpeg and not any(jpeg), jpeg
+
+
 def test_paths_disagreeing_with_nothing_to_say_which_refuse():
     """The two paths' noses 9.2 combined errors apart on random table 12006
     (a band of the cushions' shade: both wrong, 6.1 and 5.8 px) with no band
