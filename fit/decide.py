@@ -10,6 +10,9 @@
 - Is the sliding path curved or straight?  :func:`curved`, from the F
   statistic of the orthogonal-distance parabola against the line
   (fit.conics).
+- Does a rolling answer's track exclude a slide that lasts through every
+  frame?  :func:`slide_through_excluded`, from the chi-square increase of
+  the best such slide over the rolling fit (recover.mle.slide_through_chi2).
 - Is the strike in view?  :func:`strike_in_view`: still frames before it.
 - Did sliding run into the rest (paper case 2: ``x1 = x2``)?
   :func:`stop_apart`, from the distance between the sliding parabola's
@@ -124,6 +127,23 @@ def sliding_seen(lr: float) -> Decision:
     thr = slip_threshold()
     lr = float(lr) if np.isfinite(lr) else 0.0
     return Decision(lr > thr, lr, thr)
+
+
+def slide_through_excluded(d_chi2: float) -> Decision:
+    """Is a slide lasting through every frame excluded by a rolling answer's
+    track?  From the chi-square increase of the best such slide over the
+    rolling fit (recover.mle.slide_through_chi2), on the slip decision's
+    own threshold (:func:`slip_threshold`): the same evidence that would
+    call a slip seen must exclude one that never ends.  Measured
+    (docs/measurements.md, gross16; recover.simulate, seed 31): 0 of 397
+    rolling answers of null_rolling_tracks(400) and 0 of 219 of
+    leaves_table_tracks(240, case4) below it that the seen-time rule
+    (recover.mle.SLIDE_THROUGH_TAU) keeps; realistic H.264 seeds 32, 34, 71:
+    correct rolling answers 107-1.6e7, the wrong ones (a slide partly seen,
+    slip_lr under its threshold) -1.5 and -0.75."""
+    thr = slip_threshold()
+    d = float(d_chi2) if not np.isnan(d_chi2) else 0.0
+    return Decision(d > thr, d, thr)
 
 
 def t1_in_view(t1: float, t) -> bool:
