@@ -387,8 +387,9 @@ def realistic_scene(i, seed, seconds, mix=False):
 
 
 def _errors(res, tuv, t, t0, r, cam, cloth=None):
-    """Moving, wholly-in-view frames: found share, false positives, and the
-    errors (px), stated errors and look factor of the good ones.
+    """The found share over frames wholly in view (and on the cloth), false
+    positives over every frame, and the errors (px) and stated errors of the
+    good moving frames.
 
     ``cloth``: per frame, whether the ball lies wholly on the playing surface
     (issue 10 counts frames "wholly in view and on open cloth"; a ball whose
@@ -405,7 +406,9 @@ def _errors(res, tuv, t, t0, r, cam, cloth=None):
     err = res.uv[:n] - tuv
     bad = ok & (np.hypot(*err.T) > 0.25 * r)
     good = ok & ~bad & moving
-    return ok[view].mean(), int(bad.sum()), err[good], res.stderr_px[:n][good], good
+    # false centres are counted over every frame, in view or not (the stricter count)
+    found = ok[view].mean() if view.any() else np.nan
+    return found, int(bad.sum()), err[good], res.stderr_px[:n][good], good
 
 
 def _track_stats(res, tuv, t, t0, r, cam, cloth=None):
@@ -460,7 +463,8 @@ def realistic_shot(args):
     wg.release()
     row = {"i": i, "look": look, "fps": cam.fps, "noise": scene.render["noise_sigma"],
            "ball": scene.render["ball_name"], "felt": scene.render["felt_name"],
-           "exposure": cam.exposure_s * cam.fps}
+           "exposure": cam.exposure_s * cam.fps,
+           "cue": bool(scene.render.get("cue", False)), "n_balls": len(scene.render.get("balls") or [])}
     cfg = TrackerConfig(threaded=False)
     goods = {}
     for name, video in (("ffv1", path), ("mjpg", mj), ("grey", grey)):

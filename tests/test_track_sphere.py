@@ -336,8 +336,11 @@ def test_relearn_searches_both_sides_of_the_light(white, most_after, before):
     # mirror converges lower; seed 15: wrong both ways; the objectives are
     # on three single noisy frames there, the quadratic centres scattering
     # more than sphere.STILL_PX).
-    # Asserted: the measured counts (the seeds are fixed; the relearn is
-    # deterministic).
+    # Asserted: both sides at most the measured count; one side near its
+    # measured count (review 14, SHOULD 5: the compass search's path turns
+    # on rounding -- seed 8's mirror ends at 6850 or 4360 by how its start
+    # angle is written -- so another BLAS or CPU may move a seed or two of
+    # the one-sided search, the context rather than the claim).
     wrong = {"one side": 0, "both sides": 0}
     n = 0
     for seed in range(20):
@@ -353,5 +356,5 @@ def test_relearn_searches_both_sides_of_the_light(white, most_after, before):
             look = first if look is None else look
             wrong[name] += abs(np.angle(np.exp(1j * (look.azimuth - az)))) > np.pi / 2
     assert n == 20
-    assert wrong["one side"] == before
+    assert wrong["one side"] >= before - 2
     assert wrong["both sides"] <= most_after
