@@ -110,18 +110,23 @@ def null_rolling_tracks(n: int, seed: int, fps_grid=FPS_GRID, sigma_grid=SIGMA_G
 
 
 def sliding_tracks(n: int, seed: int, presets=("random", "case1", "case3", "case5", "masse"),
-                   fps_grid=FPS_GRID, sigma_grid=SIGMA_GRID_M, blur: bool = True, rho: float = 0.0):
+                   fps_grid=FPS_GRID, sigma_grid=SIGMA_GRID_M, blur: bool = True, rho: float = 0.0,
+                   seen_s: tuple[float, float] | None = None):
     """``n`` tracks of shots that slide (the sampler's presets), cycling over
     frame rates and noise levels; ``rho``: AR(1) errors
-    (:func:`simulate_track`).  Yields :class:`SimTrack`."""
+    (:func:`simulate_track`); ``seen_s``: each clip ends a uniform
+    ``seen_s[0]``-``seen_s[1]`` seconds after the strike, if sooner (as a
+    realistic 1.5-s clip sees the ball).  Yields :class:`SimTrack`."""
     rng = np.random.default_rng(seed)
     for i in range(n):
         fps, sigma = _grid_point(i, fps_grid, sigma_grid)
         shot, params = sample_shot(rng, presets[i % len(presets)])
         exposure = _exposure(rng, fps, blur)
         ph = phases(shot, params)
-        yield simulate_track(shot, params, fps, sigma, rng, exposure,
-                             t_end=min(ph.t2 + 0.3, max(ph.t1 + 1.0, shot.t0 + MAX_AFTER_STRIKE_S)), rho=rho)
+        t_end = min(ph.t2 + 0.3, max(ph.t1 + 1.0, shot.t0 + MAX_AFTER_STRIKE_S))
+        if seen_s is not None:
+            t_end = min(t_end, shot.t0 + rng.uniform(*seen_s))
+        yield simulate_track(shot, params, fps, sigma, rng, exposure, t_end=t_end, rho=rho)
 
 
 def mixed_tracks(n: int, seed: int):
