@@ -66,6 +66,11 @@ class Background:
         False when every path pixel is well covered.
     moved_px : int
         Pixels where something a ball fits in moved (:func:`ball_wide`).
+    moved_band : tuple of float
+        Those pixels' width and length (px), as a uniform band's with their
+        second moments (:func:`band_extent`): the cue's withdrawal is a long
+        band narrower than the ball (:data:`cuespin.track.video.STICK_MOVED_RADII`).
+        (0, 0) when nothing moved.
     score : float
         The ball's search score (:func:`box_score`, levels) in the samples:
         the largest over them of the peak on the swept path (the ball where
@@ -81,6 +86,18 @@ class Background:
     weak_samples: np.ndarray
     moved_px: int = 0
     score: float = 0.0
+    moved_band: tuple = (0.0, 0.0)
+
+
+def band_extent(xs: np.ndarray, ys: np.ndarray) -> tuple[float, float]:
+    """The width and length (px) of the pixels at ``xs``, ``ys`` across and
+    along their long axis: a uniform band's with their second moments,
+    sqrt(12 lambda); (0, 0) for fewer than 3 pixels."""
+    if len(xs) < 3:
+        return 0.0, 0.0
+    lam = np.linalg.eigvalsh(np.cov(np.c_[xs, ys].T.astype(float), bias=True))
+    w, length = np.sqrt(12 * np.maximum(lam, 0.0))
+    return float(w), float(length)
 
 
 # Where the ball moved, the samples disagree over a region a disc of this
@@ -377,7 +394,8 @@ def learn_background(samples: np.ndarray, radius_px, where: np.ndarray | None = 
     score = ball_score(samples, image, polarity, contrast, on, r_path)
     return Background(image=image, sigma=sigma, polarity=polarity, contrast=contrast,
                       n_samples=n, path_pixels=int(len(ys)), weak_samples=weak_samples,
-                      moved_px=int(strong.sum()), score=score)
+                      moved_px=int(strong.sum()), score=score,
+                      moved_band=band_extent(xs[strong], ys[strong]))
 
 
 # Samples that must agree (within felt_band) for a sample to count as the

@@ -13,7 +13,7 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
-from cuespin.track.background import DETECT_SIGMAS, SCORE_CAP, Background, box_score, box_size
+from cuespin.track.background import DETECT_SIGMAS, SCORE_CAP, Background, band_extent, box_score, box_size
 from cuespin.track.colour import GREY, Projection
 from cuespin.track.model import (SphereLook, _coarse, _model_rows, block_patch, blur_nodes, fit_disc,
                                  streak_from_moments, streak_model)
@@ -744,8 +744,7 @@ def stick_through(D: np.ndarray, u0: int, v0: int, c, r: float, thresh: float,
     y, x = np.nonzero(blob)
     if len(x) < 3:
         return False
-    lam = np.linalg.eigvalsh(np.cov(np.c_[x, y].T, bias=True))
-    return bool(np.sqrt(12 * max(lam[0], 0.0)) < limit * r)  # a uniform band's width
+    return bool(band_extent(x, y)[0] < limit * r)  # a uniform band's width
 
 
 def _joined_blob(on: np.ndarray, u0: int, v0: int, c, r: float) -> np.ndarray | None:

@@ -32,7 +32,8 @@ from cuespin.track.path import off_path
 from cuespin.track.radius import RadiusMap
 from cuespin.track.model import SphereLook, fit_disc, refit_shift, warm_up
 from cuespin.track.reader import FrameSource, ThreadedFrames, TrackError, blank_frame, frame_times, probe
-from cuespin.track.tracker import (BLANK, OFF_PATH, OK, PULLED, STATUS_TEXT, STILL_PX, BallTracker, TrackerConfig,
+from cuespin.track.tracker import (BLANK, OFF_PATH, OK, PULLED, STATUS_TEXT, STICK_WIDTH_RADII, STILL_PX, BallTracker,
+                                   TrackerConfig,
                                    beyond_ball, foreign_near, foreign_threshold, kept_pixels, pulled_fits)
 
 # Bytes of decoded frames held before the background is learnt: 437 grey or
@@ -53,6 +54,23 @@ MAX_SPEED_M_S = 12.0
 # sample_scenes(6, 7, realistic, MJPG)[1]) gave a contrast of 9 where the
 # ball's is ~250, and a resting ball's codec flicker became the ball.
 LEARN_MOVED_AREA = 2.0
+# What moved in a look-ahead is the cue, not the ball, when its pixels form
+# a band narrower than STICK_WIDTH_RADII radii (tracker's stick rule) and
+# longer than this many: a ball's sweep narrower than a radius is a crescent
+# no longer than its diameter.  Realistic seed 9 shot 1 (--mix, a draw shot
+# that stops 6.6 px from its rest spot, the cue withdrawing over a pocket):
+# the ball's crescent 0.94 r wide, 1.80 r long; the look-ahead after it, the
+# ball at rest throughout, saw only the cue's withdrawal, 0.91 r wide and
+# 4.33 r long, and its model (the felt under the resting ball learnt as the
+# ball, the channels the cue's) lost 70% of the frames.
+STICK_MOVED_RADII = 3.0
+
+
+def cue_moved(bg: Background, r: float) -> bool:
+    """Whether what moved in ``bg``'s samples is a stick (the cue), not a
+    ball of radius ``r`` (px): :data:`STICK_MOVED_RADII`."""
+    width, length = bg.moved_band
+    return width < STICK_WIDTH_RADII * r and length > STICK_MOVED_RADII * r
 # Every this many frames the whole decoded frame joins the felt average
 # (cv2.accumulate: ~1 ms for a 1280 x 720 BGR frame, a quarter of it per frame).
 FULL_FELT_EVERY = 4
@@ -422,11 +440,12 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         def saw_move(bg) -> bool:
             # The smallest ball in view: under perspective a far ball moving a
             # diameter sweeps less than the image centre's would.
-            return bool(bg.polarity) and bg.moved_px >= LEARN_MOVED_AREA * np.pi * radii.r_min**2
+            return bool(bg.polarity) and not cue_moved(bg, radii.r_min) and \
+                bg.moved_px >= LEARN_MOVED_AREA * np.pi * radii.r_min**2
 
         while True:
             proj, bg = learn_model(buf, radii, max(config.n_background, 2), mask, bool(info.lossless))
-            if bg.polarity and (best is None or bg.moved_px > best[1].moved_px):
+            if bg.polarity and not cue_moved(bg, radii.r_min) and (best is None or bg.moved_px > best[1].moved_px):
                 best = (proj, bg)
             if saw_move(bg):
                 # The ball's shaded side fades into the felt in the codec's
