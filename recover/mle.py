@@ -1542,8 +1542,14 @@ def crb_covariance(shot: Shot, params: BallParams, meas: Measurements, exposure_
     bound ``(J^T C^-1 J)^-1`` of an estimator that knew that correlation
     (the fit, weighting frames as independent, cannot reach it; with
     every frame independent the bound was 2.9 times below the H.264 fit's
-    RMS error, docs/measurements.md cov11).
+    RMS error, docs/measurements.md cov11).  The two are the fit's
+    alternatives, never together (AR(1) only without an inter-frame codec:
+    recover.estimate): both given, the errors would be whitened twice, so
+    ValueError.
     """
+    if ar1 > 0 and acf is not None:
+        raise ValueError("crb_covariance: the errors are AR(1) (ar1 > 0) or correlated as an inter-frame "
+                         "codec's (acf), not both")
     ar1 = float(np.clip(ar1, 0.0, MAX_AR1))
     t = meas.t_used
     p = np.r_[shot.x0, shot.t0, shot.v0] if rolling else np.r_[shot.x0, shot.t0, shot.v0, shot.w0]

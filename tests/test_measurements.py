@@ -219,6 +219,22 @@ def test_bound_under_the_fits_ar1_errors():
     assert np.all(se_v0 / iid_v0 > 1.6), se_v0 / iid_v0
 
 
+def test_bound_refuses_ar1_and_a_codecs_correlation_together():
+    # AR(1) errors and an inter-frame codec's correlation are the fit's two
+    # alternative error models (recover.estimate fits AR(1) only without a
+    # codec); given both, the bound would whiten the errors twice and come
+    # out too narrow (review SHOULD-FIX 10).  Either alone still answers.
+    from cuespin.recover.mle import INTER_CODEC_ACF, crb_covariance
+
+    shot, p = sample_shot(7, "random")
+    t = np.arange(0.0, 1.0, 1 / 120)
+    meas = build_measurements(t, model_track(shot, p, t), np.full(len(t), SIGMA), t0=shot.t0, frame_dt=1 / 120)
+    with pytest.raises(ValueError):
+        crb_covariance(shot, p, meas, ar1=0.5, acf=INTER_CODEC_ACF)
+    for kw in ({"ar1": 0.5}, {"acf": INTER_CODEC_ACF}, {"ar1": 0.0, "acf": INTER_CODEC_ACF}):
+        assert np.all(np.isfinite(np.diag(crb_covariance(shot, p, meas, **kw))))
+
+
 def test_shared_errors_on_a_lossless_codec_measure_no_codec_share():
     # A shaded look on a lossless codec: the tracker states errors the look
     # factor widened (here twice the real ones) and shared by a rest's
