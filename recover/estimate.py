@@ -506,8 +506,10 @@ def rolling_fit(t, xy, cov, px_to_m, params: BallParams, mle, seg, exposure_s: f
 def mle_noise(mle, codec: CodecCorrelation | None = None) -> tuple[float, float, tuple | None]:
     """The maximum-likelihood fit's error model for the paper's inputs
     (recover.measurements.linear_covariance): ``(ar1, scale, acf)``, its
-    errors' lag-1 correlation, ``max(1, chi2/dof)`` (its own errors are
-    scaled so) and an inter-frame codec's correlation in time (``codec``'s
+    errors' lag-1 correlation, the factor its own errors carry (``max(1,
+    chi2/dof)``, or the track's shared scale when larger:
+    recover.mle.MLEResult.error_scale; the paper's inputs are measured by
+    the same drifting frames) and an inter-frame codec's correlation in time (``codec``'s
     ``acf``, as the fit's codec_sandwich states its errors; None without
     one).  The codec's correlation holds whatever the fit answered: it is
     the measurements' model, not the fit's finding.  (Before, the paper's
@@ -519,7 +521,9 @@ def mle_noise(mle, codec: CodecCorrelation | None = None) -> tuple[float, float,
         return 0.0, 1.0, acf
     ar1 = float(getattr(mle, "ar1", 0.0) or 0.0)
     chi2 = getattr(mle, "chi2", float("nan")) / max(getattr(mle, "dof", 0), 1)
-    return (ar1 if np.isfinite(ar1) else 0.0), (max(1.0, chi2) if np.isfinite(chi2) else 1.0), acf
+    scale = max(1.0, chi2) if np.isfinite(chi2) else 1.0
+    factor = float(getattr(mle, "error_scale", 1.0))
+    return (ar1 if np.isfinite(ar1) else 0.0), (max(scale, factor) if np.isfinite(factor) else scale), acf
 
 
 def runs_to_end(seg) -> bool:

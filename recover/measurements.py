@@ -528,14 +528,16 @@ def linear_covariance(meas: Measurements, weights, ar1: float = 0.0, scale: floa
     per-axis weights (shape (k, n, 2)) the scalars ``q_a = sum_i weights[a,
     i] . xy[i]``, under the errors ``meas`` states: each frame's covariance
     (the codec's share included), and between two frames of one rest their
-    share of it (:func:`group_shares`, as the fit has them); frames in no
-    measurement (the strike's) independent.  With ``ar1``, the moving
-    ball's frames (measured one by one) correlated as the maximum-likelihood
-    fit has them (recover.mle.ar1_prewhiten: ``ar1^k`` between frames ``k``
-    apart, in their whitened errors); with ``acf``, as an inter-frame
-    codec shares them (recover.mle.codec_sandwich: ``rho(dt)`` of
+    share of it (:func:`group_shares`, as the fit has them).  With ``ar1``,
+    the frames outside every rest (the moving ball's, used by the fit or
+    left out of it: the strike's window, the cue's touched run; time order)
+    correlated as the maximum-likelihood fit has its own
+    (recover.mle.ar1_prewhiten: ``ar1^k`` between frames ``k`` apart, in
+    their whitened errors); with ``acf``, as an inter-frame codec shares
+    them (recover.mle.codec_sandwich: ``rho(dt)`` of
     recover.mle.time_correlation between their whitened errors); all of it
-    times ``scale`` (the fit's ``max(1, chi2/dof)``).
+    times ``scale`` (the factor the fit's own errors carry:
+    recover.estimate.mle_noise).
 
     Parameters
     ----------
@@ -586,11 +588,19 @@ def linear_covariance(meas: Measurements, weights, ar1: float = 0.0, scale: floa
 
 
 def _single_frames(meas: Measurements, G):
-    """The frames measured one by one (the moving ball's), in frame order,
-    and each estimate's share of their whitened errors, ``Y`` (frames, k, 2):
-    ``L_i^T G_a,i`` with ``L_i`` the frame's Cholesky factor."""
-    used = np.flatnonzero(meas.used)
-    one = used[meas.single[meas.group[used]]]
+    """The frames outside every rest, in frame order: those the fit measured
+    one by one (the moving ball's) and those it left out (the strike's
+    window, the cue's touched run), which the paper's segmentation may
+    weight; and each estimate's share of their whitened errors, ``Y``
+    (frames, k, 2): ``L_i^T G_a,i`` with ``L_i`` the frame's Cholesky
+    factor.  (Before, only the fit's frames: the codec's correlation
+    between a left-out frame and its neighbours was dropped; in the
+    reviewer's lc.py, 120 fps, x0 from a slide's first 30 frames, the sd
+    came out 1.48 / 1.80 times too small with a 50 / 100 ms window left out.)"""
+    rest = np.zeros(len(meas.group), bool)
+    used = meas.used
+    rest[used] = ~meas.single[meas.group[used]]
+    one = np.flatnonzero(~rest)
     L = np.linalg.cholesky(meas.cov[one] + 1e-30 * np.eye(2))
     return one, np.einsum("aij,ijl->ial", G[:, one], L)
 

@@ -222,6 +222,10 @@ class MLEResult:
     in time to show a slide that lasts through all of them,
     :data:`SLIDE_THROUGH_TAU`; ``strike_seen``: at least MIN_STILL_FRAMES
     used frames before t0), for a refit to keep (:func:`result`).
+    ``error_scale`` the factor :func:`covariance` put on the errors' model
+    (the reduced chi-square when above 1; with an inter-frame codec, the
+    track's :func:`shared_scale` when larger), for the paper's errors to
+    carry too (recover.estimate.mle_noise).
     """
 
     status: str
@@ -248,6 +252,7 @@ class MLEResult:
     rho1: float = float("nan")
     ar1: float = 0.0
     verdicts: dict = field(default_factory=dict)
+    error_scale: float = 1.0
 
     def __bool__(self):
         return self.status == "ok"
@@ -1111,8 +1116,9 @@ def covariance(fit: ModelFit, meas: Measurements, codec: CodecCorrelation | None
     sandwich of its error shared by frames that show the ball at nearly the
     same place (:func:`still_codec_sandwich`), never below the former.
     ``hac`` is True when a sandwich widened the errors.  Returns ``(cov,
-    hac, rho1)``; raises LinAlgError when the information matrix is
-    singular.  ``hac``: the autocorrelation decided once by the caller (as
+    hac, rho1, factor)``, ``factor`` the scale put on the errors' model
+    (:attr:`MLEResult.error_scale`); raises LinAlgError when the
+    information matrix is singular.  ``hac``: the autocorrelation decided once by the caller (as
     :func:`slip_lr`'s); None: asked here of ``fit``'s residuals."""
     rho, z = lag1_autocorrelation(meas, fit.residuals)
     scale = max(1.0, fit.chi2 / fit.dof)
@@ -1121,15 +1127,16 @@ def covariance(fit: ModelFit, meas: Measurements, codec: CodecCorrelation | None
         # The track's own share of the shared error, when its residuals show
         # clearly more than the pooled correlation says (shared_widening), as
         # the reduced chi-square's larger scale is taken.
-        return codec_sandwich(fit, meas, codec) * max(scale, shared_widening(*shared_scale(fit, meas, codec.acf))), True, rho
+        factor = max(scale, shared_widening(*shared_scale(fit, meas, codec.acf)))
+        return codec_sandwich(fit, meas, codec) * factor, True, rho, factor
     widened = False
     if still_codec:
         wide = _at_least(still_codec_sandwich(fit, meas) * scale, base)
         widened = bool(np.any(np.diag(wide) > np.diag(base) * (1 + 1e-9)))
         base = wide
     if not (autocorrelated(rho, z) if hac is None else hac):
-        return base, widened, rho
-    return _at_least(hac_covariance(fit.jac, fit.residuals, rho), base), True, rho
+        return base, widened, rho, scale
+    return _at_least(hac_covariance(fit.jac, fit.residuals, rho), base), True, rho, scale
 
 
 def _at_least(C, base) -> np.ndarray:
@@ -1158,7 +1165,7 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
                          f"{np.sqrt(chi2 / dof):.0f} times the stated noise): the fit stopped far "
                          "from the shot, or the track is not one shot", chi2=float(chi2), dof=int(dof))
     try:
-        cov, hac, rho = covariance(fit, meas, codec, still_codec, hac)
+        cov, hac, rho, factor = covariance(fit, meas, codec, still_codec, hac)
     except np.linalg.LinAlgError:
         return MLEResult("degenerate", "the track does not determine the shot (singular information matrix)")
     ph = phases(shot, pr)
@@ -1192,7 +1199,7 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
     common = dict(stderr=stderr, model="rolling" if rolling else "full", slip_lr=float(lr),
                   unseen_slip=float(dv_unseen),
                   chi2=float(chi2), dof=int(dof), residuals=fit.residuals, cov=cov, names=fit.names,
-                  hac=hac, rho1=float(rho), ar1=float(fit.ar1))
+                  hac=hac, rho1=float(rho), ar1=float(fit.ar1), error_scale=float(factor))
     verdicts = dict(verdicts or {})
     speed = float(np.hypot(*shot.v0))
     se_speed = float(np.hypot(*stderr["v0"]))
@@ -1626,8 +1633,14 @@ def crb_covariance(shot: Shot, params: BallParams, meas: Measurements, exposure_
     bound ``(J^T C^-1 J)^-1`` of an estimator that knew that correlation
     (the fit, weighting frames as independent, cannot reach it; with
     every frame independent the bound was 2.9 times below the H.264 fit's
-    RMS error, docs/measurements.md cov11).
+    RMS error, docs/measurements.md cov11).  The two are the fit's
+    alternatives, never together (AR(1) only without an inter-frame codec:
+    recover.estimate): both given, the errors would be whitened twice, so
+    ValueError.
     """
+    if ar1 > 0 and acf is not None:
+        raise ValueError("crb_covariance: the errors are AR(1) (ar1 > 0) or correlated as an inter-frame "
+                         "codec's (acf), not both")
     ar1 = float(np.clip(ar1, 0.0, MAX_AR1))
     t = meas.t_used
     p = np.r_[shot.x0, shot.t0, shot.v0] if rolling else np.r_[shot.x0, shot.t0, shot.v0, shot.w0]

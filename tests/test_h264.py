@@ -147,6 +147,41 @@ def test_a_tracks_own_drift_widens_its_errors(monkeypatch):
     assert np.sqrt(np.mean(z[True] ** 2)) > 0.5  # not merely wide
 
 
+def test_the_papers_errors_widen_with_the_tracks_own_drift(monkeypatch):
+    """The paper's inputs are measured by the same frames as the fit: when
+    the track's own shared scale widens the fit's errors (a drift the
+    pooled correlation understates), it widens the paper's by the same
+    factor (recover.mle.MLEResult.error_scale, recover.estimate.mle_noise).
+    Before, the paper took max(1, chi2/dof) only (chi2/dof ~0.77 on these
+    tracks, so 1): on the first track of seed 4 with an extra 0.2-s drift
+    that the paper answers, the scale is 2.51 and the paper's v0 errors
+    1.585 times wider with it (= sqrt(2.51))."""
+    from cuespin.recover import mle
+    from cuespin.recover.estimate import mle_noise
+    from cuespin.recover.simulate import ar1_errors
+    rng = np.random.default_rng(4)
+    own = mle.shared_scale
+    for tr in sliding_tracks(8, seed=4, presets=("case3", "random"), fps_grid=(60.0, 120.0, 240.0),
+                             sigma_grid=(1e-4,), blur=False):
+        n = len(tr.t)
+        err = 2.0 * tr.sigma * (shared_errors(n, tr.fps, rng) + ar1_errors(n, np.exp(-1.0 / (0.2 * tr.fps)), rng))
+        xy = model_track(tr.shot, tr.params, tr.t, tr.exposure_s) + err
+        est = {}
+        for on in (True, False):
+            monkeypatch.setattr(mle, "shared_scale", own if on else lambda *a, **k: (1.0, float("inf")))
+            est[on] = estimate(tr.t, xy, np.full(n, tr.sigma), tr.params, lossless=False, inter_frame=True)
+        monkeypatch.setattr(mle, "shared_scale", own)
+        if est[True].paper.status == "ok" and est[False].paper.status == "ok":
+            break
+    else:
+        pytest.fail("no track the paper answers")
+    m, off = est[True].mle, est[False].mle
+    assert m.error_scale > 2.0 and off.error_scale == 1.0  # the drift shows; without the rule nothing widens
+    assert mle_noise(m)[1] == m.error_scale
+    ratio = np.asarray(est[True].paper.stderr["v0"]) / np.asarray(est[False].paper.stderr["v0"])
+    assert np.allclose(ratio, np.sqrt(m.error_scale), rtol=1e-3)
+
+
 @pytest.mark.slow
 def test_shared_scale_rarely_widens_where_the_model_holds(monkeypatch):
     """Tracks whose whole error (4 sigma^2) is correlated exactly as

@@ -219,6 +219,22 @@ def test_bound_under_the_fits_ar1_errors():
     assert np.all(se_v0 / iid_v0 > 1.6), se_v0 / iid_v0
 
 
+def test_bound_refuses_ar1_and_a_codecs_correlation_together():
+    # AR(1) errors and an inter-frame codec's correlation are the fit's two
+    # alternative error models (recover.estimate fits AR(1) only without a
+    # codec); given both, the bound would whiten the errors twice and come
+    # out too narrow (review SHOULD-FIX 10).  Either alone still answers.
+    from cuespin.recover.mle import INTER_CODEC_ACF, crb_covariance
+
+    shot, p = sample_shot(7, "random")
+    t = np.arange(0.0, 1.0, 1 / 120)
+    meas = build_measurements(t, model_track(shot, p, t), np.full(len(t), SIGMA), t0=shot.t0, frame_dt=1 / 120)
+    with pytest.raises(ValueError):
+        crb_covariance(shot, p, meas, ar1=0.5, acf=INTER_CODEC_ACF)
+    for kw in ({"ar1": 0.5}, {"acf": INTER_CODEC_ACF}, {"ar1": 0.0, "acf": INTER_CODEC_ACF}):
+        assert np.all(np.isfinite(np.diag(crb_covariance(shot, p, meas, **kw))))
+
+
 def test_shared_errors_on_a_lossless_codec_measure_no_codec_share():
     # A shaded look on a lossless codec: the tracker states errors the look
     # factor widened (here twice the real ones) and shared by a rest's
@@ -390,6 +406,45 @@ def test_linear_covariance_carries_an_inter_frame_codecs_correlation():
     got = linear_covariance(meas, W, 0.0, 1.5, acf=INTER_CODEC_ACF)
     assert np.allclose(got, 1.5 * (base + extra), rtol=1e-9, atol=1e-20)
     assert got[0, 0] > 1.5 * 3 * base[0, 0]  # a mean of tens of frames: several times less precise
+
+
+def test_the_codecs_correlation_reaches_frames_the_fit_left_out():
+    # The paper's segmentation weights frames the fit leaves out (the
+    # strike's window, the cue's touched run); the codec shares their
+    # errors with their neighbours as with any other frame's.  Before, only
+    # the fit's frames were correlated: x0 from a slide's first 30 frames at
+    # 120 fps, 12 of them in a 100-ms window left out, had its sd 1.80
+    # times too small (the review's /tmp/revs/lc.py).  Weights on the
+    # window's frames, on the fit's, and on both, checked against the full
+    # frame covariance, rho(dt_ij) L_i L_j^T between every frame outside
+    # the rest, by brute force.
+    from cuespin.recover.measurements import linear_covariance
+    from cuespin.recover.mle import INTER_CODEC_ACF, time_correlation
+    rng = np.random.default_rng(7)
+    n = 90
+    t = np.arange(n) / 120.0
+    xy = np.c_[np.where(t < 0.2, 0.0, 0.3 * (t - 0.2)), np.zeros(n)] + 1e-4 * rng.standard_normal((n, 2))
+    cov = rng.uniform(0.5e-4, 2e-4, n)
+    meas = build_measurements(t, xy, cov, t0=0.2, frame_dt=1 / 120.0, clear_s=0.1)
+    moving = np.flatnonzero(t > 0.2)
+    left_out = moving[~meas.used[moving]]
+    assert len(left_out) >= 10  # the 100-ms window after the strike
+    rest = meas.used & ~meas.single[np.maximum(meas.group, 0)]
+    out = np.flatnonzero(~rest)  # every frame outside the rest, used or not
+    W = np.zeros((3, n))
+    W[0, left_out] = 1.0 / len(left_out)
+    slide = moving[:30]  # x0 extrapolated from the slide's first 30 frames, as a segmentation takes it
+    W[1, slide] = np.linalg.pinv(np.c_[np.ones(30), t[slide] - 0.2])[0]
+    W[2, moving] = np.linspace(-1.0, 1.0, len(moving)) / len(moving)
+    got = linear_covariance(meas, W, 0.0, 1.5, acf=INTER_CODEC_ACF)
+    L = np.linalg.cholesky(meas.cov[out])
+    R = time_correlation(meas.t[out], INTER_CODEC_ACF)
+    Y = np.einsum("ai,ijk->aijk", W[:, out], L)
+    brute = np.einsum("aipl,ij,bjql->apbq", Y, R, Y).reshape(6, 6)
+    assert np.allclose(got, 1.5 * brute, rtol=1e-9, atol=1e-20)
+    # The fit's frames alone miss most of it: a window's mean is far less
+    # precise than its frames taken as independent.
+    assert got[0, 0] > 1.5 * 3 * linear_covariance(meas, W)[0, 0]
 
 
 def test_parabola_weights_are_the_converged_fits_linearisation():
