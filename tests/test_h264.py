@@ -168,7 +168,7 @@ def test_the_papers_errors_widen_with_the_tracks_own_drift(monkeypatch):
         xy = model_track(tr.shot, tr.params, tr.t, tr.exposure_s) + err
         est = {}
         for on in (True, False):
-            monkeypatch.setattr(mle, "shared_scale", own if on else lambda *a, **k: (1.0, float("inf")))
+            monkeypatch.setattr(mle, "shared_scale", own if on else lambda *a, **k: (1.0, float("inf"), 0))
             est[on] = estimate(tr.t, xy, np.full(n, tr.sigma), tr.params, lossless=False, inter_frame=True)
         monkeypatch.setattr(mle, "shared_scale", own)
         if est[True].paper.status == "ok" and est[False].paper.status == "ok":
