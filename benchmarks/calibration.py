@@ -45,7 +45,9 @@ drawn tables (``calibrate.random_table``) against the edge each names, their
 coverage by the stated covariance, and the outline's and the lines' paths
 apart (each one's error, their ``PATHS_DISAGREE_Z`` statistic, how near a
 band lies inside the lines' noses); and the refusals and the confident
-wrong answers (over 1 px and 5 stated errors off).
+wrong answers (over 1 px and 5 stated errors off).  ``--noise`` redraws
+each table at that frame noise, ``--codec jpeg|h264`` (``--quality``,
+``--crf``) passes it through a lossy codec.
 
 With ``--diagnose`` (``--height 2 --tilt 0 --k1 -0.25``): the automatic
 camera's v0 error split into its parts (corners, k1, focal length), each
@@ -362,15 +364,47 @@ def stated(args):
             row(f"realistic {label} s{sd}", img, truth)
 
 
+def through_codec(img, codec: str | None, quality: int = 70, crf: int = 20):
+    """``img`` through a lossy codec as a camera's file would carry it: ``jpeg``
+    (OpenCV, ``quality``), ``h264`` (PyAV's libx264, ``crf``, preset medium,
+    yuv420p, the frame encoded 3 times and the first decoded: the key frame),
+    or None (unchanged)."""
+    import io
+
+    import cv2
+
+    if codec is None:
+        return img
+    if codec == "jpeg":
+        return cv2.imdecode(cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, quality])[1], cv2.IMREAD_COLOR)
+    import av
+
+    h, w = img.shape[:2]
+    f = np.ascontiguousarray(img[: h - h % 2, : w - w % 2])
+    buf = io.BytesIO()
+    with av.open(buf, "w", format="mp4") as c:
+        s = c.add_stream("libx264", rate=30)
+        s.width, s.height, s.pix_fmt = f.shape[1], f.shape[0], "yuv420p"
+        s.options = {"crf": str(crf), "preset": "medium"}
+        for _ in range(3):
+            for pkt in s.encode(av.VideoFrame.from_ndarray(f, format="bgr24")):
+                c.mux(pkt)
+        for pkt in s.encode():
+            c.mux(pkt)
+    buf.seek(0)
+    with av.open(buf) as d:
+        return next(iter(d.decode(video=0))).to_ndarray(format="bgr24")
+
+
 def tables(args):
     """The automatic corners on random drawn tables (``calibrate.random_table``, seeds
     ``--seed`` .. ``--seed + --n - 1``): each corner coordinate's error against
     its stated standard error (the detection's covariance), the truth the edge
     it says it found (``noses``: the playing surface; ``felt``: the felt's
     outline); and the two paths apart (the outline's, ``lines="never"``, and
-    the cushions' lines, ``"always"``): each one's RMS error and their largest
-    corner difference over their combined stated error (``PATHS_DISAGREE_Z``'s
-    statistic)."""
+    the cushions' lines, ``"always"``, both ``refuse=False``): each one's RMS
+    error and their largest corner difference over their combined stated
+    error (``PATHS_DISAGREE_Z``'s statistic)."""
     import math
 
     from cuespin.pipeline.calibrate import (
@@ -380,6 +414,7 @@ def tables(args):
         detect_corners,
         matched_corner_errors,
         random_table,
+        synthetic_table_frame,
     )
 
     def matched(det, truth):
@@ -391,6 +426,9 @@ def tables(args):
     zs, within, e2, v2, shows, refused, wrong = [], [], [], [], [], [], []
     for seed in range(args.seed, args.seed + args.n):
         t = random_table(seed)
+        if args.noise is not None:
+            t["frame"] = synthetic_table_frame(t["camera"], seed=seed, **dict(t["look"], noise=args.noise))
+        t["frame"] = through_codec(t["frame"], args.codec, args.quality, args.crf)
         look = ",".join(f"{k}={v:.3g}" for k, v in t["look"].items())
         try:
             det = detect_corners(t["frame"])
@@ -411,7 +449,7 @@ def tables(args):
         paths = {}
         for mode in ("never", "always"):
             try:
-                paths[mode] = detect_corners(t["frame"], lines=mode)
+                paths[mode] = detect_corners(t["frame"], lines=mode, refuse=False)
             except CalibrationError:
                 paths[mode] = None
         cols = []
@@ -705,6 +743,12 @@ def main():
     ap.add_argument("--k1", type=float, default=-0.25, help="--diagnose: the lens's k1")
     ap.add_argument("--diagnose", action="store_true",
                     help="where the automatic camera's v0 error comes from (--height, --tilt, --k1)")
+    ap.add_argument("--codec", choices=("jpeg", "h264"), default=None,
+                    help="--tables: each frame through this codec (--quality, --crf)")
+    ap.add_argument("--quality", type=int, default=70, help="--tables --codec jpeg: JPEG quality")
+    ap.add_argument("--crf", type=int, default=20, help="--tables --codec h264: libx264's CRF")
+    ap.add_argument("--noise", type=float, default=None,
+                    help="--tables: redraw each table at this frame noise (levels) instead of its drawn one")
     ap.add_argument("--tables", action="store_true",
                     help="the automatic corners' errors against their stated ones on random drawn tables")
     ap.add_argument("--stated", action="store_true",

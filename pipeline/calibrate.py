@@ -1590,7 +1590,7 @@ KAPPA_PATTERN_K1 = 6e-5
 def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = True,
                    noses: bool = True, robust: bool = True, pattern_px: float = EDGE_PATTERN_PX,
                    lines: str = "auto",
-                   kappa_pattern_k1: float = KAPPA_PATTERN_K1) -> Detection:
+                   kappa_pattern_k1: float = KAPPA_PATTERN_K1, refuse: bool = True) -> Detection:
     """The playing surface's four corners in a frame (:class:`Detection`).
 
     Parameters
@@ -1629,36 +1629,43 @@ def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = Tru
         focal length of half the frame's larger side), added when the lens
         is estimated to ``kappa_sigma`` and to the covariance, as kappa's
         move with the corners the edges give with it.
+    refuse : bool
+        Refuse, on whichever path answers, when the outline's noses show a
+        faint step outside them, a coherent band or a codec's flat cloth
+        (:func:`_outline_or_lines`); False answers what those refusals
+        withhold (to measure what they guard against).
     """
     D, thr = _felt_distance(img)
     quad, contour = _felt_quad(D, thr)
     kw = dict(K=K, dist=dist, estimate_lens=estimate_lens, robust=robust, pattern_px=pattern_px,
               kappa_pattern_k1=kappa_pattern_k1)
     outline, straddled, hidden, coherent = None, False, [], []
-    if lines != "always":
-        try:
-            sides = edge_points(img, quad, contour)
-            edge = "felt"
-            outer = []
-            if noses:
-                inner = cushion_noses(img, sides, outer=outer, hidden=hidden, coherent=coherent)
-                if inner is not None:
-                    sides, edge = inner, "noses"
-            straddled = any(outer)
-            if lines == "never" or max(_curve_rms(p) for p in sides) <= OUTLINE_STRAIGHT_PX:
-                outline = _detection(sides, edge, D.shape, **kw)
-        except CalibrationError:
-            if lines == "never":
-                raise
+    on_noses = False
+    # the outline's noses are looked for on every path: their faint-step and flat-cloth statistics refuse
+    # the lines' answer too, which takes the same band's inner edge (random table 14014 at noise 0.5 + JPEG
+    # 70: lines="always" 11.6 px off stating 0.047; fixcal, docs/measurements.md)
+    try:
+        sides = edge_points(img, quad, contour)
+        edge = "felt"
+        outer = []
+        if noses:
+            inner = cushion_noses(img, sides, outer=outer, hidden=hidden, coherent=coherent)
+            if inner is not None:
+                sides, edge, on_noses = inner, "noses", True
+        straddled = any(outer)
+        if lines == "never" or (lines == "auto" and max(_curve_rms(p) for p in sides) <= OUTLINE_STRAIGHT_PX):
+            outline = _detection(sides, edge, D.shape, **kw)
+    except CalibrationError:
+        if lines == "never":
+            raise
 
     def cushions(inside=None):
         return _detection(*cushion_lines(img, quad, contour, D, thr, noses=noses, inside=inside), D.shape,
                           lines=True, **kw)
 
-    on_noses = outline is not None and outline.edge == "noses"
     return _outline_or_lines(outline, straddled, cushions, lines, hidden_z=_hidden_z(hidden) if on_noses else 0.0,
                              flattened=on_noses and _codec_flattened(hidden),
-                             band_z=_band_z(hidden, coherent) if on_noses else 0.0)
+                             band_z=_band_z(hidden, coherent) if on_noses else 0.0, refuse=refuse)
 
 
 def _band_z(hidden: list, coherent: list) -> float:
@@ -1757,7 +1764,7 @@ def _codec_flattened(hidden: list) -> bool:
 
 
 def _outline_or_lines(outline, straddled: bool, cushions, lines: str = "auto", hidden_z: float = 0.0,
-                      flattened: bool = False, band_z: float = 0.0) -> Detection:
+                      flattened: bool = False, band_z: float = 0.0, refuse: bool = True) -> Detection:
     """Which path's corners :func:`detect_corners` answers: the felt's outline's
     or the cushions' lines' (the one place this is decided).
 
@@ -1790,6 +1797,11 @@ def _outline_or_lines(outline, straddled: bool, cushions, lines: str = "auto", h
     band_z : float
         ``_band_z`` of the same: the four sides' faint steps added where a
         band's outer edge would lie, on an uncompressed frame.
+    refuse : bool
+        Apply the three refusals below (``hidden_z``, ``band_z``,
+        ``flattened``) before any path is answered, on every ``lines``
+        mode: the lines take the same band's inner edge.  False: answer
+        what they withhold (measurements).
 
     Returns
     -------
@@ -1809,30 +1821,30 @@ def _outline_or_lines(outline, straddled: bool, cushions, lines: str = "auto", h
     Raises
     ------
     CalibrationError
-        ``auto``, the outline's noses with a faint step outside them
+        Any mode (``refuse``), the outline's noses with a faint step outside them
         (``hidden_z`` at least ``HIDDEN_NOSE_Z``, or ``band_z`` at least
         ``BAND_COHERENT_Z``) or a codec's flat cloth
         that could not show one (``flattened``), or the two paths'
         corners disagreeing on the same edge with nothing to say which is
         wrong: the reason says so and asks for ``--corners``.
     """
-    if lines == "never":
-        return outline
-    if lines == "always" or outline is None:
-        return cushions()
-    if hidden_z >= HIDDEN_NOSE_Z:
+    if refuse and hidden_z >= HIDDEN_NOSE_Z:
         raise CalibrationError(f"a faint step ({hidden_z:.1f} x the cloth's scatter) lies between the noses found "
                                "and the felt's outline: a band inside the cushions in nearly their shade may hide "
                                "the noses, whose inner edge would be taken for them; give --corners")
-    if band_z >= BAND_COHERENT_Z:
+    if refuse and band_z >= BAND_COHERENT_Z:
         raise CalibrationError(f"faint steps at the same place on all four sides ({band_z:.1f} x the cloth's "
                                "scatter) lie between the noses found and the felt's outline: a band inside the "
                                "cushions in nearly their shade may hide the noses, whose inner edge would be taken "
                                "for them; give --corners")
-    if flattened:
+    if refuse and flattened:
         raise CalibrationError("the video's compression flattened the cloth into constant blocks: a band inside the "
                                "cushions in nearly their shade, whose inner edge would be taken for the noses, could "
                                "not be seen; give --corners (or a less compressed frame)")
+    if lines == "never":
+        return outline
+    if lines == "always" or outline is None:
+        return cushions()
     inside = []
     try:
         other = cushions(inside)
