@@ -183,7 +183,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         the ball, the cue; or the ball leaving the spot it rested on): the
         first frames after the strike (recover.measurements.cue_clear_s), and
         the whole run of flagged frames from the first after the strike on,
-        its holes of up to ``TOUCHED_GAP_FRAMES`` bridged
+        its holes spanning up to ``TOUCHED_GAP_S`` bridged
         (recover.measurements.touched_run_s), are left out only when that run
         is found or a frame within ``CUE_CLEAR_FRAMES`` of the strike is
         flagged.  Without it (simulated tracks, a shot with no cue

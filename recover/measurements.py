@@ -95,16 +95,20 @@ CUE_CLEAR_FRAMES = 2.0
 # case4 MJPG clips (seed 43, 26 kept tracks; docs/measurements.md, slip11)
 # the run began 1-3 frames after the strike on 8 (the first frame's ball
 # still inside the strike's blur, not flagged) and was broken by one
-# unflagged frame on 2 (shot 0, shot 20 at 480 fps), so the run "unbroken
-# from the first frame after the strike" left out none or one frame of it
-# and the cue's tip, pulling the centre 0.2-0.5 px forward for 20 frames,
-# was fitted (shot 20: slip LR 81.6, free slip).  A run now bridges at most
-# this many unflagged frames, at its start too: 2 reaches every run seen
-# but one starting 3 frames late (shot 10, 480 fps, LR 1.8 either way),
-# and no flagged frame further on (shot 23's flicker stops at its first 4
-# unflagged frames; shot 15's flags from 8 frames after the strike on, the
-# spot the ball left, are not reached).
-TOUCHED_GAP_FRAMES = 2
+# unflagged frame on 2 (shot 0 at 240 fps, shot 20 at 480 fps), so the run
+# "unbroken from the first frame after the strike" left out none or one
+# frame of it and the cue's tip, pulling the centre 0.2-0.5 px forward for
+# 20 frames, was fitted (shot 20: slip LR 81.6, free slip).  A run bridges
+# unflagged frames in a row, at its start too, only while they span at
+# most this time (s): a hole is time the ball moves on, so a bridge counted
+# in frames (slip11's 2) left out 33 ms of early slide at 60 fps and turned
+# a correct held-out sliding shot degenerate (H.264 seed 71 shot 13, flags
+# from the 2nd frame after the strike; fixgap, docs/measurements.md).  5 ms
+# bridges slip11's 2 frames at 480 fps (4.2 ms: every run seen at 480 fps
+# but shot 10's, 3 frames late, LR 1.8 either way), 1 at 240 fps (4.2 ms:
+# shot 0's hole, the 1-frame late starts), none at 120 or 60 fps (8.3 ms, a
+# frame: seed 43 shot 30's hole at 60 fps stays unbridged).
+TOUCHED_GAP_S = 5e-3
 # A codec's measured share may lower the stated errors (see codec_excess)
 # to no less than this fraction of them: MJPG at low noise measured the
 # tracker's stated errors 1.2-1.4 times the real ones (README), so 0.5 is
@@ -689,9 +693,10 @@ def cue_clear_s(speed: float, R: float, frame_dt: float) -> float:
 
 def touched_run_s(t, touched, t0: float, exposure_s: float, frame_dt: float) -> float:
     """Time (s) after the strike ``t0`` through which the frames the tracker
-    flags (``touched``) run from the first frame after it, bridging at most
-    :data:`TOUCHED_GAP_FRAMES` unflagged frames in a row (before the first
-    flagged one too): a window :func:`strike_window` given it leaves out
+    flags (``touched``) run from the first frame after it, bridging
+    unflagged frames in a row (before the first flagged one too) only while
+    they span at most :data:`TOUCHED_GAP_S` (as many frame intervals
+    ``frame_dt``, s): a window :func:`strike_window` given it leaves out
     that whole run, the cue's tip or the spot the ball left still in its
     window (0 when no flagged frame is reached).  Used beside
     :func:`cue_clear_s`'s distance rule (recover.estimate), not capped by
@@ -701,6 +706,9 @@ def touched_run_s(t, touched, t0: float, exposure_s: float, frame_dt: float) -> 
     if touched is None or t0 is None or not np.isfinite(t0) or len(t) == 0:
         return 0.0
     touched = np.asarray(touched, dtype=bool)
+    # whole frames whose intervals fit in the time (1e-9: 2 frames at 480 fps
+    # against a time set at a round 5 ms must not hinge on rounding)
+    max_gap = int(np.floor(TOUCHED_GAP_S / frame_dt + 1e-9)) if frame_dt > 0 else 0
     after = np.flatnonzero(t > t0)
     last, gap = None, 0
     for k in after:
@@ -708,7 +716,7 @@ def touched_run_s(t, touched, t0: float, exposure_s: float, frame_dt: float) -> 
             last, gap = k, 0
             continue
         gap += 1
-        if gap > TOUCHED_GAP_FRAMES:
+        if gap > max_gap:
             break
     if last is None:
         return 0.0

@@ -148,12 +148,12 @@ def test_the_touched_run_time():
     touched = np.zeros(12, bool)
     touched[[3, 4, 5, 6, 10]] = True
     # the run from the first frame after the strike (0.025 s): frames 3-6, not 10
-    # (3 unflagged frames before it, more than TOUCHED_GAP_FRAMES)
+    # (3 unflagged frames before it, 30 ms, more than TOUCHED_GAP_S)
     s = measurements.touched_run_s(t, touched, 0.025, 0.0, 0.01)
     assert 0.06 - 0.025 <= s < 0.07 - 0.025
     assert measurements.strike_window(t, 0.025, 0.0, 0.01, s).nonzero()[0].tolist() == [3, 4, 5, 6]
-    # the first flagged frame after the strike beyond TOUCHED_GAP_FRAMES (2) unflagged ones: no run
-    assert measurements.TOUCHED_GAP_FRAMES == 2
+    # the first frame after the strike unflagged, 10 ms > TOUCHED_GAP_S (5 ms): no run
+    assert measurements.TOUCHED_GAP_S == 5e-3
     assert measurements.touched_run_s(t, touched, 0.065, 0.0, 0.01) == 0.0
     assert measurements.touched_run_s(t, None, 0.025, 0.0, 0.01) == 0.0
 
@@ -161,15 +161,28 @@ def test_the_touched_run_time():
 def test_the_touched_run_bridges_the_flags_holes():
     # Realistic MJPG clips (slip11, seed 43): the run starts a frame or two
     # after the strike and is broken by single unflagged frames; the run
-    # bridges up to TOUCHED_GAP_FRAMES unflagged frames, at its start too.
-    t = np.arange(16) / 100.0
+    # bridges unflagged frames, at its start too, spanning up to
+    # TOUCHED_GAP_S (5 ms): 2 frames at 480 fps, 1 at 240 fps, none at 60 fps.
     touched = np.zeros(16, bool)
-    touched[[5, 6, 7, 9, 10, 11, 15]] = True  # strike at 0.025: frames 3, 4 and 8 not flagged
-    s = measurements.touched_run_s(t, touched, 0.025, 0.0, 0.01)
-    assert 0.11 - 0.025 <= s < 0.12 - 0.025  # through frame 11, not 15 (3 unflagged before it)
-    assert measurements.strike_window(t, 0.025, 0.0, 0.01, s).nonzero()[0].tolist() == list(range(3, 12))
-    # three unflagged frames after the strike: no run
-    assert measurements.touched_run_s(t, touched, 0.015, 0.0, 0.01) == 0.0
+    touched[[5, 6, 7, 9, 10, 11, 15]] = True  # frames 3, 4 and 8 not flagged
+    for fps, run in ((480.0, list(range(3, 12))), (240.0, [])):
+        t = np.arange(16) / fps
+        t0 = 2.5 / fps  # frames 3 and 4: 2 unflagged frames after the strike
+        s = measurements.touched_run_s(t, touched, t0, 0.0, 1 / fps)
+        assert measurements.strike_window(t, t0, 0.0, 1 / fps, s).nonzero()[0].tolist() == run
+        # three unflagged frames after the strike: no run at either rate
+        assert measurements.touched_run_s(t, touched, 1.5 / fps, 0.0, 1 / fps) == 0.0
+    # 240 fps: one unflagged frame after the strike (frame 4) and the hole at 8 bridged, not 12-14
+    t = np.arange(16) / 240.0
+    s = measurements.touched_run_s(t, touched, 3.5 / 240.0, 0.0, 1 / 240.0)
+    assert measurements.strike_window(t, 3.5 / 240.0, 0.0, 1 / 240.0, s).nonzero()[0].tolist() == list(range(4, 12))
+    # 60 fps, the held-out H.264 seed 71 shot 13's flags (from the 2nd frame after
+    # the strike): its one unflagged frame is 17 ms of slide, not bridged
+    t = np.arange(16) / 60.0
+    shot13 = np.zeros(16, bool)
+    shot13[4:11] = True
+    assert measurements.touched_run_s(t, shot13, 2.5 / 60.0, 0.0, 1 / 60.0) == 0.0
+    assert measurements.touched_run_s(t, shot13, 3.5 / 60.0, 0.0, 1 / 60.0) > 0.0
 
 
 def test_no_cue_seen_no_frames_left_out():
