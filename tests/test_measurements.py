@@ -336,15 +336,11 @@ def test_linear_covariance_is_the_fits_measurement_model():
         assert np.allclose(C[4:6, 4:6], 0.5 * (meas.cov[rest[0]] + meas.cov[rest[1]]) / 2 + 0.5 * f[0] * c[0])
 
 
-def test_linear_covariance_carries_the_fits_ar1_errors_and_scale():
-    # The paper's inputs are measured by the frames the MLE fits; when the
-    # fit models their errors as AR(1) (recover.mle.ar1_prewhiten) and
-    # scales them by chi2/dof, so must the inputs' covariance (seed 21's
-    # realistic shots: rho up to 0.92).  Checked against the full frame
-    # covariance, rho^|i - j| L_i L_j^T between the moving frames, built
-    # by brute force: an average, a single frame, and weights of both signs.
-    from cuespin.recover.measurements import linear_covariance
-    rng = np.random.default_rng(5)
+def _a_slides_single_frames(seed):
+    """A 120-fps track (rest, then a slide from t0 0.2 s), its measurements,
+    the slide's single frames and three weight rows on them: an average, one
+    frame, and weights of both signs."""
+    rng = np.random.default_rng(seed)
     t = np.arange(60) / 120.0
     xy = np.c_[np.where(t < 0.2, 0.0, 0.3 * (t - 0.2)), np.zeros(60)] + 1e-4 * rng.standard_normal((60, 2))
     cov = rng.uniform(0.5e-4, 2e-4, 60)
@@ -356,13 +352,31 @@ def test_linear_covariance_carries_the_fits_ar1_errors_and_scale():
     W[0, one] = 1.0 / len(one)
     W[1, one[5]] = 1.0
     W[2, one] = np.linspace(-1.0, 1.0, len(one)) / len(one)
+    return meas, one, W
+
+
+def _brute_covariance(W, L, R):
+    """The weight rows' (x, y) covariance by brute force: R_ij L_i L_j^T
+    summed over frame pairs (L each frame's Cholesky factor)."""
+    Y = np.einsum("ai,ijk->aijk", W, L)
+    return np.einsum("aipl,ij,bjql->apbq", Y, R, Y).reshape(2 * len(W), 2 * len(W))
+
+
+def test_linear_covariance_carries_the_fits_ar1_errors_and_scale():
+    # The paper's inputs are measured by the frames the MLE fits; when the
+    # fit models their errors as AR(1) (recover.mle.ar1_prewhiten) and
+    # scales them by chi2/dof, so must the inputs' covariance (seed 21's
+    # realistic shots: rho up to 0.92).  Checked against the full frame
+    # covariance, rho^|i - j| L_i L_j^T between the moving frames, built
+    # by brute force: an average, a single frame, and weights of both signs.
+    from cuespin.recover.measurements import linear_covariance
+    meas, one, W = _a_slides_single_frames(5)
     rho, scale = 0.6, 2.5
     base = linear_covariance(meas, W)
     L = np.linalg.cholesky(meas.cov[one])
     k = np.rint((meas.t[one] - meas.t[one[0]]) * 120.0).astype(int)
     R = rho ** np.abs(k[:, None] - k[None, :]) - np.eye(len(one))
-    Y = np.einsum("ai,ijk->aijk", W[:, one], L)
-    extra = np.einsum("aipl,ij,bjql->apbq", Y, R, Y).reshape(6, 6)
+    extra = _brute_covariance(W[:, one], L, R)
     got = linear_covariance(meas, W, rho, scale)
     assert np.allclose(got, scale * (base + extra), rtol=1e-9, atol=1e-20)
     # A mean of m frames under AR(1) is (1 + rho) / (1 - rho) times less
@@ -386,23 +400,11 @@ def test_linear_covariance_carries_an_inter_frame_codecs_correlation():
     # covariance, rho(dt_ij) L_i L_j^T between the moving frames, by brute force.
     from cuespin.recover.measurements import linear_covariance
     from cuespin.recover.mle import INTER_CODEC_ACF, time_correlation
-    rng = np.random.default_rng(6)
-    t = np.arange(60) / 120.0
-    xy = np.c_[np.where(t < 0.2, 0.0, 0.3 * (t - 0.2)), np.zeros(60)] + 1e-4 * rng.standard_normal((60, 2))
-    cov = rng.uniform(0.5e-4, 2e-4, 60)
-    meas = build_measurements(t, xy, cov, t0=0.2, frame_dt=1 / 120.0)
-    one = np.flatnonzero(meas.used)
-    one = one[meas.single[meas.group[one]]]
-    assert len(one) >= 20
-    W = np.zeros((3, 60))
-    W[0, one] = 1.0 / len(one)
-    W[1, one[5]] = 1.0
-    W[2, one] = np.linspace(-1.0, 1.0, len(one)) / len(one)
+    meas, one, W = _a_slides_single_frames(6)
     base = linear_covariance(meas, W)
     L = np.linalg.cholesky(meas.cov[one])
     R = time_correlation(meas.t[one], INTER_CODEC_ACF) - np.eye(len(one))
-    Y = np.einsum("ai,ijk->aijk", W[:, one], L)
-    extra = np.einsum("aipl,ij,bjql->apbq", Y, R, Y).reshape(6, 6)
+    extra = _brute_covariance(W[:, one], L, R)
     got = linear_covariance(meas, W, 0.0, 1.5, acf=INTER_CODEC_ACF)
     assert np.allclose(got, 1.5 * (base + extra), rtol=1e-9, atol=1e-20)
     assert got[0, 0] > 1.5 * 3 * base[0, 0]  # a mean of tens of frames: several times less precise
@@ -439,8 +441,7 @@ def test_the_codecs_correlation_reaches_frames_the_fit_left_out():
     got = linear_covariance(meas, W, 0.0, 1.5, acf=INTER_CODEC_ACF)
     L = np.linalg.cholesky(meas.cov[out])
     R = time_correlation(meas.t[out], INTER_CODEC_ACF)
-    Y = np.einsum("ai,ijk->aijk", W[:, out], L)
-    brute = np.einsum("aipl,ij,bjql->apbq", Y, R, Y).reshape(6, 6)
+    brute = _brute_covariance(W[:, out], L, R)
     assert np.allclose(got, 1.5 * brute, rtol=1e-9, atol=1e-20)
     # The fit's frames alone miss most of it: a window's mean is far less
     # precise than its frames taken as independent.
