@@ -1380,7 +1380,7 @@ def slide_through_chi2(fit: ModelFit, meas: Measurements, n_dir: int = SLIDE_THR
     v_hat`` (eq. 16): the two differ by ``1/2 (mu_s g e_hat + 5/7 mu_r g
     v_hat) (t - t0)^2`` after the strike, ``e_hat`` any direction.  The
     change of the whitened residuals is linearised about the rolling fit
-    (its own columns, x0, t0, v0, refitted: the residual projected off
+    (x0, t0, v0 refitted: the residual projected off those columns of
     ``fit.jac``) and minimised over ``n_dir`` directions.  inf when the
     fitted ball comes to rest in view (a ball seen at rest did not slide
     through every frame).
@@ -1411,7 +1411,10 @@ def slide_through_chi2(fit: ModelFit, meas: Measurements, n_dir: int = SLIDE_THR
     cols.append(-meas.whiten_delta(off_line))
     if fit.ar1 > 0:
         cols = [ar1_prewhiten(meas, c, fit.ar1) for c in cols]
-    J = np.asarray(fit.jac, dtype=float)
+    # x0, t0, v0 only: a slide through every frame has no w0 to refit (its
+    # w0 columns, linearised at the fit's t1, would take up part of the
+    # change; realistic H.264 71/3, end_F 2168, read +2.7 with them, fix71).
+    J = np.asarray(fit.jac, dtype=float)[:, :5]
     r = np.asarray(fit.residuals, dtype=float).ravel()
     Q, _ = np.linalg.qr(J)
 
