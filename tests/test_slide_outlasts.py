@@ -251,3 +251,18 @@ def test_a_slide_outlasting_the_clip_is_not_answered_as_ended(monkeypatch):
             assert m.status == "degenerate" and m.w0 is None and m.v0 is not None
             assert "a slide lasting all of it fits the track about as well" in m.reason, m.reason
     assert by_rule >= 2
+
+
+@pytest.mark.slow
+def test_slides_ending_in_view_are_not_refused_as_outlasting():
+    # 400 generator slides that end in view (recover.simulate.sliding_tracks,
+    # seed 31, independent errors): fix71's rule refuses none (measured: 398
+    # free-slip answers asked, 0 refused, the smallest chi-square of a slide
+    # through every frame 4.1e5 against the threshold 9.2).  The nominal
+    # rate, fit.decide.LEVEL, plus two binomial standard errors would allow 7.
+    from cuespin.fit.decide import LEVEL
+    from cuespin.recover.simulate import sliding_tracks
+    n = 400
+    refused = sum(_recover(tr).verdicts.get("slide_ends") is False for tr in sliding_tracks(n, 31))
+    assert refused <= n * LEVEL + 2 * np.sqrt(n * LEVEL * (1 - LEVEL))
+    assert refused == 0
