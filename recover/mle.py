@@ -201,7 +201,10 @@ class MLEResult:
     needs to change its velocity by its speed, :func:`slide_bound_s`;
     ``slide_outlasts``: a rolling answer's frames after the strike too few
     in time to show a slide that lasts through all of them,
-    :data:`SLIDE_THROUGH_TAU`; ``strike_seen``: at least MIN_STILL_FRAMES
+    :data:`SLIDE_THROUGH_TAU`, or a slide through all of them not
+    excluded by the track; ``slide_ends``: a free-slip answer's end of
+    sliding in view excludes a slide through every frame,
+    :func:`slide_through_chi2`; ``strike_seen``: at least MIN_STILL_FRAMES
     used frames before t0), for a refit to keep (:func:`result`).
     """
 
