@@ -140,7 +140,11 @@ def slide_through_excluded(d_chi2: float) -> Decision:
     leaves_table_tracks(240, case4) below it that the seen-time rule
     (recover.mle.SLIDE_THROUGH_TAU) keeps; realistic H.264 seeds 32, 34, 71:
     correct rolling answers 107-1.6e7, the wrong ones (a slide partly seen,
-    slip_lr under its threshold) -1.5 and -0.75."""
+    slip_lr under its threshold) -1.5 and -0.75.  Asked of a free-slip
+    answer ending its slide in view too (recover.mle.result's
+    ``slide_ends``; fix71: realistic H.264 71/5, true t1 2.84 s, +6.3;
+    right free-slip answers of seeds 32, 71 refused before x0, t0, v0
+    alone were refitted read 20-221)."""
     thr = slip_threshold()
     d = float(d_chi2) if not np.isnan(d_chi2) else 0.0
     return Decision(d > thr, d, thr)

@@ -220,7 +220,10 @@ class MLEResult:
     needs to change its velocity by its speed, :func:`slide_bound_s`;
     ``slide_outlasts``: a rolling answer's frames after the strike too few
     in time to show a slide that lasts through all of them,
-    :data:`SLIDE_THROUGH_TAU`; ``strike_seen``: at least MIN_STILL_FRAMES
+    :data:`SLIDE_THROUGH_TAU`, or a slide through all of them not
+    excluded by the track; ``slide_ends``: a free-slip answer's end of
+    sliding in view excludes a slide through every frame,
+    :func:`slide_through_chi2`; ``strike_seen``: at least MIN_STILL_FRAMES
     used frames before t0), for a refit to keep (:func:`result`).
     ``error_scale`` the factor :func:`covariance` put on the errors' model
     (the reduced chi-square when above 1; with an inter-frame codec, the
@@ -1205,7 +1208,17 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
     se_speed = float(np.hypot(*stderr["v0"]))
     if verdicts.get("v0_determined") is None:
         verdicts["v0_determined"] = bool(se_speed < MAX_REL_STDERR_V0 * speed)
-    n_slide = None
+    n_slide, ends = None, None
+    if not rolling and sliding_ended:
+        # The end of sliding in view must exclude a slide lasting through
+        # every frame, on the same rule as a rolling answer
+        # (fit.decide.slide_through_excluded): realistic H.264 71/5 (60 fps,
+        # true t1 2.84 s, clip 0.85 s seen) ended its slide at 0.77 s on a
+        # correlated end_F 9.4 and answered w0 115 stated errors off (fix71).
+        if verdicts.get("slide_ends") is None:
+            ends = slide_through_excluded(slide_through_chi2(fit, meas))
+            verdicts["slide_ends"] = bool(ends)
+        sliding_ended = verdicts["slide_ends"]
     if not rolling and sliding_ended:
         t_m = meas.t_single
         n_slide = int(np.sum((t_m > shot.t0) & (t_m < ph.t1)))
@@ -1303,8 +1316,12 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
         lower = 3.5 * pr.mu_s * pr.g * (t_end - shot.t0)
         out.update(w0=None)
         out["stderr"] = {k: v for k, v in stderr.items() if k != "w0"}
+        ended = "" if verdicts.get("slide_ends", True) else (
+            f" (the fit ends sliding at t1 = {ph.t1:.3f} s, but a slide lasting all of it fits the track about as "
+            "well" + ("" if ends is None else f": chi-square {ends.statistic:+.1f} against it, over "
+                      f"{ends.threshold:.1f} would exclude it") + ")")
         return MLEResult("degenerate",
-                         f"the track ends (t = {t_end:.3f} s) before sliding does: the slip, so w0, "
+                         f"the track ends (t = {t_end:.3f} s) before sliding does{ended}: the slip, so w0, "
                          f"is not determined (|u0| > {lower:.2f} m/s); v0 is", **out)
     if not np.all(np.isfinite(stderr["w0"])):
         return MLEResult("degenerate", "the track does not determine w0 (its information is not positive "
@@ -1397,7 +1414,7 @@ def seen_after_strike_s(meas: Measurements, t0: float) -> float:
 
 
 def slide_through_chi2(fit: ModelFit, meas: Measurements, n_dir: int = SLIDE_THROUGH_DIRECTIONS) -> float:
-    """How much worse than the rolling fit ``fit`` the best slide lasting
+    """How much worse than the rolling or free-slip fit ``fit`` the best slide lasting
     through every frame fits: the chi-square increase (in the residuals'
     own scale when they are larger than stated, as :func:`slip_lr`'s).
 
@@ -1407,12 +1424,18 @@ def slide_through_chi2(fit: ModelFit, meas: Measurements, n_dir: int = SLIDE_THR
     v_hat`` (eq. 16): the two differ by ``1/2 (mu_s g e_hat + 5/7 mu_r g
     v_hat) (t - t0)^2`` after the strike, ``e_hat`` any direction.  The
     change of the whitened residuals is linearised about the rolling fit
-    (its own columns, x0, t0, v0, refitted: the residual projected off
+    (x0, t0, v0 refitted: the residual projected off those columns of
     ``fit.jac``) and minimised over ``n_dir`` directions.  inf when the
     fitted ball comes to rest in view (a ball seen at rest did not slide
-    through every frame) or when ``fit`` is not a rolling one."""
-    if not fit.rolling:
-        return float("inf")
+    through every frame).
+
+    A free-slip fit (its slide ending at t1) is asked the same question
+    about its end of sliding: the through-slide's difference from it is
+    ``-(x_fit(t) - x0 - v0 (t - t0)) - 1/2 mu_s g e_hat (t - t0)^2``, the
+    fit's own path (physics.motion.positions, exposure not averaged) off
+    its straight line in place of rolling's ``-5/7 mu_r g v_hat`` term
+    (docs/measurements.md, fix71: realistic H.264 71/5 ended its slide in
+    view, true t1 twice the clip)."""
     pr, shot = fit.params, fit.shot
     ph = phases(shot, pr)
     t_used = meas.t_used
@@ -1420,13 +1443,22 @@ def slide_through_chi2(fit: ModelFit, meas: Measurements, n_dir: int = SLIDE_THR
         return float("inf")
     v0 = np.asarray(shot.v0, dtype=float)
     v_hat = v0 / max(float(np.hypot(*v0)), 1e-12)
-    q = 0.5 * np.clip(t_used - float(shot.t0), 0.0, None) ** 2
+    tau = np.clip(t_used - float(shot.t0), 0.0, None)
+    q = 0.5 * tau ** 2
+    if fit.rolling:
+        off_line = -(5.0 / 7.0 * pr.mu_r * pr.g) * q[:, None] * v_hat
+    else:  # the fit's path off its straight line x0 + v0 (t - t0) after the strike
+        line = np.asarray(shot.x0, float) + tau[:, None] * v0
+        off_line = np.where((t_used > shot.t0)[:, None], positions(shot, pr, t_used) - line, 0.0)
     cols = [meas.whiten_delta(q[:, None] * e) for e in (pr.mu_s * pr.g * np.array([1.0, 0.0]),
-                                                        pr.mu_s * pr.g * np.array([0.0, 1.0]),
-                                                        5.0 / 7.0 * pr.mu_r * pr.g * v_hat)]
+                                                        pr.mu_s * pr.g * np.array([0.0, 1.0]))]
+    cols.append(-meas.whiten_delta(off_line))
     if fit.ar1 > 0:
         cols = [ar1_prewhiten(meas, c, fit.ar1) for c in cols]
-    J = np.asarray(fit.jac, dtype=float)
+    # x0, t0, v0 only: a slide through every frame has no w0 to refit (its
+    # w0 columns, linearised at the fit's t1, would take up part of the
+    # change; realistic H.264 71/3, end_F 2168, read +2.7 with them, fix71).
+    J = np.asarray(fit.jac, dtype=float)[:, :5]
     r = np.asarray(fit.residuals, dtype=float).ravel()
     Q, _ = np.linalg.qr(J)
 

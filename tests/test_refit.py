@@ -76,12 +76,14 @@ def test_refit_keeps_the_first_fits_verdicts(monkeypatch):
     sig = np.full(len(tr.t), tr.sigma)
     first = estimate(tr.t, tr.xy, sig, tr.params, 0.0)
     assert first.mle.status == "ok" and first.mle.model == "full"
-    assert first.decided.verdicts == {"v0_determined": True, "sliding_frames": True, "strike_seen": True}
+    assert first.decided.verdicts == {"v0_determined": True, "sliding_frames": True, "strike_seen": True,
+                                      "slide_ends": True}
     assert first.decided.hac is False and first.mle.hac is False
     assert first.paper.stop_apart is False and first.decided.stop_apart is False
     monkeypatch.setattr(mle_mod, "MIN_SLIDING_FRAMES", 10**6)
     monkeypatch.setattr(mle_mod, "MAX_REL_STDERR_V0", 0.0)
     monkeypatch.setattr(mle_mod, "strike_in_view", lambda t, t0: False)
+    monkeypatch.setattr(mle_mod, "slide_through_excluded", lambda d: Decision(False, d, 0.0))
     monkeypatch.setattr(mle_mod, "autocorrelated", lambda rho, z: Decision(True, z, 0.0))
     monkeypatch.setattr(paper_mod, "stop_apart", lambda d2: Decision(True, d2, 0.0))
     again = estimate(tr.t, tr.xy, sig, tr.params, 0.0, keep=first.decided)
