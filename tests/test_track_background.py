@@ -62,3 +62,32 @@ def test_a_withdrawing_cue_is_not_the_balls_motion():
         bg = learn_background(learn_projection(raw, r).many(raw), r, where)
         assert bg.polarity != 0
         assert cue_moved(bg, r) == cue, (first, bg.moved_band, r)
+
+
+@pytest.mark.slow  # 9 renders at 1280 x 720
+def test_the_cue_beside_the_balls_crescent_is_left_out():
+    # The same shot on grey (luma) video: the look-ahead holds the whole
+    # clip, so the ball's crescent (the ball moves 0.55 radii) and the cue's
+    # withdrawal over the corner pocket moved in the same samples.  Learnt
+    # from both (16.8 x 720 px by second moments) the model lost 189 of 193
+    # frames; with the cue's part left out (stick_parts) the moved pixels are
+    # the ball's sweep, 19.5 x 35.1 px (2.95 radii) measured in the tracker's
+    # look-ahead, and the track found 189 of 193.  Longer than 4 radii means
+    # the cue's part was kept.
+    import cv2
+
+    from cuespin.track.video import cue_moved
+
+    scene = sample_scenes(2, 9, look="realistic", codec="FFV1")[1]
+    scene.render.update(specular=0.0, markings="none", psf_sigma=0.0, max_duration=0.8)
+    fr = FrameRenderer(scene)
+    rng = np.random.default_rng(0)
+    c = scene.camera.to_pixels(np.array([scene.truth.x0[:2]]))[0]
+    r = scene.physics.R * scene.camera.px_per_m(c)
+    raw = [fr.render(int(k), rng) for k in np.linspace(0, fr.n_frames - 1, 9).round()]
+    grey = np.stack([cv2.cvtColor(f, cv2.COLOR_BGR2GRAY) for f in raw])
+    where = search_mask(scene.camera, scene.table, scene.physics.R, grey.shape[1:3])
+    bg = learn_background(grey, r, where)
+    assert bg.polarity != 0
+    assert not cue_moved(bg, r)
+    assert bg.moved_band[1] < 4 * r, (bg.moved_band, r)

@@ -66,11 +66,18 @@ LEARN_MOVED_AREA = 2.0
 STICK_MOVED_RADII = 3.0
 
 
+def cue_band(band: tuple, r: float) -> bool:
+    """Whether moved pixels of ``band`` = (width, length) (px,
+    :func:`~cuespin.track.background.band_extent`) are a stick (the cue),
+    not a ball of radius ``r`` (px): :data:`STICK_MOVED_RADII`."""
+    width, length = band
+    return width < STICK_WIDTH_RADII * r and length > STICK_MOVED_RADII * r
+
+
 def cue_moved(bg: Background, r: float) -> bool:
     """Whether what moved in ``bg``'s samples is a stick (the cue), not a
-    ball of radius ``r`` (px): :data:`STICK_MOVED_RADII`."""
-    width, length = bg.moved_band
-    return width < STICK_WIDTH_RADII * r and length > STICK_MOVED_RADII * r
+    ball of radius ``r`` (px): :func:`cue_band`."""
+    return cue_band(bg.moved_band, r)
 # Every this many frames the whole decoded frame joins the felt average
 # (cv2.accumulate: ~1 ms for a 1280 x 720 BGR frame, a quarter of it per frame).
 FULL_FELT_EVERY = 4
