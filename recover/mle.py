@@ -989,7 +989,7 @@ def shared_sandwich(meas: Measurements, jac, acf=INTER_CODEC_ACF) -> np.ndarray:
 
 
 def shared_scale(fit: ModelFit, meas: Measurements, acf=INTER_CODEC_ACF,
-                 block_s: float | None = None) -> tuple[float, float]:
+                 block_s: float | None = None) -> tuple[float, float, int]:
     """How many times the shared error's model (``acf``) this track's
     residuals show on the scale of ``block_s`` (default
     :data:`SHARED_SCALE_BLOCK_S`): the sum over blocks of that many seconds

@@ -37,6 +37,19 @@ def test_contrast_on_mjpg_is_the_lossless_one(tmp_path):
     assert 0.9 < mjpg.contrast / lossless.contrast < 1.1
 
 
+def _seed9_shot1():
+    """benchmarks/track.py realistic --mix seed 9 shot 1 (a shaded red ball on
+    green felt, the cue in view) with its highlight, markings and blur off:
+    the scene, its renderer, a seeded generator and the ball's radius (px)."""
+    scene = sample_scenes(2, 9, look="realistic", codec="FFV1")[1]
+    scene.render.update(specular=0.0, markings="none", psf_sigma=0.0, max_duration=0.8)
+    fr = FrameRenderer(scene)
+    rng = np.random.default_rng(0)
+    c = scene.camera.to_pixels(np.array([scene.truth.x0[:2]]))[0]
+    r = scene.physics.R * scene.camera.px_per_m(c)
+    return scene, fr, rng, r
+
+
 @pytest.mark.slow  # 9 + 9 renders at 1280 x 720: ~45 s on a shared machine
 def test_a_withdrawing_cue_is_not_the_balls_motion():
     # benchmarks/track.py realistic --mix seed 9 shot 1: a shaded red ball on
@@ -48,12 +61,7 @@ def test_a_withdrawing_cue_is_not_the_balls_motion():
     # Its 9 samples, and the first look-ahead's, as the tracker takes them.
     from cuespin.track.video import cue_moved
 
-    scene = sample_scenes(2, 9, look="realistic", codec="FFV1")[1]
-    scene.render.update(specular=0.0, markings="none", psf_sigma=0.0, max_duration=0.8)
-    fr = FrameRenderer(scene)
-    rng = np.random.default_rng(0)
-    c = scene.camera.to_pixels(np.array([scene.truth.x0[:2]]))[0]
-    r = scene.physics.R * scene.camera.px_per_m(c)
+    scene, fr, rng, r = _seed9_shot1()
     where = None
     for first, last, cue in ((0, 144, False), (72, 192, True)):
         raw = np.stack([fr.render(int(k), rng) for k in np.linspace(first, last, 9).round()])
@@ -78,12 +86,7 @@ def test_the_cue_beside_the_balls_crescent_is_left_out():
 
     from cuespin.track.video import cue_moved
 
-    scene = sample_scenes(2, 9, look="realistic", codec="FFV1")[1]
-    scene.render.update(specular=0.0, markings="none", psf_sigma=0.0, max_duration=0.8)
-    fr = FrameRenderer(scene)
-    rng = np.random.default_rng(0)
-    c = scene.camera.to_pixels(np.array([scene.truth.x0[:2]]))[0]
-    r = scene.physics.R * scene.camera.px_per_m(c)
+    scene, fr, rng, r = _seed9_shot1()
     raw = [fr.render(int(k), rng) for k in np.linspace(0, fr.n_frames - 1, 9).round()]
     grey = np.stack([cv2.cvtColor(f, cv2.COLOR_BGR2GRAY) for f in raw])
     where = search_mask(scene.camera, scene.table, scene.physics.R, grey.shape[1:3])
