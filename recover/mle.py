@@ -583,8 +583,11 @@ def slip_lr(full: ModelFit, roll: ModelFit, meas: Measurements | None = None,
     """Likelihood-ratio statistic of free slip against rolling from the strike.
 
     The chi-square difference, in the residuals' own scale when they are
-    larger than stated (quasi-likelihood: divided by the full fit's reduced
-    chi-square when that exceeds 1), and, when the residuals are
+    larger than stated (quasi-likelihood: divided by the track's factor on
+    its errors, :func:`error_factor` of the full fit, which nests rolling:
+    the reduced chi-square when that exceeds 1, with an inter-frame codec
+    the track's own shared-error widening when larger, the same factor
+    the standard errors carry), and, when the residuals are
     autocorrelated (``meas`` given; see :func:`covariance`), divided by how
     much the HAC sandwich widens w0's variance over the independent-error
     one: correlated errors inflate the chi-square difference as much.  Its
@@ -594,7 +597,7 @@ def slip_lr(full: ModelFit, roll: ModelFit, meas: Measurements | None = None,
     caller (recover.estimate: no, once an AR(1) error model took the
     correlation in); None: asked here of ``full``'s residuals.
     """
-    scale = max(1.0, full.chi2 / full.dof)
+    scale = error_factor(full, meas, codec) if meas is not None else max(1.0, full.chi2 / full.dof)
     if meas is not None and codec is not None:
         try:
             base = info_inverse(full.jac)
@@ -1042,6 +1045,23 @@ def shared_widening(ratio: float, se: float, n_blocks: int) -> float:
     return 1.0
 
 
+def error_factor(fit: ModelFit, meas: Measurements, codec: CodecCorrelation | None = None) -> float:
+    """The track's factor on its errors' model, from its own residuals: the
+    reduced chi-square when it exceeds 1; with an inter-frame codec
+    (``codec`` given), the track's share of the shared error when its
+    residuals show clearly more than the pooled correlation says
+    (:func:`shared_widening` of :func:`shared_scale`), if larger, as the
+    reduced chi-square's larger scale is taken.  The one factor both the
+    covariance (:func:`covariance`, :attr:`MLEResult.error_scale`) and the
+    slip's likelihood ratio (:func:`slip_lr`, asked of the free-slip fit,
+    which nests rolling) put on the errors: the likelihood ratio of a model
+    whose errors are ``s`` times wider is the ratio over ``s^2``."""
+    scale = max(1.0, fit.chi2 / fit.dof)
+    if codec is None:
+        return scale
+    return max(scale, shared_widening(*shared_scale(fit, meas, codec.acf)))
+
+
 def still_codec_pairs(meas: Measurements, length: float = STILL_CODEC_LENGTH_PX):
     """Pairs of measurements that show the ball within a few correlation
     lengths of each other on the image, and their kernel ``exp(-(d /
@@ -1127,10 +1147,7 @@ def covariance(fit: ModelFit, meas: Measurements, codec: CodecCorrelation | None
     scale = max(1.0, fit.chi2 / fit.dof)
     base = info_inverse(fit.jac) * scale
     if codec is not None:
-        # The track's own share of the shared error, when its residuals show
-        # clearly more than the pooled correlation says (shared_widening), as
-        # the reduced chi-square's larger scale is taken.
-        factor = max(scale, shared_widening(*shared_scale(fit, meas, codec.acf)))
+        factor = error_factor(fit, meas, codec)
         return codec_sandwich(fit, meas, codec) * factor, True, rho, factor
     widened = False
     if still_codec:
