@@ -115,12 +115,12 @@ CUE_CLEAR_FRAMES = 2.0
 # slide out, `degenerate` where 0cfbece answered it at chi2/dof 1.00 (the
 # lead's bisection, caught by tests/test_experiments.py).  A run holding the
 # cue's flags (the fit saw foreign pixels, ``TrackResult.foreign``) may
-# start late by as much (touched_run_s): on 30 seed-43 clips retracked
+# start late by as much (touched_run_s): on the 56 seed-43 clips retracked
 # (cueflag, docs/measurements.md) the cue's runs started 1-2 frames after
-# the strike the fit placed (2.1-4.2 ms) on 7 of 16 at 480 fps, 3 frames
-# (6.25 ms) once, at a first fit's t0 whose second pass saw 2; a rest
-# spot's runs started 1-3 frames late too (4 plain shots at 480 fps, 2 at
-# 240) and stay unbridged.
+# the strike the fit placed (2.1-4.2 ms) on 7 of 12 at 480 fps, 3 frames
+# (6.25 ms) once, at a first fit's t0 whose second pass saw 2 (free slip
+# 7 -> 3 of 55); a rest spot's runs started 1-3 frames late too (4 plain
+# shots at 480 fps, 2 at 240) and stay unbridged.
 TOUCHED_GAP_S = 5e-3
 # A codec's measured share may lower the stated errors (see codec_excess)
 # to no less than this fraction of them: MJPG at low noise measured the
