@@ -120,6 +120,7 @@ def one_shot(args):
                              independent_errors=independent and not shaded,
                              look_factor=float(z["look_factor"]) if "look_factor" in z else 1.0,
                              look_rho=float(z["look_rho"]) if "look_rho" in z else 0.0)
+        tr.foreign = z["foreign"] if "foreign" in z else None  # kept before the tracker told the cue's flags apart
         if "touched" in z:
             tr.touched = z["touched"]
         else:  # kept before the tracker flagged frames: those leaving the rest, from the centres
@@ -147,6 +148,8 @@ def one_shot(args):
                      shaded=getattr(tr, "look_shaded", False),
                      look_factor=getattr(tr, "look_factor", 1.0), look_rho=getattr(tr, "look_rho", 0.0),
                      touched=getattr(tr, "touched", None) if getattr(tr, "touched", None) is not None
+                     else np.zeros(len(tr.t), bool),
+                     foreign=getattr(tr, "foreign", None) if getattr(tr, "foreign", None) is not None
                      else np.zeros(len(tr.t), bool))
     # As pipeline.run.run_recover does, keeping the fit's own measurements
     # for the bound.
@@ -155,6 +158,8 @@ def one_shot(args):
         kw["ar1_floor"] = error_ar1(getattr(tr, "look_factor", 1.0), getattr(tr, "look_rho", 0.0))
     if "touched" in inspect.signature(recover_track).parameters:
         kw["touched"] = getattr(tr, "touched", None)
+    if "foreign" in inspect.signature(recover_track).parameters:
+        kw["foreign"] = getattr(tr, "foreign", None)
     if "look_factor" in inspect.signature(recover_track).parameters:
         kw["look_factor"] = float(getattr(tr, "look_factor", 1.0))
     lossless = getattr(tr, "independent_errors", tr.lossless)

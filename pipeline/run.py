@@ -158,7 +158,8 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
                              method, fit_friction, lossless=tr.lossless, independent=tr.independent_errors,
                              ar1_floor=tr.error_ar1, look_factor=tr.look_factor,
                              inter_frame=tr.inter_frame, px_to_m=pixel_to_table(cam, tr.xy[:n]),
-                             touched=None if tr.touched is None else tr.touched[:n], return_estimate=True)
+                             touched=None if tr.touched is None else tr.touched[:n],
+                             foreign=None if tr.foreign is None else tr.foreign[:n], return_estimate=True)
     if scene.calibration:
         # Each refit keeps this fit's decisions: the share measures the camera alone.
         add_calibration_error(out["methods"],

@@ -31,7 +31,7 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
                   method: str = "all", fit_friction: bool = False, lossless: bool = True,
                   return_estimate: bool = False, inter_frame: bool = False, px_to_m=None, keep=None,
                   ar1_floor: float = 0.0, touched=None, independent: bool | None = None,
-                  look_factor: float = 1.0):
+                  look_factor: float = 1.0, foreign=None):
     """v0 and w0 from a track, by the paper's method and/or maximum likelihood.
 
     Parameters
@@ -84,6 +84,11 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
         the ball, or the ball leaving its rest): the first frames after the
         strike are left out only when such frames lie at the strike
         (recover.estimate.estimate); without it none are.
+    foreign : ndarray of bool, shape (n,), optional
+        The flags of ``touched`` that are the cue's (``TrackResult.foreign``:
+        the fit saw foreign pixels), apart from the rest spot's: a run that
+        starts with them may start a frame or two after the strike
+        (recover.measurements.touched_run_s).
     return_estimate : bool
         Also return the :class:`~cuespin.recover.estimate.Estimate` (its
         measurements give the bound: pipeline.measure.mle_bound).
@@ -106,7 +111,8 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
                    run_paper=method in ("paper", "all"), inter_frame=inter_frame,
                    px_to_m=None if px_to_m is None else np.asarray(px_to_m, dtype=float)[ok], keep=keep,
                    ar1_floor=ar1_floor, touched=None if touched is None else np.asarray(touched, bool)[ok],
-                   independent=independent, look_factor=look_factor)
+                   independent=independent, look_factor=look_factor,
+                   foreign=None if foreign is None else np.asarray(foreign, bool)[ok])
     methods = {}
     if method in ("paper", "all"):
         methods["paper"] = paper_dict(est, params)

@@ -131,7 +131,8 @@ def _first_fit(meas, params, starts, exposure_s, fit_friction) -> ModelFit | Non
 def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: bool = True,
              fit_friction: bool = False, run_paper: bool = True, inter_frame: bool = False,
              px_to_m=None, keep: Decided | None = None, ar1_floor: float = 0.0,
-             touched=None, independent: bool | None = None, look_factor: float = 1.0) -> Estimate:
+             touched=None, independent: bool | None = None, look_factor: float = 1.0,
+             foreign=None) -> Estimate:
     """Segment, decide and fit one track.
 
     Parameters
@@ -189,6 +190,12 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         flagged.  Without it (simulated tracks, a shot with no cue
         in view) none are: leaving them out of a cue-less shot cost free-slip
         answers their coverage (short_slide.py, seeds 8-9: 91.9% -> 83.9%).
+    foreign : ndarray of bool, shape (n,), optional
+        The flags of ``touched`` that are the cue's or another object's
+        (``TrackResult.foreign``), apart from the rest spot's: a run holding
+        one of these may start up to ``TOUCHED_GAP_S`` after the first frame
+        after the strike (recover.measurements.touched_run_s).
+        Without it every run must start at that frame.
     ar1_floor : float
         Lag-1 correlation of the AR(1) error model the track states (the
         tracker's measure, track.misfit.error_ar1; 0: independent).  When
@@ -247,7 +254,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         # t0 placed most of a frame early put the run's first flagged frame
         # outside `near`, and the window, found from the segmentation's t0,
         # fell to nothing (docs/measurements.md, slip11: seed 43 shot 17).
-        run = touched_run_s(t, touched, t0, exposure_s, frame_dt)
+        run = touched_run_s(t, touched, t0, exposure_s, frame_dt, foreign)
         near = np.abs(t - t0) <= (CUE_CLEAR_FRAMES + 0.5) * frame_dt
         if run <= 0 and not np.any(touched[near]):
             return 0.0

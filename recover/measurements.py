@@ -113,8 +113,14 @@ CUE_CLEAR_FRAMES = 2.0
 # slide) has the spot the ball left flagged from the 2nd frame after the
 # strike through the whole slide, and bridging its first frame left the
 # slide out, `degenerate` where 0cfbece answered it at chi2/dof 1.00 (the
-# lead's bisection, caught by tests/test_experiments.py); the late-starting
-# cue runs slip11 bridged (8 of 26 tracks) are left to the distance rule.
+# lead's bisection, caught by tests/test_experiments.py).  A run holding the
+# cue's flags (the fit saw foreign pixels, ``TrackResult.foreign``) may
+# start late by as much (touched_run_s): on the 56 seed-43 clips retracked
+# (cueflag, docs/measurements.md) the cue's runs started 1-2 frames after
+# the strike the fit placed (2.1-4.2 ms) on 7 of 12 at 480 fps, 3 frames
+# (6.25 ms) once, at a first fit's t0 whose second pass saw 2 (free slip
+# 7 -> 3 of 55); a rest spot's runs started 1-3 frames late too (4 plain
+# shots at 480 fps, 2 at 240) and stay unbridged.
 TOUCHED_GAP_S = 5e-3
 # A codec's measured share may lower the stated errors (see codec_excess)
 # to no less than this fraction of them: MJPG at low noise measured the
@@ -698,16 +704,22 @@ def cue_clear_s(speed: float, R: float, frame_dt: float) -> float:
     return min(CUE_CLEAR_R * float(R) / speed, CUE_CLEAR_FRAMES * float(frame_dt))
 
 
-def touched_run_s(t, touched, t0: float, exposure_s: float, frame_dt: float) -> float:
+def touched_run_s(t, touched, t0: float, exposure_s: float, frame_dt: float, foreign=None) -> float:
     """Time (s) after the strike ``t0`` through which the frames the tracker
     flags (``touched``) run from the first frame after it, bridging
     unflagged frames in a row between flagged ones only while they span at
-    most :data:`TOUCHED_GAP_S` (as many frame intervals ``frame_dt``, s;
-    the first frame after the strike must be flagged): a window
-    :func:`strike_window` given it leaves out
-    that whole run, the cue's tip or the spot the ball left still in its
-    window (0 when no flagged frame is reached).  Used beside
-    :func:`cue_clear_s`'s distance rule (recover.estimate), not capped by
+    most :data:`TOUCHED_GAP_S` (as many frame intervals ``frame_dt``, s): a
+    window :func:`strike_window` given it leaves out that whole run, the
+    cue's tip or the spot the ball left still in its window (0 when no
+    flagged frame is reached).  The first frame after the strike must be
+    flagged, unless the run holds the cue's flags (``foreign``, shape (n,):
+    ``TrackResult.foreign``, the fit saw foreign pixels) and the unflagged
+    frames before it span at most :data:`TOUCHED_GAP_S`: a run of the spot
+    the ball left alone is never bridged to.  The cue's flags need not come
+    first: the rest spot's, in the same window, often do (seed 43 shot 20:
+    the cue's frame at the strike, a hole, 6 of the rest spot's, then the
+    cue's).  Used beside :func:`cue_clear_s`'s
+    distance rule (recover.estimate), not capped by
     :data:`CUE_CLEAR_FRAMES`: the flags are the tracker's, frame by frame,
     not a guess from the speed."""
     t = np.asarray(t, dtype=float)
@@ -718,14 +730,25 @@ def touched_run_s(t, touched, t0: float, exposure_s: float, frame_dt: float) -> 
     # against a time set at a round 5 ms must not hinge on rounding)
     max_gap = int(np.floor(TOUCHED_GAP_S / frame_dt + 1e-9)) if frame_dt > 0 else 0
     after = np.flatnonzero(t > t0)
-    last, gap = None, 0
-    for k in after:
-        if touched[k]:
-            last, gap = k, 0
-            continue
-        gap += 1
-        if last is None or gap > max_gap:
-            break
+
+    def run_end(frames):  # the last flagged frame of the run from frames[0], holes bridged
+        last, gap = None, 0
+        for k in frames:
+            if touched[k]:
+                last, gap = k, 0
+                continue
+            gap += 1
+            if last is None or gap > max_gap:
+                break
+        return last
+
+    last = run_end(after)
+    flagged = np.flatnonzero(touched[after])
+    if last is None and foreign is not None and len(flagged):
+        late = flagged[0]  # unflagged frames before the run's first flag
+        end = run_end(after[late:]) if late <= max_gap else None
+        if end is not None and np.any(np.asarray(foreign, dtype=bool)[after[late]:end + 1]):
+            last = end
     if last is None:
         return 0.0
     # just past the last flagged frame's exposure start, short of the next's

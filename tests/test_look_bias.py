@@ -247,3 +247,29 @@ def test_frames_leaving_the_rest_are_flagged():
     assert np.flatnonzero(leaving_rest(uv, ok, 8.0)).tolist() == [5, 6, 7]
     # Moving from the first frame (no rest in view): nothing flagged.
     assert not leaving_rest(uv[5:], ok[5:], 8.0).any()
+
+
+def test_a_late_cue_run_is_bridged_a_late_rest_run_is_not():
+    # Realistic MJPG clips at 480 fps (seed 43 shots 20, 29, 32, 34;
+    # docs/measurements.md, cueflag): the flags start a frame or two after
+    # the strike, the rest spot's often before the cue's (shot 20).  A run
+    # holding the cue's flags (``foreign``) is bridged to from the strike;
+    # the same run from the spot the ball left alone (a plain shot with no
+    # cue, the noise experiment's seed-1 shot) is not: only the distance
+    # rule's frames are left out.
+    tracks = list(null_rolling_tracks(3, 21, fps_grid=(480.0,), sigma_grid=(1.5e-4,)))
+    for tr in tracks:
+        xy, touched = _pulled_back(tr)
+        run = np.flatnonzero(touched)
+        touched[run[0]] = False  # the run starts one frame late
+        xy[run[0]] = tr.xy[run[0]]
+        cue = np.zeros_like(touched)
+        cue[run[3:]] = True  # the rest spot's flags first, then the cue's
+        args = (tr.t, xy, np.full(len(tr.t), tr.sigma), tr.params, tr.exposure_s)
+        est = estimate(*args, lossless=False, run_paper=False, touched=touched, foreign=cue)
+        assert est.decided.clear_s > (RUN_FRAMES - 2) / tr.fps
+        assert est.mle.status == "ok" and est.mle.model == "rolling", (est.mle.model, est.mle.slip_lr)
+        rest = estimate(*args, lossless=False, run_paper=False, touched=touched, foreign=np.zeros_like(touched))
+        assert rest.decided.clear_s <= measurements.CUE_CLEAR_FRAMES / tr.fps + 1e-12
+        assert estimate(*args, lossless=False, run_paper=False, touched=touched).decided.clear_s \
+            == rest.decided.clear_s

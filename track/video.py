@@ -169,6 +169,12 @@ class TrackResult:
         window still holds the spot the ball rested on (:func:`leaving_rest`);
         the recovery leaves out the first frames after the strike only where
         these show it (``recover_track(touched=...)``).
+    foreign : ndarray of bool, shape (n,), or None
+        The frames of ``touched`` whose fit found something other than the
+        felt beside the ball (the cue at the strike, another ball), apart
+        from those leaving the rest: only a run of these may start a frame
+        or two after the strike (``recover_track(foreign=...)``,
+        recover.measurements.touched_run_s).
     """
 
     t: np.ndarray
@@ -191,6 +197,7 @@ class TrackResult:
     look_shaded: bool = False
     fit_rms: np.ndarray | None = None
     touched: np.ndarray | None = None
+    foreign: np.ndarray | None = None
 
     def __post_init__(self):
         if self.cov_px is None:
@@ -623,9 +630,12 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     # (the cue at the strike, another ball) and left those pixels out, and
     # those leaving the rest: the recovery leaves out the strike's first
     # frames only where the track flags them (recover.estimate, cue_clear_s).
-    touched = leaving_rest(uv, ok, radius_px)
+    # The two kinds are kept apart as well: a run of the cue's may start a
+    # frame or two late, the rest spot's may not (recover.measurements.touched_run_s).
+    foreign = np.zeros(len(ok), bool)
     for kk, lf in fits:
-        touched[kk] |= lf.foreign is not None
+        foreign[kk] |= lf.foreign is not None
+    touched = leaving_rest(uv, ok, radius_px) | foreign
     if not ok.any():
         why = (" (the ball never moved, or is not in view; do physics.R and the camera "
                "match the video?)")
@@ -672,7 +682,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
                        seconds={"background": t_bg, "track": t_track}, lossless=info.lossless,
                        inter_frame=info.inter_frame, cov_px=cov, projection=proj, camera=cam,
                        look_factor=misfit.factor, look_rho=misfit.rho, look_shaded=tracker.shade is not False,
-                       fit_rms=rms, touched=touched)
+                       fit_rms=rms, touched=touched, foreign=foreign)
 
 
 def leaving_rest(uv, ok, radius_px: float) -> np.ndarray:
