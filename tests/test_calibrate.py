@@ -1085,6 +1085,96 @@ def test_the_coherent_band_rule_spares_tables_whose_noses_show():
     assert jpeg and not any(jpeg), jpeg
 
 
+def test_noses_straddled_all_round_with_the_lines_refusing_are_refused():
+    """Random drawn table 19001 (cushions 0.984 x the felt's shade, a band
+    at 0.875 inside them), raw: the outline took the band's inner edge for
+    the noses, 10.9 px off stating 0.055 (nose16), the band's outer edge in
+    sight beside it on all four sides, while the cushions' lines refuse.
+    With nothing to check the outline against, a band's other edge on every
+    side (STRADDLED_SIDES_REFUSE) refuses it, naming --corners."""
+    from cuespin.pipeline.calibrate import random_table
+
+    with pytest.raises(CalibrationError, match="all 4 sides.*lines.*refuse.*give --corners"):
+        detect_corners(random_table(19001)["frame"])
+
+
+@pytest.mark.slow
+def test_the_straddled_rule_refuses_no_right_answer():
+    """The straddled-on-every-side rule (``STRADDLED_SIDES_REFUSE``) on the
+    raw frames of the random drawn tables 19000-19059 with cushions: every
+    frame it refuses is one whose outline (what ``auto`` answered before,
+    the lines refusing) is more than 1 px off; 19001 among them, and the
+    rest of the block's answers unchanged (strad12: 4 frames straddled
+    all round, the lines answering right on the other 3)."""
+    from cuespin.pipeline.calibrate import random_table
+
+    refused = {}
+    for seed in range(19000, 19060):
+        t = random_table(seed)
+        if "cushion_m" not in t["look"]:
+            continue
+        try:
+            detect_corners(t["frame"])
+        except CalibrationError as err:
+            if "lines, which would take the outermost" in str(err):
+                outline = detect_corners(t["frame"], lines="never", refuse=False)
+                e, _ = _matched_errors(outline, t["noses"])
+                refused[seed] = float(np.sqrt(np.mean(e**2)))
+    assert 19001 in refused and all(rms > 1.0 for rms in refused.values()), refused
+
+
+def test_a_narrow_band_seen_on_two_sides_is_refused():
+    """Random drawn table 19053 (cushions 0.879 x the felt's shade, a 10 mm
+    band at 0.869 inside them), raw: the outline took the band's inner edge
+    for the noses, 3.83 px off stating 0.065 (nose16).  Its faint step per
+    side 8.2, 2.0, 4.9, 1.4 x the scatter (median under HIDDEN_NOSE_Z, the
+    coherent sum 1.8: the band's outer edge on the far sides lies at the
+    faint-step zone's inner end); the second-largest side 4.94 reaches
+    SECOND_SIDE_Z 4.1: refused, naming --corners."""
+    from cuespin.pipeline.calibrate import random_table
+
+    with pytest.raises(CalibrationError, match="two sides or more.*give --corners"):
+        detect_corners(random_table(19053)["frame"])
+
+
+@pytest.mark.slow
+def test_the_second_side_rule_spares_tables_whose_noses_show():
+    """The second-largest side's faint step (``_second_side_z``) on the raw
+    frames of the random drawn tables 13000-13039 whose outline takes noses:
+    under SECOND_SIDE_Z on every one whose noses show (13007, the largest
+    measured on 12000-17059 and 19000-19059, reads 3.34; strad12), and 0
+    through JPEG 95 (the felt's flat share over RAW_FLAT_SHARE)."""
+    from cuespin.pipeline.calibrate import (
+        SECOND_SIDE_Z,
+        _felt_distance,
+        _felt_quad,
+        _second_side_z,
+        cushion_noses,
+        edge_points,
+        random_table,
+    )
+
+    showing, jpeg = {}, []
+    for seed in range(13000, 13040):
+        t = random_table(seed)
+        look = t["look"]
+        if "cushion_m" not in look or abs(look["cushion_shade"] - look.get("band_shade", 9.0)) < 0.1:
+            continue
+        for name, img in (("raw", t["frame"]), ("jpeg95", _jpeg(t["frame"], 95))):
+            D, thr = _felt_distance(img)
+            quad, contour = _felt_quad(D, thr)
+            hidden = []
+            if cushion_noses(img, edge_points(img, quad, contour), hidden=hidden) is None:
+                continue
+            if name == "raw":
+                showing[seed] = _second_side_z(hidden)
+            else:
+                jpeg.append(_second_side_z(hidden))
+    assert len(showing) >= 10 and showing.get(13007, 0.0) > 3.0, showing
+    assert all(z < SECOND_SIDE_Z for z in showing.values()), showing
+    assert jpeg and not any(jpeg), jpeg
+
+
 def test_paths_disagreeing_with_nothing_to_say_which_refuse():
     """The two paths' noses 9.2 combined errors apart on random table 12006
     (a band of the cushions' shade: both wrong, 6.1 and 5.8 px) with no band
