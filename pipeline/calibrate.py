@@ -587,16 +587,105 @@ def perturbed_cameras(corners_px, sigma_px: float, size, table: Table = Table(),
 
 
 # --------------------------------------------------------------------------- automatic
+# The table is found in the mean of the video's still frames (mean12): where
+# each frame carries its own sensor and codec noise, the mean's noise falls as
+# 1 / sqrt(frames) while a band's faint step inside the noses stays (random
+# table 14014 in one H.264 stream at CRF 18: the first frame answered 9.80 px
+# off stating 0.066, the mean of 32 refused at 11.9 x the scatter).  At CRF
+# 20 and over x264 codes a still table's later frames as copies of the key
+# frame, and the mean is the key frame's (docs/measurements.md, ## mean12).
+# A run is still while no STILL_BLOCK_PX-square block's grey mean moves from
+# the run's first frame by more than STILL_FLOOR_LEVELS, or STILL_Z of the
+# blocks' robust scatter where that is larger (a noisier camera).  Measured
+# on 32 still frames in one H.264 stream (tables 14014, 18010, 18019, 18055;
+# CRF 18-28): the largest block move 1.27-2.26 levels, at most 5.9 x the
+# scatter at CRF 18 (at 20 and over the scatter is 0.00-0.15: blocks
+# repeated, the floor decides); a drawn ball (table 18000) moved 0.2 px moves
+# a block by 2.2-3.1 levels raw and at CRF 23/28, 0.5 px by 5.0-5.6: a run
+# is still to about a third of a pixel.
+STILL_FRAMES = 32           # frames averaged (the brief's 16-32: 32 refused 14014 at 11.9 x, 16 at 9.9 x)
+STILL_MIN_FRAMES = 16       # fewer still frames in a row: the median of frames spread over the video
+STILL_BLOCK_PX = 16
+STILL_Z = 8.0               # 1.35 x the largest measured (5.9)
+STILL_FLOOR_LEVELS = 3.0    # 1.33 x the largest measured move of a still frame (2.26)
+STILL_SCAN_FRAMES = 600     # frames read looking for a still run (2.5 s at 240 fps, 20 s at 30 fps)
+
+
+def _blocks(img: np.ndarray) -> np.ndarray:
+    """Grey means of ``STILL_BLOCK_PX``-square blocks (levels)."""
+    g = img.astype(np.float32).mean(axis=2) if img.ndim == 3 else img.astype(np.float32)
+    h, w = g.shape[:2]
+    return cv2.resize(g, (max(w // STILL_BLOCK_PX, 1), max(h // STILL_BLOCK_PX, 1)), interpolation=cv2.INTER_AREA)
+
+
+def still_moved(b: np.ndarray, b0: np.ndarray) -> float:
+    """How far a frame's block means ``b`` moved from the run's first ``b0``:
+    the largest block difference over the threshold (above 1: not still)."""
+    d = np.abs(b - b0)
+    return float(d.max() / max(STILL_Z * 1.4826 * float(np.median(d)), STILL_FLOOR_LEVELS))
+
+
+def still_mean(frames, n: int = STILL_FRAMES):
+    """The mean of the first ``n`` still frames in a row of ``frames`` (an
+    iterable of images), else of the longest still run in it.
+
+    Returns
+    -------
+    mean : ndarray, float32
+        The run's mean image (levels).
+    count : int
+        Frames averaged.
+    start : int
+        The run's first frame (index in ``frames``).
+    """
+    best = (None, 0, 0)
+    total = b0 = None
+    count = start = 0
+    for k, img in enumerate(frames):
+        img = img if img.ndim == 3 else img[:, :, None]
+        b = _blocks(img)
+        if total is not None and still_moved(b, b0) <= 1.0:
+            total += img
+            count += 1
+        else:
+            if count > best[1]:
+                best = (total, count, start)
+            total, b0, count, start = img.astype(np.float32), b, 1, k
+        if count >= n:
+            break
+    if count > best[1]:
+        best = (total, count, start)
+    if best[0] is None:
+        return None, 0, 0
+    return (best[0] / best[1]).astype(np.float32), best[1], best[2]
+
+
 def reference_frame(path, n: int = 9) -> np.ndarray:
-    """The median of ``n`` frames spread over the video: the table without the
-    moving ball (and without a cue that crosses the view for a moment)."""
+    """The table's image: the mean of the video's first ``STILL_FRAMES``
+    still frames in a row (:func:`still_mean`, read from the start, at most
+    ``STILL_SCAN_FRAMES``); with fewer than ``STILL_MIN_FRAMES`` of them, the
+    median of ``n`` frames spread over the video (the table without the
+    moving ball, and without a cue that crosses the view for a moment)."""
     from cuespin.videoio import quiet_native_stderr
 
     with quiet_native_stderr():
         cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
     if not cap.isOpened():
         raise InputError(f"{path}: not a video OpenCV can read")
+
+    def read(limit):
+        for _ in range(limit):
+            ok, img = cap.read()
+            if not ok or img is None:
+                return
+            yield img
+
     try:
+        with quiet_native_stderr():
+            mean, count, _ = still_mean(read(STILL_SCAN_FRAMES))
+        if count >= STILL_MIN_FRAMES:
+            return mean
+        cap.set(cv2.CAP_PROP_POS_FRAMES, 0.0)
         count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
         idx = set(np.unique(np.linspace(0, max(count - 1, 0), n).round().astype(int)).tolist())
         frames = []
@@ -2515,7 +2604,7 @@ def _coverage(polys, w, h, ss):
 def synthetic_table_frame(cam, table=Table(), seed=0, noise=3.0, ss=4, felt=(40, 120, 30), wood=(40, 75, 125),
                           balls=((0.6, 0.4), (2.45, 1.2)), cushion_m: float = 0.0,
                           cushion_shade: float = 0.8, pockets: bool = False, band_m: float = 0.0,
-                          band_shade: float = 0.8):
+                          band_shade: float = 0.8, frames: int = 0):
     """A frame of the table through ``cam`` to check the detector on: the playing
     surface's felt (its edge bowed by the lens, sampled every few mm) on wood,
     optionally cushions ``cushion_m`` wide in ``cushion_shade`` x the felt's
@@ -2526,7 +2615,9 @@ def synthetic_table_frame(cam, table=Table(), seed=0, noise=3.0, ss=4, felt=(40,
     lies in the cloth's plane.  Coverage by ``ss`` x supersampling,
     area-averaged (pixel integration); an edge lands on a multiple of
     ``1/ss`` px (averaged out along edges off the pixel axes).  The renderer
-    draws the realistic table; this is the bare geometry."""
+    draws the realistic table; this is the bare geometry.  ``frames`` > 0:
+    that many frames of the still table, shape (frames, h, w, 3), each with
+    its own noise (the first is the single frame's)."""
     rng = np.random.default_rng(seed)
     w, h = cam.width, cam.height
     s = np.linspace(0.0, 1.0, 400)[:-1]
@@ -2566,8 +2657,9 @@ def synthetic_table_frame(cam, table=Table(), seed=0, noise=3.0, ss=4, felt=(40,
     for polys, colour in layers:
         c = _coverage(polys, w, h, ss)[..., None]
         img = img * (1 - c) + colour * c
-    img += rng.normal(0.0, noise, img.shape)
-    return np.clip(np.round(img), 0, 255).astype(np.uint8)
+    out = [np.clip(np.round(img + rng.normal(0.0, noise, img.shape)), 0, 255).astype(np.uint8)
+           for _ in range(max(frames, 1))]
+    return np.stack(out) if frames > 0 else out[0]
 
 
 def matched_corner_errors(corners: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
