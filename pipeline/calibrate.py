@@ -668,24 +668,30 @@ def reference_frame(path, n: int = 9) -> np.ndarray:
     moving ball, and without a cue that crosses the view for a moment)."""
     from cuespin.videoio import quiet_native_stderr
 
-    with quiet_native_stderr():
-        cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
-    if not cap.isOpened():
-        raise InputError(f"{path}: not a video OpenCV can read")
+    def opened():
+        with quiet_native_stderr():
+            cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
+        if not cap.isOpened():
+            raise InputError(f"{path}: not a video OpenCV can read")
+        return cap
 
-    def read(limit):
+    def read(cap, limit):
         for _ in range(limit):
             ok, img = cap.read()
             if not ok or img is None:
                 return
             yield img
 
+    cap = opened()
     try:
         with quiet_native_stderr():
-            mean, count, _ = still_mean(read(STILL_SCAN_FRAMES))
-        if count >= STILL_MIN_FRAMES:
-            return mean
-        cap.set(cv2.CAP_PROP_POS_FRAMES, 0.0)
+            mean, count, _ = still_mean(read(cap, STILL_SCAN_FRAMES))
+    finally:
+        cap.release()
+    if count >= STILL_MIN_FRAMES:
+        return mean
+    cap = opened()      # read again from the start (a finished capture does not always rewind)
+    try:
         count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
         idx = set(np.unique(np.linspace(0, max(count - 1, 0), n).round().astype(int)).tolist())
         frames = []
