@@ -1685,7 +1685,8 @@ KAPPA_PATTERN_K1 = 6e-5
 def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = True,
                    noses: bool = True, robust: bool = True, pattern_px: float = EDGE_PATTERN_PX,
                    lines: str = "auto",
-                   kappa_pattern_k1: float = KAPPA_PATTERN_K1, refuse: bool = True) -> Detection:
+                   kappa_pattern_k1: float = KAPPA_PATTERN_K1, refuse: bool = True,
+                   lossy: bool = False) -> Detection:
     """The playing surface's four corners in a frame (:class:`Detection`).
 
     Parameters
@@ -1729,6 +1730,14 @@ def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = Tru
         faint step outside them, a coherent band or a codec's flat cloth
         (:func:`_outline_or_lines`); False answers what those refusals
         withhold (to measure what they guard against).
+    lossy : bool
+        The frame came through a lossy codec, whatever its pixels show: the
+        raw frames' coherent-band rule (:func:`_band_z`) is off, as on a
+        single codec frame, whose flat cloth says so.  A mean of codec frames
+        (:func:`reference_frame`) has no equal neighbours left, and the
+        codec's ringing, the same in every frame, adds up coherently there
+        (random table 18009 through H.264 CRF 18: the first frame answered,
+        the mean of 32 refused; mean12).
     """
     D, thr = _felt_distance(img)
     quad, contour = _felt_quad(D, thr)
@@ -1760,7 +1769,7 @@ def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = Tru
 
     return _outline_or_lines(outline, straddled, cushions, lines, hidden_z=_hidden_z(hidden) if on_noses else 0.0,
                              flattened=on_noses and _codec_flattened(hidden),
-                             band_z=_band_z(hidden, coherent) if on_noses else 0.0, refuse=refuse)
+                             band_z=_band_z(hidden, coherent) if on_noses and not lossy else 0.0, refuse=refuse)
 
 
 def _band_z(hidden: list, coherent: list) -> float:
@@ -2325,10 +2334,21 @@ def calibrate_video(path, table: Table = Table(), corners=None, *, intrinsics=No
             kw["corner_height_m"] = nose_height_m
         return calibrate_clicked(corners, size, table, frame=frame, intrinsics=K, distortion=dist, fps=fps,
                                  camera_height_sigma_m=camera_height_sigma_m, use_balls=use_balls, **kw)
-    return calibrate_frame(reference_frame(path), table, intrinsics=K, distortion=dist, fps=fps,
+    return calibrate_frame(reference_frame(path), table, intrinsics=K, distortion=dist, fps=fps, lossy=_lossy(path),
                            felt_margin_m=felt_margin_m, felt_height_m=felt_height_m,
                            nose_height_m=nose_height_m, camera_height_sigma_m=camera_height_sigma_m,
                            use_balls=use_balls, **kw)
+
+
+def _lossy(path) -> bool:
+    """Whether the video's codec is lossy (:func:`cuespin.track.reader.probe`);
+    False when it cannot say (the frame's own flat cloth then decides)."""
+    from cuespin.track.reader import TrackError, probe
+
+    try:
+        return not probe(path).lossless
+    except TrackError:
+        return False
 
 
 def _focal_by_rule(same: dict) -> bool:
@@ -2504,7 +2524,7 @@ def _focal_and_errors(cal: Calibration, size, table: Table, same: dict, moves: n
 def calibrate_frame(frame: np.ndarray, table: Table = Table(), *, corners=None, intrinsics=None,
                     distortion=None, felt_margin_m: float = 0.0, felt_height_m: float = 0.0,
                     nose_height_m: float = 0.0, camera_height_sigma_m: float = 0.0, use_balls: bool = True,
-                    estimate_lens: bool = True, **kw) -> Calibration:
+                    estimate_lens: bool = True, lossy: bool = False, **kw) -> Calibration:
     """The camera found in one frame of the table (``calibrate_video``'s automatic
     path): the corners and the lens's bow from :func:`detect_corners`, the
     corners' order from :func:`assign_corners`, their error (the edges'
@@ -2513,7 +2533,8 @@ def calibrate_frame(frame: np.ndarray, table: Table = Table(), *, corners=None, 
     (:func:`_focal_and_errors`, as for clicked corners).  With ``corners``
     given: :func:`calibrate_clicked` on them (the bow and the balls read in
     ``frame``).  ``estimate_lens=False``: the lens taken as undistorted (no
-    bow fitted).
+    bow fitted).  ``lossy``: the frame came through a lossy codec
+    (:func:`detect_corners`).
     ``kw`` as for :func:`calibrate_corners`."""
     h, w = frame.shape[:2]
     size = (int(w), int(h))
@@ -2523,7 +2544,7 @@ def calibrate_frame(frame: np.ndarray, table: Table = Table(), *, corners=None, 
         kw.setdefault("corner_height_m", nose_height_m)  # clicks at the noses (review 12a: was ignored here)
         return calibrate_clicked(corners, size, table, frame=frame, use_balls=use_balls, estimate_lens=estimate_lens,
                                  intrinsics=K, distortion=dist, camera_height_sigma_m=camera_height_sigma_m, **kw)
-    det = detect_corners(frame, K, dist, estimate_lens=estimate_lens)
+    det = detect_corners(frame, K, dist, estimate_lens=estimate_lens, lossy=lossy)
     quad, edge_rms, kappa = det.corners, det.edge_rms, det.kappa
     if det.edge == "noses":
         felt_margin_m, felt_height_m = 0.0, nose_height_m
