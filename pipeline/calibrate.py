@@ -597,17 +597,18 @@ def perturbed_cameras(corners_px, sigma_px: float, size, table: Table = Table(),
 # A run is still while no STILL_BLOCK_PX-square block's grey mean moves from
 # the run's first frame by more than STILL_FLOOR_LEVELS, or STILL_Z of the
 # blocks' robust scatter where that is larger (a noisier camera).  Measured
-# on 32 still frames in one H.264 stream (tables 14014, 18010, 18019, 18055;
-# CRF 18-28): the largest block move 1.27-2.26 levels, at most 5.9 x the
-# scatter at CRF 18 (at 20 and over the scatter is 0.00-0.15: blocks
-# repeated, the floor decides); a drawn ball (table 18000) moved 0.2 px moves
-# a block by 2.2-3.1 levels raw and at CRF 23/28, 0.5 px by 5.0-5.6: a run
-# is still to about a third of a pixel.
+# on 32 still frames in one H.264 stream (random tables 14014 and the 33 of
+# 18000-18059 with cushions, CRF 18 and 28): the largest block move 0.91-2.58
+# levels; the scatter 0.06-0.35 levels at CRF 18 (the move at most 5.9 x it
+# where it is over 0.2) and 0.00-0.15 at 20 and over (blocks repeated), so
+# the floor decided on every one; a drawn ball (table 18000) moved 0.2 px
+# moves a block by 2.2-3.1 levels raw and at CRF 23/28, 0.5 px by 5.0-5.6:
+# a run is still to about a third of a pixel.
 STILL_FRAMES = 32           # frames averaged (the brief's 16-32: 32 refused 14014 at 11.9 x, 16 at 9.9 x)
 STILL_MIN_FRAMES = 16       # fewer still frames in a row: the median of frames spread over the video
 STILL_BLOCK_PX = 16
-STILL_Z = 8.0               # 1.35 x the largest measured (5.9)
-STILL_FLOOR_LEVELS = 3.0    # 1.33 x the largest measured move of a still frame (2.26)
+STILL_Z = 8.0               # 1.35 x the largest measured (5.9, CRF 18)
+STILL_FLOOR_LEVELS = 3.0    # 1.16 x the largest measured move of a still frame (2.58)
 STILL_SCAN_FRAMES = 600     # frames read looking for a still run (2.5 s at 240 fps, 20 s at 30 fps)
 
 
