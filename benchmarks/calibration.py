@@ -364,11 +364,32 @@ def stated(args):
             row(f"realistic {label} s{sd}", img, truth)
 
 
+def h264_encode(frames, out, crf: int = 20, fps: int = 30) -> None:
+    """BGR uint8 ``frames`` as ONE H.264 stream into ``out`` (a path or a file
+    object; MP4): PyAV's libx264, ``crf``, preset medium, yuv420p, as a phone's
+    file carries a still table (each frame with its own noise: the encoder
+    codes what changed from the key frame)."""
+    import av
+
+    with av.open(out, "w", format="mp4") as c:
+        s = c.add_stream("libx264", rate=fps)
+        s.pix_fmt, s.options = "yuv420p", {"crf": str(crf), "preset": "medium"}
+        for k, img in enumerate(frames):
+            h, w = img.shape[:2]
+            f = np.ascontiguousarray(img[: h - h % 2, : w - w % 2])
+            if k == 0:
+                s.width, s.height = f.shape[1], f.shape[0]
+            for pkt in s.encode(av.VideoFrame.from_ndarray(f, format="bgr24")):
+                c.mux(pkt)
+        for pkt in s.encode():
+            c.mux(pkt)
+
+
 def through_codec(img, codec: str | None, quality: int = 70, crf: int = 20):
     """``img`` through a lossy codec as a camera's file would carry it: ``jpeg``
-    (OpenCV, ``quality``), ``h264`` (PyAV's libx264, ``crf``, preset medium,
-    yuv420p, the frame encoded 3 times and the first decoded: the key frame),
-    or None (unchanged)."""
+    (OpenCV, ``quality``), ``h264`` (:func:`h264_encode`, ``crf``, the frame
+    encoded 3 times and the first decoded: the key frame), or None
+    (unchanged)."""
     import io
 
     import cv2
@@ -379,18 +400,8 @@ def through_codec(img, codec: str | None, quality: int = 70, crf: int = 20):
         return cv2.imdecode(cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, quality])[1], cv2.IMREAD_COLOR)
     import av
 
-    h, w = img.shape[:2]
-    f = np.ascontiguousarray(img[: h - h % 2, : w - w % 2])
     buf = io.BytesIO()
-    with av.open(buf, "w", format="mp4") as c:
-        s = c.add_stream("libx264", rate=30)
-        s.width, s.height, s.pix_fmt = f.shape[1], f.shape[0], "yuv420p"
-        s.options = {"crf": str(crf), "preset": "medium"}
-        for _ in range(3):
-            for pkt in s.encode(av.VideoFrame.from_ndarray(f, format="bgr24")):
-                c.mux(pkt)
-        for pkt in s.encode():
-            c.mux(pkt)
+    h264_encode([img] * 3, buf, crf)
     buf.seek(0)
     with av.open(buf) as d:
         return next(iter(d.decode(video=0))).to_ndarray(format="bgr24")

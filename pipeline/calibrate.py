@@ -587,15 +587,111 @@ def perturbed_cameras(corners_px, sigma_px: float, size, table: Table = Table(),
 
 
 # --------------------------------------------------------------------------- automatic
+# The table is found in the mean of the video's still frames (mean12): where
+# each frame carries its own sensor and codec noise, the mean's noise falls as
+# 1 / sqrt(frames) while a band's faint step inside the noses stays (random
+# table 14014 in one H.264 stream at CRF 18: the first frame answered 9.80 px
+# off stating 0.066, the mean of 32 refused at 11.9 x the scatter).  At CRF
+# 20 and over x264 codes a still table's later frames as copies of the key
+# frame, and the mean is the key frame's (docs/measurements.md, ## mean12).
+# A run is still while no STILL_BLOCK_PX-square block's grey mean moves from
+# the run's first frame by more than STILL_FLOOR_LEVELS, or STILL_Z of the
+# blocks' robust scatter where that is larger (a noisier camera).  Measured
+# on 32 still frames in one H.264 stream (random tables 14014 and the 33 of
+# 18000-18059 with cushions, CRF 18 and 28): the largest block move 0.91-2.58
+# levels; the scatter 0.06-0.35 levels at CRF 18 (the move at most 5.9 x it
+# where it is over 0.2) and 0.00-0.15 at 20 and over (blocks repeated), so
+# the floor decided on every one; a drawn ball (table 18000) moved 0.2 px
+# moves a block by 2.2-3.1 levels raw and at CRF 23/28, 0.5 px by 5.0-5.6:
+# a run is still to about a third of a pixel.
+STILL_FRAMES = 32           # frames averaged (the brief's 16-32: 32 refused 14014 at 11.9 x, 16 at 9.9 x)
+STILL_MIN_FRAMES = 16       # fewer still frames in a row: the median of frames spread over the video
+STILL_BLOCK_PX = 16
+STILL_Z = 8.0               # 1.35 x the largest measured (5.9, CRF 18)
+STILL_FLOOR_LEVELS = 3.0    # 1.16 x the largest measured move of a still frame (2.58)
+STILL_SCAN_FRAMES = 600     # frames read looking for a still run (2.5 s at 240 fps, 20 s at 30 fps)
+
+
+def _blocks(img: np.ndarray) -> np.ndarray:
+    """Grey means of ``STILL_BLOCK_PX``-square blocks (levels)."""
+    g = img.astype(np.float32).mean(axis=2) if img.ndim == 3 else img.astype(np.float32)
+    h, w = g.shape[:2]
+    return cv2.resize(g, (max(w // STILL_BLOCK_PX, 1), max(h // STILL_BLOCK_PX, 1)), interpolation=cv2.INTER_AREA)
+
+
+def still_moved(b: np.ndarray, b0: np.ndarray) -> float:
+    """How far a frame's block means ``b`` moved from the run's first ``b0``:
+    the largest block difference over the threshold (above 1: not still)."""
+    d = np.abs(b - b0)
+    return float(d.max() / max(STILL_Z * 1.4826 * float(np.median(d)), STILL_FLOOR_LEVELS))
+
+
+def still_mean(frames, n: int = STILL_FRAMES):
+    """The mean of the first ``n`` still frames in a row of ``frames`` (an
+    iterable of images), else of the longest still run in it.
+
+    Returns
+    -------
+    mean : ndarray, float32
+        The run's mean image (levels).
+    count : int
+        Frames averaged.
+    start : int
+        The run's first frame (index in ``frames``).
+    """
+    best = (None, 0, 0)
+    total = b0 = None
+    count = start = 0
+    for k, img in enumerate(frames):
+        img = img if img.ndim == 3 else img[:, :, None]
+        b = _blocks(img)
+        if total is not None and still_moved(b, b0) <= 1.0:
+            total += img
+            count += 1
+        else:
+            if count > best[1]:
+                best = (total, count, start)
+            total, b0, count, start = img.astype(np.float32), b, 1, k
+        if count >= n:
+            break
+    if count > best[1]:
+        best = (total, count, start)
+    if best[0] is None:
+        return None, 0, 0
+    return (best[0] / best[1]).astype(np.float32), best[1], best[2]
+
+
 def reference_frame(path, n: int = 9) -> np.ndarray:
-    """The median of ``n`` frames spread over the video: the table without the
-    moving ball (and without a cue that crosses the view for a moment)."""
+    """The table's image: the mean of the video's first ``STILL_FRAMES``
+    still frames in a row (:func:`still_mean`, read from the start, at most
+    ``STILL_SCAN_FRAMES``); with fewer than ``STILL_MIN_FRAMES`` of them, the
+    median of ``n`` frames spread over the video (the table without the
+    moving ball, and without a cue that crosses the view for a moment)."""
     from cuespin.videoio import quiet_native_stderr
 
-    with quiet_native_stderr():
-        cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
-    if not cap.isOpened():
-        raise InputError(f"{path}: not a video OpenCV can read")
+    def opened():
+        with quiet_native_stderr():
+            cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
+        if not cap.isOpened():
+            raise InputError(f"{path}: not a video OpenCV can read")
+        return cap
+
+    def read(cap, limit):
+        for _ in range(limit):
+            ok, img = cap.read()
+            if not ok or img is None:
+                return
+            yield img
+
+    cap = opened()
+    try:
+        with quiet_native_stderr():
+            mean, count, _ = still_mean(read(cap, STILL_SCAN_FRAMES))
+    finally:
+        cap.release()
+    if count >= STILL_MIN_FRAMES:
+        return mean
+    cap = opened()      # read again from the start (a finished capture does not always rewind)
     try:
         count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
         idx = set(np.unique(np.linspace(0, max(count - 1, 0), n).round().astype(int)).tolist())
@@ -1611,7 +1707,8 @@ KAPPA_PATTERN_K1 = 6e-5
 def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = True,
                    noses: bool = True, robust: bool = True, pattern_px: float = EDGE_PATTERN_PX,
                    lines: str = "auto",
-                   kappa_pattern_k1: float = KAPPA_PATTERN_K1, refuse: bool = True) -> Detection:
+                   kappa_pattern_k1: float = KAPPA_PATTERN_K1, refuse: bool = True,
+                   lossy: bool = False) -> Detection:
     """The playing surface's four corners in a frame (:class:`Detection`).
 
     Parameters
@@ -1655,6 +1752,15 @@ def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = Tru
         faint step outside them, a coherent band or a codec's flat cloth
         (:func:`_outline_or_lines`); False answers what those refusals
         withhold (to measure what they guard against).
+    lossy : bool
+        The frame came through a lossy codec, whatever its pixels show: the
+        raw frames' rules (the coherent band, :func:`_band_z`, and the
+        second side's faint step, :func:`_second_side_z`) are off, as on a
+        single codec frame, whose flat cloth says so.  A mean of codec frames
+        (:func:`reference_frame`) has no equal neighbours left, and the
+        codec's ringing, the same in every frame, adds up coherently there
+        (random table 18009 through H.264 CRF 18: the first frame answered,
+        the mean of 32 refused; mean12).
     """
     D, thr = _felt_distance(img)
     quad, contour = _felt_quad(D, thr)
@@ -1686,9 +1792,9 @@ def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = Tru
 
     return _outline_or_lines(outline, straddled, cushions, lines, hidden_z=_hidden_z(hidden) if on_noses else 0.0,
                              flattened=on_noses and _codec_flattened(hidden),
-                             band_z=_band_z(hidden, coherent) if on_noses else 0.0, refuse=refuse,
+                             band_z=_band_z(hidden, coherent) if on_noses and not lossy else 0.0, refuse=refuse,
                              n_straddled=n_straddled if on_noses else 0,
-                             second_z=_second_side_z(hidden) if on_noses else 0.0)
+                             second_z=_second_side_z(hidden) if on_noses and not lossy else 0.0)
 
 
 def _band_z(hidden: list, coherent: list) -> float:
@@ -2304,10 +2410,21 @@ def calibrate_video(path, table: Table = Table(), corners=None, *, intrinsics=No
             kw["corner_height_m"] = nose_height_m
         return calibrate_clicked(corners, size, table, frame=frame, intrinsics=K, distortion=dist, fps=fps,
                                  camera_height_sigma_m=camera_height_sigma_m, use_balls=use_balls, **kw)
-    return calibrate_frame(reference_frame(path), table, intrinsics=K, distortion=dist, fps=fps,
+    return calibrate_frame(reference_frame(path), table, intrinsics=K, distortion=dist, fps=fps, lossy=_lossy(path),
                            felt_margin_m=felt_margin_m, felt_height_m=felt_height_m,
                            nose_height_m=nose_height_m, camera_height_sigma_m=camera_height_sigma_m,
                            use_balls=use_balls, **kw)
+
+
+def _lossy(path) -> bool:
+    """Whether the video's codec is lossy (:func:`cuespin.track.reader.probe`);
+    False when it cannot say (the frame's own flat cloth then decides)."""
+    from cuespin.track.reader import TrackError, probe
+
+    try:
+        return not probe(path).lossless
+    except TrackError:
+        return False
 
 
 def _focal_by_rule(same: dict) -> bool:
@@ -2483,7 +2600,7 @@ def _focal_and_errors(cal: Calibration, size, table: Table, same: dict, moves: n
 def calibrate_frame(frame: np.ndarray, table: Table = Table(), *, corners=None, intrinsics=None,
                     distortion=None, felt_margin_m: float = 0.0, felt_height_m: float = 0.0,
                     nose_height_m: float = 0.0, camera_height_sigma_m: float = 0.0, use_balls: bool = True,
-                    estimate_lens: bool = True, **kw) -> Calibration:
+                    estimate_lens: bool = True, lossy: bool = False, **kw) -> Calibration:
     """The camera found in one frame of the table (``calibrate_video``'s automatic
     path): the corners and the lens's bow from :func:`detect_corners`, the
     corners' order from :func:`assign_corners`, their error (the edges'
@@ -2492,7 +2609,8 @@ def calibrate_frame(frame: np.ndarray, table: Table = Table(), *, corners=None, 
     (:func:`_focal_and_errors`, as for clicked corners).  With ``corners``
     given: :func:`calibrate_clicked` on them (the bow and the balls read in
     ``frame``).  ``estimate_lens=False``: the lens taken as undistorted (no
-    bow fitted).
+    bow fitted).  ``lossy``: the frame came through a lossy codec
+    (:func:`detect_corners`).
     ``kw`` as for :func:`calibrate_corners`."""
     h, w = frame.shape[:2]
     size = (int(w), int(h))
@@ -2502,7 +2620,7 @@ def calibrate_frame(frame: np.ndarray, table: Table = Table(), *, corners=None, 
         kw.setdefault("corner_height_m", nose_height_m)  # clicks at the noses (review 12a: was ignored here)
         return calibrate_clicked(corners, size, table, frame=frame, use_balls=use_balls, estimate_lens=estimate_lens,
                                  intrinsics=K, distortion=dist, camera_height_sigma_m=camera_height_sigma_m, **kw)
-    det = detect_corners(frame, K, dist, estimate_lens=estimate_lens)
+    det = detect_corners(frame, K, dist, estimate_lens=estimate_lens, lossy=lossy)
     quad, edge_rms, kappa = det.corners, det.edge_rms, det.kappa
     if det.edge == "noses":
         felt_margin_m, felt_height_m = 0.0, nose_height_m
@@ -2589,7 +2707,7 @@ def _coverage(polys, w, h, ss):
 def synthetic_table_frame(cam, table=Table(), seed=0, noise=3.0, ss=4, felt=(40, 120, 30), wood=(40, 75, 125),
                           balls=((0.6, 0.4), (2.45, 1.2)), cushion_m: float = 0.0,
                           cushion_shade: float = 0.8, pockets: bool = False, band_m: float = 0.0,
-                          band_shade: float = 0.8):
+                          band_shade: float = 0.8, frames: int = 0):
     """A frame of the table through ``cam`` to check the detector on: the playing
     surface's felt (its edge bowed by the lens, sampled every few mm) on wood,
     optionally cushions ``cushion_m`` wide in ``cushion_shade`` x the felt's
@@ -2600,7 +2718,9 @@ def synthetic_table_frame(cam, table=Table(), seed=0, noise=3.0, ss=4, felt=(40,
     lies in the cloth's plane.  Coverage by ``ss`` x supersampling,
     area-averaged (pixel integration); an edge lands on a multiple of
     ``1/ss`` px (averaged out along edges off the pixel axes).  The renderer
-    draws the realistic table; this is the bare geometry."""
+    draws the realistic table; this is the bare geometry.  ``frames`` > 0:
+    that many frames of the still table, shape (frames, h, w, 3), each with
+    its own noise (the first is the single frame's)."""
     rng = np.random.default_rng(seed)
     w, h = cam.width, cam.height
     s = np.linspace(0.0, 1.0, 400)[:-1]
@@ -2640,8 +2760,9 @@ def synthetic_table_frame(cam, table=Table(), seed=0, noise=3.0, ss=4, felt=(40,
     for polys, colour in layers:
         c = _coverage(polys, w, h, ss)[..., None]
         img = img * (1 - c) + colour * c
-    img += rng.normal(0.0, noise, img.shape)
-    return np.clip(np.round(img), 0, 255).astype(np.uint8)
+    out = [np.clip(np.round(img + rng.normal(0.0, noise, img.shape)), 0, 255).astype(np.uint8)
+           for _ in range(max(frames, 1))]
+    return np.stack(out) if frames > 0 else out[0]
 
 
 def matched_corner_errors(corners: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
