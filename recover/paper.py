@@ -102,7 +102,9 @@ class PaperResult:
     than one (status ``ambiguous``).  ``trajectory`` is ``parabola`` or ``line``.
     ``stderr`` holds standard errors of ``v0`` and ``w0`` when ``ok``.
     ``stop_apart`` is fit.decide.stop_apart's answer when case 2 was asked
-    (None: not asked), for a refit to keep.
+    (None: not asked), for a refit to keep.  ``cov`` the covariance of
+    ``(v0, w0)`` (4 x 4; m/s and rad/s) whose diagonal ``stderr`` holds,
+    for statistics of the answer (:func:`sliding_time_stderr`).
     """
 
     status: str
@@ -117,6 +119,7 @@ class PaperResult:
     solutions: list = field(default_factory=list)
     stderr: dict = field(default_factory=dict)
     stop_apart: bool | None = None
+    cov: np.ndarray | None = None
 
     def __bool__(self):
         return self.status == "ok"
@@ -200,6 +203,23 @@ def sliding_time(v0, w0, params: BallParams) -> float:
     """Eq. 10: ``t1 - t0 = 2 |u0| / (7 mu_s g)``, ``u0 = v0 + R z_hat x w0``."""
     u0 = np.asarray(v0, float) + params.R * z_cross(np.asarray(w0, float))
     return 2.0 * float(np.hypot(*u0)) / (7.0 * params.mu_s * params.g)
+
+
+def sliding_time_stderr(v0, w0, cov, params: BallParams) -> float:
+    """Standard error (s) of eq. 10's sliding time ``2 |u0| / (7 mu_s g)``,
+    ``u0 = v0 + R z_hat x w0``, by the delta method from the covariance
+    ``cov`` (4 x 4) of ``(v0, w0)`` (m/s, rad/s); NaN without one or when
+    the slip is zero (no gradient there)."""
+    if cov is None:
+        return float("nan")
+    u0 = np.asarray(v0, float) + params.R * z_cross(np.asarray(w0, float))
+    norm = float(np.hypot(*u0))
+    if norm <= 0:
+        return float("nan")
+    u_hat = u0 / norm
+    # d|u0| / dv0 = u_hat; d|u0| / dw0 = R (z_hat x)^T u_hat = R (u_y, -u_x)
+    g = 2.0 / (7.0 * params.mu_s * params.g) * np.r_[u_hat, params.R * np.array([u_hat[1], -u_hat[0]])]
+    return float(np.sqrt(max(float(g @ np.asarray(cov, float)[:4, :4] @ g), 0.0)))
 
 
 def break_tie(sols: list, params: BallParams, tau1: float | None, tau1_tol: float) -> list:
@@ -432,8 +452,10 @@ def with_stderr(res: PaperResult, solve, x, C, params: BallParams) -> PaperResul
         if a is None or b is None:
             return res
         J[:, i] = (a - b) / (2 * h)
-    se = np.sqrt(np.clip(np.diag(J @ C @ J.T), 0, None))
-    return replace(res, stderr={"v0": se[0:2], "w0": se[2:4] / params.R})
+    D = np.diag([1.0, 1.0, 1.0 / params.R, 1.0 / params.R])  # (v0, R w0) to (v0, w0)
+    cov = D @ J @ C @ J.T @ D
+    se = np.sqrt(np.clip(np.diag(cov), 0, None))
+    return replace(res, stderr={"v0": se[0:2], "w0": se[2:4]}, cov=cov)
 
 
 def path_shape(seg, xy, params: BallParams, curved: bool | None = None):
@@ -527,7 +549,7 @@ def sliding_time_check(res: PaperResult, seg, params: BallParams, sigma: float, 
         f"the answer slides {answer:.3f} s (eq. 10), the track {measured:.3f} s (eq. 26): "
         f"{abs(answer - measured) / tol:.0f} times the {tol * 1e3:.0f} ms to which the end of sliding "
         f"can be placed (more than {SLIDING_TIME_TOLERANCES:g}), so the answer does not describe this track"),
-                   v0=None, w0=None, u0=None, solutions=[], stderr={})
+                   v0=None, w0=None, u0=None, solutions=[], stderr={}, cov=None)
 
 
 def nearest_root(res: PaperResult, near, params: BallParams) -> PaperResult:

@@ -12,6 +12,7 @@ import pytest
 
 import cuespin.recover.mle as mle_module
 from cuespin.fit.decide import Decision, slide_through_excluded
+from cuespin.physics.motion import BallParams
 from cuespin.recover.estimate import estimate
 from cuespin.recover.simulate import leaves_table_tracks, null_rolling_tracks
 
@@ -139,7 +140,7 @@ def test_the_papers_answer_follows_the_fits_verdicts_on_the_trusted_frames():
                                        ({"slide_hidden": True}, False, False),
                                        ({}, False, False)):
         mle = MLEResult("degenerate" if refused else "ok", "the fit's reason", verdicts=verdicts)
-        got = paper_verdicts(paper, mle, rolling)
+        got = paper_verdicts(paper, mle, rolling, BallParams())
         assert (got.status == "degenerate") == refused, verdicts
         if refused:
             assert got.reason == "the fit's reason" and got.v0 is None

@@ -1,0 +1,184 @@
+"""The paper's answer against the maximum-likelihood fit's sliding time
+(recover.estimate.sliding_times_agree): H.264's drift can put the
+segmentation's end of sliding early on a slide into the rest (case 2), and
+the line method's answer then lies many of its stated errors off; the fit,
+on the same frames, measures the sliding time right (docs/measurements.md,
+paper32)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import cuespin.recover.estimate as estimate_module
+from cuespin.physics.motion import BallParams
+from cuespin.recover.estimate import estimate
+from cuespin.recover.mle import model_track
+from cuespin.recover.paper import sliding_time, sliding_time_stderr
+from cuespin.recover.simulate import case2_tracks, shared_errors
+
+
+def test_sliding_time_stderr_is_the_spread_of_eq10():
+    # The delta method against draws of (v0, w0) from their covariance: at a
+    # slip 50 times its error the sliding time is linear enough for the
+    # spread of 20000 draws (its own standard error 0.5%) to be within 2%.
+    p = BallParams()
+    v0, w0 = np.array([0.8, -0.3]), np.array([12.0, 25.0])
+    A = np.array([[2e-3, 1e-3, 0, 0], [0, 3e-3, 0, 0], [0.1, 0, 0.4, 0.2], [0, -0.1, 0, 0.5]])
+    cov = A @ A.T
+    draws = np.random.default_rng(3).multivariate_normal(np.r_[v0, w0], cov, 20000)
+    taus = [sliding_time(d[:2], d[2:], p) for d in draws]
+    assert sliding_time_stderr(v0, w0, cov, p) == pytest.approx(np.std(taus), rel=0.02)
+    assert np.isnan(sliding_time_stderr(v0, w0, None, p))
+
+
+def _case2_shared(n: int, seed: int = 7):
+    """case2_tracks at 1e-4 and 3e-4 m, the whole error 4 sigma^2 correlated
+    in time as H.264's (recover.simulate.shared_errors), as the calibration
+    drew them (docs/measurements.md, paper32: /tmp/paper32/sim.py)."""
+    rng = np.random.default_rng(seed + 1000)
+    for tr in case2_tracks(n, seed=seed, sigma_grid=(1e-4, 3e-4), blur=False):
+        m = len(tr.t)
+        xy = model_track(tr.shot, tr.params, tr.t, tr.exposure_s) + 2.0 * tr.sigma * shared_errors(m, tr.fps, rng)
+        yield tr, xy
+
+
+def _estimate(tr, xy):
+    m = len(tr.t)
+    return estimate(tr.t, xy, np.full(m, tr.sigma), tr.params, tr.exposure_s, lossless=False, inter_frame=True)
+
+
+def _z(p, tr):
+    return np.r_[(p.v0 - tr.shot.v0) / p.stderr["v0"], (p.w0 - tr.shot.w0) / p.stderr["w0"]]
+
+
+def test_an_early_end_of_sliding_gives_way_to_the_slide_into_the_rest(monkeypatch):
+    # Track 15 of these (480 fps, 3e-4 m): the line's answer from the
+    # breakpoint 18.1 stated errors off (RMS) and ok without the rule, its
+    # sliding time 5.6 errors from the fit's; the segmentation's other
+    # reading, a slide into the rest (case 2), answers within 1.6 stated
+    # errors and agrees with the fit: that is the answer (measured: all 11
+    # answers the rule refused on 250 such tracks, 120-480 fps, shared and
+    # independent errors, answered so within 1.6).  The 14 answers within 3
+    # of their errors in every component among the first 15: untouched
+    # (measured |z| <= 3.2 over 216 such answers).
+    from cuespin.recover.paper import ran_into_rest
+    tracks = list(_case2_shared(16))
+    tr, xy = tracks[15]
+    est = _estimate(tr, xy)
+    assert est.paper.status == "ok" and np.all(np.abs(_z(est.paper, tr)) < 3) and ran_into_rest(est.seg)
+    assert est.decided.paper_agrees is True and est.decided.segments == "unended"
+    with monkeypatch.context() as m:
+        m.setattr(estimate_module, "PAPER_FIT_TAU_Z", float("inf"))
+        off = _estimate(tr, xy).paper
+        assert off.status == "ok" and np.sqrt(np.mean(_z(off, tr) ** 2)) > 5
+        right = []
+        for tr, xy in tracks[:15]:
+            p = _estimate(tr, xy).paper
+            if p.status == "ok" and np.all(np.abs(_z(p, tr)) < 3):
+                right.append((tr, xy, p))
+    assert len(right) >= 8
+    for tr, xy, p in right:
+        got = _estimate(tr, xy).paper
+        assert got.status == "ok" and np.allclose(got.v0, p.v0) and np.allclose(got.w0, p.w0)
+
+
+def _touched_runs(n: int, seed: int = 5):
+    """sliding_tracks (random, case3; 120 and 240 fps; 1e-4 m) with H.264's
+    shared error and the frames from the strike to 50 ms past the end of
+    sliding flagged as the cue's touched run (no bias: the cue left the
+    centres alone), as /tmp/paper32/touchsim.py drew them (paper32)."""
+    from cuespin.physics.motion import phases
+    from cuespin.recover.simulate import sliding_tracks
+    rng = np.random.default_rng(seed + 1000)
+    for tr in sliding_tracks(n, seed=seed, presets=("random", "case3"), fps_grid=(120.0, 240.0),
+                             sigma_grid=(1e-4,), blur=False):
+        m = len(tr.t)
+        xy = model_track(tr.shot, tr.params, tr.t, tr.exposure_s) + 2.0 * tr.sigma * shared_errors(m, tr.fps, rng)
+        touched = (tr.t > tr.shot.t0) & (tr.t < phases(tr.shot, tr.params).t1 + 0.05)
+        yield tr, xy, touched
+
+
+def test_where_the_trusted_frames_cannot_know_the_paper_answers_on_every_frame():
+    # Review SHOULD 7: the fit on the frames left after the cue's touched run
+    # cannot determine v0 (the run covers the whole slide), so the paper's
+    # answer, taken from every frame, was refused though right (realistic
+    # H.264 32/22, 0.8 stated errors; 71/0).  It is now the recovery's paper
+    # answer on every frame, held to the fit on those frames.  Track 4: right
+    # (1.2 stated errors), kept; track 6: the paper's answer under the
+    # trusted fit's error model 7.2 stated errors off, refused (on every
+    # frame its x1 lies off the line).  Measured over 30 such tracks: 7 right
+    # answers kept (at most 2.1 stated errors), none wrong let through.
+    tracks = list(_touched_runs(7))
+    tr, xy, touched = tracks[4]
+    m = len(tr.t)
+    est = estimate(tr.t, xy, np.full(m, tr.sigma), tr.params, tr.exposure_s, lossless=False,
+                   inter_frame=True, touched=touched)
+    assert est.mle.verdicts.get("v0_determined") is False  # the old rule refused the paper here
+    assert est.paper.status == "ok" and np.all(np.abs(_z(est.paper, tr)) < 3)
+    every = estimate(tr.t, xy, np.full(m, tr.sigma), tr.params, tr.exposure_s, lossless=False,
+                     inter_frame=True).paper
+    assert np.allclose(est.paper.v0, every.v0) and np.allclose(est.paper.w0, every.w0)
+    tr, xy, touched = tracks[6]
+    est = estimate(tr.t, xy, np.full(len(tr.t), tr.sigma), tr.params, tr.exposure_s, lossless=False,
+                   inter_frame=True, touched=touched)
+    assert est.paper.status == "degenerate" and "on every frame" in est.paper.reason, est.paper.reason
+
+
+def test_paper_verdicts_take_every_frames_answer_and_the_kept_agreement():
+    from cuespin.recover.estimate import paper_verdicts
+    from cuespin.recover.mle import MLEResult
+    from cuespin.recover.paper import PaperResult
+    p = BallParams()
+    paper = PaperResult("ok", "", "parabola", v0=np.array([1.0, 0.0]), w0=np.array([0.0, 10.0]))
+    other = PaperResult("ok", "", "parabola", v0=np.array([1.1, 0.0]), w0=np.array([0.0, 11.0]))
+    blind = MLEResult("degenerate", "v0 not determined", verdicts={"v0_determined": False})
+    assert paper_verdicts(paper, blind, False, p, True, other) is other
+    got = paper_verdicts(paper, blind, False, p, False, PaperResult("failed", "x1 off the line"))
+    assert got.status == "degenerate" and got.reason.endswith("on every frame, the cue's touched run too: "
+                                                                "x1 off the line")
+    assert paper_verdicts(paper, blind, False, p, True) is paper  # a refit keeps the first pass's answer
+    assert paper_verdicts(paper, blind, False, p, None).status == "degenerate"
+    fit = MLEResult("ok", "", verdicts={"v0_determined": True, "strike_seen": True})
+    assert paper_verdicts(paper, fit, False, p, False).status == "failed"
+    assert paper_verdicts(paper, fit, False, p, None) is paper  # nothing to compare (no covariance)
+
+
+# The rule's stated false-refusal rate on right answers: its z is not quite
+# normal under H.264's shared error (sd 1.09 on 125 right case-2 answers,
+# where the normal's rate at 4 would be 2.4e-4); measured 1 of 399 (0.25%,
+# Clopper-Pearson 95% up to 1.4%) on the tracks below (docs/measurements.md,
+# paper32), stated as 0.5%.
+FALSE_REFUSAL_RATE = 0.005
+
+
+@pytest.mark.slow
+def test_right_answers_are_rarely_refused_by_the_fits_sliding_time(monkeypatch):
+    # The rule's false refusals: the paper's right answers (every component
+    # within 3 stated errors) on 250 case-2 tracks with H.264's shared error
+    # (seed 7) and 200 with independent errors (seed 8), where the paper's
+    # case 2 fails most: at most FALSE_REFUSAL_RATE plus two binomial
+    # standard errors (measured 1 of 399; 755 s wall at load 15, 2 cores).
+    from cuespin.recover.estimate import PAPER_FIT_TAU_Z, sliding_time_z
+    monkeypatch.setattr(estimate_module, "PAPER_FIT_TAU_Z", float("inf"))
+    right = refused = 0
+
+    def count(tr, xy, lossless):
+        nonlocal right, refused
+        m = len(tr.t)
+        est = estimate(tr.t, xy, np.full(m, tr.sigma), tr.params, tr.exposure_s, lossless=lossless,
+                       inter_frame=not lossless)
+        p = est.paper
+        if p.status != "ok" or not p.stderr or not np.all(np.abs(_z(p, tr)) < 3):
+            return
+        z = sliding_time_z(p, est.mle, tr.params)
+        right += 1
+        refused += bool(np.isfinite(z) and abs(z) > PAPER_FIT_TAU_Z)
+
+    for tr, xy in _case2_shared(250):
+        count(tr, xy, False)
+    for tr in case2_tracks(200, seed=8, sigma_grid=(1e-4, 3e-4), blur=False):
+        count(tr, tr.xy, True)
+    rate = FALSE_REFUSAL_RATE
+    assert right >= 390
+    assert refused <= right * rate + 2 * np.sqrt(right * rate * (1 - rate)), (refused, right)
