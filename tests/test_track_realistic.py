@@ -456,3 +456,33 @@ def test_the_pulled_rule_drops_fits_off_the_ball_not_a_turning_look(tmp_path, mo
             r[k] = v
             kept += not pulled_fits(r, ok, still=still)[k]
     assert kept == 0, f"{kept} of {len(off) * len(measured)} fits held 0.25 R off kept"
+
+
+@pytest.mark.slow
+def test_dark_dots_are_not_given_back_to_the_lights_learning(tmp_path):
+    # benchmarks/track.py realistic seed 8 shot 8: a white ball with black
+    # dots on blue felt, 60 fps, noise 5.4, FFV1, struck at 0.28 s.  The
+    # dot at the resting ball's middle was given back to the light's
+    # learning (marks_given_back) and the light learnt overhead: every
+    # moving frame (-0.07, -0.09) px off, RMSE 0.0868 px (3.5x the bound
+    # 0.025), err/se 3.81; given back only when lighter than the look
+    # (GIVE_BACK_LIGHTER), measured RMSE 0.0353 px, err/se 1.16 (mean error
+    # 0.017 px; docs/measurements.md, mark10).  Asserted: halfway between
+    # on the RMSE and the mean error, err/se under 1.6 (0.4 over the
+    # measured, the issue's bound 1.25 plus the spread of 30 frames'
+    # err/se, ~0.13 a standard error).
+    scene = sample_scenes(9, 8, look="realistic", codec="FFV1")[8]
+    scene.render.update(specular=0.0, psf_sigma=0.0, markings="dots", cue=False, balls=[], max_duration=0.8)
+    path = tmp_path / "dots.avi"
+    render_video(scene, path)
+    tr = track_video(path, scene, TrackerConfig(threaded=False))
+    truth = pd.read_csv(path.with_suffix(".truth.csv"))
+    n = min(tr.n_frames, len(truth))
+    moving = (truth.t.values[:n] > scene.truth.t0 + 0.02) & tr.ok[:n]
+    assert moving.sum() >= 25
+    e = (tr.uv[:n] - np.c_[truth.uc_px.values, truth.vc_px.values][:n])[moving]
+    rmse = float(np.sqrt(np.mean(e ** 2)))
+    z = float(np.sqrt(np.mean((e / tr.stderr_px[:n][moving]) ** 2)))
+    assert rmse < 0.06, rmse
+    assert np.hypot(*e.mean(axis=0)) < 0.065, e.mean(axis=0)
+    assert z < 1.6, z
