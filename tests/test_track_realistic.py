@@ -465,8 +465,8 @@ def test_dark_dots_are_not_given_back_to_the_lights_learning(tmp_path):
     # dot at the resting ball's middle was given back to the light's
     # learning (marks_given_back) and the light learnt overhead: every
     # moving frame (-0.07, -0.09) px off, RMSE 0.0868 px (3.5x the bound
-    # 0.025), err/se 3.81; given back only when lighter than the look
-    # (GIVE_BACK_LIGHTER), measured RMSE 0.0353 px, err/se 1.16 (mean error
+    # 0.025), err/se 3.81; given back only when the look keeps its diffuse
+    # light (GIVE_BACK_DIFFUSE_MIN), measured RMSE 0.0353 px, err/se 1.16 (mean error
     # 0.017 px; docs/measurements.md, mark10).  Asserted: halfway between
     # on the RMSE and the mean error, err/se under 1.6 (0.4 over the
     # measured, the issue's bound 1.25 plus the spread of 30 frames'
