@@ -46,7 +46,9 @@ from cuespin.fit.segment import noise_from_track
 
 # Frames within this many frame intervals of the strike, beyond half the
 # exposure, are left out as well: the margin for the strike time's own
-# error (the first fit places it to a small fraction of a frame).
+# error (the first fit places it to a small fraction of a frame).  At any
+# exposure, while the cue's window is open, it starts this far before the
+# strike found (strike_window; seed 43 shot 51's refit t0 0.12 frames late).
 STRIKE_MARGIN_FRAMES = 0.25
 # The cue follows the departing ball through the strike (on the realistic
 # look at half its speed, render.draw.cue_tip; a real cue's follow-through
