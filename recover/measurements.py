@@ -46,7 +46,9 @@ from cuespin.fit.segment import noise_from_track
 
 # Frames within this many frame intervals of the strike, beyond half the
 # exposure, are left out as well: the margin for the strike time's own
-# error (the first fit places it to a small fraction of a frame).
+# error (the first fit places it to a small fraction of a frame).  At any
+# exposure, while the cue's window is open, it starts this far before the
+# strike found (strike_window; seed 43 shot 51's refit t0 0.12 frames late).
 STRIKE_MARGIN_FRAMES = 0.25
 # The cue follows the departing ball through the strike (on the realistic
 # look at half its speed, render.draw.cue_tip; a real cue's follow-through
@@ -758,11 +760,19 @@ def touched_run_s(t, touched, t0: float, exposure_s: float, frame_dt: float, for
 def strike_window(t, t0: float, exposure_s: float, frame_dt: float, clear_s: float = 0.0) -> np.ndarray:
     """Mask of the frames whose exposure may hold the strike at ``t0``, or
     starts within ``clear_s`` seconds after it (the cue's tip still on the
-    ball: :func:`cue_clear_s`); the one definition of the strike's window."""
+    ball: :func:`cue_clear_s`); the one definition of the strike's window.
+    While that window is open (``clear_s`` > 0) it starts
+    :data:`STRIKE_MARGIN_FRAMES` before ``t0`` at any exposure: an
+    instantaneous frame that close before the strike found may be after the
+    true one, the cue's tip on the ball (seed 43 shot 51, 120 fps: the refit's
+    t0 0.12 frames late, the cue's flagged frame 0.05 frames before it and
+    0.07 after the true strike, 8.7 of its free-slip LR 10.3; docs/
+    measurements.md, roll45)."""
     t = np.asarray(t, dtype=float)
     if t0 is None or not np.isfinite(t0):
         return np.zeros(len(t), bool)
-    cue = (t > t0) & (t - 0.5 * exposure_s < t0 + clear_s)
+    start = t0 - STRIKE_MARGIN_FRAMES * frame_dt if clear_s > 0 else t0
+    cue = (t > start) & (t - 0.5 * exposure_s < t0 + clear_s)
     if exposure_s <= 0:
         return cue
     half = 0.5 * exposure_s + STRIKE_MARGIN_FRAMES * frame_dt

@@ -273,3 +273,22 @@ def test_a_late_cue_run_is_bridged_a_late_rest_run_is_not():
         assert rest.decided.clear_s <= measurements.CUE_CLEAR_FRAMES / tr.fps + 1e-12
         assert estimate(*args, lossless=False, run_paper=False, touched=touched).decided.clear_s \
             == rest.decided.clear_s
+
+
+def test_the_cue_window_starts_the_strike_margin_before_t0():
+    # Realistic MJPG (instantaneous frames), seed 43 shot 51 at 120 fps: the
+    # refit's t0 0.12 frames after the true strike, the cue's flagged frame
+    # 0.05 frames before that t0 (0.07 after the true one) was fitted and made
+    # 8.7 of its free-slip LR 10.3 (docs/measurements.md, roll45).  While the
+    # cue's window is open it starts STRIKE_MARGIN_FRAMES before t0; with it
+    # shut a frame before t0 is the ball at rest and kept.
+    fps = 120.0
+    t = np.arange(12) / fps
+    t0 = 3.05 / fps  # frame 3 lies 0.05 frames before the strike found
+    clear = 3.05 / fps  # the run through frame 6
+    assert measurements.STRIKE_MARGIN_FRAMES > 0.05
+    assert measurements.strike_window(t, t0, 0.0, 1 / fps, clear).nonzero()[0].tolist() == [3, 4, 5, 6]
+    assert not measurements.strike_window(t, t0, 0.0, 1 / fps, 0.0).any()
+    # a frame further before t0 than the margin is kept
+    t0 = 3.3 / fps
+    assert measurements.strike_window(t, t0, 0.0, 1 / fps, clear).nonzero()[0].tolist() == [4, 5, 6]
