@@ -714,13 +714,18 @@ def touched_run_s(t, touched, t0: float, exposure_s: float, frame_dt: float, for
     window :func:`strike_window` given it leaves out that whole run, the
     cue's tip or the spot the ball left still in its window (0 when no
     flagged frame is reached).  The first frame after the strike must be
-    flagged, unless the run holds the cue's flags (``foreign``, shape (n,):
-    ``TrackResult.foreign``, the fit saw foreign pixels) and the unflagged
-    frames before it span at most :data:`TOUCHED_GAP_S`: a run of the spot
-    the ball left alone is never bridged to.  The cue's flags need not come
-    first: the rest spot's, in the same window, often do (seed 43 shot 20:
-    the cue's frame at the strike, a hole, 6 of the rest spot's, then the
-    cue's).  Used beside :func:`cue_clear_s`'s
+    flagged, unless the cue is flagged where the run starts (``foreign``,
+    shape (n,): ``TrackResult.foreign``, the fit saw foreign pixels; on the
+    strike's own frame, the last at or before ``t0``, or in the run's first
+    ``max_gap + 1`` frames, ``max_gap`` the frames :data:`TOUCHED_GAP_S`
+    spans) and the unflagged frames before it span at most
+    :data:`TOUCHED_GAP_S`: a run of the spot the ball left alone is never
+    bridged to, nor one that only ends in a cue flag (a sliding shot's
+    rest spot flagged through its slide, then the cue's one frame: bridged,
+    it left the slide out; fixslip, docs/measurements.md).  The rest spot's
+    flags may come first (seed 43 shot 20: the cue's frame at the strike,
+    a hole, 6 of the rest spot's, then the cue's; at the refit's t0 the
+    cue's frame is the strike's).  Used beside :func:`cue_clear_s`'s
     distance rule (recover.estimate), not capped by
     :data:`CUE_CLEAR_FRAMES`: the flags are the tracker's, frame by frame,
     not a guess from the speed."""
@@ -749,7 +754,10 @@ def touched_run_s(t, touched, t0: float, exposure_s: float, frame_dt: float, for
     if last is None and foreign is not None and len(flagged):
         late = flagged[0]  # unflagged frames before the run's first flag
         end = run_end(after[late:]) if late <= max_gap else None
-        if end is not None and np.any(np.asarray(foreign, dtype=bool)[after[late]:end + 1]):
+        # the cue's flag where the run starts (its first max_gap + 1 frames),
+        # or on the strike's own frame just before the first after it
+        lo = after[0] - 1 if after[0] > 0 and t[after[0] - 1] > t0 - frame_dt else after[late]
+        if end is not None and np.any(np.asarray(foreign, dtype=bool)[lo:min(after[late] + max_gap, end) + 1]):
             last = end
     if last is None:
         return 0.0

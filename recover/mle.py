@@ -33,7 +33,7 @@ from scipy.sparse import csr_array
 from cuespin.fit.decide import MIN_STILL_FRAMES, autocorrelated, slide_through_excluded, strike_in_view
 from cuespin.fit.lm import lm_fit
 from cuespin.physics.motion import SLIP_ZERO, BallParams, Shot, phases, positions, positions_jacobian, z_cross
-from cuespin.recover.measurements import Measurements, build_measurements, frame_lattice, lattice_ar1_sums
+from cuespin.recover.measurements import Measurements, frame_lattice, lattice_ar1_sums
 
 # A fit whose residuals are this many times the stated variance does not
 # describe the track (it stopped far from the shot, or the track is not one
@@ -1603,63 +1603,6 @@ def initial_guess(seg, params: BallParams):
     u0 = 3.5 * mu_g * max(t1 - seg.t0, 0.0) * u_hat
     w0 = z_cross(np.asarray(seg.v0) - u0) / params.R
     return np.asarray(seg.x0, float), float(seg.t0), np.asarray(seg.v0, float), w0
-
-
-def fit_mle(t, xy, sigma, params: BallParams, start, exposure_s: float = 0.0,
-            fit_friction: bool = False, sliding_ended: bool = True, start_rolling=None) -> MLEResult:
-    """Maximum-likelihood estimate of the shot from a track, every frame its
-    own measurement (no strike window, no rest grouping: for those, build
-    :class:`~cuespin.recover.measurements.Measurements` and use
-    recover.estimate).
-
-    Parameters
-    ----------
-    t : ndarray, shape (n,)
-        Frame times (s) of frames where the ball was found.
-    xy : ndarray, shape (n, 2)
-        Observed centres (m).
-    sigma : float or ndarray, shape (n,), (n, 2) or (n, 2, 2)
-        Per-axis standard error of each centre (m), or its covariance (m^2).
-    params : BallParams
-        Known constants (start values of mu_s and mu_r with ``fit_friction``).
-    start : tuple
-        ``(x0, t0, v0, w0)`` start values, e.g. from :func:`initial_guess`.
-    exposure_s : float
-        Exposure (s): the model is averaged over it.
-    fit_friction : bool
-        Estimate ``mu_s`` and ``mu_r`` too.
-    sliding_ended : bool
-        Whether the track shows sliding end (fit.decide's verdict).
-
-    Returns
-    -------
-    MLEResult
-        Never raises for bad data.
-    """
-    from cuespin.fit.decide import sliding_seen
-    t = np.asarray(t, dtype=float)
-    xy = np.asarray(xy, dtype=float)
-    s = np.asarray(sigma, dtype=float)
-    if s.ndim == 0:
-        s = np.full(len(t), float(s))
-    good = np.all(np.isfinite(xy), axis=1) & np.isfinite(t)
-    if good.sum() < 8:
-        return MLEResult("failed", f"only {int(good.sum())} usable frames in the track")
-    meas = build_measurements(t[good], xy[good], s[good])
-    try:
-        full, roll = fit_models(meas, params, start, exposure_s, fit_friction, start_rolling)
-    except (ValueError, np.linalg.LinAlgError, FloatingPointError) as exc:
-        return MLEResult("failed", f"the fit did not run: {exc}")
-    hac = autocorrelated(*lag1_autocorrelation(meas, full.residuals))  # asked once, of the free-slip fit
-    lr = slip_lr(full, roll, meas, hac=hac)
-    chosen = full if sliding_seen(lr).yes else roll
-    return result(chosen, meas, lr, sliding_ended and not _t1_beyond(chosen, meas), hac=hac)
-
-
-def _t1_beyond(fit: ModelFit, meas: Measurements) -> bool:
-    """The fitted end of sliding lies beyond the track's last two frames."""
-    from cuespin.fit.decide import t1_in_view
-    return not fit.rolling and not t1_in_view(phases(fit.shot, fit.params).t1, meas.t_used)
 
 
 def crb_covariance(shot: Shot, params: BallParams, meas: Measurements, exposure_s: float = 0.0,

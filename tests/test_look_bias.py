@@ -292,3 +292,26 @@ def test_the_cue_window_starts_the_strike_margin_before_t0():
     # a frame further before t0 than the margin is kept
     t0 = 3.3 / fps
     assert measurements.strike_window(t, t0, 0.0, 1 / fps, clear).nonzero()[0].tolist() == [4, 5, 6]
+
+
+def test_a_rest_run_through_a_slide_ending_in_one_cue_flag_keeps_the_slide():
+    # A plain sliding shot at 480 fps whose spot the ball left is flagged
+    # from the 2nd frame after the strike through the slide (12 frames,
+    # 25 ms), the last of them the cue's: the cue's flag is not where the
+    # run starts, so the run is not bridged to and the slide stays in the
+    # fit (the reviewer's late.py, docs/measurements.md fixslip: 18 short
+    # slips, 6 ok free-slip answers turned degenerate when a cue flag
+    # anywhere in the run bridged it; none with the flag asked of the run's
+    # first frames).  Track 0 of short_slip_tracks(1, 5): slide 16.7 ms,
+    # free slip ok at slip LR 142.8 either way.
+    from cuespin.recover.simulate import short_slip_tracks
+    tr = next(short_slip_tracks(1, 5, frames=(2, 8), fps_grid=(480.0,), sigma_grid=(1e-4,)))
+    after = np.flatnonzero(tr.t - 0.5 * tr.exposure_s > tr.shot.t0)
+    touched = np.zeros(len(tr.t), bool)
+    touched[after[1:13]] = True
+    cue = np.zeros_like(touched)
+    cue[after[12]] = True
+    args = (tr.t, tr.xy, np.full(len(tr.t), tr.sigma), tr.params, tr.exposure_s)
+    est = estimate(*args, lossless=False, run_paper=False, touched=touched, foreign=cue)
+    assert est.decided.clear_s <= measurements.CUE_CLEAR_FRAMES / tr.fps + 1e-12
+    assert est.mle.status == "ok" and est.mle.model == "full", (est.mle.status, est.mle.model, est.mle.reason)

@@ -12,9 +12,8 @@ from cuespin.data_gen.sampler import make_scene, sample_shot
 from cuespin.physics import BallParams, Shot, phases, positions, sliding_parabola
 from cuespin.physics.straight import straight_frame
 from cuespin.pipeline.io import write_scene
-from cuespin.recover.mle import fit_mle, initial_guess
+from cuespin.recover.estimate import estimate
 from cuespin.recover.paper import recover_line, recover_parabola, sliding_time
-from cuespin.fit.decide import sliding_ended
 from cuespin.fit.segment import segment_track
 from cuespin.render import render_video
 
@@ -169,9 +168,8 @@ def synthetic(shot, p, fps=240.0, sigma=2e-5, seed=0, t_cut=None):
 
 
 def mle_of(t, xy, p, sigma=2e-5, **kw):
-    seg = segment_track(t, xy, 5 / 7 * p.mu_r * p.g, sigma)
-    return fit_mle(t, xy, sigma, p, initial_guess(seg, p), sliding_ended=sliding_ended(seg, t).yes,
-                   start_rolling=initial_guess(seg.rolling, p), **kw)
+    """The maximum-likelihood answer by the one path (recover.estimate)."""
+    return estimate(t, xy, np.full(len(t), sigma), p, run_paper=False, **kw).mle
 
 
 @pytest.mark.parametrize("preset,seed", [("random", 1), ("random", 2), ("case1", 3), ("case3", 4),
@@ -390,9 +388,7 @@ def test_mle_fits_friction_on_request():
     ph = phases(shot, p)
     t, xy = synthetic(shot, p, t_cut=min(ph.t2 + 0.3, 6.0))
     wrong = BallParams(mu_s=p.mu_s * 1.3, mu_r=p.mu_r * 0.7)
-    seg = segment_track(t, xy, 5 / 7 * wrong.mu_r * wrong.g, 2e-5)
-    m = fit_mle(t, xy, 2e-5, wrong, initial_guess(seg, wrong), fit_friction=True,
-                sliding_ended=sliding_ended(seg, t, friction_known=False).yes)
+    m = mle_of(t, xy, wrong, fit_friction=True)
     assert m.status == "ok", m.reason
     assert abs(m.mu_s - p.mu_s) < MLE_Z_MAX * m.stderr["mu_s"]
     assert abs(m.mu_r - p.mu_r) < MLE_Z_MAX * m.stderr["mu_r"]
