@@ -210,6 +210,25 @@ REST_SHARED_LEVEL = 0.025
 # (RMS error / stated 0.60 -> 1.32, RMS / bound 0.82) with the factor off
 # the rests and this share, 87.5% (1.70) with the scatter rule instead.
 LOOK_REST_SHARE = 1.0
+# A frame whose stated covariance is numerically singular, or states an
+# error of the table's size, carries no measurement: it is left out
+# (stated_frames), never weighted by a near-zero weight.  Realistic MJPG
+# seed 45 shot 28 (case 4, roll45's kept track) had five `ok` frames whose
+# jackknife covariance was the inverse of a near-singular normal matrix:
+# eigenvalues up to 1.9e24 px^2 (5e9 m), condition numbers up to 1.1e16;
+# the codec's floor against them reached -3.2e22 and `cov + floor K`
+# cancelled to a zero eigenvalue (codec_excess's Cholesky failed; crash28,
+# docs/measurements.md).  On the 191 other kept realistic tracks
+# (roll45's seed 45 MJPG, cueflag's seed 43 MJPG and seed 34 H.264,
+# h264new's seed 36 FFV1/MJPG/H.264) every `ok` frame's condition number
+# was at most 393 and its largest error at most 13 px (about 5 cm); shot
+# 28's singular frames 4e12-1.1e16 and 2e3-5e9 m, so both limits below sit
+# orders of magnitude from either side.  The condition number: an inverse
+# whose smaller eigenvalue is rounding of the larger (float64's 1e-16
+# leaves 1e-10 of it at 1e6).  The error: 1 m, 40% of the table's length:
+# a centre known only to the table's size is no measurement.
+MAX_COV_CONDITION = 1e6
+MAX_STATED_SD_M = 1.0
 # Frames needed with a finite stated error before the stated errors are
 # used; otherwise the spread of the track itself (the moments refinement
 # states no error).
@@ -230,16 +249,21 @@ def as_covariance(stderr_or_cov, n: int) -> np.ndarray:
 
 def stated_frames(stderr_or_cov) -> np.ndarray:
     """Which frames state their error, shape (n,) bool: a finite, positive
-    definite covariance (or finite positive per-axis errors).  The others
-    carry no measurement and are left out (masked), never weighted: an
-    indefinite one made the measurements' Cholesky fail (a tracker's
-    relearnt fits, seed 22 realistic shot 16, FFV1, before the tracker
-    checked them too)."""
+    definite covariance (m^2; or finite positive per-axis errors, m) whose
+    condition number is at most :data:`MAX_COV_CONDITION` and whose largest
+    standard error is at most :data:`MAX_STATED_SD_M`.  The others carry no
+    measurement and are left out (masked), never weighted: an indefinite
+    one made the measurements' Cholesky fail (a tracker's relearnt fits,
+    seed 22 realistic shot 16, FFV1, before the tracker checked them too),
+    a numerically singular one the codec's (seed 45 shot 28, MJPG)."""
     a = np.asarray(stderr_or_cov, dtype=float)
     c = as_covariance(a, len(a))
     with np.errstate(invalid="ignore"):
-        return (np.all(np.isfinite(c), axis=(1, 2)) & (c[:, 0, 0] > 0) & (c[:, 1, 1] > 0)
-                & (c[:, 0, 0] * c[:, 1, 1] - c[:, 0, 1] * c[:, 1, 0] > 0))
+        ok = (np.all(np.isfinite(c), axis=(1, 2)) & (c[:, 0, 0] > 0) & (c[:, 1, 1] > 0)
+              & (c[:, 0, 0] * c[:, 1, 1] - c[:, 0, 1] * c[:, 1, 0] > 0))
+    lam = np.linalg.eigvalsh(0.5 * (c[ok] + np.swapaxes(c[ok], -1, -2)))
+    ok[ok] = (lam[:, 0] > 0) & (lam[:, 1] <= MAX_COV_CONDITION * lam[:, 0]) & (lam[:, 1] <= MAX_STATED_SD_M**2)
+    return ok
 
 
 def table_covariance(camera, xy, stderr_px) -> np.ndarray:
@@ -1033,19 +1057,39 @@ def codec_excess(meas: Measurements, whitened_residuals, n_par: int) -> float:
     scatter = group_scatter(meas.xy, meas.group, meas.rest_scatter)
 
     def excess_chi2(c):
-        # As with_codec(c).whiten, without building the Measurements.
+        # As with_codec(c).whiten, without building the Measurements; NaN
+        # where a measurement's covariance is numerically no covariance.
         C = group_covariance(cov + np.maximum(c, floor)[:, None, None] * K, g, m, scatter, meas.rest_min_share,
                              meas.rest_scale, meas.rest_scale_dof)
-        w = np.linalg.solve(np.linalg.cholesky(C), raw[:, :, None])[:, :, 0]
+        try:
+            w = np.linalg.solve(np.linalg.cholesky(C), raw[:, :, None])[:, :, 0]
+        except np.linalg.LinAlgError:
+            return float("nan")
         return float(np.sum(w * w)) - dof
 
     s2 = np.diagonal(cov, axis1=1, axis2=2)                          # stated per-axis variances
     k = np.diagonal(K, axis1=1, axis2=2)                             # per unit codec variance
     lo = float(floor.min())                                          # every frame on its floor
     hi = max(float(np.sum(raw * raw) / k.min()), float((s2 / k).max()))
-    if excess_chi2(lo) <= 0:
+    at_lo = excess_chi2(lo)
+    if not np.isfinite(at_lo):
+        # The floor cancels some frame's covariance in rounding (stated_frames
+        # leaves such frames out; a caller's own Measurements may not): the
+        # bracket starts at the lowest c found valid between it and 0 (the
+        # stated covariances, which _make already factored).
+        ok = 0.0
+        for _ in range(64):
+            mid = 0.5 * (lo + ok)
+            if np.isfinite(excess_chi2(mid)):
+                ok = mid
+            else:
+                lo = mid
+        lo, at_lo = ok, excess_chi2(ok)
+        if not np.isfinite(at_lo):
+            return 0.0
+    if at_lo <= 0:
         return lo
-    if excess_chi2(hi) >= 0:
+    if not excess_chi2(hi) < 0:
         return hi
     # The sum falls as c grows, continuously (Measurements.codec_floor).
     return float(brentq(excess_chi2, lo, hi, xtol=1e-12 * (hi - lo), rtol=1e-12))

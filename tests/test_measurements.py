@@ -813,3 +813,59 @@ def test_the_look_factor_comes_off_the_recoverys_rest_only(fps):
     assert np.all(dist[off & moving] <= REST_SIGMAS * stated)
     # the segmentation's stop early by 0.11-0.17 s (seeds 0-2, 240 and 480 fps)
     assert np.all(tr.t[off & moving] > t2 - 0.25)
+
+
+def _singular_frames_track():
+    """A lossy track with seed 45 shot 28's defect (realistic MJPG, case 4):
+    frames whose stated covariance is the inverse of a near-singular normal
+    matrix, condition 1e14-1e16, and one stating 5e9 m (eigenvalues as the
+    tracker's jackknife gave them there, in units of one frame's variance)."""
+    shot, p = sample_shot(5, "random")
+    ph = phases(shot, p)
+    t = np.arange(0.0, min(ph.t2 + 0.3, 4.0), 1 / 240)
+    rng = np.random.default_rng(2)
+    xy = model_track(shot, p, t) + SIGMA * rng.standard_normal((len(t), 2))
+    cov = np.tile(np.eye(2) * SIGMA**2, (len(t), 1, 1))
+    bad = [30, len(t) // 3, len(t) // 2, len(t) // 2 + 9]
+    u = np.array([0.6, 0.8])
+    for i, big in zip(bad[:3], (1e14, 4e15, 1.1e16)):      # a tiny error across, a huge one along u
+        cov[i] = SIGMA**2 * (np.eye(2) + (big - 1.0) * np.outer(u, u))
+    cov[bad[3]] = np.eye(2) * 5e9**2                        # well conditioned, the table's size many times over
+    return shot, p, t, xy, cov, bad
+
+
+def test_a_numerically_singular_stated_error_is_left_out_not_weighted():
+    # Realistic MJPG seed 45 shot 28 crashed the recovery: its singular
+    # frames' codec floor (-3.2e22 px^2) cancelled `cov + floor K` to a zero
+    # eigenvalue and codec_excess's Cholesky raised (crash28).  Such frames
+    # state no error (stated_frames: MAX_COV_CONDITION, MAX_STATED_SD_M):
+    # the answer is the one with them masked, to the bit.
+    shot, p, t, xy, cov, bad = _singular_frames_track()
+    assert np.flatnonzero(~stated_frames(cov)).tolist() == bad
+    got = recover_track(t, xy, np.ones(len(t), bool), cov, p, lossless=False)
+    ok = np.ones(len(t), bool)
+    ok[bad] = False
+    want = recover_track(t, xy, ok, cov, p, lossless=False)
+    for m in ("mle", "paper"):
+        assert got["methods"][m]["status"] == want["methods"][m]["status"]
+        assert got["methods"][m]["v0"] == want["methods"][m]["v0"] and got["methods"][m]["w0"] == want["methods"][m]["w0"]
+    assert got["methods"]["mle"]["status"] == "ok", got["methods"]["mle"]["reason"]
+
+
+def test_codec_excess_answers_on_measurements_whose_floor_cancels():
+    # codec_excess on measurements built with the singular frames kept (a
+    # caller past stated_frames): the bracket's low end, every frame on its
+    # floor, is no covariance in rounding; the solver starts from the lowest
+    # valid codec variance instead and answers a number, never raises.
+    from cuespin.recover.measurements import codec_excess
+    shot, p, t, xy, cov, bad = _singular_frames_track()
+    # A tilted camera's metres per pixel, 5% apart from frame to frame (its
+    # generalised eigenvalues' rounding is what cancels; with the identity
+    # the old bracket happened to hold).
+    B = np.array([[2.5e-3, 0.3e-3], [0.1e-3, 2.2e-3]])
+    B = B * (1 + 0.05 * np.random.default_rng(0).standard_normal((len(t), 1, 1)))
+    meas = build_measurements(t, xy, cov, px_to_m=B)
+    r = meas.whiten(model_track(shot, p, meas.t_used))
+    c = codec_excess(meas, r, 7)
+    assert np.isfinite(c)
+    meas.with_codec(c)                                      # a covariance the fit can factor
