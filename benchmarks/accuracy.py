@@ -151,6 +151,14 @@ def one_shot(args):
                      else np.zeros(len(tr.t), bool),
                      foreign=getattr(tr, "foreign", None) if getattr(tr, "foreign", None) is not None
                      else np.zeros(len(tr.t), bool))
+    # The analysis ends at the first contact, cut as the user's path cuts it
+    # (pipeline.run.contact_cut): the benchmark measures what the user gets.
+    from cuespin.pipeline.run import contact_cut
+
+    contact, n_fit = contact_cut(tr, scene, cam)
+    for key in ("t", "xy", "ok", "cov_px", "stderr_px", "uv", "touched", "foreign"):
+        if getattr(tr, key, None) is not None:
+            setattr(tr, key, np.asarray(getattr(tr, key))[:n_fit])
     # As pipeline.run.run_recover does, keeping the fit's own measurements
     # for the bound.
     kw = {"px_to_m": pixel_to_table(cam, tr.xy)}
@@ -179,6 +187,7 @@ def one_shot(args):
            "fps": cam.fps, "codec": scene.render.get("codec"),
            "camera": camera, "height_m": float(cam.centre[2]) if cam.is_pinhole else np.nan,
            "noise": scene.render.get("noise_sigma"), "frames": n, "t_decode": t_decode,
+           "frames_fitted": n_fit, "contact": "" if contact is None else contact.kind,
            "t_fit": out["timing_s"]["fit"], "t_recover": out["timing_s"]["recover"],
            "t1_true": phases(truth, p).t1 - truth.t0}
     truth_vw = np.r_[v0, w0]

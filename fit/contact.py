@@ -50,6 +50,9 @@ MIN_WINDOW, MAX_WINDOW = 8, 64
 # at 0.35 px noise, was within the noise).
 MEASURED_NULL_MAX = 25.5
 CHANGE_THRESHOLD = 40.0
+# Median of chi-square with 4 degrees of freedom (the change statistic's
+# null), scipy.stats.chi2.median(4).
+CHI2_4_MEDIAN = 3.3567
 # The ball's centre this many standard errors beyond R of a cushion line
 # has touched it; when classifying a change, this near (or 1 cm) is at it.
 CUSHION_SIGMAS = 3.0
@@ -147,7 +150,7 @@ def _window_fits(t, xy, sig, starts, W, tau):
     return coef, cov, chi2
 
 
-def change_statistic(t, xy, stderr_m, W: int | None = None, details: bool = False):
+def change_statistic(t, xy, stderr_m, W: int | None = None, details: bool = False, time_corr=None):
     """The change test at every boundary with ``W`` frames on each side.
 
     Parameters
@@ -160,6 +163,11 @@ def change_statistic(t, xy, stderr_m, W: int | None = None, details: bool = Fals
         Per-frame standard error (m).
     W : int, optional
         Frames on each side; :func:`window_frames` when absent.
+    time_corr : callable, optional
+        ``time_corr(t)``: the per-axis correlation (k, k) of the errors of
+        frames at times ``t`` (s), as ``recover.mle.time_correlation`` gives
+        for an inter-frame codec; None: independent errors.  With it, each
+        boundary's statistic is divided by :func:`correlation_inflation`.
 
     Returns
     -------
@@ -168,9 +176,10 @@ def change_statistic(t, xy, stderr_m, W: int | None = None, details: bool = Fals
     stat : ndarray, shape (m,)
         Wald statistic of equal position and velocity at the boundary, in
         units of the noise scaled by ``scale``.
-    scale : float
+    scale : float or ndarray, shape (m,)
         Factor (>= 1) by which the local fits' residuals exceed the stated
-        errors (median over windows).
+        errors (median over windows); with ``time_corr``, per boundary,
+        times the square root of :func:`correlation_inflation`.
     coef : tuple of ndarray
         Left and right fits ``(m, 2, 3)`` at each boundary's midpoint time.
     jump_chi2 : ndarray, shape (m,)
@@ -198,9 +207,53 @@ def change_statistic(t, xy, stderr_m, W: int | None = None, details: bool = Fals
     d = cl[:, :, :2] - cr[:, :, :2]                              # (m, 2, 2): x, v
     C = covl[:, :2, :2] + covr[:, :2, :2]
     Ci = np.linalg.inv(C)
+    scale2 = scale2 if time_corr is None else scale2 * correlation_inflation(t, sig, b, W, C, time_corr)
     stat = np.einsum("nai,nij,naj->n", d, Ci, d) / scale2
-    out = b, stat, float(np.sqrt(scale2)), (cl, cr)
+    if time_corr is not None and len(stat):
+        # A shot's own drift beyond the pooled correlation (recover.mle's
+        # INTER_CODEC_ACF note; the recovery's shared_scale): most boundaries
+        # see no change, so the statistic's median should be chi-square(4)'s.
+        # On seed 36's H.264 480-fps tracks it was 6-8 (contact36).
+        drift2 = max(1.0, float(np.median(stat)) / CHI2_4_MEDIAN)
+        stat, scale2 = stat / drift2, scale2 * drift2
+    out = b, stat, (float(np.sqrt(scale2)) if np.ndim(scale2) == 0 else np.sqrt(scale2)), (cl, cr)
     return (*out, chil + chir) if details else out
+
+
+def _window_map(t, sig, starts, W, tau) -> np.ndarray:
+    """The linear map (n, 2, W) from a window's ``W`` centres (one axis) to
+    its weighted quadratic's position and velocity at ``tau``
+    (:func:`_window_fits`' first two coefficients)."""
+    idx = starts[:, None] + np.arange(W)[None, :]
+    s = t[idx] - tau[:, None]
+    X = np.stack([np.ones_like(s), s, s * s], axis=-1)
+    Xw = X * (1.0 / sig[idx] ** 2)[:, :, None]
+    return (np.linalg.inv(np.swapaxes(Xw, 1, 2) @ X) @ np.swapaxes(Xw, 1, 2))[:, :2, :]
+
+
+def correlation_inflation(t, sig, b, W: int, C, time_corr) -> np.ndarray:
+    """How much errors correlated in time widen the change test's position
+    and velocity difference at each boundary, shape (m,): the mean
+    eigenvalue of ``C^-1 V``, ``V`` the difference's covariance under the
+    correlation ``time_corr(t)`` (the errors of the ``2 W`` frames around
+    the boundary, left and right windows alike) and ``C`` (m, 2, 2) its
+    covariance with independent errors.  An inter-frame codec's error
+    shared over tens of milliseconds (recover.mle.INTER_CODEC_ACF: 21 ms)
+    moves a window's fitted velocity as one: read against independent
+    errors it looks like a change of motion (contact36: 4 of 80 simulated
+    contact-free tracks, all at 480 fps, over the threshold)."""
+    tau = 0.5 * (t[b - 1] + t[b])
+    A = np.concatenate([_window_map(t, sig, b - W, W, tau), -_window_map(t, sig, b, W, tau)], axis=2)
+    rows = (b - W)[:, None] + np.arange(2 * W)[None, :]
+    As = A * sig[rows][:, None, :]                  # the map from whitened errors
+    # One correlation per pattern of frame times (one for evenly spaced frames).
+    rel = np.round((t[rows] - t[rows[:, :1]]) * 1e9).astype(np.int64)
+    _, first, which = np.unique(rel, axis=0, return_index=True, return_inverse=True)
+    V = np.empty((len(b), 2, 2))
+    for j, i in enumerate(first):
+        m = np.flatnonzero(which.ravel() == j)
+        V[m] = As[m] @ time_corr(t[rows[i]]) @ np.swapaxes(As[m], 1, 2)
+    return np.maximum(0.5 * np.trace(np.linalg.solve(C, V), axis1=1, axis2=2), 1.0)
 
 
 def _kink_chi2(t, xy, sig, lo: int, hi: int, tau: float, end_gap: int = 0,
@@ -273,9 +326,10 @@ def kink_statistic(t, xy, sig, W, b, stat, jump_chi2, scale, screen, first_over=
         k = int(b[i])
         tau = 0.5 * (t[k - 1] + t[k])
         # Refined only while the answer could still exceed ``screen``.
-        stop = float(jump_chi2[i]) + screen * scale**2
+        sc2 = float(scale[i] if np.ndim(scale) else scale) ** 2
+        stop = float(jump_chi2[i]) + screen * sc2
         stat[i] = (_kink_chi2(t, xy, sig, k - W, k + W, tau, stop_below=stop)
-                   - float(jump_chi2[i])) / scale**2
+                   - float(jump_chi2[i])) / sc2
         if first_over is not None and stat[i] > first_over:
             break
     return stat
@@ -304,8 +358,12 @@ def _change_point(t, xy, sig, lo: int, hi: int, candidates, kink: bool = False,
 
 def _moved_index(xy, sig) -> int:
     """First frame of the first ``MOVE_CONFIRM_FRAMES`` in a row away from the
-    start by ``MOVE_SIGMAS`` errors: the strike is behind it."""
-    far = np.hypot(*(xy - xy[0]).T) > MOVE_SIGMAS * sig * np.sqrt(2)
+    start by ``MOVE_SIGMAS`` errors: the strike is behind it.  The start is
+    the median of the first ``2 MOVE_CONFIRM_FRAMES - 1`` frames: one frame
+    off (the first of seed 34's H.264 shot 27, 0.35 px, 7 stated errors)
+    made every later frame "moved", and the strike itself a contact."""
+    start = np.median(xy[:2 * MOVE_CONFIRM_FRAMES - 1], axis=0)
+    far = np.hypot(*(xy - start).T) > MOVE_SIGMAS * sig * np.sqrt(2)
     run = np.convolve(far.astype(int), np.ones(MOVE_CONFIRM_FRAMES, int), "valid")
     hits = np.flatnonzero(run == MOVE_CONFIRM_FRAMES)
     return int(hits[0]) if hits.size else len(xy)
@@ -411,7 +469,7 @@ def _by_geometry(t, xy, sig, gap_of, crossing, start: int, W: int):
 
 
 def find_contact(t, xy, ok, stderr_m, table, R: float, balls=(), W: int | None = None,
-                 threshold: float = CHANGE_THRESHOLD) -> Contact | None:
+                 threshold: float = CHANGE_THRESHOLD, time_corr=None) -> Contact | None:
     """The first contact in a track, or None.
 
     Parameters
@@ -435,6 +493,11 @@ def find_contact(t, xy, ok, stderr_m, table, R: float, balls=(), W: int | None =
         when absent.
     threshold : float
         Change statistic above which a boundary is a contact.
+    time_corr : callable, optional
+        ``time_corr(t)``: the per-axis correlation (k, k) of the errors of
+        frames at times ``t`` (s), for errors correlated in time (an
+        inter-frame codec: ``recover.mle.time_correlation``); None:
+        independent.  See :func:`change_statistic`.
 
     Returns
     -------
@@ -462,12 +525,13 @@ def find_contact(t, xy, ok, stderr_m, table, R: float, balls=(), W: int | None =
         found.append(Contact(t=hit[0], index=int(rows[hit[1]]), kind="ball"))
         if geo is None or hit[1] < geo[1]:
             geo = hit
-    b, stat, scale, (cl, cr), jump_chi2 = change_statistic(tt, pp, sig, W, details=True)
+    b, stat, scale, (cl, cr), jump_chi2 = change_statistic(tt, pp, sig, W, details=True, time_corr=time_corr)
     # Boundaries with the left window wholly after the strike, and not past
     # a cushion contact already found.
     last = geo[1] if geo is not None else len(tt)
     keep = (b - W >= moved) & (b <= last)
     b, stat, cl, cr, jump_chi2 = b[keep], stat[keep], cl[keep], cr[keep], jump_chi2[keep]
+    scale = scale[keep] if np.ndim(scale) else scale
     stat = kink_statistic(tt, pp, sig, W, b, stat, jump_chi2, scale, threshold, first_over=threshold)
     over = np.flatnonzero(stat > threshold)
     if over.size:

@@ -42,6 +42,36 @@ def track_covariance_m(tr, camera) -> np.ndarray:
     return table_covariance(camera, tr.xy, tr.cov_px)
 
 
+def contact_cut(tr, scene, camera):
+    """Where a track's analysed motion ends (CONVENTIONS.md, "What a shot is"):
+    ``(contact, n)``, the first contact (``fit.contact.Contact`` or None) and
+    how many leading frames the fit may use (``fit.contact.analysed_frames``).
+
+    The one cut every caller makes (the user's path here, and
+    benchmarks/accuracy.py, which must measure what the user gets).  An
+    inter-frame lossy codec's errors are correlated in time as the recovery
+    takes them (``recover.mle.time_correlation``, INTER_CODEC_ACF): the
+    change test reads them so, or their shared drift is taken for a contact.
+
+    Parameters
+    ----------
+    tr : TrackResult or namespace
+        ``t``, ``xy`` (m), ``ok``, ``cov_px``, ``lossless``, ``inter_frame``.
+    scene : Scene
+        Its ``table``, ``physics.R`` and the resting balls of ``render``.
+    camera : Camera
+        Converts the stated pixel errors to metres.
+    """
+    from cuespin.fit.contact import analysed_frames, find_contact
+    from cuespin.physics.contact import scene_balls
+    from cuespin.recover.mle import time_correlation
+
+    correlated = bool(getattr(tr, "inter_frame", False)) and not bool(getattr(tr, "lossless", True))
+    contact = find_contact(tr.t, tr.xy, tr.ok, track_stderr_m(tr, camera), scene.table, scene.physics.R,
+                           scene_balls(scene.render), time_corr=time_correlation if correlated else None)
+    return contact, analysed_frames(tr.t, contact, camera.exposure_s)
+
+
 def _num(x):
     return None if x is None or not math.isfinite(x) else float(x)
 
@@ -135,8 +165,6 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
     TrackError
         The video cannot be read at all (see ``cuespin.track.video.track_video``).
     """
-    from cuespin.fit.contact import analysed_frames, find_contact
-    from cuespin.physics.contact import scene_balls
     from cuespin.recover.api import recover_track
     from cuespin.recover.calibration import add_calibration_error
     from cuespin.recover.measurements import pixel_to_table
@@ -151,9 +179,7 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
     cam = getattr(tr, "camera", None) or scene.camera  # its size filled from the video where the scene leaves it
     cov_m = track_covariance_m(tr, cam)
     # The analysed motion ends at the first contact (CONVENTIONS.md): fit only the frames before it.
-    contact = find_contact(tr.t, tr.xy, tr.ok, track_stderr_m(tr, cam), scene.table, scene.physics.R,
-                           scene_balls(scene.render))
-    n = analysed_frames(tr.t, contact, cam.exposure_s)
+    contact, n = contact_cut(tr, scene, cam)
     out, est = recover_track(tr.t[:n], tr.xy[:n], tr.ok[:n], cov_m[:n], scene.physics, cam.exposure_s,
                              method, fit_friction, lossless=tr.lossless, independent=tr.independent_errors,
                              ar1_floor=tr.error_ar1, look_factor=tr.look_factor,

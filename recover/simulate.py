@@ -41,20 +41,22 @@ class SimTrack:
 
 def simulate_track(shot: Shot, params: BallParams, fps: float, sigma: float, rng,
                    exposure_s: float = 0.0, t_end: float | None = None,
-                   t_start: float = 0.0, rho: float = 0.0) -> SimTrack:
+                   t_start: float = 0.0, rho: float = 0.0, acf=None) -> SimTrack:
     """The exposure-averaged centre at frame times ``k / fps`` plus N(0, sigma^2) per axis.
 
     ``t_end`` defaults to 0.3 s after rest, at most :data:`MAX_AFTER_STRIKE_S`
     after the strike.  ``rho``: the errors are AR(1) along the track with
     this lag-1 correlation (the same variance; a lossy codec at low noise,
-    README), independent between axes.
+    README), independent between axes; ``acf``: instead, correlated in time
+    as an inter-frame codec's whole error (:func:`shared_errors`).
     """
     rng = np.random.default_rng(rng)
     ph = phases(shot, params)
     if t_end is None:
         t_end = min(ph.t2 + 0.3, shot.t0 + MAX_AFTER_STRIKE_S)
     t = np.arange(np.ceil(t_start * fps), np.floor(t_end * fps) + 1) / fps
-    xy = model_track(shot, params, t, exposure_s) + sigma * ar1_errors(len(t), rho, rng)
+    e = ar1_errors(len(t), rho, rng) if acf is None else shared_errors(len(t), fps, rng, acf)
+    xy = model_track(shot, params, t, exposure_s) + sigma * e
     return SimTrack(t, xy, float(sigma), shot, params, float(exposure_s), float(fps))
 
 
@@ -96,25 +98,25 @@ def _exposure(rng, fps: float, blur: bool) -> float:
 
 
 def null_rolling_tracks(n: int, seed: int, fps_grid=FPS_GRID, sigma_grid=SIGMA_GRID_M,
-                        blur: bool = True, rho: float = 0.0):
+                        blur: bool = True, rho: float = 0.0, acf=None):
     """``n`` tracks rolling from the strike (paper case 4: no slip to see),
     cycling over frame rates and noise levels, exposures 0.3-1 frame half
-    the time (as the sampler draws them); ``rho``: AR(1) errors
-    (:func:`simulate_track`).  Yields :class:`SimTrack`."""
+    the time (as the sampler draws them); ``rho``: AR(1) errors, ``acf``:
+    an inter-frame codec's (:func:`simulate_track`).  Yields :class:`SimTrack`."""
     rng = np.random.default_rng(seed)
     for i in range(n):
         fps, sigma = _grid_point(i, fps_grid, sigma_grid)
         shot, params = sample_shot(rng, "case4")
         exposure = _exposure(rng, fps, blur)
-        yield simulate_track(shot, params, fps, sigma, rng, exposure, rho=rho)
+        yield simulate_track(shot, params, fps, sigma, rng, exposure, rho=rho, acf=acf)
 
 
 def sliding_tracks(n: int, seed: int, presets=("random", "case1", "case3", "case5", "masse"),
                    fps_grid=FPS_GRID, sigma_grid=SIGMA_GRID_M, blur: bool = True, rho: float = 0.0,
-                   seen_s: tuple[float, float] | None = None):
+                   seen_s: tuple[float, float] | None = None, acf=None):
     """``n`` tracks of shots that slide (the sampler's presets), cycling over
-    frame rates and noise levels; ``rho``: AR(1) errors
-    (:func:`simulate_track`); ``seen_s``: each clip ends a uniform
+    frame rates and noise levels; ``rho``: AR(1) errors, ``acf``: an
+    inter-frame codec's (:func:`simulate_track`); ``seen_s``: each clip ends a uniform
     ``seen_s[0]``-``seen_s[1]`` seconds after the strike, if sooner (as a
     realistic 1.5-s clip sees the ball).  Yields :class:`SimTrack`."""
     rng = np.random.default_rng(seed)
@@ -126,7 +128,7 @@ def sliding_tracks(n: int, seed: int, presets=("random", "case1", "case3", "case
         t_end = min(ph.t2 + 0.3, max(ph.t1 + 1.0, shot.t0 + MAX_AFTER_STRIKE_S))
         if seen_s is not None:
             t_end = min(t_end, shot.t0 + rng.uniform(*seen_s))
-        yield simulate_track(shot, params, fps, sigma, rng, exposure, t_end=t_end, rho=rho)
+        yield simulate_track(shot, params, fps, sigma, rng, exposure, t_end=t_end, rho=rho, acf=acf)
 
 
 def mixed_tracks(n: int, seed: int):
