@@ -732,18 +732,24 @@ def test_x0_states_the_strike_times_own_error():
     assert len(z2) >= 6 and np.mean(z2) < 2.0, (len(z2), np.mean(z2))
 
 
+def _sampled_track(noise_seed: int):
+    """Random shot 5 at 240 fps to 0.3 s past its rest, independent errors
+    SIGMA (m) drawn with ``noise_seed``, every frame's covariance SIGMA^2 I."""
+    shot, p = sample_shot(5, "random")
+    ph = phases(shot, p)
+    t = np.arange(0.0, min(ph.t2 + 0.3, 4.0), 1 / 240)
+    rng = np.random.default_rng(noise_seed)
+    xy = model_track(shot, p, t) + SIGMA * rng.standard_normal((len(t), 2))
+    return shot, p, t, xy, np.tile(np.eye(2) * SIGMA**2, (len(t), 1, 1))
+
+
 def test_frames_without_a_stated_error_are_left_out_not_fitted():
     # A frame whose covariance is indefinite, zero or NaN states no error:
     # recover_track leaves it out as it leaves out a frame without a centre
     # (before, the measurements' Cholesky raised on such a frame: a tracker's
     # relearnt fits, seed 22 realistic shot 16, FFV1), and the answer is the
     # one with those frames masked, to the bit.
-    shot, p = sample_shot(5, "random")
-    ph = phases(shot, p)
-    t = np.arange(0.0, min(ph.t2 + 0.3, 4.0), 1 / 240)
-    rng = np.random.default_rng(1)
-    xy = model_track(shot, p, t) + SIGMA * rng.standard_normal((len(t), 2))
-    cov = np.tile(np.eye(2) * SIGMA**2, (len(t), 1, 1))
+    shot, p, t, xy, cov = _sampled_track(1)
     bad = [20, 21, len(t) // 2, len(t) // 2 + 7]
     cov[bad[0]] = [[SIGMA**2, 0.0], [0.0, -SIGMA**2]]  # a negative variance
     cov[bad[1]] = [[1e10, 2e10], [2e10, 1e10]]  # indefinite
@@ -820,12 +826,7 @@ def _singular_frames_track():
     frames whose stated covariance is the inverse of a near-singular normal
     matrix, condition 1e14-1e16, and one stating 5e9 m (eigenvalues as the
     tracker's jackknife gave them there, in units of one frame's variance)."""
-    shot, p = sample_shot(5, "random")
-    ph = phases(shot, p)
-    t = np.arange(0.0, min(ph.t2 + 0.3, 4.0), 1 / 240)
-    rng = np.random.default_rng(2)
-    xy = model_track(shot, p, t) + SIGMA * rng.standard_normal((len(t), 2))
-    cov = np.tile(np.eye(2) * SIGMA**2, (len(t), 1, 1))
+    shot, p, t, xy, cov = _sampled_track(2)
     bad = [30, len(t) // 3, len(t) // 2, len(t) // 2 + 9]
     u = np.array([0.6, 0.8])
     for i, big in zip(bad[:3], (1e14, 4e15, 1.1e16)):      # a tiny error across, a huge one along u

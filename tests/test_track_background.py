@@ -1,4 +1,7 @@
 """The look-ahead's background: the ball's contrast on a lossy codec."""
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -9,6 +12,9 @@ from cuespin.track.background import learn_background
 from cuespin.track.colour import learn_projection
 from cuespin.track.reader import FrameSource, probe
 from cuespin.track.video import search_mask
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+from cue_rules import Frames  # noqa: E402  (the benchmark's lazily rendered look-ahead)
 
 
 def test_contrast_on_mjpg_is_the_lossless_one(tmp_path):
@@ -96,23 +102,6 @@ def test_the_cue_beside_the_balls_crescent_is_left_out():
     assert bg.moved_band[1] < 4 * r, (bg.moved_band, r)
 
 
-class _Frames:
-    """A look-ahead's frames ``ks`` of ``fr``, each rendered when first read
-    (learn_model reads only its samples), with a fixed generator per frame."""
-
-    def __init__(self, fr, ks):
-        self.fr, self.ks, self.done = fr, list(ks), {}
-
-    def __len__(self):
-        return len(self.ks)
-
-    def __getitem__(self, i):
-        k = self.ks[i]
-        if k not in self.done:
-            self.done[k] = self.fr.render(int(k), np.random.default_rng([k, 7]))
-        return self.done[k]
-
-
 @pytest.mark.slow  # 20 look-aheads' 9 samples at 800 x 600 - 1280 x 720: ~1-2 min on a shared machine
 def test_the_cue_rules_error_rates_on_generated_cue_scenes(monkeypatch):
     # cue10 (docs/measurements.md): the two cue rules (video.cue_band, judging
@@ -161,7 +150,7 @@ def test_the_cue_rules_error_rates_on_generated_cue_scenes(monkeypatch):
         ke = k0 + int(np.argmax(np.hypot(*(uv[k0:] - uv[0]).T) >= r))
         for ks, ball in ((range(k0), False), (range(max(0, ke - 40), ke + 1), True)):
             removed.clear()
-            _, bg = learn_model(_Frames(fr, ks), radii, 9, mask, True)
+            _, bg = learn_model(Frames(fr, ks, False, {}), radii, 9, mask, True)
             if not bg.polarity:
                 continue
             fired = cue_moved(bg, radii.r_min)
