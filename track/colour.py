@@ -721,7 +721,8 @@ def learn_projection(samples: np.ndarray, radius_px, lossless: bool = True, blin
         (:func:`channel_rule`'s ``felt``; chosen by :func:`shade_match`).
     chroma_block : int
         Side (px) of the pixel blocks sharing one chroma sample
-        (:attr:`cuespin.track.reader.VideoInfo.chroma_block`): on a lossy
+        (:attr:`cuespin.track.reader.VideoInfo.chroma_block`; the tracker
+        passes it for an inter-frame codec only, track.video): on a lossy
         codec the channel is chosen under :func:`chroma_shared`'s noise.
 
     Returns
