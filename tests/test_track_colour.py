@@ -97,3 +97,33 @@ def test_the_felt_blind_channel_sees_a_shaded_ball_nowhere_at_the_felts_level():
     assert abs(felt_blind(d, S, felt) @ felt) < 1e-9 * np.linalg.norm(felt_blind(d, S, felt)) * np.linalg.norm(felt)
     # Nothing left when the ball is the felt's colour scaled (brightness only).
     assert felt_blind(0.5 * felt, S, felt) is None
+
+
+def test_a_shared_chroma_is_not_trusted_per_pixel_on_h264(tmp_path):
+    # Held-out realistic seed 36 shot 5 (an orange ball on red felt, 120
+    # fps): 9 frames spread over 0.8 s through the H.264 writer (4:2:0).
+    # Per pixel the codec's chroma looks as clean as its luma (noise 0.09
+    # levels^2 a channel, the rounding's), and the channel learnt as if its
+    # pixels were independent was the blue-difference chroma alone: w
+    # (-0.81, 0.51, 0.30), sum 0 (the tracker's on the 1.5-s video: (-0.85,
+    # 0.55, 0.30), its track 1.22 px off after the strike, FFV1 0.02 px).
+    # Counting a chroma sample's error as shared by its 2 x 2 pixels, the
+    # channel sees luma: measured (0.20, 0.81, 0.54), sum / norm 1.56
+    # (sqrt 3 = 1.73 at most; 0.5 only says "mostly luma").
+    from cuespin.render.video import encode_frames
+    from cuespin.track.reader import FrameSource, probe
+    scene = sample_scenes(6, 36, look="realistic")[5]
+    scene.render.update(max_duration=0.8)
+    fr = FrameRenderer(scene)
+    rng = np.random.default_rng(0)
+    ks = np.linspace(0, fr.n_frames - 1, 9).round().astype(int)
+    raw = [fr.render(int(k), rng) for k in ks]
+    path = tmp_path / "shot.mp4"
+    encode_frames(raw, path, "H264", scene.camera.fps, raw[0].shape[1::-1])
+    info = probe(path)
+    coded = np.stack(list(FrameSource(path, info)))
+    r = scene.physics.R * scene.camera.px_per_m(fr._uv_nodes[ks[4]].mean(axis=0))
+    assert info.chroma_block == 2 and not info.lossless
+    assert learn_projection(coded, r, lossless=False).luma_blind  # the temptation
+    w = learn_projection(coded, r, lossless=False, chroma_block=info.chroma_block).w.astype(float)
+    assert w.sum() > 0.5 * np.linalg.norm(w)

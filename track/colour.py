@@ -122,6 +122,9 @@ HIGHLIGHT_SIGMAS = 6.0
 # the 9 samples; the gradients' channel there: RMSE 0.0075 -> 0.0208 px),
 # shot 2 42-90; shots 1, 5, 9, 10 still 0 (shade10).
 HIGHLIGHT_PIXELS = 1
+# BT.601's luma row (B, G, R): a YUV video's decoder adds its luma to B, G
+# and R alike, so BGR = 1 Y + chroma with Y = LUMA . BGR.
+LUMA = np.array([0.114, 0.587, 0.299])
 # Weights summing to at most this fraction of their absolute sum are blind
 # to luma (the white-free weights sum to zero; float32 rounds them by ~1e-7).
 LUMA_BLIND_TOL = 1e-5
@@ -225,6 +228,29 @@ def noise_covariance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     # of the mean variance, keep every direction's noise honest.
     floor = ROUNDING_VAR + CONDITION_FLOOR * np.trace(cov) / 3.0
     return cov + floor * np.eye(3)
+
+
+def chroma_shared(S: np.ndarray, chroma_block: int) -> np.ndarray:
+    """The noise covariance (3 x 3, BGR levels^2) the centre's information
+    sees when a lossy codec stores chroma once per ``chroma_block`` x
+    ``chroma_block`` pixels (4:2:0: 2): the chroma part of ``S``'s noise
+    amplitude counted ``chroma_block`` times, ``Q S Q'`` with ``Q = 1 LUMA'
+    + b (I - 1 LUMA')``.  A chroma sample's error is one error shared by
+    its b^2 pixels (and the codec's coarser chroma quantisation blurs the
+    ball's rim over them), so per-pixel noise, the frame differences', makes
+    chroma look b^2 times as informative as it is.  ``S`` for ``b`` 1.
+
+    Measured (docs/measurements.md, chroma36): realistic seed 36 shot 5
+    (orange on red felt, 120 fps, H.264; the per-pixel noise 0.09-0.10
+    levels^2 a channel, the rounding's) was fitted in the blue-difference
+    chroma alone, w (-0.85, 0.55, 0.30), its track 1.22 px off the truth
+    after the strike (FFV1 0.02 px)."""
+    b = float(chroma_block)
+    if b <= 1:
+        return S
+    one = np.ones(3)
+    Q = np.outer(one, LUMA) + b * (np.eye(3) - np.outer(one, LUMA))
+    return Q @ S @ Q.T
 
 
 def median_u8(X: np.ndarray) -> np.ndarray:
@@ -675,7 +701,8 @@ def channel_rule(d: np.ndarray, S: np.ndarray, gradients, lossless: bool = True,
     return (g if g @ d > 0 else -g), False
 
 
-def learn_projection(samples: np.ndarray, radius_px, lossless: bool = True, blind_to_felt: bool = False) -> Projection:
+def learn_projection(samples: np.ndarray, radius_px, lossless: bool = True, blind_to_felt: bool = False,
+                     chroma_block: int = 1) -> Projection:
     """The channel combination that best separates the moving ball from the felt.
 
     Parameters
@@ -692,6 +719,11 @@ def learn_projection(samples: np.ndarray, radius_px, lossless: bool = True, blin
         On a lossy codec, the channel blind to the felt's colour (the
         samples' first frame's median) rather than to white
         (:func:`channel_rule`'s ``felt``; chosen by :func:`shade_match`).
+    chroma_block : int
+        Side (px) of the pixel blocks sharing one chroma sample
+        (:attr:`cuespin.track.reader.VideoInfo.chroma_block`; the tracker
+        passes it for an inter-frame codec only, track.video): on a lossy
+        codec the channel is chosen under :func:`chroma_shared`'s noise.
 
     Returns
     -------
@@ -709,7 +741,7 @@ def learn_projection(samples: np.ndarray, radius_px, lossless: bool = True, blin
     L = np.linalg.cholesky(S)
     sd = np.sqrt(np.diag(S))
     ys, xs = np.nonzero(ball_wide(moved_boxes(samples, radius_px, sd), radius_px))
-    luma = np.array([0.114, 0.587, 0.299])
+    luma = LUMA
     w = None
     blind = False
     felt = median_counts(samples[0].reshape(-1, 3))
@@ -717,7 +749,11 @@ def learn_projection(samples: np.ndarray, radius_px, lossless: bool = True, blin
         votes: list = []
         e = ball_direction(samples, ys, xs, radius_px, L, votes)
         if e is not None:
-            w, blind = channel_rule(L @ e, S, lambda hl: ball_gradients(samples, ys, xs, votes[0], radius_px, L, hl),
+            # The rule weighs the channels by the noise the centre's
+            # information sees (a lossy codec's shared chroma counted as
+            # such); the image is scaled below by the per-pixel noise.
+            Si = S if lossless else chroma_shared(S, chroma_block)
+            w, blind = channel_rule(L @ e, Si, lambda hl: ball_gradients(samples, ys, xs, votes[0], radius_px, L, hl),
                                     lossless, felt if blind_to_felt else None)
     if w is None:
         w = luma / np.sqrt(luma @ S @ luma)
@@ -729,5 +765,5 @@ def learn_projection(samples: np.ndarray, radius_px, lossless: bool = True, blin
     return Projection(w=w.astype(np.float32), offset=float(FELT_LEVEL - felt @ w), noise_cov=S)
 
 
-__all__ = ["GREY", "Projection", "best_channel", "channel_rule", "learn_projection", "noise_covariance",
+__all__ = ["GREY", "Projection", "best_channel", "channel_rule", "chroma_shared", "learn_projection", "noise_covariance",
            "white_free"]
