@@ -1071,6 +1071,37 @@ def test_a_table_whose_noses_show_through_h264_is_answered_from_the_still_frames
 
 
 @pytest.mark.slow
+def test_a_phone_h264_file_resaved_losslessly_is_still_read_as_lossy(tmp_path):
+    """Random drawn table 18058 filmed still as 32 frames in one H.264 stream
+    at CRF 18, decoded and re-saved as FFV1 (a lossless container of codec
+    frames): the container says lossless, so before fixvis the raw frames'
+    coherent-band rule ran on the mean of codec frames and refused it (faint
+    steps on all four sides 6.5 x the scatter).  The still run's first frame
+    says what the codec did (its felt's flat share 0.45-0.47 a side, raw
+    frames 0.000-0.001, over RAW_FLAT_SHARE 0.05): answered, measured 0.05 px
+    RMS off, as from the .mp4 (fixvis, docs/measurements.md)."""
+    from benchmarks.calibration import h264_encode
+    from cuespin.pipeline.calibrate import calibrate_video, random_table
+
+    t = random_table(18058)
+    mp4, mkv = tmp_path / "table.mp4", tmp_path / "table.mkv"
+    h264_encode(synthetic_table_frame(t["camera"], seed=18058, frames=32, **t["look"]), str(mp4), crf=18)
+    cap, out = cv2.VideoCapture(str(mp4)), None
+    while True:
+        ok, img = cap.read()
+        if not ok:
+            break
+        if out is None:
+            out = cv2.VideoWriter(str(mkv), cv2.VideoWriter_fourcc(*"FFV1"), 30, (img.shape[1], img.shape[0]))
+        out.write(img)
+    cap.release()
+    out.release()
+    cal = calibrate_video(mkv)
+    e, _ = matched_corner_errors(cal.corners_px, t["noses"])
+    assert cal.edge == "noses" and np.sqrt(np.mean(e**2)) < 3 * 0.05, e
+
+
+@pytest.mark.slow
 def test_the_codec_flat_rule_spares_noisy_jpeg_and_raw_frames():
     """The codec's flat-cloth rule (``_codec_flattened``) on the random drawn
     tables 16000-16019 whose outline takes noses: off on every one at the
