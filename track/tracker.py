@@ -268,8 +268,10 @@ class LastFit(NamedTuple):
     ``pu, pv`` (px) and size ``ph, pw``, the centre ``c`` and blur ``b`` (px),
     the ball's level ``G``, whether the blur was fitted, the look's shade
     parameters, the outline (None: the radius map's disc), the foreign
-    pixels left out (None: none) and the markings' pixels left out
-    (:func:`marking_pixels`; None: none)."""
+    pixels left out (None: none), the markings' pixels left out
+    (:func:`marking_pixels`; None: none) and whether the foreign pixels hold
+    something beyond the felt's ghost of the ball (:func:`foreign_seen`:
+    the cue, another ball; ``TrackResult.foreign``)."""
     pu: int
     pv: int
     ph: int
@@ -282,6 +284,7 @@ class LastFit(NamedTuple):
     outline: object
     foreign: np.ndarray | None
     marks: np.ndarray | None = None
+    seen: bool = False
 
 
 @dataclass(frozen=True)
@@ -727,6 +730,19 @@ def foreign_pixels(D: np.ndarray, beyond: np.ndarray, sigma: float, contrast: fl
         return None
     g = 2 * FOREIGN_GROW_PX + 1
     return cv2.dilate(bad, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (g, g))).astype(bool)
+
+
+def foreign_seen(D: np.ndarray, u0: int, v0: int, c, b, r_out: float, sigma: float, contrast: float,
+                 ghost: np.ndarray | None) -> bool:
+    """Whether :func:`foreign_pixels` of a window ``D`` finds a group beyond
+    the ball with the felt's ghost of it (:func:`felt_ghost`'s mask
+    ``ghost``) left out: something else in view (the cue, another ball),
+    not the felt's memory of the rest spot, whose pixels depart by the
+    ball's whole contrast (|D|) and would flag every frame leaving the rest."""
+    beyond = beyond_ball(D.shape, u0, v0, c, b, r_out)
+    if ghost is not None:
+        beyond = beyond & ~ghost
+    return foreign_pixels(D, beyond, sigma, contrast) is not None
 
 
 def foreign_near(D: np.ndarray, u0: int, v0: int, c, b, r_out: float, sigma: float,
@@ -1956,8 +1972,11 @@ class BallTracker:
                 # blocks).
                 return _lost(FIT_FAILED)
             c, se, cov, rms = f.c, f.stderr, f.cov, f.rms
+            ghost = self._ghost_of[2] if self._ghost_of is not None and self._ghost_of[0] is patch else None
+            seen = foreign is not None and foreign_seen(D, u0, v0, f.c, f.b, r_out, self.bg.sigma, self.bg.contrast,
+                                                        ghost)
             self.last_fit = LastFit(u0, v0, v1 - v0, u1 - u0, f.c.copy(), f.b.copy(), f.G, bool(fit_blur),
-                                    f.shade, ol, foreign, marks)
+                                    f.shade, ol, foreign, marks, seen)
             if self.shade is None:
                 self._keep_for_sphere(f, patch, felt, u0, v0, fit_blur, foreign, self.last_fit)
                 self._learn_look(patch, felt, u0, v0, f, r, G0, blur, fit_blur, marks, foreign)

@@ -180,9 +180,10 @@ class TrackResult:
     foreign : ndarray of bool, shape (n,), or None
         The frames of ``touched`` whose fit found something other than the
         felt beside the ball (the cue at the strike, another ball), apart
-        from those leaving the rest: only a run of these may start a frame
-        or two after the strike (``recover_track(foreign=...)``,
-        recover.measurements.touched_run_s).
+        from those leaving the rest and from the felt's ghost of the rest
+        spot (:func:`~cuespin.track.tracker.foreign_seen`): only a run of
+        these may start a frame or two after the strike
+        (``recover_track(foreign=...)``, recover.measurements.touched_run_s).
     """
 
     t: np.ndarray
@@ -594,7 +595,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         # and the felt's whole-frame passes cost ~50 ms a 1280 x 640 video.)
         look = tracker.relearn_sphere(felt.felt(bg.image, proj, SPHERE_FELT_FRAMES)) \
             if patches and isinstance(tracker.shade, SphereLook) else None
-        for kk, (pu, pv, ph, pw, c, b, G, fb, shade, outline, foreign, marks) in fits:
+        for kk, (pu, pv, ph, pw, c, b, G, fb, shade, outline, foreign, marks, _) in fits:
             old = bg.image[pv:pv + ph, pu:pu + pw]
             new = better[pv:pv + ph, pu:pu + pw]
             # Beyond the ball the fit's frame agreed with the old felt (else
@@ -651,10 +652,14 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     # frames only where the track flags them (recover.estimate, cue_clear_s).
     # The two kinds are kept apart as well: a run of the cue's may start a
     # frame or two late, the rest spot's may not (recover.measurements.touched_run_s).
+    # ``touched`` keeps every frame whose fit left pixels out; ``foreign`` only those whose left-out pixels
+    # hold something beyond the felt's ghost of the rest spot (the cue, another ball: LastFit.seen; fixvis).
     foreign = np.zeros(len(ok), bool)
+    left_out = np.zeros(len(ok), bool)
     for kk, lf in fits:
-        foreign[kk] |= lf.foreign is not None
-    touched = leaving_rest(uv, ok, radius_px) | foreign
+        foreign[kk] |= lf.seen
+        left_out[kk] |= lf.foreign is not None
+    touched = leaving_rest(uv, ok, radius_px) | left_out
     if not ok.any():
         why = (" (the ball never moved, or is not in view; do physics.R and the camera "
                "match the video?)")
