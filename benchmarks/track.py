@@ -74,6 +74,7 @@ from cuespin.data_gen.sampler import make_scene, sample_shot
 from cuespin.physics import Shot
 from cuespin.render import FrameRenderer
 from cuespin.pipeline.measure import tracker_accuracy
+from cuespin.track.colour import LUMA  # OpenCV's BGR-to-grey weights (BT.601)
 from cuespin.track.synthetic import colour_frames, write_av
 from cuespin.track.video import decode_seconds, track_video
 
@@ -315,8 +316,7 @@ def colour_accuracy(tmp, pair, noise, codec="FFV1", fps=240.0, seed=1, grey=Fals
     path = Path(tmp) / f"acc.{ext}"
     frames = colour_frames(scene, ball, felt, noise=noise, seed=seed, ramp=ramp)
     if grey:
-        w = np.array([0.114, 0.587, 0.299])
-        frames = (np.clip(np.rint(f @ w), 0, 255).astype(np.uint8) for f in frames)
+        frames = (np.clip(np.rint(f @ LUMA), 0, 255).astype(np.uint8) for f in frames)
         pix = "gray" if codec == "FFV1" else pix
     write_av(frames, path, enc, pix, fps, options=opts, bit_rate=rate and rate * fps)
     res = track_video(path, scene)
@@ -359,7 +359,6 @@ REALISTIC_LOOKS = {
     "markings": {"specular": 0.0, "psf_sigma": 0.0},
     "blur": {"specular": 0.0, "markings": "none"},
 }
-LUMA = (0.114, 0.587, 0.299)  # OpenCV's BGR-to-grey weights
 
 
 def realistic_scene(i, seed, seconds, mix=False):

@@ -50,9 +50,6 @@ MIN_WINDOW, MAX_WINDOW = 8, 64
 # at 0.35 px noise, was within the noise).
 MEASURED_NULL_MAX = 25.5
 CHANGE_THRESHOLD = 40.0
-# Median of chi-square with 4 degrees of freedom (the change statistic's
-# null), scipy.stats.chi2.median(4).
-CHI2_4_MEDIAN = 3.3567
 # The ball's centre this many standard errors beyond R of a cushion line
 # has touched it; when classifying a change, this near (or 1 cm) is at it.
 CUSHION_SIGMAS = 3.0

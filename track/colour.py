@@ -741,7 +741,6 @@ def learn_projection(samples: np.ndarray, radius_px, lossless: bool = True, blin
     L = np.linalg.cholesky(S)
     sd = np.sqrt(np.diag(S))
     ys, xs = np.nonzero(ball_wide(moved_boxes(samples, radius_px, sd), radius_px))
-    luma = LUMA
     w = None
     blind = False
     felt = median_counts(samples[0].reshape(-1, 3))
@@ -756,7 +755,7 @@ def learn_projection(samples: np.ndarray, radius_px, lossless: bool = True, blin
             w, blind = channel_rule(L @ e, Si, lambda hl: ball_gradients(samples, ys, xs, votes[0], radius_px, L, hl),
                                     lossless, felt if blind_to_felt else None)
     if w is None:
-        w = luma / np.sqrt(luma @ S @ luma)
+        w = LUMA / np.sqrt(LUMA @ S @ LUMA)
     # Projected noise variance w^T S w = 1 here; give it the channels' mean
     # variance, so the projected image's noise reads like a channel's.
     w = w / np.sqrt(w @ S @ w) * np.sqrt(np.trace(S) / 3.0)
