@@ -394,15 +394,15 @@ def test_a_logos_faint_crescent_at_the_rim_is_left_out():
 
 @pytest.mark.parametrize("mirrored, given_back", [(False, True), (True, False)])
 def test_markings_are_given_back_only_to_a_look_that_keeps_the_balls_light(mirrored, given_back):
-    # tracker.GIVE_BACK_DIFFUSE_MIN: a still ball's 12 frames (lit_ball's
+    # tracker.GIVE_BACK_FALSE_RATE: a still ball's 12 frames (lit_ball's
     # look, noise 5), a faint spot (10 levels, under the give-back rule's 5
     # sigmas) at its middle found as a marking in every frame.  Against a
-    # look learnt with it in that holds the ball's light as the look
-    # learnt without it does (the same look: diffuse ratio 1) it is given
-    # back; against one that holds it only with its diffuse light turned
-    # over (the light from the other side: ratio < 0, as realistic seed 8
-    # shot 8's look bent by a dark dot, -0.54) it stays out.  Without the
-    # check (``without`` None) both are given back.
+    # look learnt with it in that explains the ball's other pixels as the
+    # look learnt without it does (the same look: F 0, p 1) it is given
+    # back; against one that holds it only with its light turned over (the
+    # light from the other side, as realistic seed 8 shot 8's look bent by a
+    # dark dot) the F test refuses it (p far under the stated 0.001) and it
+    # stays out.  Without the check (``without`` None) both are given back.
     from cuespin.track.model import SphereLook
     from cuespin.track.sphere import Sample
     from cuespin.track.tracker import marks_given_back

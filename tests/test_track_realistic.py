@@ -458,6 +458,20 @@ def test_the_pulled_rule_drops_fits_off_the_ball_not_a_turning_look(tmp_path, mo
     assert kept == 0, f"{kept} of {len(off) * len(measured)} fits held 0.25 R off kept"
 
 
+def _moving_errors(scene, path):
+    """Render ``scene`` to ``path`` (FFV1), track it, and return the errors
+    (px, (m, 2)) of the found frames 20 ms after the strike, their RMSE and
+    err/se (the RMS of the errors over the stated errors)."""
+    render_video(scene, path)
+    tr = track_video(path, scene, TrackerConfig(threaded=False))
+    truth = pd.read_csv(path.with_suffix(".truth.csv"))
+    n = min(tr.n_frames, len(truth))
+    moving = (truth.t.values[:n] > scene.truth.t0 + 0.02) & tr.ok[:n]
+    e = (tr.uv[:n] - np.c_[truth.uc_px.values, truth.vc_px.values][:n])[moving]
+    z = float(np.sqrt(np.mean((e / tr.stderr_px[:n][moving]) ** 2)))
+    return e, float(np.sqrt(np.mean(e ** 2))), z
+
+
 @pytest.mark.slow
 def test_dark_dots_are_not_given_back_to_the_lights_learning(tmp_path):
     # benchmarks/track.py realistic seed 8 shot 8: a white ball with black
@@ -465,27 +479,38 @@ def test_dark_dots_are_not_given_back_to_the_lights_learning(tmp_path):
     # dot at the resting ball's middle was given back to the light's
     # learning (marks_given_back) and the light learnt overhead: every
     # moving frame (-0.07, -0.09) px off, RMSE 0.0868 px (3.5x the bound
-    # 0.025), err/se 3.81; given back only when the look keeps its diffuse
-    # light (GIVE_BACK_DIFFUSE_MIN), measured RMSE 0.0353 px, err/se 1.16 (mean error
-    # 0.017 px; docs/measurements.md, mark10).  Asserted: halfway between
+    # 0.025), err/se 3.81; given back only when the look learnt with it
+    # explains the ball's other pixels (GIVE_BACK_FALSE_RATE's F test; first
+    # a diffuse ratio), measured RMSE 0.0353 px, err/se 1.16 (mean error
+    # 0.017 px; docs/measurements.md, mark10 and markgate).  Asserted: halfway between
     # on the RMSE and the mean error, err/se under 1.6 (0.4 over the
     # measured, the issue's bound 1.25 plus the spread of 30 frames'
     # err/se, ~0.13 a standard error).
     scene = sample_scenes(9, 8, look="realistic", codec="FFV1")[8]
     scene.render.update(specular=0.0, psf_sigma=0.0, markings="dots", cue=False, balls=[], max_duration=0.8)
-    path = tmp_path / "dots.avi"
-    render_video(scene, path)
-    tr = track_video(path, scene, TrackerConfig(threaded=False))
-    truth = pd.read_csv(path.with_suffix(".truth.csv"))
-    n = min(tr.n_frames, len(truth))
-    moving = (truth.t.values[:n] > scene.truth.t0 + 0.02) & tr.ok[:n]
-    assert moving.sum() >= 25
-    e = (tr.uv[:n] - np.c_[truth.uc_px.values, truth.vc_px.values][:n])[moving]
-    rmse = float(np.sqrt(np.mean(e ** 2)))
-    z = float(np.sqrt(np.mean((e / tr.stderr_px[:n][moving]) ** 2)))
+    e, rmse, z = _moving_errors(scene, tmp_path / "dots.avi")
+    assert len(e) >= 25
     assert rmse < 0.06, rmse
     assert np.hypot(*e.mean(axis=0)) < 0.065, e.mean(axis=0)
     assert z < 1.6, z
+
+
+@pytest.mark.slow
+def test_a_logo_balls_stated_error_is_honest(tmp_path):
+    # benchmarks/track.py realistic --mix seed 9 shot 3: a yellow ball with
+    # a logo on blue felt, 120 fps, noise 5.9, FFV1, resting 0.2 s then
+    # struck; the logo is found and left out in 78 of the 80 moving frames.
+    # Measured on main fadee02 and on this rule (docs/measurements.md,
+    # markgate): RMSE 0.0077 px, 1.15x the colour bound 0.0067, err/se 1.00
+    # (marked frames inside the rim 1.20, at the rim 0.85).  Asserted: the
+    # issue's targets, err/se within 0.8-1.25 (80 frames' err/se: ~0.08 a
+    # standard error) and RMSE within 1.3x the bound (0.0087 px).
+    scene = sample_scenes(4, 9, look="realistic", codec="FFV1")[3]
+    scene.render.update(specular=0.0, psf_sigma=0.0, markings="logo", max_duration=0.8)
+    e, rmse, z = _moving_errors(scene, tmp_path / "logo.avi")
+    assert len(e) >= 70
+    assert 0.8 < z < 1.25, z
+    assert rmse < 1.3 * 0.0067, rmse
 
 
 @pytest.mark.slow
