@@ -103,13 +103,26 @@ def test_blocks_stated_error_on_mjpg(shot7):
     assert 1 - 3 * 0.072 < np.sqrt(np.mean(z**2)) < 2.04 - 3 * 0.147
 
 
-def test_blocks_stated_error_independent_noise():
+# An RMS of 120 values' standard error: 1 / sqrt(240), 0.065 (0.07 of 1.14).
+RMS_120_SE = 1 / np.sqrt(2 * 120)
+
+
+@pytest.mark.parametrize("block,band", [
+    (2, (0.93, 1.35)),
+    ((2, 1), (1 - 3 * RMS_120_SE, 1 + 3 * RMS_120_SE)),
+    ((4, 1), (1 - 3 * RMS_120_SE, 1 + 3 * RMS_120_SE)),
+])
+def test_blocks_stated_error_independent_noise(block, band):
     # A disc (r 9 px) seen through 4:2:0 blocks with independent noise per
     # block (4 levels), fitted with the shaded look, whose sandwich clusters
     # 3 x 3 blocks: nothing correlated, yet CR1 stated 1.48 times too little
     # (60 fits; 1.43 over 150), the jackknife 1.14 (1.11 over 150): the
     # clusters' leverage, not a correlation.  Band: 1.14 +- 3 standard
-    # errors of an RMS of 120 values (0.07).
+    # errors of an RMS of 120 values (0.07).  On 4:2:2's and 4:1:1's oblong
+    # blocks (the disc an ellipse on their grid, model._coarse) the
+    # jackknife's err/se over these 60 fits 1.02 (2 x 1) and 0.94 (4 x 1;
+    # over 150: 1.02, 0.97); band 1 +- 3 standard errors.
+    bx, by = (block, block) if np.ndim(block) == 0 else block
     rng = np.random.default_rng(1)
     r, n = 9.0, 36
     z = []
@@ -117,11 +130,13 @@ def test_blocks_stated_error_independent_noise():
         c = 18.0 + rng.uniform(-1, 1, 2)
         felt = np.full((n, n), 100.0)
         img = felt + streak_model(c, np.zeros(2), 160.0, felt, r, 0, 0, np.zeros(1))[0].reshape(n, n)
-        blocks = img.reshape(n // 2, 2, n // 2, 2).mean(axis=(1, 3)) + 4.0 * rng.standard_normal((n // 2, n // 2))
-        f = fit_disc(np.repeat(np.repeat(blocks, 2, 0), 2, 1), felt, 0, 0, c + 0.3, r, 150.0, shade=True, block=2)
+        means = img.reshape(n // by, by, n // bx, bx).mean(axis=(1, 3))
+        means += 4.0 * rng.standard_normal(means.shape)
+        f = fit_disc(np.repeat(np.repeat(means, by, 0), bx, 1), felt, 0, 0, c + 0.3, r, 150.0, shade=True,
+                     block=block)
         assert f.ok
         z.append((f.c - c) / f.stderr)
-    assert 0.93 < np.sqrt(np.mean(np.square(z))) < 1.35
+    assert band[0] < np.sqrt(np.mean(np.square(z))) < band[1]
 
 
 def test_codec_variance_only_on_an_intra_frame_lossy_codecs_blocks():
@@ -129,6 +144,8 @@ def test_codec_variance_only_on_an_intra_frame_lossy_codecs_blocks():
     assert codec_variance(lossless=True, inter_frame=False, block=2) == 1.0  # FFV1 yuv420p: no quantisation
     assert codec_variance(lossless=False, inter_frame=True, block=2) == 1.0  # H.264: recover.mle.INTER_CODEC_ACF
     assert codec_variance(lossless=False, inter_frame=False, block=1) == 1.0  # grey, or a projection seeing luma
+    assert codec_variance(lossless=False, inter_frame=False, block=(2, 1)) == JPEG_CHROMA_VAR  # MJPG 4:2:2
+    assert codec_variance(lossless=False, inter_frame=False, block=(1, 1)) == 1.0
 
 
 def test_blocks_stated_error_on_mjpg_with_the_codec_term(shot7):
@@ -176,31 +193,6 @@ def test_tracker_states_the_codec_term_on_mjpg_blocks(tmp_path, monkeypatch):
     np.testing.assert_array_equal(res.uv[res.ok], own.uv[own.ok])
     stated = res.cov_px[res.ok] / res.look_factor
     np.testing.assert_allclose(stated, JPEG_CHROMA_VAR * own.cov_px[own.ok] / own.look_factor, rtol=1e-12)
-
-
-@pytest.mark.parametrize("block", [(2, 1), (4, 1)])
-def test_oblong_blocks_stated_error_independent_noise(block):
-    # test_blocks_stated_error_independent_noise on 4:2:2's and 4:1:1's
-    # oblong blocks (the disc an ellipse on their grid, model._coarse):
-    # measured err/se over these 60 fits 1.02 (2 x 1) and 0.94 (4 x 1); over
-    # 150, 1.02 and 0.97 (4:2:0's 2 x 2 1.14 and 1.11: the clusters'
-    # leverage there).  Band: 1 +- 3 standard errors of an RMS of 120 values.
-    bx, by = block
-    rng = np.random.default_rng(1)
-    r, n = 9.0, 36
-    z = []
-    for _ in range(60):
-        c = 18.0 + rng.uniform(-1, 1, 2)
-        felt = np.full((n, n), 100.0)
-        img = felt + streak_model(c, np.zeros(2), 160.0, felt, r, 0, 0, np.zeros(1))[0].reshape(n, n)
-        means = img.reshape(n // by, by, n // bx, bx).mean(axis=(1, 3))
-        means += 4.0 * rng.standard_normal(means.shape)
-        f = fit_disc(np.repeat(np.repeat(means, by, 0), bx, 1), felt, 0, 0, c + 0.3, r, 150.0, shade=True,
-                     block=block)
-        assert f.ok
-        z.append((f.c - c) / f.stderr)
-    se = 1 / np.sqrt(2 * 120)
-    assert 1 - 3 * se < np.sqrt(np.mean(np.square(z))) < 1 + 3 * se
 
 
 @pytest.mark.parametrize("pix_fmt,block", [("yuv420p", (2, 2)), ("yuv422p", (2, 1)), ("yuv411p", (4, 1))])
