@@ -60,6 +60,17 @@ CHROMA_SUBSAMPLING = {"yuv420p": (2, 2), "yuvj420p": (2, 2), "nv12": (2, 2), "nv
 # pairs), but its 4 x 1 blocks' fits were nearer than the pixels' (0.075 ->
 # 0.040 px, err/se 1.50 -> 0.96) and its 2 x 1 pairs' far off (1.9 px).
 CHROMA_PIXEL_FIT_PIX_FMTS = {"yuv440p", "yuvj440p"}
+# The largest side (px) of a square block the fits take in place of an
+# oblong chroma block that divides it: 4:2:2's 2 x 1 samples averaged in
+# 2 x 2 are still exact block means, and on a square grid the look's
+# quadratic term (model.streak_model's |X|^2 / r^2) is the pixels' own;
+# on the 2 x 1 grid it is not, and the shaded realistic seed 0 shots 7 and
+# 12 through MJPG yuvj422p were 0.22 px off in u (RMSE 0.158 / 0.171 px,
+# pixels 0.132 / 0.153, 2 x 2 0.052 / 0.053; FFV1 yuv422p 0.076 / 0.041,
+# 2 x 2 0.025 / 0.031).  4:1:1's 4 x 4 leaves a 6-9 px ball 3-4 blocks
+# across: 0.302 / 0.390 px against 4 x 1's 0.171 / 0.106 (FFV1 yuv411p),
+# so it keeps 4 x 1 (docs/measurements.md, yuv422).
+FIT_SQUARE_MAX_PX = 2
 
 
 def chroma_subsampling(pix_fmt: str) -> tuple[int, int]:
@@ -271,12 +282,16 @@ class VideoInfo:
     @property
     def fit_block(self) -> tuple[int, int]:
         """The blocks the tracker's fits model through a luma-blind channel
-        (:func:`cuespin.track.model.fit_disc`'s ``block``): the chroma's
-        (:attr:`chroma_block`), or pixels, (1, 1), for a format in
-        :data:`CHROMA_PIXEL_FIT_PIX_FMTS`."""
+        (:func:`cuespin.track.model.fit_disc`'s ``block``): the square of
+        the chroma block's longer side where that is at most
+        :data:`FIT_SQUARE_MAX_PX` (4:2:0 and 4:2:2: (2, 2)), else the chroma
+        block itself (4:1:1: (4, 1)); pixels, (1, 1), for a format in
+        :data:`CHROMA_PIXEL_FIT_PIX_FMTS` (4:4:0)."""
         if self.pix_fmt.strip().lower() in CHROMA_PIXEL_FIT_PIX_FMTS:
             return 1, 1
-        return self.chroma_block
+        bx, by = self.chroma_block
+        s = max(bx, by)
+        return (s, s) if s <= FIT_SQUARE_MAX_PX else (bx, by)
 
 
 def _check_path(path) -> Path:
