@@ -123,7 +123,7 @@ def test_a_shared_chroma_is_not_trusted_per_pixel_on_h264(tmp_path):
     info = probe(path)
     coded = np.stack(list(FrameSource(path, info)))
     r = scene.physics.R * scene.camera.px_per_m(fr._uv_nodes[ks[4]].mean(axis=0))
-    assert info.chroma_block == 2 and not info.lossless
+    assert info.chroma_block == (2, 2) and not info.lossless
     assert learn_projection(coded, r, lossless=False).luma_blind  # the temptation
     w = learn_projection(coded, r, lossless=False, chroma_block=info.chroma_block).w.astype(float)
     assert w.sum() > 0.5 * np.linalg.norm(w)

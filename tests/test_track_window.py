@@ -256,14 +256,15 @@ def test_block_means_are_numpys_bit_for_bit(dtype):
         h, w = (int(x) for x in rng.integers(4, 50, 2))
         big = rng.normal(100, 60, (h + 3, w + 3)).clip(0, 255).astype(dtype)
         x = big[1:1 + h, 2:2 + w]  # cut from a larger image, as the felt is
-        block = int(rng.choice([2, 3]))
-        a, b = (int(v) for v in rng.integers(0, block, 2))
-        n, m = (h - b) // block, (w - a) // block
-        ref = x[b:b + n * block, a:a + m * block].reshape(n, block, m, block)
-        assert np.array_equal(window.block_means(x, a, b, n, m, block), ref.mean(axis=(1, 3), dtype=np.float64))
+        # square (4:2:0's 2) and oblong (4:2:2's 2 x 1, 4:1:1's 4 x 1, 4:4:0's 1 x 2) blocks
+        bx, by = [(2, 2), (3, 3), (2, 1), (4, 1), (1, 2)][int(rng.integers(5))]
+        a, b = int(rng.integers(0, bx)), int(rng.integers(0, by))
+        n, m = (h - b) // by, (w - a) // bx
+        ref = x[b:b + n * by, a:a + m * bx].reshape(n, by, m, bx)
+        assert np.array_equal(window.block_means(x, a, b, n, m, bx, by), ref.mean(axis=(1, 3), dtype=np.float64))
         ok = x > 20
-        ref_ok = ok[b:b + n * block, a:a + m * block].reshape(n, block, m, block).all(axis=(1, 3))
-        assert np.array_equal(window.block_all(ok, a, b, n, m, block), ref_ok)
+        ref_ok = ok[b:b + n * by, a:a + m * bx].reshape(n, by, m, bx).all(axis=(1, 3))
+        assert np.array_equal(window.block_all(ok, a, b, n, m, bx, by), ref_ok)
 
 
 @pytest.mark.parametrize("colour", [True, False])

@@ -19,6 +19,7 @@ import cv2
 import numpy as np
 
 from cuespin.track.background import ball_wide, box_size, spread_threshold
+from cuespin.track.model import block_area
 from cuespin.track.radius import as_radius_map
 
 # 8-bit rounding adds variance 1/12 per channel, whatever the sensor does.
@@ -230,22 +231,24 @@ def noise_covariance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return cov + floor * np.eye(3)
 
 
-def chroma_shared(S: np.ndarray, chroma_block: int) -> np.ndarray:
+def chroma_shared(S: np.ndarray, chroma_block) -> np.ndarray:
     """The noise covariance (3 x 3, BGR levels^2) the centre's information
-    sees when a lossy codec stores chroma once per ``chroma_block`` x
-    ``chroma_block`` pixels (4:2:0: 2): the chroma part of ``S``'s noise
-    amplitude counted ``chroma_block`` times, ``Q S Q'`` with ``Q = 1 LUMA'
-    + b (I - 1 LUMA')``.  A chroma sample's error is one error shared by
-    its b^2 pixels (and the codec's coarser chroma quantisation blurs the
-    ball's rim over them), so per-pixel noise, the frame differences', makes
-    chroma look b^2 times as informative as it is.  ``S`` for ``b`` 1.
+    sees when a lossy codec stores chroma once per block of ``chroma_block``
+    pixels (an int: a square's side, 4:2:0's 2; a pair: across, down,
+    4:2:2's (2, 1), 4:1:1's (4, 1)): the chroma part of ``S``'s noise
+    amplitude counted ``b`` times, ``b^2`` the block's pixels, ``Q S Q'``
+    with ``Q = 1 LUMA' + b (I - 1 LUMA')``.  A chroma sample's error is one
+    error shared by its b^2 pixels (and the codec's coarser chroma
+    quantisation blurs the ball's rim over them), so per-pixel noise, the
+    frame differences', makes chroma look b^2 times as informative as it
+    is.  ``S`` for a block of one pixel.
 
     Measured (docs/measurements.md, chroma36): realistic seed 36 shot 5
     (orange on red felt, 120 fps, H.264; the per-pixel noise 0.09-0.10
     levels^2 a channel, the rounding's) was fitted in the blue-difference
     chroma alone, w (-0.85, 0.55, 0.30), its track 1.22 px off the truth
     after the strike (FFV1 0.02 px)."""
-    b = float(chroma_block)
+    b = float(np.sqrt(block_area(chroma_block)))
     if b <= 1:
         return S
     one = np.ones(3)
@@ -702,7 +705,7 @@ def channel_rule(d: np.ndarray, S: np.ndarray, gradients, lossless: bool = True,
 
 
 def learn_projection(samples: np.ndarray, radius_px, lossless: bool = True, blind_to_felt: bool = False,
-                     chroma_block: int = 1) -> Projection:
+                     chroma_block=1) -> Projection:
     """The channel combination that best separates the moving ball from the felt.
 
     Parameters
@@ -719,8 +722,9 @@ def learn_projection(samples: np.ndarray, radius_px, lossless: bool = True, blin
         On a lossy codec, the channel blind to the felt's colour (the
         samples' first frame's median) rather than to white
         (:func:`channel_rule`'s ``felt``; chosen by :func:`shade_match`).
-    chroma_block : int
-        Side (px) of the pixel blocks sharing one chroma sample
+    chroma_block : int or (int, int)
+        The pixel blocks sharing one chroma sample, a square's side or
+        (across, down) px
         (:attr:`cuespin.track.reader.VideoInfo.chroma_block`; the tracker
         passes it for an inter-frame codec only, track.video): on a lossy
         codec the channel is chosen under :func:`chroma_shared`'s noise.

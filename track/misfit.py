@@ -30,6 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cuespin.track.model import block_area
+
 # Frame spacings of the third differences (frames).
 SPACINGS = (1, 2, 3, 4, 6, 8, 12, 16, 24, 32)
 # A spacing's variance ratio counts once this many third differences of
@@ -380,17 +382,17 @@ __all__ = ["JPEG_CHROMA_VAR", "LookMisfit", "codec_variance", "look_misfit", "re
            "third_difference_weights", "variance_ratios"]
 
 
-def codec_variance(lossless: bool, inter_frame: bool, block: int) -> float:
+def codec_variance(lossless: bool, inter_frame: bool, block) -> float:
     """What a frame's stated covariance is multiplied by for the codec's
     error it leaves out: ``JPEG_CHROMA_VAR`` for fits on the chroma's blocks
-    (``block`` > 1, track.model.fit_disc) of a lossy codec that codes every
+    (``block`` more than a pixel, track.model.fit_disc) of a lossy codec that codes every
     frame on its own (MJPG); 1 otherwise.  A lossless 4:2:0 stream's blocks
     carry no quantisation; an inter-frame codec's error is modelled in the
     recovery (recover.mle.INTER_CODEC_ACF, measured with the tracker's
     stated variance taken off); pixels' fits (grey, or a projection seeing
     luma) are left as stated.
     """
-    return JPEG_CHROMA_VAR if (not lossless and not inter_frame and block > 1) else 1.0
+    return JPEG_CHROMA_VAR if (not lossless and not inter_frame and block_area(block) > 1) else 1.0
 
 
 def error_ar1(factor: float, rho: float) -> float:

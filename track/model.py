@@ -394,7 +394,7 @@ class DiscFit:
 
 def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float, G0: float,
              b0=(0.0, 0.0), fit_blur: bool = False, shade: bool = False, valid=None,
-             outline=None, block: int = 1, jackknife: bool = True) -> DiscFit:
+             outline=None, block=1, jackknife: bool = True) -> DiscFit:
     """Least-squares fit of the exact disc (or streak) model to a patch.
 
     Parameters
@@ -429,12 +429,14 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
         (:func:`cuespin.track.outline.local_outline`), its shape fixed and
         its centre fitted; ``c`` is then that ellipse's centre.  None: the
         disc of radius ``r``.
-    block : int
-        The patch holds the means of ``block`` x ``block`` pixel blocks,
-        aligned to multiples of ``block`` in the frame, each repeated over
-        its block: a 4:2:0 video's colour as its decoder hands it back
-        (2), seen through a projection blind to luma.  The model is then
-        averaged over the same blocks (:func:`block_patch`); 1: pixels.
+    block : int or (int, int)
+        The patch holds the means of ``block`` x ``block`` pixel blocks
+        (a pair: width x height, :func:`block_sides`), aligned to multiples
+        of their sides in the frame, each repeated over its block: a
+        subsampled video's colour as its decoder hands it back (4:2:0: 2;
+        4:2:2: (2, 1); 4:1:1: (4, 1)), seen through a projection blind to
+        luma.  The model is then averaged over the same blocks
+        (:func:`block_patch`); 1: pixels.
     jackknife : bool
         With ``block`` > 1, the covariance from the blocks' jackknife
         (:func:`_jackknife_cov`); False keeps the fit's own sandwich, for
@@ -446,7 +448,7 @@ def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float
     DiscFit
         Never raises for bad data; ``ok`` False with a reason instead.
     """
-    if block > 1:
+    if block_area(block) > 1:
         return _fit_blocks(block, frame, felt, u0, v0, c0, r, G0, b0, fit_blur, shade, valid, outline,
                            jackknife=jackknife)
     felt = np.ascontiguousarray(felt, dtype=np.float64)
@@ -576,13 +578,31 @@ def _kinked_minimum(y, felt, use, has_valid, c, b, r, u0, v0, look: SphereLook, 
 # green felt), 0.31 / 0.21 px (u / v), 71% / 61% of the error's variance.
 # The block means of the disc's pixel areas are the pixel areas of the disc
 # scaled by 1 / block on the blocks' grid, exactly: the fit runs there.
-def block_patch(block: int, u0: int, v0: int, *arrays):
-    """The whole ``block`` x ``block`` blocks of a window at ``(u0, v0)``.
+def block_sides(block) -> tuple[int, int]:
+    """A block's ``(width, height)`` (px): ``block`` an int (a square's
+    side, 4:2:0's 2) or a pair (the reader's
+    :attr:`~cuespin.track.reader.VideoInfo.chroma_block`: 4:2:2's (2, 1),
+    4:1:1's (4, 1))."""
+    if np.ndim(block) == 0:
+        return int(block), int(block)
+    bx, by = block
+    return int(bx), int(by)
+
+
+def block_area(block) -> int:
+    """Pixels a block holds (1: pixels, no blocks)."""
+    bx, by = block_sides(block)
+    return bx * by
+
+
+def block_patch(block, u0: int, v0: int, *arrays):
+    """The whole blocks of a window at ``(u0, v0)``.
 
     Parameters
     ----------
-    block : int
-        Block size (px); blocks are aligned to multiples of it in the frame.
+    block : int or (int, int)
+        Block size (px; a pair: width, height, :func:`block_sides`);
+        blocks are aligned to multiples of it in the frame.
     u0, v0 : int
         Column and row of the window's top-left pixel.
     *arrays : ndarray, shape (h, w), or None
@@ -593,12 +613,13 @@ def block_patch(block: int, u0: int, v0: int, *arrays):
     -------
     (U0, V0), list of ndarray
         The first whole block's column and row on the blocks' grid, and the
-        arrays on that grid.  A pixel ``x`` of the frame is ``(x - (block -
-        1) / 2) / block`` on it.
+        arrays on that grid.  A pixel ``x`` of the frame is ``(x - (bx -
+        1) / 2) / bx`` on it (``y``: ``by``'s).
     """
+    bx, by = block_sides(block)
     h, w = next(np.shape(a) for a in arrays if a is not None)
-    a, b = -u0 % block, -v0 % block
-    m, n = (w - a) // block, (h - b) // block
+    a, b = -u0 % bx, -v0 % by
+    m, n = (w - a) // bx, (h - b) // by
     out = []
     from cuespin.track import window  # compiled: numpy's reductions cost ~0.1 ms a fit
     for x in arrays:
@@ -607,13 +628,13 @@ def block_patch(block: int, u0: int, v0: int, *arrays):
             continue
         x = np.asarray(x)
         if x.dtype == bool:
-            out.append(window.block_all(x, a, b, n, m, block))
+            out.append(window.block_all(x, a, b, n, m, bx, by))
         elif x.dtype in _EXACT_BLOCK_SUMS:
-            out.append(window.block_means(x, a, b, n, m, block))
+            out.append(window.block_means(x, a, b, n, m, bx, by))
         else:  # float64: numpy's own order of summation
-            x = x[b:b + n * block, a:a + m * block].reshape(n, block, m, block)
+            x = x[b:b + n * by, a:a + m * bx].reshape(n, by, m, bx)
             out.append(x.mean(axis=(1, 3), dtype=np.float64))
-    return ((u0 + a) // block, (v0 + b) // block), out
+    return ((u0 + a) // bx, (v0 + b) // by), out
 
 
 # Window types whose blocks' sums are exact in float64 (any order gives
@@ -621,11 +642,23 @@ def block_patch(block: int, u0: int, v0: int, *arrays):
 _EXACT_BLOCK_SUMS = (np.dtype(np.float32), np.dtype(np.uint8))
 
 
-def _coarse(block: int, c, r: float, b, outline):
-    """Centre, radius, blur and outline on the blocks' grid (:func:`block_patch`)."""
-    half = (block - 1) / 2.0
-    ol = None if outline is None else Ellipse(Q=tuple(map(tuple, block * block * outline.Qm)))
-    return (np.asarray(c, float) - half) / block, r / block, np.asarray(b, float) / block, ol
+def _coarse(block, c, r: float, b, outline):
+    """Centre, radius, blur and outline on the blocks' grid (:func:`block_patch`).
+
+    A grid ``bx`` by ``by`` px a unit maps the frame by ``D = diag(1/bx,
+    1/by)``: the centre and blur by it, an outline's ``Q`` to ``D^-1 Q
+    D^-1``; a disc on an oblong grid (4:2:2's, 4:1:1's) is the ellipse
+    ``Q = D^-1 D^-1 / r^2`` there, and the radius given back is its
+    equal-area one (a square grid's ``r / b``)."""
+    bx, by = block_sides(block)
+    half = np.array([(bx - 1) / 2.0, (by - 1) / 2.0])
+    side = np.array([bx, by], float)
+    if bx == by:
+        ol = None if outline is None else Ellipse(Q=tuple(map(tuple, bx * bx * outline.Qm)))
+    else:
+        Q = np.eye(2) / (r * r) if outline is None else outline.Qm
+        ol = Ellipse(Q=tuple(map(tuple, np.outer(side, side) * Q)))
+    return (np.asarray(c, float) - half) / side, r / np.sqrt(bx * by), np.asarray(b, float) / side, ol
 
 
 def _fit_blocks(block, frame, felt, u0, v0, c0, r, G0, b0, fit_blur, shade, valid, outline, fit=None,
@@ -651,15 +684,17 @@ def _fit_blocks(block, frame, felt, u0, v0, c0, r, G0, b0, fit_blur, shade, vali
         c, _, b, _ = _coarse(block, p.c, r, p.b, outline)
         g = fit(y, f, U0, V0, c, rc, p.G, b0=b, fit_blur=fit_blur, shade=shade, valid=ok, outline=ol)
         if not g:
-            # The pixels' fit counts each chroma sample block**2 times (the
-            # decoder repeats it): its variance is scaled by block**2, a
+            # The pixels' fit counts each chroma sample bx * by times (the
+            # decoder repeats it): its variance is scaled by bx * by, a
             # conservative bound (review7 measured its err/se 1.5-1.9x the
-            # blocks' on the chroma test's 24 MJPG frames).
-            return replace(p, stderr=block * p.stderr, cov=block * block * p.cov)
+            # blocks' on the chroma test's 24 MJPG frames, 2 x 2 blocks).
+            n = block_area(block)
+            return replace(p, stderr=np.sqrt(n) * p.stderr, cov=n * p.cov)
     if jackknife:
         g = _jackknife_cov(g, y, f, U0, V0, rc, fit_blur, shade, ok, ol)
-    return replace(g, c=block * g.c + (block - 1) / 2.0, b=block * g.b, stderr=block * g.stderr,
-                   cov=block * block * g.cov)
+    side = np.array(block_sides(block), float)
+    return replace(g, c=side * g.c + (side - 1) / 2.0, b=side * g.b, stderr=side * g.stderr,
+                   cov=np.outer(side, side) * g.cov)
 
 
 def _jackknife_cov(g: DiscFit, y, felt, U0, V0, r, fit_blur, shade, ok, outline) -> DiscFit:
@@ -753,7 +788,7 @@ SHIFT_RCOND = 1e-9
 
 
 def refit_shift(felt_old: np.ndarray, felt_new: np.ndarray, u0: int, v0: int, c, b, G: float,
-                r: float, fit_blur: bool, shade=None, outline=None, valid=None, block: int = 1) -> np.ndarray:
+                r: float, fit_blur: bool, shade=None, outline=None, valid=None, block=1) -> np.ndarray:
     """Change of a converged disc fit's centre (px) when its felt is replaced.
 
     At the old optimum the old Jacobian ``J_o`` is orthogonal to the
@@ -770,11 +805,11 @@ def refit_shift(felt_old: np.ndarray, felt_new: np.ndarray, u0: int, v0: int, c,
     shape) the pixels it used, when it left some out (the cue's); ``block``
     :func:`fit_disc`'s (the shift of a fit to block means, on their grid).
     """
-    if block > 1:
+    if block_area(block) > 1:
         ok = None if valid is None else np.asarray(valid, bool)
         (U0, V0), (fo, fn, ok) = block_patch(block, u0, v0, felt_old, felt_new, ok)
         cc, rc, bc, ol = _coarse(block, c, r, b, outline)
-        return block * refit_shift(fo, fn, U0, V0, cc, bc, G, rc, fit_blur, shade, ol, ok)
+        return np.array(block_sides(block), float) * refit_shift(fo, fn, U0, V0, cc, bc, G, rc, fit_blur, shade, ol, ok)
     # The rows before the level's (centre, blur) are linear in the felt, with
     # the coverage's derivatives as its coefficient (the disc's rows at
     # level 1 on zero felt); the others do not depend on it.  So one

@@ -40,9 +40,63 @@ LOSSLESS_CODECS = {"ffv1", "huffyuv", "ffvhuff", "png", "rawvideo", "utvideo", "
 INTRA_CODECS = {"mjpeg", "mjpg", "jpeg", "mjpa", "mjpb", "jpeg2000", "mjp2", "prores", "apch", "apcn",
                 "dnxhd", "avdn", "dvvideo", "dvsd"}
 GREY_PIX_FMTS = {"gray", "gray8", "y8", "gray10le", "gray12le", "gray16le", "gray16be", "monow", "monob"}
-# Pixel formats storing colour at half resolution both ways (4:2:0) besides
-# those named ``*420*`` (FFmpeg's names): one chroma sample a 2 x 2 block.
-CHROMA_420_PIX_FMTS = {"nv12", "nv21", "p010le", "p010be", "p016le", "p016be"}
+# Pixels (across, down) sharing one chroma sample, by FFmpeg's pixel format,
+# for when PyAV does not know the name (its own ``av.VideoFormat`` gives the
+# chroma planes' size for every format FFmpeg knows: chroma_subsampling).
+CHROMA_SUBSAMPLING = {"yuv420p": (2, 2), "yuvj420p": (2, 2), "nv12": (2, 2), "nv21": (2, 2),
+                      "p010le": (2, 2), "p010be": (2, 2), "p016le": (2, 2), "p016be": (2, 2),
+                      "yuv422p": (2, 1), "yuvj422p": (2, 1), "yuyv422": (2, 1), "uyvy422": (2, 1),
+                      "nv16": (2, 1), "yuv422p10le": (2, 1), "yuv411p": (4, 1), "uyyvyy411": (4, 1),
+                      "yuv440p": (1, 2), "yuvj440p": (1, 2), "yuv410p": (4, 4)}
+
+
+# Subsampled formats whose decoding does not repeat each chroma sample over
+# its block but interpolates it (FFmpeg's swscale has no unscaled converter
+# to BGR for them): a colour edge through FFV1 yuv440p came back spread over
+# 4-5 rows, and the tracker's fits on the 1 x 2 blocks' means were further
+# off than on pixels (tests/test_track_formats.py's yellow-on-grey scene,
+# RMSE 0.0165 -> 0.0447 px; docs/measurements.md, yuv422), so they fit
+# pixels there.  yuv411p interpolates too (an edge spread over ~8 columns in
+# pairs), but its 4 x 1 blocks' fits were nearer than the pixels' (0.075 ->
+# 0.040 px, err/se 1.50 -> 0.96) and its 2 x 1 pairs' far off (1.9 px).
+CHROMA_PIXEL_FIT_PIX_FMTS = {"yuv440p", "yuvj440p"}
+# The largest side (px) of a square block the fits take in place of an
+# oblong chroma block that divides it: 4:2:2's 2 x 1 samples averaged in
+# 2 x 2 are still exact block means, and on a square grid the look's
+# quadratic term (model.streak_model's |X|^2 / r^2) is the pixels' own;
+# on the 2 x 1 grid it is not, and the shaded realistic seed 0 shots 7 and
+# 12 through MJPG yuvj422p were 0.22 px off in u (RMSE 0.158 / 0.171 px,
+# pixels 0.132 / 0.153, 2 x 2 0.052 / 0.053; FFV1 yuv422p 0.076 / 0.041,
+# 2 x 2 0.025 / 0.031).  4:1:1's 4 x 4 leaves a 6-9 px ball 3-4 blocks
+# across: 0.302 / 0.390 px against 4 x 1's 0.171 / 0.106 (FFV1 yuv411p),
+# so it keeps 4 x 1 (docs/measurements.md, yuv422).
+FIT_SQUARE_MAX_PX = 2
+
+
+def chroma_subsampling(pix_fmt: str) -> tuple[int, int]:
+    """Pixels across and down sharing one chroma sample in FFmpeg's pixel
+    format ``pix_fmt``: (2, 2) for 4:2:0 (``yuv420p``, ``yuvj420p``,
+    ``nv12``), (2, 1) for 4:2:2 (``yuv422p``, ``yuvj422p``), (4, 1) for
+    4:1:1 (``yuv411p``, DV), (1, 2) for 4:4:0, (1, 1) for 4:4:4, RGB, grey
+    or an unknown or empty name.  From PyAV's description of the format
+    (its chroma planes' size against the luma's), else
+    :data:`CHROMA_SUBSAMPLING`, else names with ``420`` in them (2, 2)."""
+    pf = pix_fmt.strip().lower()
+    if not pf:
+        return 1, 1
+    try:
+        import av
+
+        n = 48  # a multiple of every subsampling factor FFmpeg has (1, 2, 4)
+        comps = av.VideoFormat(pf, n, n).components
+        if len(comps) >= 3:
+            return n // int(comps[1].width), n // int(comps[1].height)
+        return 1, 1
+    except (ValueError, TypeError, ImportError, ZeroDivisionError):
+        pass
+    if pf in CHROMA_SUBSAMPLING:
+        return CHROMA_SUBSAMPLING[pf]
+    return (2, 2) if "420" in pf else (1, 1)
 # 8-bit 4:2:0 planar formats read as planes (PlanarFrame), and whether their
 # levels are full range (JPEG's ``yuvj``) rather than BT.601's 16-235.
 PLANAR_PIX_FMTS = {"yuv420p": False, "yuvj420p": True}
@@ -217,12 +271,27 @@ class VideoInfo:
         return not self.lossless and self.codec.strip().lower() not in INTRA_CODECS
 
     @property
-    def chroma_block(self) -> int:
-        """Side (px) of the pixel blocks sharing one chroma sample: 2 for a
-        4:2:0 stream (MJPG from OpenCV's writer, H.264's yuv420p), 1
-        otherwise or when the pixel format is unknown."""
-        pf = self.pix_fmt.strip().lower()
-        return 2 if "420" in pf or pf in CHROMA_420_PIX_FMTS else 1
+    def chroma_block(self) -> tuple[int, int]:
+        """The pixel blocks sharing one chroma sample, (across, down) px
+        (:func:`chroma_subsampling` of the stream's pixel format): (2, 2)
+        for 4:2:0 (MJPG from OpenCV's writer, H.264's yuv420p), (2, 1) for
+        4:2:2 (MJPG from cameras, ``yuvj422p``), (4, 1) for 4:1:1 (DV),
+        (1, 1) for 4:4:4, RGB, grey or an unknown pixel format."""
+        return chroma_subsampling(self.pix_fmt)
+
+    @property
+    def fit_block(self) -> tuple[int, int]:
+        """The blocks the tracker's fits model through a luma-blind channel
+        (:func:`cuespin.track.model.fit_disc`'s ``block``): the square of
+        the chroma block's longer side where that is at most
+        :data:`FIT_SQUARE_MAX_PX` (4:2:0 and 4:2:2: (2, 2)), else the chroma
+        block itself (4:1:1: (4, 1)); pixels, (1, 1), for a format in
+        :data:`CHROMA_PIXEL_FIT_PIX_FMTS` (4:4:0)."""
+        if self.pix_fmt.strip().lower() in CHROMA_PIXEL_FIT_PIX_FMTS:
+            return 1, 1
+        bx, by = self.chroma_block
+        s = max(bx, by)
+        return (s, s) if s <= FIT_SQUARE_MAX_PX else (bx, by)
 
 
 def _check_path(path) -> Path:

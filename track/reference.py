@@ -16,7 +16,7 @@ import numpy as np
 from cuespin.track.kernel import PSF_AT, PSF_REACH
 from cuespin.track.model import (AITKEN_COS, AITKEN_RHO, CLUSTER_PX, DAMP_AFTER, MAX_ITER, NO_CONVERGENCE_SE,
                                  SPHERE_CLUSTER_PX, STEP_TOL_PX, STEP_TOL_SE, DiscFit, SphereLook, _failed,
-                                 _fit_blocks, blur_nodes, coverage_with_gradient, look_value)
+                                 _fit_blocks, block_area, blur_nodes, coverage_with_gradient, look_value)
 
 
 def model_rows(c, b, G, felt, r, u0, v0, taus, shade=None, blur_rows=True, outline=None):
@@ -116,9 +116,9 @@ def _sharp_rows(c, b, G, felt, r, u0, v0, taus, shade=None, blur_rows=True, outl
 
 def fit_disc(frame: np.ndarray, felt: np.ndarray, u0: int, v0: int, c0, r: float, G0: float,
              b0=(0.0, 0.0), fit_blur: bool = False, shade: bool = False, valid=None,
-             outline=None, block: int = 1, jackknife: bool = True) -> DiscFit:
+             outline=None, block=1, jackknife: bool = True) -> DiscFit:
     """:func:`cuespin.track.model.fit_disc` in numpy (same arguments and result)."""
-    if block > 1:
+    if block_area(block) > 1:
         return _fit_blocks(block, frame, felt, u0, v0, c0, r, G0, b0, fit_blur, shade, valid, outline, fit=fit_disc,
                            jackknife=jackknife)
     felt = np.asarray(felt, dtype=np.float64)

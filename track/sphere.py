@@ -18,7 +18,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from cuespin.track.model import SphereLook, blur_nodes, fit_disc
+from cuespin.track.model import SphereLook, block_area, blur_nodes, fit_disc
 
 # Frames whose centres lie within this of their group's first (px) are the
 # same still ball (its blur, predicted from a velocity that is noise, too
@@ -114,7 +114,7 @@ def still_groups(samples: list) -> list:
     return [mean_sample([samples[i] for i in g]) for g in still_members(samples)[:MAX_GROUPS]]
 
 
-def _rss(groups, r: float, outline, look: SphereLook, block: int = 1) -> float:
+def _rss(groups, r: float, outline, look: SphereLook, block=1) -> float:
     """Residual sum of squares of the sphere's fits to the groups (inf when
     one fails), on the ``block`` x ``block`` means the tracker fits (a 4:2:0
     video seen through a luma-blind channel, :func:`fit_disc`'s ``block``):
@@ -127,7 +127,7 @@ def _rss(groups, r: float, outline, look: SphereLook, block: int = 1) -> float:
                      valid=s.valid, outline=outline, block=block, jackknife=False)  # its residual only
         if not f:
             return np.inf
-        n = (s.patch.size if s.valid is None else int(s.valid.sum())) // (block * block)
+        n = (s.patch.size if s.valid is None else int(s.valid.sum())) // block_area(block)
         tot += f.rms**2 * (n - 6 - (2 if s.fit_blur else 0))
     return tot
 
@@ -138,7 +138,7 @@ def _look(x) -> SphereLook:
     return SphereLook(float(np.mod(x[0], 2 * np.pi)), el, p, float(np.sqrt(np.clip(x[3], *PSF_VAR_RANGE))))
 
 
-def learn_sphere(samples: list, r: float, outline=None, start: SphereLook | None = None, block: int = 1
+def learn_sphere(samples: list, r: float, outline=None, start: SphereLook | None = None, block=1
                  ) -> tuple[SphereLook | None, float]:
     """The light's direction, the shininess and the lens's blur that
     explain the frames best.
@@ -199,7 +199,7 @@ def learn_sphere(samples: list, r: float, outline=None, start: SphereLook | None
     return _look(x), best
 
 
-def relearn_both_sides(samples: list, r: float, start: SphereLook, outline=None, block: int = 1
+def relearn_both_sides(samples: list, r: float, start: SphereLook, outline=None, block=1
                        ) -> tuple[SphereLook | None, float]:
     """The light learnt again against another felt from a look learnt
     before, searched from that look and from its mirror (azimuth + pi), the

@@ -15,8 +15,8 @@ import numpy as np
 
 from cuespin.track.background import DETECT_SIGMAS, SCORE_CAP, Background, band_extent, box_score, box_size
 from cuespin.track.colour import GREY, Projection
-from cuespin.track.model import (SphereLook, _coarse, _model_rows, block_patch, blur_nodes, fit_disc,
-                                 streak_from_moments, streak_model)
+from cuespin.track.model import (SphereLook, _coarse, _model_rows, block_area, block_patch, block_sides, blur_nodes,
+                                 fit_disc, streak_from_moments, streak_model)
 from cuespin.track.outline import OUTLINE_REFIT_PX, OutlineCache, is_similarity
 from cuespin.track.radius import RadiusMap
 from cuespin.track.sphere import STILL_PX as STILL_PX_SPHERE
@@ -533,7 +533,7 @@ def rim_marking_pixels(patch, felt, u0: int, v0: int, g, r: float, sigma: float 
 RIM_MEAN_SIGMA_MIN = 1.0
 
 
-def rim_left_out(samples, look, marked, r: float, outline=None, block: int = 1) -> list | None:
+def rim_left_out(samples, look, marked, r: float, outline=None, block=1) -> list | None:
     """The lit sphere's voting frames (:class:`~cuespin.track.sphere.Sample`)
     with the markings at their rim (:func:`rim_marking_pixels`, against the
     look ``look`` fitted on each still ball's mean window, the noise from
@@ -549,7 +549,7 @@ def rim_left_out(samples, look, marked, r: float, outline=None, block: int = 1) 
     (realistic seed 0 shot 13: none found frame by frame; on the mean the
     learnt elevation 1.372 -> 1.329 rad, the renderer's 1.318, RMSE 0.00902
     -> 0.00823 px; docs/measurements.md, marks8)."""
-    if block > 1:
+    if block_area(block) > 1:
         return None
     out, found = list(samples), False
     for idx in still_members(samples):
@@ -640,7 +640,7 @@ def look_bent(s, g, q, rr: float, valid, outline=None) -> float:
 
 
 def marks_given_back(samples, look, marks, foreign, r: float, sigma: float, outline=None,
-                     block: int = 1, without=None) -> list | None:
+                     block=1, without=None) -> list | None:
     """The lit sphere's voting frames (:class:`~cuespin.track.sphere.Sample`)
     with the markings given back where the look ``look``, learnt with them
     in, explains them: on each still ball's mean window
@@ -662,7 +662,7 @@ def marks_given_back(samples, look, marks, foreign, r: float, sigma: float, outl
     (realistic seed 0 shot 12, no markings: elevation 1.0506 with them left
     out, 1.0356 with the rule off while learning; RMSE 0.00795 -> 0.00726
     px; docs/measurements.md, branch marks9)."""
-    if block > 1:
+    if block_area(block) > 1:
         return None
     out, back = list(samples), False
     for idx in still_members(samples):
@@ -984,7 +984,7 @@ class RestReference(NamedTuple):
     the centre's stated error and covariance (px, px^2).  ``use`` (0/1,
     flat) the values the fit used."""
     fit: LastFit
-    block: int
+    block: tuple
     y: np.ndarray
     use: np.ndarray
     res: np.ndarray
@@ -999,16 +999,16 @@ class RestReference(NamedTuple):
     cov: np.ndarray
 
 
-def _rest_values(block: int, lf: LastFit, patch) -> np.ndarray:
+def _rest_values(block, lf: LastFit, patch) -> np.ndarray:
     """A window's values as the fit of ``lf`` saw them (flat float64): its
     pixels, or its blocks' means (:func:`~cuespin.track.model.block_patch`)."""
-    if block > 1:
+    if block_area(block) > 1:
         return np.ravel(block_patch(block, lf.pu, lf.pv, patch)[1][0])
     return np.asarray(patch, np.float64).ravel()
 
 
 def rest_reference(patch, felt_image, lf: LastFit, obs, r: float, thresh: float,
-                   block: int = 1, valid=None) -> RestReference | None:
+                   block=1, valid=None) -> RestReference | None:
     """The :class:`RestReference` of a sharp fit ``lf`` (every pixel of its
     window used, on ``block`` x ``block`` blocks' means if ``block`` > 1;
     ``patch`` its window, ``obs`` its Observation, ``r`` the ball's radius
@@ -1019,7 +1019,7 @@ def rest_reference(patch, felt_image, lf: LastFit, obs, r: float, thresh: float,
     by the outline's radius where there is one."""
     felt = felt_image[lf.pv:lf.pv + lf.ph, lf.pu:lf.pu + lf.pw]
     c, b, ol, u0, v0 = lf.c, lf.b, lf.outline, lf.pu, lf.pv
-    if block > 1:
+    if block_area(block) > 1:
         (u0, v0), (felt, valid) = block_patch(block, lf.pu, lf.pv, felt,
                                               None if valid is None else np.asarray(valid, bool))
         c, r, b, ol = _coarse(block, c, r, b, ol)
@@ -1042,7 +1042,7 @@ def rest_reference(patch, felt_image, lf: LastFit, obs, r: float, thresh: float,
     taus = blur_nodes(float(np.hypot(*b)))
     for j in range(2):
         e = np.zeros(2)
-        e[j] = REST_HESSIAN_STEP_PX / (block if block > 1 else 1)
+        e[j] = REST_HESSIAN_STEP_PX / block_sides(block)[j]
         g = []
         for sgn in (1.0, -1.0):
             mj, Jj = _model_rows(np.asarray(c, float) + sgn * e, b, lf.G, felt, r, u0, v0, taus, lf.shade, False, ol)
@@ -1056,7 +1056,7 @@ def rest_reference(patch, felt_image, lf: LastFit, obs, r: float, thresh: float,
         return None
     dof = max(int(use.sum()) - JT.shape[0], 1)
     var = max(float(obs.rms) ** 2, float(use @ (res * res)) / dof)
-    return RestReference(lf, int(block), y, use, res, JT, P, P @ res, dof,
+    return RestReference(lf, block_sides(block), y, use, res, JT, P, P @ res, dof,
                          var * (1.0 + REST_RMS_SIGMAS * 2.0 / np.sqrt(dof)), thresh, np.abs(res) > thresh,
                          np.asarray(obs.stderr, float), np.asarray(obs.cov, float))
 
@@ -1069,7 +1069,7 @@ def rest_step(ref: RestReference, patch) -> tuple[np.ndarray, float] | None:
     rule)."""
     d = _rest_values(ref.block, ref.fit, patch) - ref.y
     theta = ref.p0 + ref.P @ d
-    dc = ref.block * theta[:2]  # the blocks' grid is block px a unit
+    dc = np.array(ref.block, float) * theta[:2]  # the blocks' grid is (bx, by) px a unit
     if np.hypot(dc[0], dc[1]) > REST_STEP_PX:
         return None
     res = ref.res + d - ref.JT.T @ theta
@@ -1115,9 +1115,10 @@ class BallTracker:
         The ball's radius over the image (:mod:`cuespin.track.radius`): the
         search's filter, its two-blob and reach rules and the moments start
         are sized by the ball where it is.  None: ``radius_px`` everywhere.
-    chroma_block : int
-        Side (px) of the pixel blocks sharing one chroma sample in the video
-        (:attr:`cuespin.track.reader.VideoInfo.chroma_block`): with a
+    chroma_block : int or (int, int)
+        The pixel blocks, a square's side or (across, down) px, the fits
+        model the video's chroma on
+        (:attr:`cuespin.track.reader.VideoInfo.fit_block`): with a
         projection blind to luma (:attr:`Projection.luma_blind`) every fit
         models the blocks' means.
     """
@@ -1125,7 +1126,7 @@ class BallTracker:
     def __init__(self, background: Background, radius_px: float, exposure_frames: float,
                  config: TrackerConfig = TrackerConfig(), projection: Projection = GREY,
                  search_mask: np.ndarray | None = None, max_step_px: float = np.inf,
-                 camera=None, R: float | None = None, radii: RadiusMap | None = None, chroma_block: int = 1):
+                 camera=None, R: float | None = None, radii: RadiusMap | None = None, chroma_block=1):
         if config.refine not in REFINERS:
             raise ValueError(f"refine must be one of {REFINERS}, got {config.refine!r}")
         self.bg = background
@@ -1137,7 +1138,7 @@ class BallTracker:
         self.proj = projection
         # A luma-blind channel of a video storing colour in blocks is those
         # blocks' means: the fits model them (fit_disc's ``block``).
-        self.block = int(chroma_block) if projection.luma_blind else 1
+        self.block = block_sides(chroma_block) if projection.luma_blind else (1, 1)
         self.cap = np.float32(SCORE_CAP * max(background.contrast, 1.0))
         self.H, self.W = background.image.shape
         self.radii = radii if radii is not None else RadiusMap((self.H, self.W), self.r)
@@ -1549,7 +1550,7 @@ class BallTracker:
         :data:`SPHERE_MARK_MOVE_RADII` and lands no nearer than
         :data:`MARK_RETRY_RADII` to the prediction ``pred`` (px; None: not
         known)."""
-        if self.block > 1:
+        if block_area(self.block) > 1:
             return f, marks
         left = kept_pixels(marks, foreign)
         left = None if left is None else ~left
@@ -1634,7 +1635,7 @@ class BallTracker:
             if not f_shaded:
                 return
         # (the blocks' fits have a pixel a block: their residuals' count)
-        self._look_votes.append(look_vote(d, f_shaded, patch.size // self.block**2))
+        self._look_votes.append(look_vote(d, f_shaded, patch.size // block_area(self.block)))
         if len(self._look_votes) >= LOOK_FRAMES:
             self.shade = shaded_look(self._look_votes)
             if self.shade and self.cfg.sphere:
@@ -1668,7 +1669,7 @@ class BallTracker:
         marks = [None if lf is None else lf.marks for _, _, lf in self._look_fits]
         foreign = [None if lf is None else lf.foreign for _, _, lf in self._look_fits]
         back = None
-        if any(m is not None for m in marks) and self.block == 1:
+        if any(m is not None for m in marks) and block_area(self.block) == 1:
             whole = [s._replace(valid=kept_pixels(fo)) for s, fo in zip(samples, foreign)]
             lit, _ = learn_sphere(whole, self.r, self.outline, block=self.block)
             back = None if lit is None else marks_given_back(samples, lit, marks, foreign, self.r, self.bg.sigma,

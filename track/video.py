@@ -326,7 +326,7 @@ def _warm_up() -> None:
 
 def learn_model(frames: list, radius_px, n_samples: int,
                 where: np.ndarray | None = None, lossless: bool = True,
-                blind_to_felt: bool = False, chroma_block: int = 1) -> tuple[Projection, Background]:
+                blind_to_felt: bool = False, chroma_block=1) -> tuple[Projection, Background]:
     """The projection and the background from ``n_samples`` frames spread over
     ``frames`` (the look-ahead), plus as many again where a resting ball hid
     the felt from most of the first ones.  ``radius_px``: the ball's radius
@@ -335,8 +335,8 @@ def learn_model(frames: list, radius_px, n_samples: int,
     is lossless (:func:`~cuespin.track.colour.channel_rule`);
     ``blind_to_felt``: on a lossy codec the channel blind to the felt's
     colour (:func:`~cuespin.track.colour.learn_projection`);
-    ``chroma_block``: the pixels' side sharing one chroma sample (the
-    reader's ``VideoInfo.chroma_block``).  Blank frames
+    ``chroma_block``: the pixels sharing one chroma sample, a square's side
+    or (across, down) (the reader's ``VideoInfo.chroma_block``).  Blank frames
     (:func:`~cuespin.track.reader.blank_frame`: a black lead-in, a fade) are
     left out: they would teach a felt and a colour projection of black."""
     n = len(frames)
@@ -518,7 +518,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         sphere_cfg = replace(config, sphere=config.sphere and bool(info.lossless))
         tracker = BallTracker(bg, radius_px, cam.exposure_s * cam.fps, sphere_cfg, projection=proj,
                               search_mask=mask, max_step_px=max_step, camera=cam, R=R, radii=radii,
-                              chroma_block=info.chroma_block)
+                              chroma_block=info.fit_block)
         felt = FeltAccumulator(first.shape)
         foreign_level = foreign_threshold(bg.sigma, bg.contrast)
         fits = []  # (frame index, the fit's state) for the final background correction

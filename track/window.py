@@ -482,11 +482,11 @@ def felt_shift(fo, fn, valid, has_valid, c0, c1, b0, b1, G, r, kind, geo, u0, v0
 
 
 @_jit()
-def block_means(x, a, b, n, m, block):
-    """The means (float64) of the ``n`` x ``m`` whole ``block`` x ``block``
-    blocks of ``x`` from row ``b``, column ``a``:
-    :func:`cuespin.track.model.block_patch`'s ``x.reshape(n, block, m,
-    block).mean(axis=(1, 3), dtype=np.float64)`` in one call instead of
+def block_means(x, a, b, n, m, bx, by):
+    """The means (float64) of the ``n`` x ``m`` whole ``bx`` x ``by``
+    blocks (width x height) of ``x`` from row ``b``, column ``a``:
+    :func:`cuespin.track.model.block_patch`'s ``x.reshape(n, by, m,
+    bx).mean(axis=(1, 3), dtype=np.float64)`` in one call instead of
     numpy's ~0.1 ms of reductions: bit for bit wherever a block's sum is
     exact in float64, whatever the order (float32 or uint8 levels whose
     lowest bits lie within 53 of the largest's highest: a window's levels,
@@ -497,22 +497,22 @@ def block_means(x, a, b, n, m, block):
     for i in range(n):
         for j in range(m):
             acc = 0.0
-            for p in range(b + i * block, b + (i + 1) * block):
-                for q in range(a + j * block, a + (j + 1) * block):
+            for p in range(b + i * by, b + (i + 1) * by):
+                for q in range(a + j * bx, a + (j + 1) * bx):
                     acc += float(x[p, q])
-            out[i, j] = acc / (block * block)
+            out[i, j] = acc / (bx * by)
     return out
 
 
 @_jit()
-def block_all(x, a, b, n, m, block):
+def block_all(x, a, b, n, m, bx, by):
     """Whether every pixel of each whole block is True (``block_means``'
     blocks): ``block_patch``'s ``x.all(axis=(1, 3))``."""
     out = np.ones((n, m), np.bool_)
     for i in range(n):
         for j in range(m):
-            for p in range(b + i * block, b + (i + 1) * block):
-                for q in range(a + j * block, a + (j + 1) * block):
+            for p in range(b + i * by, b + (i + 1) * by):
+                for q in range(a + j * bx, a + (j + 1) * bx):
                     if not x[p, q]:
                         out[i, j] = False
     return out
@@ -745,9 +745,9 @@ def warm_up() -> None:
                   np.zeros(3), True, False, 3)
     felt_shift(y, y - 1.0, np.ones(9), True, 1.0, 1.0, 0.0, 0.0, 3.0, 1.0, 0, np.ones(1), 0, 0, np.zeros(1),
                np.zeros(3), True, False, 1e-9)
-    block_means(D, 0, 0, 4, 4, 2)
-    block_means(felt, 0, 0, 4, 4, 2)
-    block_all(np.ones((9, 9), bool), 0, 0, 4, 4, 2)
+    block_means(D, 0, 0, 4, 4, 2, 2)
+    block_means(felt, 0, 0, 4, 4, 2, 2)
+    block_all(np.ones((9, 9), bool), 0, 0, 4, 4, 2, 2)
     hidden_pixels(np.zeros((9, 9, 3), np.uint16), np.zeros((9, 9), np.int32), np.zeros((9, 9, 3), np.uint8), D, True,
                   D, 1.0, 0, 0, 9, 9, 4.0, 4.0, 3.0)
     frame = np.zeros((12, 12, 3), np.uint8)
