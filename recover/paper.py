@@ -452,7 +452,7 @@ def with_stderr(res: PaperResult, solve, x, C, params: BallParams) -> PaperResul
         dx[i] = h
         a, b = pick(solve(x + dx)), pick(solve(x - dx))
         if a is None or b is None:
-            return unpropagated(res, f"input {i} of {len(x)} moved by {h / s:g} of its standard error "
+            return unpropagated(res, f"input {i + 1} of {len(x)} moved by {h / s:g} of its standard error "
                                 f"{'up' if a is None else 'down'} leaves no root: the answer sits at the edge "
                                 "of where the method has one, where its error is not the delta method's")
         J[:, i] = (a - b) / (2 * h)
