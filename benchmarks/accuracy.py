@@ -334,8 +334,12 @@ def intervals(rows, n_boot: int = 4000, seed: int = 0, m: str = "mle"):
         k, n = int(hit.sum()), Z.size
         Z = np.where(np.isfinite(Z), Z, np.nan)
         idx = rng.integers(0, len(ok), (n_boot, len(ok)))
-        boot = {name: np.percentile([f(A[i]) for i in idx], [2.5, 97.5]) for name, f, A in (
-            ("rms", lambda a: np.sqrt(np.nanmean(a * a)), Z), ("crb", lambda a: np.sqrt(np.nanmean(a * a)), K))
+        def rms(a):  # over the stated errors a draw holds (none: NaN, out of the percentiles)
+            a = a[np.isfinite(a)]
+            return float(np.sqrt(np.mean(a * a))) if a.size else np.nan
+
+        boot = {name: np.nanpercentile([f(A[i]) for i in idx], [2.5, 97.5]) for name, f, A in (
+            ("rms", rms, Z), ("crb", lambda a: np.sqrt(np.nanmean(a * a)), K))
             if name != "crb" or m == "mle"}
         lo, hi = coverage_interval(hit)
         print(f"  {band}: {len(ok)} ok" + (f" ({bare} without stated errors: missed)" if bare else "")
