@@ -205,6 +205,12 @@ def one_shot(args):
             row[f"{m}_cover"] = float(np.mean(np.abs(z) < 1.96))
             for k, name in enumerate(COMPONENTS):  # per component, for intervals over shots (summarize)
                 row[f"{m}_z_{name}"] = float(z[k])
+        elif d["status"] == "ok":
+            # An ok without stated errors states none: a miss in every
+            # component (z infinite), counted, never left out (held37: two
+            # paper answers so, 29% and 12% off, left out of its coverage).
+            row[f"{m}_z"], row[f"{m}_cover"] = np.inf, 0.0
+            row.update({f"{m}_z_{name}": np.inf for name in COMPONENTS})
     mle = out["methods"]["mle"]
     row["mle_model"] = mle.get("model") or ""
     row["mle_v0_z"] = np.nan  # |v0 error| in its stated errors (the worse axis)
@@ -315,22 +321,31 @@ def intervals(rows, n_boot: int = 4000, seed: int = 0, m: str = "mle"):
         bands += (("free slip answers", lambda r: r.get("mle_model") == "full"),)
     for band, sel in bands:
         ok = [r for r in rows if r[f"{m}_status"] == "ok" and sel(r) and f"{m}_z_{COMPONENTS[0]}" in r
-              and np.isfinite(r[f"{m}_z_{COMPONENTS[0]}"])]
+              and not np.isnan(float(r[f"{m}_z_{COMPONENTS[0]}"]))]
         if len(ok) < 2:
             continue
         Z = np.array([[r[f"{m}_z_{c}"] for c in COMPONENTS] for r in ok], float)
+        # ok answers without stated errors (z infinite): misses in the
+        # coverage, out of the RMS (which they have none of), and said.
+        bare = int(np.sum(~np.all(np.isfinite(Z), axis=1)))
         K = np.array([[r.get(f"mle_crb_{c}", np.nan) if m == "mle" else np.nan for c in COMPONENTS] for r in ok],
                      float)
         hit = np.abs(Z) < 1.959964
         k, n = int(hit.sum()), Z.size
+        Z = np.where(np.isfinite(Z), Z, np.nan)
         idx = rng.integers(0, len(ok), (n_boot, len(ok)))
-        boot = {name: np.percentile([f(A[i]) for i in idx], [2.5, 97.5]) for name, f, A in (
-            ("rms", lambda a: np.sqrt(np.nanmean(a * a)), Z), ("crb", lambda a: np.sqrt(np.nanmean(a * a)), K))
+        def rms(a):  # over the stated errors a draw holds (none: NaN, out of the percentiles)
+            a = a[np.isfinite(a)]
+            return float(np.sqrt(np.mean(a * a))) if a.size else np.nan
+
+        boot = {name: np.nanpercentile([f(A[i]) for i in idx], [2.5, 97.5]) for name, f, A in (
+            ("rms", rms, Z), ("crb", lambda a: np.sqrt(np.nanmean(a * a)), K))
             if name != "crb" or m == "mle"}
         lo, hi = coverage_interval(hit)
-        print(f"  {band}: {len(ok)} ok; coverage {k}/{n} = {k / n:.1%} (95% {lo:.1%}-{hi:.1%}, "
+        print(f"  {band}: {len(ok)} ok" + (f" ({bare} without stated errors: missed)" if bare else "")
+              + f"; coverage {k}/{n} = {k / n:.1%} (95% {lo:.1%}-{hi:.1%}, "
               f"design effect of the shots); RMS / stated error "
-              f"{np.sqrt(np.mean(Z * Z)):.2f} ({boot['rms'][0]:.2f}-{boot['rms'][1]:.2f})"
+              f"{np.sqrt(np.nanmean(Z * Z)):.2f} ({boot['rms'][0]:.2f}-{boot['rms'][1]:.2f})"
               + (f"; RMS / bound {np.sqrt(np.nanmean(K * K)):.2f} ({boot['crb'][0]:.2f}-{boot['crb'][1]:.2f}); "
                  f"chi2/dof median {np.nanmedian([r['chi2_per_dof'] for r in ok]):.2f}" if m == "mle" else ""))
 
@@ -441,11 +456,14 @@ def summarize(rows, seed=0):
     for m, target in (("mle", "93-97%"), ("paper", "90-97%")):
         for band, sel in (("all", lambda r: True), ("noise < 0.5", lambda r: r["noise"] < 0.5),
                           ("noise >= 0.5", lambda r: r["noise"] >= 0.5)):
-            zs = [r for r in rows if r[f"{m}_status"] == "ok" and np.isfinite(r[f"{m}_z"]) and sel(r)]
+            zs = [r for r in rows if r[f"{m}_status"] == "ok" and not np.isnan(float(r[f"{m}_z"])) and sel(r)]
             if zs:
+                fin = [r[f"{m}_z"] for r in zs if np.isfinite(r[f"{m}_z"])]
+                bare = len(zs) - len(fin)
                 print(f"{m}: {band}: coverage of 95% intervals {np.mean([r[f'{m}_cover'] for r in zs]):.1%} "
-                      f"(target {target}); RMS error / own stderr "
-                      f"{np.sqrt(np.mean(np.square([r[f'{m}_z'] for r in zs]))):.2f} (target 0.9-1.1); {len(zs)} shots")
+                      f"(target {target}; {bare} ok without stated errors counted as missed); RMS error / own "
+                      f"stderr {np.sqrt(np.mean(np.square(fin))) if fin else np.nan:.2f} (target 0.9-1.1); "
+                      f"{len(zs)} shots")
     intervals(rows)
     intervals(rows, m="paper")
     rolling = [r for r in rows if r.get("preset") == "case4" and r["mle_status"] == "ok"]

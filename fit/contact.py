@@ -392,6 +392,19 @@ def _moved_index(xy, sig) -> int:
     return int(hits[0]) if hits.size else len(xy)
 
 
+def strike_at(coef_before, cov_before, scale: float = 1.0) -> bool:
+    """A change of motion is the strike: the ball before it still, its
+    velocity over the window before (``coef_before``, ``(2 axes, 3)`` of
+    :func:`_window_fits`; ``cov_before`` their unscaled covariance, times
+    ``scale`` squared as :func:`change_statistic` scales the noise) within
+    ``MOVE_SIGMAS`` of its standard errors of zero, the rule by which
+    :func:`_moved_index` says the ball has not moved.  A contact changes a
+    moving ball's motion; a still ball's only change is the strike."""
+    v = np.asarray(coef_before, float)[:, 1]
+    var = float(np.asarray(cov_before, float)[1, 1]) * float(scale) ** 2
+    return bool(var > 0 and float(v @ v) / var <= 2 * MOVE_SIGMAS ** 2)
+
+
 def _crossing_time(c, t_lo, t_hi, tau, target) -> float | None:
     """First time in [t_lo, t_hi] the quadratic ``c0 + c1 s + c2 s^2`` (``s = t - tau``)
     reaches ``target``."""
@@ -548,16 +561,21 @@ def find_contact(t, xy, ok, stderr_m, table, R: float, balls=(), W: int | None =
         found.append(Contact(t=hit[0], index=int(rows[hit[1]]), kind="ball"))
         if geo is None or hit[1] < geo[1]:
             geo = hit
-    b, stat, scale, (cl, cr), jump_chi2 = change_statistic(tt, pp, sig, W, details=True, time_corr=time_corr)
+    b_all, stat_all, scale_all, (cl_all, cr_all), jump_all = change_statistic(
+        tt, pp, sig, W, details=True, time_corr=time_corr)
+    _, covl_all, _ = _window_fits(tt, pp, sig, b_all - W, W, 0.5 * (tt[b_all - 1] + tt[b_all])) \
+        if len(b_all) else (None, np.zeros((0, 3, 3)), None)
     # Boundaries with the left window wholly after the strike, and not past
     # a cushion contact already found.
     last = geo[1] if geo is not None else len(tt)
-    keep = (b - W >= moved) & (b <= last)
-    b, stat, cl, cr, jump_chi2 = b[keep], stat[keep], cl[keep], cr[keep], jump_chi2[keep]
-    scale = scale[keep] if np.ndim(scale) else scale
-    stat = kink_statistic(tt, pp, sig, W, b, stat, jump_chi2, scale, threshold, first_over=threshold)
-    over = np.flatnonzero(stat > threshold)
-    if over.size:
+    while True:
+        keep = (b_all - W >= moved) & (b_all <= last)
+        b, stat, cl, cr, jump_chi2 = b_all[keep], stat_all[keep], cl_all[keep], cr_all[keep], jump_all[keep]
+        scale = scale_all[keep] if np.ndim(scale_all) else scale_all
+        stat = kink_statistic(tt, pp, sig, W, b, stat, jump_chi2, scale, threshold, first_over=threshold)
+        over = np.flatnonzero(stat > threshold)
+        if not over.size:
+            break
         # The first boundary over the threshold has the jump somewhere in its
         # right window: place it by maximum likelihood there, with a few
         # frames beyond (no more: a second contact may follow soon after).
@@ -570,6 +588,16 @@ def find_contact(t, xy, ok, stderr_m, table, R: float, balls=(), W: int | None =
         k = (_change_point(tt, pp, sig, k0 - W, hi, cands, kink=CHANGE_POINT_KINK,
                            kappa_max=float(tt[k0 - 1])) if cands.size else k0)
         j = int(np.clip(np.searchsorted(b, k), 0, len(b) - 1))
+        if strike_at(cl[j] if b[j] == k else cl[i], covl_all[keep][j if b[j] == k else i],
+                     scale[j if b[j] == k else i] if np.ndim(scale) else scale):
+            # The ball was still before this change: it is the strike (a
+            # change of motion by definition), which _moved_index placed too
+            # early (a resting ball's track wandering by MOVE_SIGMAS errors:
+            # realistic H.264 38/21, "moved" at 0.10 s, the strike at 0.40 s
+            # cut as an unknown contact, and every frame of motion with it).
+            # The search starts again after the strike's window.
+            moved = k
+            continue
         if b[j] == k:
             tc = _jump_time(cl[j], cr[j], tt[k - 1], tt[k])
             centre = cl[j][:, 0] + cl[j][:, 1] * (tc - 0.5 * (tt[k - 1] + tt[k]))
@@ -577,6 +605,7 @@ def find_contact(t, xy, ok, stderr_m, table, R: float, balls=(), W: int | None =
             tc, centre = 0.5 * (tt[k - 1] + tt[k]), pp[k - 1]
         kind = _kind_at(centre, table, R, balls, float(np.median(sig)))
         found.append(Contact(t=tc, index=int(rows[k]), kind=kind, statistic=float(stat[i])))
+        break
     if not found:
         return None
     return min(found, key=lambda c: (c.index, c.t))

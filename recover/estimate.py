@@ -468,13 +468,25 @@ def paper_verdicts(paper, mle, rolling: bool, params: BallParams, agree: bool | 
     segmentation takes x0 and the slide's start from all frames, those
     touched by the cue too (realistic H.264 seed 32 shot 0: the cue's run
     frames 31-57, the segmentation's t1 26 ms early, v0 19% off at 10 of its
-    stated errors; docs/measurements.md, paper11).  Then ``failed`` when the answer's sliding time disagrees with the fit's
+    stated errors; docs/measurements.md, paper11).  Any segments: a slide
+    through every frame not excluded by the fit (``slide_ends`` False).
+    Then ``failed`` when the answer's sliding time disagrees with the fit's
     (:func:`sliding_times_agree`; ``agree`` False, an earlier answer of it on
     the same track kept by a refit; None: asked here)."""
     if paper is None or paper.status != "ok" or mle is None:
         return paper
     v = mle.verdicts or {}
     if rolling and (v.get("slide_hidden") or v.get("slide_outlasts")):
+        return PaperResult("degenerate", mle.reason)
+    if v.get("slide_ends") is False:
+        # The fit's end of sliding does not exclude a slide through every
+        # frame (recover.mle.result's slide_ends, asked of the free-slip
+        # model whatever segments the paper took): x1, and so the paper's
+        # answer, rests on an end of sliding the track does not show
+        # (realistic H.264 37/31: the true slide ends 0.07 s after the last
+        # fitted frame, the paper's x1 16 cm off, w0 9.9 stated errors off and
+        # given as best; of the 20 paper answers ok on seeds 37/38 the one so
+        # refused; held37).
         return PaperResult("degenerate", mle.reason)
     if trusted_frames_refuse(mle):
         return PaperResult("degenerate", mle.reason)
