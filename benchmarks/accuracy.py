@@ -118,6 +118,7 @@ def one_shot(args):
         tr = SimpleNamespace(t=z["t"], xy=z["xy"], ok=z["ok"], cov_px=z["cov_px"], lossless=bool(z["lossless"]),
                              inter_frame=bool(z["inter_frame"]),
                              independent_errors=independent and not shaded,
+                             look_shaded=shaded,
                              look_factor=float(z["look_factor"]) if "look_factor" in z else 1.0,
                              look_rho=float(z["look_rho"]) if "look_rho" in z else 0.0)
         tr.foreign = z["foreign"] if "foreign" in z else None  # kept before the tracker told the cue's flags apart
@@ -170,6 +171,8 @@ def one_shot(args):
         kw["foreign"] = getattr(tr, "foreign", None)
     if "look_factor" in inspect.signature(recover_track).parameters:
         kw["look_factor"] = float(getattr(tr, "look_factor", 1.0))
+    if "shaded" in inspect.signature(recover_track).parameters:
+        kw["shaded"] = bool(getattr(tr, "look_shaded", False))
     lossless = getattr(tr, "independent_errors", tr.lossless)
     if "independent" in inspect.signature(recover_track).parameters:  # the codec apart from the errors' sharing
         kw["independent"], lossless = lossless, bool(tr.lossless)

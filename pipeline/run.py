@@ -183,6 +183,7 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
     out, est = recover_track(tr.t[:n], tr.xy[:n], tr.ok[:n], cov_m[:n], scene.physics, cam.exposure_s,
                              method, fit_friction, lossless=tr.lossless, independent=tr.independent_errors,
                              ar1_floor=tr.error_ar1, look_factor=tr.look_factor,
+                             shaded=bool(getattr(tr, "look_shaded", False)),
                              inter_frame=tr.inter_frame, px_to_m=pixel_to_table(cam, tr.xy[:n]),
                              touched=None if tr.touched is None else tr.touched[:n],
                              foreign=None if tr.foreign is None else tr.foreign[:n], return_estimate=True)
@@ -229,6 +230,7 @@ def _refit_through(camera, tr, n: int, scene, method: str, fit_friction: bool, k
     return recover_track(tr.t[:n], xy, np.asarray(tr.ok)[:n], cov, scene.physics, scene.camera.exposure_s,
                          method, fit_friction, lossless=tr.lossless, independent=tr.independent_errors,
                          ar1_floor=tr.error_ar1, look_factor=tr.look_factor,
+                         shaded=bool(getattr(tr, "look_shaded", False)),
                          inter_frame=tr.inter_frame,
                          px_to_m=pixel_to_table(camera, xy), keep=keep)["methods"]
 

@@ -31,7 +31,7 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
                   method: str = "all", fit_friction: bool = False, lossless: bool = True,
                   return_estimate: bool = False, inter_frame: bool = False, px_to_m=None, keep=None,
                   ar1_floor: float = 0.0, touched=None, independent: bool | None = None,
-                  look_factor: float = 1.0, foreign=None):
+                  look_factor: float = 1.0, foreign=None, shaded: bool = False):
     """v0 and w0 from a track, by the paper's method and/or maximum likelihood.
 
     Parameters
@@ -63,6 +63,9 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
     look_factor : float
         ``TrackResult.look_factor``, on every frame's stated error: taken
         off the rests' frames where they share the look's error.
+    shaded : bool
+        ``TrackResult.look_shaded``: on a lossy codec each rest's mean has
+        the still look's own error (recover.measurements.STILL_LOOK_VAR_PX2).
     inter_frame : bool
         The lossy codec predicts frames from others (H.264): its error is
         shared between neighbouring frames (recover.mle.codec_sandwich).
@@ -111,7 +114,7 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
                    run_paper=method in ("paper", "all"), inter_frame=inter_frame,
                    px_to_m=None if px_to_m is None else np.asarray(px_to_m, dtype=float)[ok], keep=keep,
                    ar1_floor=ar1_floor, touched=None if touched is None else np.asarray(touched, bool)[ok],
-                   independent=independent, look_factor=look_factor,
+                   independent=independent, look_factor=look_factor, shaded=shaded,
                    foreign=None if foreign is None else np.asarray(foreign, bool)[ok])
     methods = {}
     if method in ("paper", "all"):

@@ -136,7 +136,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
              fit_friction: bool = False, run_paper: bool = True, inter_frame: bool = False,
              px_to_m=None, keep: Decided | None = None, ar1_floor: float = 0.0,
              touched=None, independent: bool | None = None, look_factor: float = 1.0,
-             foreign=None) -> Estimate:
+             foreign=None, shaded: bool = False) -> Estimate:
     """Segment, decide and fit one track.
 
     Parameters
@@ -167,6 +167,10 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         look (``TrackResult.look_factor``); on a lossless codec with
         ``independent`` False it is taken off the rests' frames
         (:func:`cuespin.recover.measurements.build_measurements`).
+    shaded : bool
+        The tracker shaded the ball's look (``TrackResult.look_shaded``): on
+        a lossy codec each rest's mean has the still look's own error
+        (``build_measurements(still_look=)``).
     fit_friction : bool
         Estimate mu_s and mu_r in the maximum-likelihood fit.
     run_paper : bool
@@ -243,7 +247,8 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         return build_measurements(t, xy, cov, t0=t0, t_rest=seg.t2, exposure_s=exposure_s,
                                   frame_dt=frame_dt, shared_rest=not independent, px_to_m=px_to_m, clear_s=clear_s,
                                   group_rest=group_rest, rest_scale=scale[0], rest_scale_dof=scale[1],
-                                  look_rest=lossless and not independent, look_factor=look_factor)
+                                  look_rest=lossless and not independent, look_factor=look_factor,
+                                  still_look=bool(shaded) and not lossless)
 
     if keep is not None:
         codec = CodecCorrelation(keep.codec_var, frame_dt) if inter_frame and not lossless else None
