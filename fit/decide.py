@@ -22,6 +22,10 @@
   difference of the two sliding times (eq. 10) in their errors
   (recover.estimate.sliding_time_z); yes takes the segmentation's slide
   into the rest in place of its breakpoint, and refuses an answer.
+- Does the line's case 3 (sliding ends at x1, the ball rolls to x2) hold
+  between the breakpoint's sliding speed and the distance rolled (eq. 19)?
+  :func:`rolling_speed_differs`, from their difference in its errors
+  (recover.paper.rolling_speed_z); yes refuses the line's answer.
 - Are the fit's residuals autocorrelated along the track (a lossy codec at
   low noise)?  :func:`autocorrelated`, from their lag-1 autocorrelation's z
   score (recover.mle.lag1_autocorrelation); yes refits under AR(1) errors.
@@ -131,6 +135,11 @@ CASE2_FACTOR = 1.5
 #   H.264 32/16 (the breakpoint 0.13 s early): z -4.32.
 PAPER_FIT_TAU_Z = 4.0
 SLIDING_TIMES_LEVEL = 0.005
+# - rolling speed differs: z = (|v1| - sqrt(2 (5/7) mu_r g |x2 - x1|)) / se
+#   (recover.paper.rolling_speed_z; eq. 19), asked of the line's case-3
+#   answers (x1 apart from x2).  CALIBRATION PENDING.
+ROLL_SPEED_FACTOR = 1.3
+ROLL_SPEED_LEVEL = LEVEL
 # The strike is in view when at least this many frames show the ball still
 # before it: the segmentation takes the start position as the median of the
 # first three frames (fit.segment).
@@ -272,6 +281,18 @@ def stop_apart(d2: float) -> Decision:
     thr = CASE2_FACTOR * float(chi2.isf(LEVEL, 2))
     d2 = float(d2) if np.isfinite(d2) else float("inf")
     return Decision(d2 > thr, d2, thr)
+
+
+def rolling_speed_differs(z: float) -> Decision:
+    """Does the breakpoint's sliding speed ``|v1|`` differ from the speed
+    that rolls from ``x1`` to the rest (eq. 19)?  ``z`` is their difference
+    in its standard error (recover.paper.rolling_speed_z), two-sided
+    against the normal's ``LEVEL`` point times :data:`ROLL_SPEED_FACTOR`;
+    NaN (not measured) is no.  Yes: x1 is not where sliding ended, and the
+    line's case 3 has no answer there."""
+    z = float(z)
+    thr = ROLL_SPEED_FACTOR * float(norm.isf(LEVEL / 2))
+    return Decision(bool(np.isfinite(z) and abs(z) > thr), z, thr, ROLL_SPEED_LEVEL)
 
 
 def strike_in_view(t, t0: float) -> bool:

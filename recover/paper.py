@@ -24,7 +24,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from cuespin.fit.conics import fit_parabola
-from cuespin.fit.decide import stop_apart
+from cuespin.fit.decide import rolling_speed_differs, stop_apart
 from cuespin.physics.motion import BallParams, z_cross
 from cuespin.physics.parabola import Parabola
 from cuespin.recover.mle import MIN_SLIDING_FRAMES
@@ -102,7 +102,9 @@ class PaperResult:
     than one (status ``ambiguous``).  ``trajectory`` is ``parabola`` or ``line``.
     ``stderr`` holds standard errors of ``v0`` and ``w0`` when ``ok``.
     ``stop_apart`` is fit.decide.stop_apart's answer when case 2 was asked
-    (None: not asked), for a refit to keep.  ``cov`` the covariance of
+    (None: not asked), for a refit to keep.  ``rolling_speed`` is
+    fit.decide.rolling_speed_differs's Decision when the line's case 3 was
+    asked it (:func:`rolling_speed_z`; None: not asked).  ``cov`` the covariance of
     ``(v0, w0)`` (4 x 4; m/s and rad/s) whose diagonal ``stderr`` holds,
     for statistics of the answer (:func:`sliding_time_stderr`).
     """
@@ -120,6 +122,7 @@ class PaperResult:
     stderr: dict = field(default_factory=dict)
     stop_apart: bool | None = None
     cov: np.ndarray | None = None
+    rolling_speed: object | None = None
 
     def __bool__(self):
         return self.status == "ok"
@@ -296,14 +299,16 @@ def recover_line(x0, x1, x2, params: BallParams, tol: float, heading=None,
 
 def segment_weights(seg, n: int) -> dict | None:
     """The segmentation's estimates as weights on the track's ``n`` frames
-    (fit.segment: ``geometry_cov``): ``x0``, ``x1`` and, with a rest in
-    view, ``x2`` (its frames' mean), each an array (n,) with ``estimate = w
-    @ xy``; None when the segmentation kept no weights."""
+    (fit.segment: ``geometry_cov``): ``x0``, ``x1``, the sliding velocity
+    at the breakpoint ``v1`` (m/s per m) and, with a rest in view, ``x2``
+    (its frames' mean), each an array (n,) with ``estimate = w @ xy``; None
+    when the segmentation kept no weights."""
     g = seg.geometry_cov or {}
     if g.get("w") is None or not len(g["frames"]) or int(np.max(g["frames"])) >= n:
         return None
     out = {}
-    for name, col in (("x0", g["w"][:, 0]), ("x1", g["w1"])):
+    cols = [("x0", g["w"][:, 0]), ("x1", g["w1"])] + ([("v1", g["wv1"])] if g.get("wv1") is not None else [])
+    for name, col in cols:
         out[name] = np.zeros(n)
         np.add.at(out[name], g["frames"], col)
     if g.get("rest") is not None and len(g["rest"]):
@@ -678,8 +683,94 @@ def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, n
         idx = np.r_[0:2, 4:6]
         x = np.r_[seg.x0, seg.x2]
         return replace(with_stderr(solve_case2(x), solve_case2, x, geo[np.ix_(idx, idx)], params), stop_apart=False)
+    # Case 3: sliding ends at x1 and the ball rolls to x2 (eq. 16-19), so
+    # the segmentation's sliding speed there must be the one that rolls
+    # |x2 - x1| (eq. 19; eq. 25 and 27 on the line): asked of the
+    # breakpoint's v1 in its errors (fit.decide.rolling_speed_differs).
+    # Realistic H.264 36/38: the rest found 66 ms before the stop, the
+    # breakpoint 100 ms early and x1 10 mm short, |v1| 0.198 m/s where
+    # 9.6 mm of rolling allows 0.037 (docs/measurements.md, p38, v1chk).
+    # (Rolling from the strike, x1 = x0, is not asked: not calibrated.)
+    rolls = rolling_speed_differs(rolling_speed_z(seg, params, sigma, t, xy, meas, noise)) \
+        if seg.t1 > seg.t0 else None
+    if rolls is not None and rolls.yes:
+        return PaperResult("failed", f"the slide's speed where it ends, |v1| {np.hypot(*seg.v1):.3f} m/s, is "
+                           f"{rolls.statistic:+.1f} of its errors from the "
+                           f"{rolling_speed(seg.x1, seg.x2, params):.3f} m/s that rolls the "
+                           f"{np.hypot(*(seg.x2 - seg.x1)) * 1e3:.1f} mm from x1 to the rest (eq. 19): x1 is not "
+                           f"where sliding ended ({why_line})", "line", x0=seg.x0, x1=seg.x1, x2=seg.x2,
+                           rolling_speed=rolls)
     x = np.r_[seg.x0, seg.x1, seg.x2]
-    return with_stderr(solve_line(x), solve_line, x, geo, params)
+    return replace(with_stderr(solve_line(x), solve_line, x, geo, params), rolling_speed=rolls)
+
+
+def rolling_speed(x1, x2, params: BallParams) -> float:
+    """Eq. 19 (eq. 16-17 integrated): the speed (m/s) at ``x1`` that rolls
+    to rest at ``x2``, ``sqrt(2 (5/7) mu_r g |x2 - x1|)``."""
+    d = float(np.hypot(*(np.asarray(x2, float) - np.asarray(x1, float))))
+    return float(np.sqrt(2.0 * 5.0 / 7.0 * params.mu_r * params.g * d))
+
+
+def rolling_speed_z(seg, params: BallParams, sigma: float, t, xy, meas=None, noise=(0.0, 1.0)) -> float:
+    """The segmentation's sliding speed at its breakpoint, ``|v1|``, against
+    the speed that rolls from ``x1`` to the rest ``x2`` (eq. 19,
+    :func:`rolling_speed`), in the standard error of their difference
+    (dimensionless; NaN where not defined: no rest, ``v1`` or ``x2 - x1``
+    zero, no weights).
+
+    ``x2`` here is the mean of the rest's frames from the stop the breakpoint
+    predicts on, ``t1 + |v1| / ((5/7) mu_r g)`` (eq. 17), when at least
+    fit.segment.MIN_REST_FRAMES of them are left, else of the whole rest:
+    the rest is found while the ball still creeps within its noise, and the
+    whole rest's mean sat short of the stop along the path, by about one of
+    its errors (the null's z had mean 1.04 with it, 48 simulated case 1/3/5
+    tracks; docs/measurements.md, v1chk; fit.segment does the same for case 2).
+
+    ``x1``, ``x2`` and ``v1`` are linear in the track's frames ``t``, ``xy``
+    (s, m; :func:`segment_weights`): their covariance is
+    recover.measurements.linear_covariance's under ``meas`` and ``noise``
+    (the maximum-likelihood fit's error model, as
+    :func:`geometry_covariance`), or the frames independent at ``sigma``
+    (m, per axis) without ``meas``; plus the breakpoints' own share (the
+    path refitted as they move: fit.segment's ``x1v1_t``).  Propagated to
+    first order: ``d|v1| = v1_hat . dv1``, ``d r = (5/7) mu_r g / r  e .
+    (dx2 - dx1)`` with ``e`` the unit vector from ``x1`` to ``x2`` and ``r``
+    the rolling speed."""
+    from cuespin.fit.segment import MIN_REST_FRAMES
+    g = seg.geometry_cov or {}
+    if seg.x2 is None or seg.v1 is None or seg.x1 is None or g.get("rest") is None or not len(g["rest"]):
+        return float("nan")
+    t, xy = np.asarray(t, float), np.asarray(xy, float)
+    decel = 5.0 / 7.0 * params.mu_r * params.g
+    v1 = np.asarray(seg.v1, float)
+    speed = float(np.hypot(*v1))
+    rest = np.asarray(g["rest"])
+    after = rest[t[rest] >= seg.t1 + speed / decel]
+    rest = after if len(after) >= MIN_REST_FRAMES else rest
+    x2 = np.mean(xy[rest], axis=0)
+    dx = x2 - np.asarray(seg.x1, float)
+    d = float(np.hypot(*dx))
+    r = rolling_speed(seg.x1, x2, params)
+    w = segment_weights(seg, len(t))
+    if speed <= 0 or d <= 0 or r <= 0 or w is None or any(k not in w for k in ("x1", "v1")):
+        return float("nan")
+    w2 = np.zeros(len(t))
+    w2[rest] = 1.0 / len(rest)
+    W = np.stack([w["x1"], w2, w["v1"]])
+    if meas is not None:
+        from cuespin.recover.measurements import linear_covariance
+        C = linear_covariance(meas, W, *noise)
+    else:
+        C = sigma**2 * np.kron(W @ W.T, np.eye(2))
+    if g.get("x1v1_t") is not None:
+        idx = np.r_[0:2, 4:6]
+        C[np.ix_(idx, idx)] += g["x1v1_t"]
+    e = dx / d
+    grad = np.r_[decel / r * e, -decel / r * e, v1 / speed]
+    var = float(grad @ C @ grad)
+    if not var > 0:
+        return float("nan")
+    return float((speed - r) / np.sqrt(var))
 
 
 def line_offset(x0, x1, x2, C) -> tuple[float, float]:
