@@ -29,6 +29,11 @@ from cuespin.physics.motion import BallParams, z_cross
 from cuespin.physics.parabola import Parabola
 from cuespin.recover.mle import MIN_SLIDING_FRAMES
 
+# The rolling-speed test (rolling_speed_asked) is asked under an inter-frame
+# codec's errors when their short correlation time spans at most this many
+# frames: measured to hold at 5 (240 fps, 0 of 55), not at 10 (480 fps, 5
+# of 45); 8 lies between, not measured there (docs/measurements.md, v1chk).
+ROLL_SPEED_MAX_CORR_FRAMES = 8.0
 # A candidate satisfies eq. 37 when its predicted x1 is within this many
 # position-noise sigmas of the measured one (the measured x1 is itself an
 # estimate; callers add a frame's travel); every candidate within it is kept.
@@ -690,9 +695,11 @@ def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, n
     # Realistic H.264 36/38: the rest found 66 ms before the stop, the
     # breakpoint 100 ms early and x1 10 mm short, |v1| 0.198 m/s where
     # 9.6 mm of rolling allows 0.037 (docs/measurements.md, p38, v1chk).
-    # (Rolling from the strike, x1 = x0, is not asked: not calibrated.)
+    # (Rolling from the strike, x1 = x0, is not asked: not calibrated; nor
+    # where the errors' correlation in time is not the one measured:
+    # rolling_speed_asked.)
     rolls = rolling_speed_differs(rolling_speed_z(seg, params, sigma, t, xy, meas, noise)) \
-        if seg.t1 > seg.t0 else None
+        if seg.t1 > seg.t0 and rolling_speed_asked(noise, frame_dt) else None
     if rolls is not None and rolls.yes:
         return PaperResult("failed", f"the slide's speed where it ends, |v1| {np.hypot(*seg.v1):.3f} m/s, is "
                            f"{rolls.statistic:+.1f} of its errors from the "
@@ -702,6 +709,26 @@ def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, n
                            rolling_speed=rolls)
     x = np.r_[seg.x0, seg.x1, seg.x2]
     return replace(with_stderr(solve_line(x), solve_line, x, geo, params), rolling_speed=rolls)
+
+
+def rolling_speed_asked(noise, frame_dt: float) -> bool:
+    """Is :func:`rolling_speed_z`'s error stated under these errors?
+    ``noise`` is the maximum-likelihood fit's ``(ar1, scale[, acf])``
+    (recover.estimate.mle_noise).  Measured (docs/measurements.md, v1chk):
+    independent errors (rolls_to_rest_tracks, 988 tracks, 0 beyond the
+    threshold held out), and an inter-frame codec's correlation
+    (recover.mle.INTER_CODEC_ACF, through recover.estimate) at 60-240 fps,
+    0 of 139 (max |z| 2.13); at 480 fps, where its short correlation time
+    spans 10 frames, 5 of 45 at |z| 7-61 (the breakpoints' share, from the
+    profile's curvature, takes the frames as independent).  So asked
+    without a correlation in time, or with a codec's whose short time spans
+    at most :data:`ROLL_SPEED_MAX_CORR_FRAMES` frames; not under AR(1)
+    errors (a lossy intra-frame codec's: not measured)."""
+    ar1 = float(noise[0]) if len(noise) > 0 else 0.0
+    acf = noise[2] if len(noise) > 2 else None
+    if ar1 > 0:
+        return False
+    return acf is None or float(acf[2]) / frame_dt <= ROLL_SPEED_MAX_CORR_FRAMES
 
 
 def rolling_speed(x1, x2, params: BallParams) -> float:
