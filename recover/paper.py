@@ -690,8 +690,9 @@ def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, n
         return replace(with_stderr(solve_case2(x), solve_case2, x, geo[np.ix_(idx, idx)], params), stop_apart=False)
     # Case 3: sliding ends at x1 and the ball rolls to x2 (eq. 16-19), so
     # the segmentation's sliding speed there must be the one that rolls
-    # |x2 - x1| (eq. 19; eq. 25 and 27 on the line): asked of the
-    # breakpoint's v1 in its errors (fit.decide.rolling_speed_differs).
+    # |x2 - x1| (eq. 19; eq. 25 and 27 on the line): asked of the rest's
+    # frames against the rolling path from x1 at v1 (eq. 18), in their
+    # errors (rolling_speed_z, fit.decide.rolling_speed_differs).
     # Realistic H.264 36/38: the rest found 66 ms before the stop, the
     # breakpoint 100 ms early and x1 10 mm short, |v1| 0.198 m/s where
     # 9.6 mm of rolling allows 0.037 (docs/measurements.md, p38, v1chk).
@@ -701,11 +702,11 @@ def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, n
     rolls = rolling_speed_differs(rolling_speed_z(seg, params, sigma, t, xy, meas, noise)) \
         if seg.t1 > seg.t0 and rolling_speed_asked(noise, frame_dt) else None
     if rolls is not None and rolls.yes:
-        return PaperResult("failed", f"the slide's speed where it ends, |v1| {np.hypot(*seg.v1):.3f} m/s, is "
-                           f"{rolls.statistic:+.1f} of its errors from the "
-                           f"{rolling_speed(seg.x1, seg.x2, params):.3f} m/s that rolls the "
-                           f"{np.hypot(*(seg.x2 - seg.x1)) * 1e3:.1f} mm from x1 to the rest (eq. 19): x1 is not "
-                           f"where sliding ended ({why_line})", "line", x0=seg.x0, x1=seg.x1, x2=seg.x2,
+        return PaperResult("failed", f"the slide's speed where it ends, |v1| {np.hypot(*seg.v1):.3f} m/s, rolls "
+                           f"past the rest (eq. 18-19: {rolling_speed(seg.x1, seg.x2, params):.3f} m/s rolls the "
+                           f"{np.hypot(*(seg.x2 - seg.x1)) * 1e3:.1f} mm from x1 to it; the rest's frames "
+                           f"{rolls.statistic:+.1f} of their errors from the rolling path): x1 is not where "
+                           f"sliding ended ({why_line})", "line", x0=seg.x0, x1=seg.x1, x2=seg.x2,
                            rolling_speed=rolls)
     x = np.r_[seg.x0, seg.x1, seg.x2]
     return replace(with_stderr(solve_line(x), solve_line, x, geo, params), rolling_speed=rolls)
@@ -739,48 +740,52 @@ def rolling_speed(x1, x2, params: BallParams) -> float:
 
 
 def rolling_speed_z(seg, params: BallParams, sigma: float, t, xy, meas=None, noise=(0.0, 1.0)) -> float:
-    """The segmentation's sliding speed at its breakpoint, ``|v1|``, against
-    the speed that rolls from ``x1`` to the rest ``x2`` (eq. 19,
-    :func:`rolling_speed`), in the standard error of their difference
-    (dimensionless; NaN where not defined: no rest, ``v1`` or ``x2 - x1``
-    zero, no weights).
+    """Does the ball roll from the breakpoint to the rest as case 3 says?
+    The rest's frames' mean position along the rolling direction against
+    where the rolling path from the segmentation's ``x1`` and ``v1`` puts
+    the ball at those frames' times (eq. 18, stopped at eq. 17's ``t2``:
+    past it, at eq. 19's ``x2``), in the standard error of their difference
+    (dimensionless; positive: the rest short of the path's; NaN where not
+    defined: no rest, ``v1`` zero, no weights).
 
-    ``x2`` here is the mean of the rest's frames from the stop the breakpoint
-    predicts on, ``t1 + |v1| / ((5/7) mu_r g)`` (eq. 17), when at least
-    fit.segment.MIN_REST_FRAMES of them are left, else of the whole rest:
-    the rest is found while the ball still creeps within its noise, and the
-    whole rest's mean sat short of the stop along the path, by about one of
-    its errors (the null's z had mean 1.04 with it, 48 simulated case 1/3/5
-    tracks; docs/measurements.md, v1chk; fit.segment does the same for case 2).
+    Eq. 19 alone, ``|v1|`` against ``sqrt(2 (5/7) mu_r g |x2 - x1|)``, read
+    the rest's first frames, where the ball still creeps within its noise
+    (or a track ending before the stop), as the rest: its null's z had mean
+    1.04 (48 simulated case 1/3/5 tracks), and right line answers of
+    sliding_tracks cut 0.07-0.2 s before the stop read 4-7.5
+    (docs/measurements.md, v1chk).  Eq. 18 at the rest's own frames holds
+    for those frames too.  Where the breakpoint is early on a slide into the
+    rest (realistic H.264 36/38: |v1| 0.198 m/s where the 9.6 mm to the rest
+    allow 0.037) the path runs on far past the rest.
 
-    ``x1``, ``x2`` and ``v1`` are linear in the track's frames ``t``, ``xy``
-    (s, m; :func:`segment_weights`): their covariance is
+    ``x1``, ``v1`` and the rest's mean are linear in the track's frames
+    ``t``, ``xy`` (s, m; :func:`segment_weights`): their covariance is
     recover.measurements.linear_covariance's under ``meas`` and ``noise``
     (the maximum-likelihood fit's error model, as
     :func:`geometry_covariance`), or the frames independent at ``sigma``
     (m, per axis) without ``meas``; plus the breakpoints' own share (the
-    path refitted as they move: fit.segment's ``x1v1_t``).  Propagated to
-    first order: ``d|v1| = v1_hat . dv1``, ``d r = (5/7) mu_r g / r  e .
-    (dx2 - dx1)`` with ``e`` the unit vector from ``x1`` to ``x2`` and ``r``
-    the rolling speed."""
-    from cuespin.fit.segment import MIN_REST_FRAMES
+    path refitted as they move, t1 with it: fit.segment's ``x1v1_t``).
+    Propagated to first order: along ``v1_hat`` the path has gone ``s(tau)
+    = |v1| tau - (5/7) mu_r g tau^2 / 2``, ``tau`` the time since ``t1``
+    capped at the stop, and ``ds / d|v1| = tau``."""
     g = seg.geometry_cov or {}
-    if seg.x2 is None or seg.v1 is None or seg.x1 is None or g.get("rest") is None or not len(g["rest"]):
+    if seg.x2 is None or seg.v1 is None or seg.x1 is None or g.get("rest") is None or not len(g["rest"]) \
+            or not np.isfinite(seg.t1):
         return float("nan")
     t, xy = np.asarray(t, float), np.asarray(xy, float)
     decel = 5.0 / 7.0 * params.mu_r * params.g
     v1 = np.asarray(seg.v1, float)
     speed = float(np.hypot(*v1))
-    rest = np.asarray(g["rest"])
-    after = rest[t[rest] >= seg.t1 + speed / decel]
-    rest = after if len(after) >= MIN_REST_FRAMES else rest
-    x2 = np.mean(xy[rest], axis=0)
-    dx = x2 - np.asarray(seg.x1, float)
-    d = float(np.hypot(*dx))
-    r = rolling_speed(seg.x1, x2, params)
     w = segment_weights(seg, len(t))
-    if speed <= 0 or d <= 0 or r <= 0 or w is None or any(k not in w for k in ("x1", "v1")):
+    if speed <= 0 or decel <= 0 or w is None or any(k not in w for k in ("x1", "v1")):
         return float("nan")
+    rest = np.asarray(g["rest"])
+    e = v1 / speed
+    x1 = np.asarray(seg.x1, float)
+    xbar = np.mean(xy[rest], axis=0)
+    tau = np.clip(t[rest] - seg.t1, 0.0, speed / decel)
+    s = speed * tau - 0.5 * decel * tau**2
+    resid = float(e @ (xbar - x1)) - float(np.mean(s))
     w2 = np.zeros(len(t))
     w2[rest] = 1.0 / len(rest)
     W = np.stack([w["x1"], w2, w["v1"]])
@@ -789,15 +794,19 @@ def rolling_speed_z(seg, params: BallParams, sigma: float, t, xy, meas=None, noi
         C = linear_covariance(meas, W, *noise)
     else:
         C = sigma**2 * np.kron(W @ W.T, np.eye(2))
+    C = np.pad(C, ((0, 1), (0, 1)))  # (x1, xbar, v1, t1)
     if g.get("x1v1_t") is not None:
-        idx = np.r_[0:2, 4:6]
+        idx = np.r_[0:2, 4:7]
         C[np.ix_(idx, idx)] += g["x1v1_t"]
-    e = dx / d
-    grad = np.r_[decel / r * e, -decel / r * e, v1 / speed]
+    # d resid: -e.dx1 + e.dxbar - mean(tau) e.dv1 + (xbar - x1)_perp.dv1 / |v1| + mean(ds/dt1) dt1
+    perp = (np.eye(2) - np.outer(e, e)) @ (xbar - x1) / speed
+    moving = (t[rest] - seg.t1 > 0) & (t[rest] - seg.t1 < speed / decel)
+    ds_dt1 = float(np.mean(np.where(moving, -(speed - decel * tau), 0.0)))
+    grad = np.r_[-e, e, -float(np.mean(tau)) * e + perp, -ds_dt1]
     var = float(grad @ C @ grad)
     if not var > 0:
         return float("nan")
-    return float((speed - r) / np.sqrt(var))
+    return float(-resid / np.sqrt(var))
 
 
 def line_offset(x0, x1, x2, C) -> tuple[float, float]:

@@ -431,7 +431,7 @@ def test_rolling_speed_refuses_a_slide_into_a_rest_found_early():
     # a case-2 slide into the rest whose rest is found 66 ms before the
     # stop.  The segmentation ends sliding early and bridges to the rest
     # with a short "rolling" piece; x1 is apart from x2, so the line's case
-    # 3 answers, at a speed that would roll far past the rest (eq. 19).
+    # 3 answers, at a speed that would roll far past the rest (eq. 18-19).
     # Refused; the segmentation's slide into the rest answers right.
     from cuespin.fit import decide
     from cuespin.fit.decide import t1_in_view
@@ -450,7 +450,7 @@ def test_rolling_speed_refuses_a_slide_into_a_rest_found_early():
         got = paper_from_segments(seg, tr.t, tr.xy, p, tr.sigma, dt)
         if got.rolling_speed is None:
             continue  # case 2 by stop_apart: not the line
-        assert got.status == "failed" and "eq. 19" in got.reason, got.reason
+        assert got.status == "failed" and "eq. 18-19" in got.reason, got.reason
         assert got.rolling_speed.statistic > 2 * got.rolling_speed.threshold
         # Without the test the line's answer is many of its errors off.
         try:
