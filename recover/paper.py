@@ -31,8 +31,8 @@ from cuespin.recover.mle import MIN_SLIDING_FRAMES
 
 # The rolling-speed test (rolling_speed_asked) is asked under an inter-frame
 # codec's errors when their short correlation time spans at most this many
-# frames: measured to hold at 5 (240 fps, 0 of 55), not at 10 (480 fps, 5
-# of 45); 8 lies between, not measured there (docs/measurements.md, v1chk).
+# frames: measured to hold at 5 (240 fps, 0 of 55), not at 10 (480 fps, 7
+# of 62); 8 lies between, not measured there (docs/measurements.md, v1chk).
 ROLL_SPEED_MAX_CORR_FRAMES = 8.0
 # A candidate satisfies eq. 37 when its predicted x1 is within this many
 # position-noise sigmas of the measured one (the measured x1 is itself an
@@ -716,15 +716,16 @@ def rolling_speed_asked(noise, frame_dt: float) -> bool:
     """Is :func:`rolling_speed_z`'s error stated under these errors?
     ``noise`` is the maximum-likelihood fit's ``(ar1, scale[, acf])``
     (recover.estimate.mle_noise).  Measured (docs/measurements.md, v1chk):
-    independent errors (rolls_to_rest_tracks, 988 tracks, 0 beyond the
-    threshold held out), and an inter-frame codec's correlation
-    (recover.mle.INTER_CODEC_ACF, through recover.estimate) at 60-240 fps,
-    0 of 139 (max |z| 2.13); at 480 fps, where its short correlation time
-    spans 10 frames, 5 of 45 at |z| 7-61 (the breakpoints' share, from the
-    profile's curvature, takes the frames as independent).  So asked
-    without a correlation in time, or with a codec's whose short time spans
-    at most :data:`ROLL_SPEED_MAX_CORR_FRAMES` frames; not under AR(1)
-    errors (a lossy intra-frame codec's: not measured)."""
+    independent errors (rolls_to_rest_tracks held out, 1 of 925 beyond the
+    threshold; through recover.estimate 0 of 408); an inter-frame codec's
+    correlation (recover.mle.INTER_CODEC_ACF, through recover.estimate) at
+    60-240 fps 0 of 139 (max |z| 1.77); at 480 fps, where its short
+    correlation time spans 10 frames, 7 of 62 at |z| up to 59 (the
+    breakpoints' share, from the profile's curvature, takes the frames as
+    independent).  So asked without a correlation in time, or with a
+    codec's whose short time spans at most :data:`ROLL_SPEED_MAX_CORR_FRAMES`
+    frames; not under AR(1) errors (a lossy intra-frame codec's: not
+    measured)."""
     ar1 = float(noise[0]) if len(noise) > 0 else 0.0
     acf = noise[2] if len(noise) > 2 else None
     if ar1 > 0:
