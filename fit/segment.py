@@ -528,7 +528,11 @@ def _geometry_cov(tf, xf, t0, t1, beyond, decel, v1, s2, n_rest, v0=None):
     breakpoints' shared term ``x0x1_t``).  ``w`` holds
     the coefficients' ``(x0, v0, a_s)`` weights on the fitted frames,
     ``A (A^T A)^-1`` (shape (n, 3); ``x0 = sum_i w[i, 0] xf_i``), and ``w1``
-    x1's, ``A (A^T A)^-1 c1``, for their covariance under other errors.
+    x1's, ``A (A^T A)^-1 c1``, for their covariance under other errors;
+    ``wv1`` likewise the sliding velocity's at the breakpoint, ``v1 = v0 +
+    a_s tau1`` (m/s per m), and ``x1v1_t`` the breakpoints' share of
+    ``(x1, v1, t1)``'s covariance (5 x 5; m, m/s, s), the path refitted as
+    they move.
     """
     tau = np.maximum(tf - t0, 0.0)
     tau1 = max(t1 - t0, 0.0)
@@ -540,22 +544,36 @@ def _geometry_cov(tf, xf, t0, t1, beyond, decel, v1, s2, n_rest, v0=None):
     c0[0] = 1.0
     c1 = np.r_[1.0, tau1, 0.5 * tau1**2][:len(cols)]
     I2 = np.eye(2)
+    cv1 = np.r_[0.0, 1.0, tau1][:len(cols)]  # v1 = v0 + a_s tau1
     out = {"x0": s2 * float(c0 @ M @ c0) * I2, "x1": s2 * float(c1 @ M @ c1) * I2,
            "x0x1": s2 * float(c0 @ M @ c1) * I2, "x2": None,
-           "w": A @ M, "w1": A @ (M @ c1), "x1_t1": np.zeros((2, 2)), "x0_t0": np.zeros((2, 2)),
-           "x0x1_t": np.zeros((2, 2))}
+           "w": A @ M, "w1": A @ (M @ c1), "wv1": A @ (M @ cv1), "x1_t1": np.zeros((2, 2)),
+           "x0_t0": np.zeros((2, 2)), "x0x1_t": np.zeros((2, 2)),
+           "x1v1_t": np.zeros((5, 5))}
     if 0 < tau1 and t1 < beyond:
         # The Hessian of the profile over (t0, t1), a frame either side: t1's
         # marginal variance, with t0 free too (they trade off).
         h = float(np.median(np.diff(tf)))
         g0, g1 = np.meshgrid([-h, 0.0, h], [-h, 0.0, h], indexing="ij")
-        S = _solve_many(tf, xf, t0 + g0.ravel(), t1 + g1.ravel(), decel)[0].reshape(3, 3)
+        S, coef, _ = _solve_many(tf, xf, t0 + g0.ravel(), t1 + g1.ravel(), decel)
+        S = S.reshape(3, 3)
         H = np.array([[S[2, 1] - 2 * S[1, 1] + S[0, 1], (S[2, 2] - S[2, 0] - S[0, 2] + S[0, 0]) / 4],
                       [0.0, S[1, 2] - 2 * S[1, 1] + S[1, 0]]]) / h**2
         H[1, 0] = H[0, 1]
         if np.linalg.det(H) > 0 and H[0, 0] > 0:
             Ht = 2 * s2 * np.linalg.inv(H)  # covariance of (t0, t1)
             out["x1_t1"] = Ht[1, 1] * np.outer(v1, v1)
+            # (x1, v1, t1) along the profile (the path refitted at each
+            # breakpoint), central differences over (t0, t1): their share of
+            # the breakpoints' errors, J Ht J^T (recover.paper.rolling_speed_z).
+            # (x1 along v1 and v1 along a_s, the path held, read |v1| against
+            # eq. 19's rolling speed 9 times too loose: docs/measurements.md, v1chk.)
+            tau1s = (t1 + g1.ravel()) - (t0 + g0.ravel())
+            x1s = coef[:, 0] + coef[:, 1] * tau1s[:, None] + 0.5 * coef[:, 2] * tau1s[:, None] ** 2
+            v1s = coef[:, 1] + coef[:, 2] * tau1s[:, None]
+            q = np.concatenate([x1s, v1s, (t1 + g1.ravel())[:, None]], axis=1).reshape(3, 3, 5)
+            J = np.stack([(q[2, 1] - q[0, 1]) / (2 * h), (q[1, 2] - q[1, 0]) / (2 * h)], axis=1)
+            out["x1v1_t"] = J @ Ht @ J.T
             out["x1"] = out["x1"] + out["x1_t1"]
             if v0 is not None:
                 # x0 is the fitted path at t0: t0's error moves it along v0.

@@ -391,8 +391,17 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
             # from the fit's; case 2's answer within 0.6 stated errors;
             # paper32).  The slide into the rest's answer is then held to
             # the fit like any other, not chosen for agreeing.
+            # The breakpoint's line answer refused because its sliding speed
+            # does not roll to the rest (eq. 19; recover.paper.rolling_speed_z)
+            # leaves the same two readings: sliding did not end at x1, so the
+            # segmentation's other one, the slide into the rest, is taken
+            # (realistic H.264 36/38: the rest found 66 ms early, the line's
+            # answer 7.7 stated errors off; case 2's 0.68; docs/measurements.md,
+            # p38, v1chk).
+            if paper.rolling_speed is not None:
+                decisions["rolling_speed_differs"] = paper.rolling_speed
             decisions["breakpoint_differs"] = sliding_times_differ(sliding_time_z(paper, mle, params))
-            if decisions["breakpoint_differs"]:
+            if decisions["breakpoint_differs"] or decisions.get("rolling_speed_differs"):
                 chosen = seg.unended
                 paper = paper_of(chosen)
         shape = paper.trajectory == "parabola" if paper.trajectory else None

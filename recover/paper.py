@@ -24,11 +24,16 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from cuespin.fit.conics import fit_parabola
-from cuespin.fit.decide import stop_apart
+from cuespin.fit.decide import rolling_speed_differs, stop_apart
 from cuespin.physics.motion import BallParams, z_cross
 from cuespin.physics.parabola import Parabola
 from cuespin.recover.mle import MIN_SLIDING_FRAMES
 
+# The rolling-speed test (rolling_speed_asked) is asked under an inter-frame
+# codec's errors when their short correlation time spans at most this many
+# frames: measured to hold at 5 (240 fps, 0 of 55), not at 10 (480 fps, 7
+# of 62); 8 lies between, not measured there (docs/measurements.md, v1chk).
+ROLL_SPEED_MAX_CORR_FRAMES = 8.0
 # A candidate satisfies eq. 37 when its predicted x1 is within this many
 # position-noise sigmas of the measured one (the measured x1 is itself an
 # estimate; callers add a frame's travel); every candidate within it is kept.
@@ -102,7 +107,9 @@ class PaperResult:
     than one (status ``ambiguous``).  ``trajectory`` is ``parabola`` or ``line``.
     ``stderr`` holds standard errors of ``v0`` and ``w0`` when ``ok``.
     ``stop_apart`` is fit.decide.stop_apart's answer when case 2 was asked
-    (None: not asked), for a refit to keep.  ``cov`` the covariance of
+    (None: not asked), for a refit to keep.  ``rolling_speed`` is
+    fit.decide.rolling_speed_differs's Decision when the line's case 3 was
+    asked it (:func:`rolling_speed_z`; None: not asked).  ``cov`` the covariance of
     ``(v0, w0)`` (4 x 4; m/s and rad/s) whose diagonal ``stderr`` holds,
     for statistics of the answer (:func:`sliding_time_stderr`).
     """
@@ -120,6 +127,7 @@ class PaperResult:
     stderr: dict = field(default_factory=dict)
     stop_apart: bool | None = None
     cov: np.ndarray | None = None
+    rolling_speed: object | None = None
 
     def __bool__(self):
         return self.status == "ok"
@@ -296,14 +304,16 @@ def recover_line(x0, x1, x2, params: BallParams, tol: float, heading=None,
 
 def segment_weights(seg, n: int) -> dict | None:
     """The segmentation's estimates as weights on the track's ``n`` frames
-    (fit.segment: ``geometry_cov``): ``x0``, ``x1`` and, with a rest in
-    view, ``x2`` (its frames' mean), each an array (n,) with ``estimate = w
-    @ xy``; None when the segmentation kept no weights."""
+    (fit.segment: ``geometry_cov``): ``x0``, ``x1``, the sliding velocity
+    at the breakpoint ``v1`` (m/s per m) and, with a rest in view, ``x2``
+    (its frames' mean), each an array (n,) with ``estimate = w @ xy``; None
+    when the segmentation kept no weights."""
     g = seg.geometry_cov or {}
     if g.get("w") is None or not len(g["frames"]) or int(np.max(g["frames"])) >= n:
         return None
     out = {}
-    for name, col in (("x0", g["w"][:, 0]), ("x1", g["w1"])):
+    cols = [("x0", g["w"][:, 0]), ("x1", g["w1"])] + ([("v1", g["wv1"])] if g.get("wv1") is not None else [])
+    for name, col in cols:
         out[name] = np.zeros(n)
         np.add.at(out[name], g["frames"], col)
     if g.get("rest") is not None and len(g["rest"]):
@@ -712,8 +722,126 @@ def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, n
         idx = np.r_[0:2, 4:6]
         x = np.r_[seg.x0, seg.x2]
         return replace(with_stderr(solve_case2(x), solve_case2, x, geo[np.ix_(idx, idx)], params), stop_apart=False)
+    # Case 3: sliding ends at x1 and the ball rolls to x2 (eq. 16-19), so
+    # the segmentation's sliding speed there must be the one that rolls
+    # |x2 - x1| (eq. 19; eq. 25 and 27 on the line): asked of the rest's
+    # frames against the rolling path from x1 at v1 (eq. 18), in their
+    # errors (rolling_speed_z, fit.decide.rolling_speed_differs).
+    # Realistic H.264 36/38: the rest found 66 ms before the stop, the
+    # breakpoint 100 ms early and x1 10 mm short, |v1| 0.198 m/s where
+    # 9.6 mm of rolling allows 0.037 (docs/measurements.md, p38, v1chk).
+    # (Rolling from the strike, x1 = x0, is not asked: not calibrated; nor
+    # where the errors' correlation in time is not the one measured:
+    # rolling_speed_asked.)
+    rolls = rolling_speed_differs(rolling_speed_z(seg, params, sigma, t, xy, meas, noise)) \
+        if seg.t1 > seg.t0 and rolling_speed_asked(noise, frame_dt) else None
+    if rolls is not None and rolls.yes:
+        return PaperResult("failed", f"the slide's speed where it ends, |v1| {np.hypot(*seg.v1):.3f} m/s, rolls "
+                           f"past the rest (eq. 18-19: {rolling_speed(seg.x1, seg.x2, params):.3f} m/s rolls the "
+                           f"{np.hypot(*(seg.x2 - seg.x1)) * 1e3:.1f} mm from x1 to it; the rest's frames "
+                           f"{rolls.statistic:+.1f} of their errors from the rolling path): x1 is not where "
+                           f"sliding ended ({why_line})", "line", x0=seg.x0, x1=seg.x1, x2=seg.x2,
+                           rolling_speed=rolls)
     x = np.r_[seg.x0, seg.x1, seg.x2]
-    return with_stderr(solve_line(x), solve_line, x, geo, params)
+    return replace(with_stderr(solve_line(x), solve_line, x, geo, params), rolling_speed=rolls)
+
+
+def rolling_speed_asked(noise, frame_dt: float) -> bool:
+    """Is :func:`rolling_speed_z`'s error stated under these errors?
+    ``noise`` is the maximum-likelihood fit's ``(ar1, scale[, acf])``
+    (recover.estimate.mle_noise).  Measured (docs/measurements.md, v1chk):
+    independent errors (rolls_to_rest_tracks held out, 1 of 925 beyond the
+    threshold; through recover.estimate 0 of 408); an inter-frame codec's
+    correlation (recover.mle.INTER_CODEC_ACF, through recover.estimate) at
+    60-240 fps 0 of 139 (max |z| 1.77); at 480 fps, where its short
+    correlation time spans 10 frames, 7 of 62 at |z| up to 59 (the
+    breakpoints' share, from the profile's curvature, takes the frames as
+    independent).  So asked without a correlation in time, or with a
+    codec's whose short time spans at most :data:`ROLL_SPEED_MAX_CORR_FRAMES`
+    frames; not under AR(1) errors (a lossy intra-frame codec's: not
+    measured)."""
+    ar1 = float(noise[0]) if len(noise) > 0 else 0.0
+    acf = noise[2] if len(noise) > 2 else None
+    if ar1 > 0:
+        return False
+    return acf is None or float(acf[2]) / frame_dt <= ROLL_SPEED_MAX_CORR_FRAMES
+
+
+def rolling_speed(x1, x2, params: BallParams) -> float:
+    """Eq. 19 (eq. 16-17 integrated): the speed (m/s) at ``x1`` that rolls
+    to rest at ``x2``, ``sqrt(2 (5/7) mu_r g |x2 - x1|)``."""
+    d = float(np.hypot(*(np.asarray(x2, float) - np.asarray(x1, float))))
+    return float(np.sqrt(2.0 * 5.0 / 7.0 * params.mu_r * params.g * d))
+
+
+def rolling_speed_z(seg, params: BallParams, sigma: float, t, xy, meas=None, noise=(0.0, 1.0)) -> float:
+    """Does the ball roll from the breakpoint to the rest as case 3 says?
+    The rest's frames' mean position along the rolling direction against
+    where the rolling path from the segmentation's ``x1`` and ``v1`` puts
+    the ball at those frames' times (eq. 18, stopped at eq. 17's ``t2``:
+    past it, at eq. 19's ``x2``), in the standard error of their difference
+    (dimensionless; positive: the rest short of the path's; NaN where not
+    defined: no rest, ``v1`` zero, no weights).
+
+    Eq. 19 alone, ``|v1|`` against ``sqrt(2 (5/7) mu_r g |x2 - x1|)``, read
+    the rest's first frames, where the ball still creeps within its noise
+    (or a track ending before the stop), as the rest: its null's z had mean
+    1.04 (48 simulated case 1/3/5 tracks), and right line answers of
+    sliding_tracks cut 0.07-0.2 s before the stop read 4-7.5
+    (docs/measurements.md, v1chk).  Eq. 18 at the rest's own frames holds
+    for those frames too.  Where the breakpoint is early on a slide into the
+    rest (realistic H.264 36/38: |v1| 0.198 m/s where the 9.6 mm to the rest
+    allow 0.037) the path runs on far past the rest.
+
+    ``x1``, ``v1`` and the rest's mean are linear in the track's frames
+    ``t``, ``xy`` (s, m; :func:`segment_weights`): their covariance is
+    recover.measurements.linear_covariance's under ``meas`` and ``noise``
+    (the maximum-likelihood fit's error model, as
+    :func:`geometry_covariance`), or the frames independent at ``sigma``
+    (m, per axis) without ``meas``; plus the breakpoints' own share (the
+    path refitted as they move, t1 with it: fit.segment's ``x1v1_t``).
+    Propagated to first order: along ``v1_hat`` the path has gone ``s(tau)
+    = |v1| tau - (5/7) mu_r g tau^2 / 2``, ``tau`` the time since ``t1``
+    capped at the stop, and ``ds / d|v1| = tau``."""
+    g = seg.geometry_cov or {}
+    if seg.x2 is None or seg.v1 is None or seg.x1 is None or g.get("rest") is None or not len(g["rest"]) \
+            or not np.isfinite(seg.t1):
+        return float("nan")
+    t, xy = np.asarray(t, float), np.asarray(xy, float)
+    decel = 5.0 / 7.0 * params.mu_r * params.g
+    v1 = np.asarray(seg.v1, float)
+    speed = float(np.hypot(*v1))
+    w = segment_weights(seg, len(t))
+    if speed <= 0 or decel <= 0 or w is None or any(k not in w for k in ("x1", "v1")):
+        return float("nan")
+    rest = np.asarray(g["rest"])
+    e = v1 / speed
+    x1 = np.asarray(seg.x1, float)
+    xbar = np.mean(xy[rest], axis=0)
+    tau = np.clip(t[rest] - seg.t1, 0.0, speed / decel)
+    s = speed * tau - 0.5 * decel * tau**2
+    resid = float(e @ (xbar - x1)) - float(np.mean(s))
+    w2 = np.zeros(len(t))
+    w2[rest] = 1.0 / len(rest)
+    W = np.stack([w["x1"], w2, w["v1"]])
+    if meas is not None:
+        from cuespin.recover.measurements import linear_covariance
+        C = linear_covariance(meas, W, *noise)
+    else:
+        C = sigma**2 * np.kron(W @ W.T, np.eye(2))
+    C = np.pad(C, ((0, 1), (0, 1)))  # (x1, xbar, v1, t1)
+    if g.get("x1v1_t") is not None:
+        idx = np.r_[0:2, 4:7]
+        C[np.ix_(idx, idx)] += g["x1v1_t"]
+    # d resid: -e.dx1 + e.dxbar - mean(tau) e.dv1 + (xbar - x1)_perp.dv1 / |v1| + mean(ds/dt1) dt1
+    perp = (np.eye(2) - np.outer(e, e)) @ (xbar - x1) / speed
+    moving = (t[rest] - seg.t1 > 0) & (t[rest] - seg.t1 < speed / decel)
+    ds_dt1 = float(np.mean(np.where(moving, -(speed - decel * tau), 0.0)))
+    grad = np.r_[-e, e, -float(np.mean(tau)) * e + perp, -ds_dt1]
+    var = float(grad @ C @ grad)
+    if not var > 0:
+        return float("nan")
+    return float(-resid / np.sqrt(var))
 
 
 def line_offset(x0, x1, x2, C) -> tuple[float, float]:

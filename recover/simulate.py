@@ -154,6 +154,29 @@ def case2_tracks(n: int, seed: int, fps_grid=FPS_GRID, sigma_grid=SIGMA_GRID_M, 
         yield simulate_track(shot, params, fps, sigma, rng, exposure, t_end=phases(shot, params).t2 + 0.3)
 
 
+def rolls_to_rest_tracks(n: int, seed: int, presets=("case1", "case3", "case5"), rest_s=(0.6, 2.5),
+                         fps_grid=FPS_GRID, sigma_grid=SIGMA_GRID_M, blur: bool = True):
+    """``n`` tracks of straight shots that slide, then roll to a rest in
+    view (the sampler's presets: paper cases 1, 3, 5; the line method's
+    case with ``x1`` apart from ``x2``), each slowed (``v0`` and ``w0`` by
+    one factor, so the case is kept) to come to rest a uniform
+    ``rest_s[0]``-``rest_s[1]`` seconds after the strike when it would
+    take longer (as a clip sees a slow shot to its rest: the presets'
+    0.5-3 m/s roll for up to 19 s), seen to 0.3 s after the rest.  Cycles
+    over frame rates and noise levels as the others.  Yields
+    :class:`SimTrack`."""
+    from dataclasses import replace
+    rng = np.random.default_rng(seed)
+    for i in range(n):
+        fps, sigma = _grid_point(i, fps_grid, sigma_grid)
+        shot, params = sample_shot(rng, presets[i % len(presets)])
+        ph = phases(shot, params)
+        f = min(1.0, float(rng.uniform(*rest_s)) / (ph.t2 - shot.t0))
+        shot = replace(shot, v0=tuple(f * np.asarray(shot.v0)), w0=tuple(f * np.asarray(shot.w0)))
+        exposure = _exposure(rng, fps, blur)
+        yield simulate_track(shot, params, fps, sigma, rng, exposure, t_end=phases(shot, params).t2 + 0.3)
+
+
 def short_slip_tracks(n: int, seed: int, frames=(0.2, 1.0), fps_grid=(60.0, 120.0, 240.0),
                       sigma_grid=SIGMA_GRID_M, blur: bool = True, to_rest: bool = False):
     """``n`` tracks of shots that slide for ``frames`` (a uniform range, in
