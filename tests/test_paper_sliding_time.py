@@ -104,6 +104,7 @@ def _touched_runs(n: int, seed: int = 5):
 
 
 def test_where_the_trusted_frames_cannot_know_the_paper_is_degenerate():
+    from cuespin.recover.estimate import trusted_frames_refuse
     # The fit on the frames left after the cue's touched run cannot determine
     # v0 (the run covers the whole slide): the paper's answer, whose
     # segmentation took the run's frames, is degenerate, right (track 4,
@@ -117,7 +118,11 @@ def test_where_the_trusted_frames_cannot_know_the_paper_is_degenerate():
         tr, xy, touched = tracks[k]
         est = estimate(tr.t, xy, np.full(len(tr.t), tr.sigma), tr.params, tr.exposure_s, lossless=False,
                        inter_frame=True, touched=touched)
-        assert est.mle.verdicts.get("v0_determined") is False
+        # Which verdict refuses depends on where the ill-conditioned fit ends
+        # in its flat valley, which moved between machines (numpy/BLAS
+        # builds; docs/measurements.md, determ): v0 not determined, or the
+        # slide seen in fewer than MIN_SLIDING_FRAMES trusted frames.
+        assert est.mle.status == "degenerate" and trusted_frames_refuse(est.mle), est.mle.verdicts
         assert est.paper.status == "degenerate" and est.paper.reason == est.mle.reason, est.paper.reason
 
 
