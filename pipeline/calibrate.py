@@ -965,7 +965,18 @@ RAW_FLAT_SHARE = 0.05
 # sides) over the share of the same pixels equal in the run's second frame by
 # more than NOISE_FLAT_EXCESS.  Where that share is FROZEN_SHARE or more the
 # noise says nothing and RAW_FLAT_SHARE decides as for one frame.  Measured
-# (lossy12, docs/measurements.md): MEASURED_PLACEHOLDER
+# (lossy12, docs/measurements.md) on the random tables 18000-18059 with
+# cushions (33), the still table's first two frames: lossless at noise 0.2,
+# 0.3, 0.5 and as drawn (2-4) flat minus equal -0.007..+0.007 (flat shares
+# 0.92, 0.55, 0.14, 0.00; the renderer's realistic table, noise 0.2-2,
+# -0.79..0.00: its felt's texture parts neighbours);
+# decoded codec frames, 8-frame streams: JPEG 95 0.051-0.18, MJPG (OpenCV's
+# writer) 0.081-0.61, H.264 CRF 18 0.20-0.51, CRF 20 0.12-0.27; 0.02 is about
+# the geometric middle of 0.007 and 0.051.  H.264 CRF 23 and 28 code the
+# later frames as copies: equal 0.961-1.000 (flat -0.07..0.00 beyond it),
+# where lossless noise 0.2 reads 0.92-0.93 and 0.15 0.99: FROZEN_SHARE
+# between 0.93 and 0.961, so noise under about 0.18 levels reads lossy as
+# before (flat shares 0.92-1.00 there).
 NOISE_FLAT_EXCESS = 0.02
 FROZEN_SHARE = 0.95
 
