@@ -644,7 +644,9 @@ def still_moved(b: np.ndarray, b0: np.ndarray) -> float:
 def still_mean(frames, n: int = STILL_FRAMES, first: list | None = None):
     """The mean of the first ``n`` still frames in a row of ``frames`` (an
     iterable of images), else of the longest still run in it.  ``first``,
-    when given, gets the run's first frame (as decoded).
+    when given, gets the run's first frame (as decoded) and, when the run
+    has two or more, its second (the same table again: what the sensor's
+    noise alone changes, :func:`_video_lossy`).
 
     Returns
     -------
@@ -655,8 +657,8 @@ def still_mean(frames, n: int = STILL_FRAMES, first: list | None = None):
     start : int
         The run's first frame (index in ``frames``).
     """
-    best = (None, 0, 0, None)
-    total = b0 = img0 = None
+    best = (None, 0, 0, None, None)
+    total = b0 = img0 = img1 = None
     count = start = 0
     for k, img in enumerate(frames):
         img = img if img.ndim == 3 else img[:, :, None]
@@ -664,22 +666,23 @@ def still_mean(frames, n: int = STILL_FRAMES, first: list | None = None):
         if total is not None and still_moved(b, b0) <= 1.0:
             total += img
             count += 1
+            img1 = img if count == 2 else img1
         else:
             if count > best[1]:
-                best = (total, count, start, img0)
-            total, b0, count, start, img0 = img.astype(np.float32), b, 1, k, img
+                best = (total, count, start, img0, img1)
+            total, b0, count, start, img0, img1 = img.astype(np.float32), b, 1, k, img, None
         if count >= n:
             break
     if count > best[1]:
-        best = (total, count, start, img0)
+        best = (total, count, start, img0, img1)
     if best[0] is None:
         return None, 0, 0
     if first is not None:
-        first.append(best[3])
+        first.extend(f for f in best[3:] if f is not None)
     return (best[0] / best[1]).astype(np.float32), best[1], best[2]
 
 
-def reference_frame(path, n: int = 9) -> tuple[np.ndarray, np.ndarray]:
+def reference_frame(path, n: int = 9) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """The table's image: the mean of the video's first ``STILL_FRAMES``
     still frames in a row (:func:`still_mean`, read from the start, at most
     ``STILL_SCAN_FRAMES``); with fewer than ``STILL_MIN_FRAMES`` of them, the
@@ -693,7 +696,11 @@ def reference_frame(path, n: int = 9) -> tuple[np.ndarray, np.ndarray]:
     single : ndarray
         One decoded frame of those: the still run's first, else the first of
         the spread frames (what the codec left: :func:`detect_corners`'
-        ``single``)."""
+        ``single``).
+    single_next : ndarray or None
+        The still run's second frame (the sensor's noise alone changed it:
+        :func:`detect_corners`' ``single_next``); None without a still run
+        of 16 or more."""
     from cuespin.videoio import quiet_native_stderr
 
     def opened():
@@ -718,7 +725,7 @@ def reference_frame(path, n: int = 9) -> tuple[np.ndarray, np.ndarray]:
     finally:
         cap.release()
     if count >= STILL_MIN_FRAMES:
-        return mean, first[0]
+        return mean, first[0], first[1]
     cap = opened()      # read again from the start (a finished capture does not always rewind)
     try:
         count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
@@ -742,7 +749,7 @@ def reference_frame(path, n: int = 9) -> tuple[np.ndarray, np.ndarray]:
         cap.release()
     if not frames:
         raise InputError(f"{path}: no frame could be decoded")
-    return np.median(np.stack(frames), axis=0).astype(np.float32), frames[0]
+    return np.median(np.stack(frames), axis=0).astype(np.float32), frames[0], None
 
 
 def _felt_distance(img: np.ndarray) -> tuple[np.ndarray, float]:
@@ -952,6 +959,27 @@ CODEC_RING_LEVELS = 0.1
 BAND_COHERENT_Z = 4.2
 RAW_FLAT_SHARE = 0.05
 
+# A video whose container says lossless is read lossy when its still run's
+# first frame is flatter in space than its noise leaves it in time
+# (``_video_lossy``): the felt's flat share (``_flat_share``, median over the
+# sides) over the share of the same pixels equal in the run's second frame by
+# more than NOISE_FLAT_EXCESS.  Where that share is FROZEN_SHARE or more the
+# noise says nothing and RAW_FLAT_SHARE decides as for one frame.  Measured
+# (lossy12, docs/measurements.md) on the random tables 18000-18059 with
+# cushions (33), the still table's first two frames: lossless at noise 0.2,
+# 0.3, 0.5 and as drawn (2-4) flat minus equal -0.007..+0.007 (flat shares
+# 0.92, 0.55, 0.14, 0.00; the renderer's realistic table, noise 0.2-2,
+# -0.79..0.00: its felt's texture parts neighbours);
+# decoded codec frames, 8-frame streams: JPEG 95 0.051-0.18, MJPG (OpenCV's
+# writer) 0.081-0.61, H.264 CRF 18 0.20-0.51, CRF 20 0.12-0.27; 0.02 is about
+# the geometric middle of 0.007 and 0.051.  H.264 CRF 23 and 28 code the
+# later frames as copies: equal 0.961-1.000 (flat -0.07..0.00 beyond it),
+# where lossless noise 0.2 reads 0.92-0.93 and 0.15 0.99: FROZEN_SHARE
+# between 0.93 and 0.961, so noise under about 0.18 levels reads lossy as
+# before (flat shares 0.92-1.00 there).
+NOISE_FLAT_EXCESS = 0.02
+FROZEN_SHARE = 0.95
+
 # The outline's noses are refused on a frame no lossy codec touched (the
 # felt's flat share at most RAW_FLAT_SHARE) when the second-largest side's
 # faint step (``cushion_noses``' ``hidden``, sides whose step is at least
@@ -1109,10 +1137,12 @@ def _felt_flat_shares(img: np.ndarray, sides: list) -> list:
     return [_flat_share(img, P[:, : max(len(offs) // 3, 2)]) for _, _, offs, P in _inward_samples(sides)]
 
 
-def _flat_share(img: np.ndarray, P: np.ndarray) -> float:
+def _flat_share(img: np.ndarray, P: np.ndarray, other: np.ndarray | None = None) -> float:
     """The share of the pixels at sample points ``P`` (px, any shape x 2) equal
     in every channel to their right-hand neighbour: near 1 where a lossy codec
-    flattened the cloth into constant blocks, low on noisy raw frames."""
+    flattened the cloth into constant blocks, low on noisy raw frames.  With
+    ``other`` (an image of the same size): equal to the same pixel there
+    instead."""
     im = np.asarray(img)
     if im.ndim == 2:
         im = im[:, :, None]
@@ -1121,7 +1151,10 @@ def _flat_share(img: np.ndarray, P: np.ndarray) -> float:
     q = q[(q[:, 0] >= 0) & (q[:, 0] < w - 1) & (q[:, 1] >= 0) & (q[:, 1] < h)]
     if len(q) == 0:
         return 0.0
-    return float(np.all(im[q[:, 1], q[:, 0]] == im[q[:, 1], q[:, 0] + 1], axis=-1).mean())
+    if other is None:
+        return float(np.all(im[q[:, 1], q[:, 0]] == im[q[:, 1], q[:, 0] + 1], axis=-1).mean())
+    ot = np.asarray(other).reshape(im.shape)
+    return float(np.all(im[q[:, 1], q[:, 0]] == ot[q[:, 1], q[:, 0]], axis=-1).mean())
 
 
 def edge_points(img: np.ndarray, quad: np.ndarray, contour: np.ndarray,
@@ -1759,7 +1792,8 @@ def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = Tru
                    noses: bool = True, robust: bool = True, pattern_px: float = EDGE_PATTERN_PX,
                    lines: str = "auto",
                    kappa_pattern_k1: float = KAPPA_PATTERN_K1, refuse: bool = True,
-                   lossy: bool = False, single: np.ndarray | None = None) -> Detection:
+                   lossy: bool = False, single: np.ndarray | None = None,
+                   single_next: np.ndarray | None = None) -> Detection:
     """The playing surface's four corners in a frame (:class:`Detection`).
 
     Parameters
@@ -1815,12 +1849,18 @@ def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = Tru
     single : ndarray, optional
         One frame of the video ``img`` is a mean of (:func:`reference_frame`:
         the still run's first): where a mean hides what the codec did, that
-        frame's felt says it.  Its flat share over ``RAW_FLAT_SHARE`` makes
-        the frame lossy as ``lossy`` does (a phone's H.264 file transcoded to
-        FFV1 or PNG: a lossless container of codec frames), and the codec's
-        flat cloth (:func:`_codec_flattened`) is read from it (with the
-        mean's ringing beside the noses), not from the mean, whose averaged
-        frames have no equal neighbours left.
+        frame's felt says it.  Its flat share beyond its noise's
+        (:func:`_video_lossy`, with ``single_next``; without it, over
+        ``RAW_FLAT_SHARE``) makes the frame lossy as ``lossy`` does (a
+        phone's H.264 file transcoded to FFV1 or PNG: a lossless container
+        of codec frames), and the codec's flat cloth
+        (:func:`_codec_flattened`) is read from it (with the mean's ringing
+        beside the noses), not from the mean, whose averaged frames have no
+        equal neighbours left.
+    single_next : ndarray, optional
+        The still frame after ``single`` (:func:`reference_frame`): the same
+        table again, changed by the sensor's noise alone, which says how
+        flat that noise leaves the felt (:func:`_video_lossy`).
     """
     D, thr = _felt_distance(img)
     quad, contour = _felt_quad(D, thr)
@@ -1855,37 +1895,85 @@ def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = Tru
         # the single frame's felt where the mean's was read; the ringing the mean's (the codec's, the same in
         # every frame of a still run: mean12)
         flat_hidden = [(z, zr, ring, f) for (z, zr, ring, _), f in zip(hidden, _felt_flat_shares(single, felt_sides))]
-        lossy = lossy or bool(np.median(np.asarray(flat_hidden, dtype=float)[:, 3]) > RAW_FLAT_SHARE)
+        if single_next is not None:     # the video's own noise says how flat a lossless frame's felt is
+            lossy = lossy or _video_lossy(single, single_next, felt_sides)
+        else:
+            lossy = lossy or _frame_lossy(flat_hidden) or _frame_lossy(hidden)
+    elif on_noses:
+        lossy = lossy or _frame_lossy(hidden)
     return _outline_or_lines(outline, straddled, cushions, lines, hidden_z=_hidden_z(hidden) if on_noses else 0.0,
                              flattened=on_noses and _codec_flattened(flat_hidden),
-                             band_z=_band_z(hidden, coherent) if on_noses and not lossy else 0.0, refuse=refuse,
+                             band_z=_band_z(hidden, coherent, lossy) if on_noses else 0.0, refuse=refuse,
                              n_straddled=n_straddled if on_noses else 0,
-                             second_z=_second_side_z(hidden) if on_noses and not lossy else 0.0)
+                             second_z=_second_side_z(hidden, lossy) if on_noses else 0.0)
 
 
-def _band_z(hidden: list, coherent: list) -> float:
+def _frame_lossy(hidden: list) -> bool:
+    """Whether one frame, alone, says a lossy codec touched it: its felt's
+    flat share (``cushion_noses``' ``hidden``, median over the sides) over
+    ``RAW_FLAT_SHARE``.  Without a second still frame the sensor's noise
+    cannot be told from the felt's texture, so a clean lossless frame (noise
+    under about 0.5 levels) reads lossy here too (lossy12,
+    docs/measurements.md); :func:`_video_lossy` tells them apart."""
+    return bool(hidden) and bool(np.median(np.asarray(hidden, dtype=float)[:, 3]) > RAW_FLAT_SHARE)
+
+
+def _video_lossy(single: np.ndarray, single_next: np.ndarray, sides: list) -> bool:
+    """Whether a lossy codec touched a video's frames, from two still frames.
+
+    A lossless camera's quantised noise leaves a felt pixel equal to its
+    right-hand neighbour (:func:`_flat_share`) at most about as often as to
+    itself in the next still frame (the same table again: only the noise
+    changed; texture and shading make neighbours differ more, never less),
+    whatever the noise's level.  A codec flattens the cloth in space beyond
+    that (``NOISE_FLAT_EXCESS``).  Where the frames are equal nearly
+    everywhere (``FROZEN_SHARE``: noise under about 0.18 levels, or a
+    codec's frames coded as copies of the first) the noise says nothing, and
+    the one frame's flat share decides (:func:`_frame_lossy`).
+
+    Parameters
+    ----------
+    single, single_next : ndarray
+        The still run's first two frames (BGR or grey, as decoded).
+    sides : list
+        The felt outline's edge points (:func:`_felt_flat_shares`' ``sides``).
+
+    Returns
+    -------
+    bool
+    """
+    flat, same = [], []
+    for _, _, offs, P in _inward_samples(sides):
+        P = P[:, : max(len(offs) // 3, 2)]
+        flat.append(_flat_share(single, P))
+        same.append(_flat_share(single, P, single_next))
+    flat, same = float(np.median(flat)), float(np.median(same))
+    if same >= FROZEN_SHARE:
+        return flat > RAW_FLAT_SHARE
+    return flat - same > NOISE_FLAT_EXCESS
+
+
+def _band_z(hidden: list, coherent: list, lossy: bool | None = None) -> float:
     """The four sides' faint steps added where a band's outer edge would lie
-    (:func:`_coherent_z`), on a frame no lossy codec touched (the felt's flat
-    share, median over the sides, at most ``RAW_FLAT_SHARE``) and at least
-    ``HIDDEN_MIRROR_Z`` times the same sum on the felt's side of the nose;
-    else 0.  Compared with ``BAND_COHERENT_Z``."""
-    if not hidden or np.median(np.asarray(hidden, dtype=float)[:, 3]) > RAW_FLAT_SHARE:
+    (:func:`_coherent_z`), on a frame no lossy codec touched (``lossy``
+    False; None: the frame's own flat share says, :func:`_frame_lossy`) and
+    at least ``HIDDEN_MIRROR_Z`` times the same sum on the felt's side of
+    the nose; else 0.  Compared with ``BAND_COHERENT_Z``."""
+    if not hidden or (_frame_lossy(hidden) if lossy is None else lossy):
         return 0.0
     z = _coherent_z(coherent)
     return z if z >= HIDDEN_MIRROR_Z * max(_coherent_z(coherent, mirror=True), 1.0) else 0.0
 
 
-def _second_side_z(hidden: list) -> float:
+def _second_side_z(hidden: list, lossy: bool | None = None) -> float:
     """The second-largest side's faint step over the scatter (sides whose step
     is at least ``HIDDEN_MIRROR_Z`` x the felt side's ringing; the others 0),
-    on a frame no lossy codec touched (the felt's flat share, median over the
-    sides, at most ``RAW_FLAT_SHARE``); else 0.  Compared with
+    on a frame no lossy codec touched (``lossy`` False; None: the frame's own
+    flat share says, :func:`_frame_lossy`); else 0.  Compared with
     ``SECOND_SIDE_Z``."""
-    if len(hidden) < 2:
+    if len(hidden) < 2 or (_frame_lossy(hidden) if lossy is None else lossy):
         return 0.0
     h = np.asarray(hidden, dtype=float)
-    if np.median(h[:, 3]) > RAW_FLAT_SHARE:
-        return 0.0
     return float(np.sort(np.where(h[:, 1] >= HIDDEN_MIRROR_Z, h[:, 0], 0.0))[-2])
 
 
@@ -2476,8 +2564,9 @@ def calibrate_video(path, table: Table = Table(), corners=None, *, intrinsics=No
             kw["corner_height_m"] = nose_height_m
         return calibrate_clicked(corners, size, table, frame=frame, intrinsics=K, distortion=dist, fps=fps,
                                  camera_height_sigma_m=camera_height_sigma_m, use_balls=use_balls, **kw)
-    image, single = reference_frame(path)
+    image, single, single_next = reference_frame(path)
     return calibrate_frame(image, table, intrinsics=K, distortion=dist, fps=fps, lossy=_lossy(path), single=single,
+                           single_next=single_next,
                            felt_margin_m=felt_margin_m, felt_height_m=felt_height_m,
                            nose_height_m=nose_height_m, camera_height_sigma_m=camera_height_sigma_m,
                            use_balls=use_balls, **kw)
@@ -2670,7 +2759,7 @@ def calibrate_frame(frame: np.ndarray, table: Table = Table(), *, corners=None, 
                     distortion=None, felt_margin_m: float = 0.0, felt_height_m: float = 0.0,
                     nose_height_m: float = 0.0, camera_height_sigma_m: float = 0.0, use_balls: bool = True,
                     estimate_lens: bool = True, lossy: bool = False, single: np.ndarray | None = None,
-                    **kw) -> Calibration:
+                    single_next: np.ndarray | None = None, **kw) -> Calibration:
     """The camera found in one frame of the table (``calibrate_video``'s automatic
     path): the corners and the lens's bow from :func:`detect_corners`, the
     corners' order from :func:`assign_corners`, their error (the edges'
@@ -2680,8 +2769,8 @@ def calibrate_frame(frame: np.ndarray, table: Table = Table(), *, corners=None, 
     given: :func:`calibrate_clicked` on them (the bow and the balls read in
     ``frame``).  ``estimate_lens=False``: the lens taken as undistorted (no
     bow fitted).  ``lossy``: the frame came through a lossy codec;
-    ``single``: one frame of the video ``frame`` is a mean of
-    (:func:`detect_corners`).
+    ``single``: one frame of the video ``frame`` is a mean of, and
+    ``single_next`` the still frame after it (:func:`detect_corners`).
     ``kw`` as for :func:`calibrate_corners`."""
     h, w = frame.shape[:2]
     size = (int(w), int(h))
@@ -2691,7 +2780,8 @@ def calibrate_frame(frame: np.ndarray, table: Table = Table(), *, corners=None, 
         kw.setdefault("corner_height_m", nose_height_m)  # clicks at the noses (review 12a: was ignored here)
         return calibrate_clicked(corners, size, table, frame=frame, use_balls=use_balls, estimate_lens=estimate_lens,
                                  intrinsics=K, distortion=dist, camera_height_sigma_m=camera_height_sigma_m, **kw)
-    det = detect_corners(frame, K, dist, estimate_lens=estimate_lens, lossy=lossy, single=single)
+    det = detect_corners(frame, K, dist, estimate_lens=estimate_lens, lossy=lossy, single=single,
+                         single_next=single_next)
     quad, edge_rms, kappa = det.corners, det.edge_rms, det.kappa
     if det.edge == "noses":
         felt_margin_m, felt_height_m = 0.0, nose_height_m
