@@ -141,7 +141,14 @@ def test_paper_refuses_the_one_frame_arc_it_once_answered_196_percent_off(monkey
     monkeypatch.setattr(paper, "PAPER_MIN_SLIDING_FRAMES", 1)
     assert paper_answer().status == "failed"  # the sliding-time check alone
     monkeypatch.setattr(paper, "SLIDING_TIME_TOLERANCES", np.inf)
-    r = paper_answer()  # neither: the confident wrong answer both exist for
+    # The fit's verdict on its trusted frames (the slide seen in 1 of them,
+    # under MIN_SLIDING_FRAMES) refuses it a third way since the paper
+    # follows ``sliding_frames`` (recover.estimate.trusted_frames_refuse).
+    r = paper_answer()
+    assert r.status == "degenerate" and "seen in 1 frame" in r.reason, r.reason
+    import cuespin.recover.estimate as estimate_module
+    monkeypatch.setattr(estimate_module, "trusted_frames_refuse", lambda mle: False)
+    r = paper_answer()  # none: the confident wrong answer they exist for
     assert r.status == "ok" and np.linalg.norm(np.asarray(r.v0) - v0) > np.linalg.norm(v0)
 
 
