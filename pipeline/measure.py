@@ -124,7 +124,8 @@ def mle_bound(scene: Scene, track, mle: dict | None = None, independent: bool = 
                                       look_rest=bool(track.lossless) and not getattr(track, "independent_errors",
                                                                                      track.lossless),
                                       look_factor=float(getattr(track, "look_factor", 1.0)),
-                                      still_look=bool(getattr(track, "look_shaded", False)) and not track.lossless,
+                                      still_look=(bool(getattr(track, "look_shaded", False)) and not track.lossless
+                                                  and not getattr(track, "inter_frame", False)),
                                       px_to_m=pixel_to_table(cam, xy) if in_px else None,
                                       clear_s=mle.get("cue_clear_s") or 0.0,
                                       # under the AR(1) model the fit kept a lossless rest frame by frame
