@@ -62,3 +62,18 @@ def test_rolling_answer_bound_on_an_unseen_slide():
         # the free slip's bound at the truth: none, and it says why
         f = answer_bound(scene, est.meas, "full")
         assert f.cov is None and "before the first measured moving frame" in f.reason
+
+
+def test_a_shot_without_a_bound_is_listed_apart(capsys):
+    # held37: 38/8's NaN bound was left out of the RMS / bound silently.
+    # accuracy.bound_summary averages the shots with a bound (per model)
+    # and lists the others with the reason answer_bound gave.
+    from benchmarks.accuracy import bound_summary
+    nan = float("nan")
+    row = dict(mle_crb_z_indep=nan, mle_bias_v0=nan, mle_bound_fail="")
+    rows = [dict(row, i=0, mle_model="full", mle_crb_z=1.0), dict(row, i=1, mle_model="full", mle_crb_z=3.0),
+            dict(row, i=2, mle_model="full", mle_crb_z=nan, mle_bound_fail="the information is singular")]
+    bound_summary(rows)
+    out = capsys.readouterr().out
+    assert f"2 shots): {np.sqrt(5.0):.2f}" in out, out
+    assert "no bound on 1 ok answers" in out and "shot 2 (full): the information is singular" in out, out
