@@ -400,7 +400,12 @@ def bound_summary(ok):
                 print("  (a rolling answer's error about the rolling parameters nearest the truth: its model's "
                       "bias on a truth that slid unseen apart, below)")
     roll = [r for r in ok if r.get("mle_model") == "rolling" and np.isfinite(r.get("mle_bias_v0", np.nan))]
+    slid = [r for r in roll if r["t1_true"] > 0]
     if roll:
+        print(f"  rolling answers: {len(roll) - len(slid)} on a truth rolling from the strike (no bias), "
+              f"{len(slid)} on a truth that slid")
+    if slid:
+        roll = slid
         print(f"  rolling answers' bias of assuming no slip ({len(roll)}; per shot: |bias of v0| / |v0|, "
               "bias in the rolling bound, the truth's sliding time, the answer's unseen-slide allowance "
               "(recover.mle.unseen_slip), the time to the first measured moving frame, error / stated):")
