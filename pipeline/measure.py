@@ -217,7 +217,10 @@ def answer_bound(scene: Scene, meas, model: str, ar1: float = 0.0, acf=None, ind
     No bound, with ``reason``: a free-slip answer on a truth rolling from
     the strike, or one whose slide ends before the first measured moving
     frame's exposure (the v0 and w0 columns then combine to zero, as
-    recover.mle._deficient_by_form's cases); a rolling fit to the exact
+    recover.mle._deficient_by_form's cases), or one that stops as its
+    slide ends (the sampler's case2: the truth on the model's kink, where
+    central differences straddle it; MJPG seed 39 shot 5's w0 "bound" came
+    out 25,000 times its error); a rolling fit to the exact
     path that fails; an information matrix singular or rank deficient to
     round-off (recover.mle.RANK_DEFICIENT_EIG, the fit's own rule); a
     covered variance not positive.  Never raises for those: the caller
@@ -244,7 +247,11 @@ def answer_bound(scene: Scene, meas, model: str, ar1: float = 0.0, acf=None, ind
             return replace(none, reason="free slip answered, the truth rolls from the strike: free slip's "
                                         "information is singular at zero slip")
         first = first_measured_after(meas, float(truth.t0))
-        if phases(truth, p).t1 <= first - 0.5 * exposure:
+        ph = phases(truth, p)
+        if float(np.hypot(*ph.v1)) < 1e-9:
+            return replace(none, reason="free slip answered, the truth stops as its slide ends (no rolling): "
+                                        "the model has a kink there, its derivatives and bound are not defined")
+        if ph.t1 <= first - 0.5 * exposure:
             return replace(none, reason=f"free slip answered, the truth's slide ends before the first "
                                         f"measured moving frame ({first - truth.t0:.4f} s after the "
                                         f"strike): its v0 and w0 not determined by these frames")

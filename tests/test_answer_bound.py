@@ -78,3 +78,21 @@ def test_a_shot_without_a_bound_is_listed_apart(capsys):
     out = capsys.readouterr().out
     assert f"2 shots): {np.sqrt(5.0):.2f}" in out, out
     assert "no bound on 1 ok answers" in out and "shot 2 (full): the information is singular" in out, out
+
+
+def test_no_bound_where_the_truth_stops_as_its_slide_ends():
+    # The sampler's case2 stops exactly as sliding ends: the truth on the
+    # model's kink, where the free slip's bound is not defined (MJPG seed
+    # 39 shots 5 and 16, H.264 37/5, 37/27, 38/5, 38/38: their w0 "bounds"
+    # 10^4-10^5 times the error, averaged in before).
+    from cuespin.data_gen.sampler import sample_shot
+    shot, p = sample_shot(3, "case2")
+    ph = phases(shot, p)
+    assert np.hypot(*ph.v1) < 1e-9
+    t = np.arange(0.0, ph.t1 + 0.3, 1 / 120)
+    clean = model_track(shot, p, t)
+    noisy = clean + SIGMA_M * np.random.default_rng(0).standard_normal(clean.shape)
+    _, est = recover_track(t, noisy, np.ones(len(t), bool), np.full(len(t), SIGMA_M), p, method="mle",
+                           return_estimate=True)
+    b = answer_bound(make_scene(shot, p, fps=120.0), est.meas, "full")
+    assert b.cov is None and "stops as its slide ends" in b.reason
