@@ -70,7 +70,7 @@ def one_shot(args):
     max_seconds = args[11] if len(args) > 11 else MAX_SECONDS
     from cuespin.data_gen.sampler import sample_scenes
     from cuespin.physics import phases
-    from cuespin.pipeline.measure import mle_bound
+    from cuespin.pipeline.measure import answer_bound
     from cuespin.recover.api import recover_track
     from cuespin.recover.measurements import table_covariance
     try:
@@ -219,7 +219,9 @@ def one_shot(args):
     row["mle_v0_z"] = np.nan  # |v0 error| in its stated errors (the worse axis)
     if mle["status"] == "ok" and (mle.get("stderr") or {}).get("v0"):
         row["mle_v0_z"] = float(np.max(np.abs((np.array(mle["v0"]) - v0) / np.array(mle["stderr"]["v0"]))))
-    row["mle_crb_z"] = row["mle_crb_z_indep"] = np.nan
+    row["mle_crb_z"] = row["mle_crb_z_indep"] = row["mle_crb_z_truth"] = row["mle_bias_z"] = np.nan
+    row["mle_bias_v0"] = row["t_unseen"] = row["t_allowance"] = np.nan
+    row["mle_bound_fail"] = ""
     row.update({f"mle_crb_{name}": np.nan for name in COMPONENTS})
     row["chi2_per_dof"] = row["codec_noise_px"] = row["hac"] = row["rho1"] = row["ar1"] = np.nan
     if mle["status"] == "ok":
@@ -228,27 +230,43 @@ def one_shot(args):
         row["hac"], row["rho1"] = float(bool(mle.get("hac"))), mle.get("rho1")
         row["ar1"] = mle.get("ar1", np.nan)
         row["codec_noise_px"] = mle.get("codec_noise_px", np.nan)
-        try:
-            # The bound for the fit's own measurements (recover.measurements),
-            # and for reference the one with every frame independent.
-            for key, indep in (("mle_crb_z_indep", True), ("mle_crb_z", False)):
-                kw_ar1 = {"ar1": float(getattr(est.mle, "ar1", 0.0) or 0.0)} \
-                    if "ar1" in inspect.signature(mle_bound).parameters else {}
-                # An inter-frame codec: its frames' errors correlated in time as
-                # the fit's covariance takes them (recover.mle.INTER_CODEC_ACF).
-                if tr.inter_frame and not tr.lossless and "acf" in inspect.signature(mle_bound).parameters:
-                    from cuespin.recover.mle import INTER_CODEC_ACF
-                    kw_ar1["acf"] = INTER_CODEC_ACF
-                cov, rolling = mle_bound(scene, est.meas, independent=indep, **kw_ar1)
-                idx = [3, 4] if rolling else [3, 4, 5, 6]
-                e = err[:2] if rolling else err
-                row[key] = float(np.sqrt(np.mean((e / np.sqrt(np.diag(cov)[idx])) ** 2)))
-                if not indep:  # per component (NaN for w0 on a rolling answer: its bound is v0's)
-                    zc = np.r_[e / np.sqrt(np.diag(cov)[idx]), [np.nan] * (4 - len(idx))]
-                    for k, name in enumerate(COMPONENTS):
-                        row[f"mle_crb_{name}"] = float(zc[k])
-        except np.linalg.LinAlgError:  # the bound is a diagnostic; never lose the row
-            pass
+        # The bound of the model the answer was given with, at that model's
+        # parameters nearest the truth (pipeline.measure.answer_bound): a
+        # rolling answer against the rolling model's bound, what assuming
+        # no slip costs on a truth that slid unseen (its bias) stated
+        # apart; a shot without a bound says why and is counted apart
+        # (held37: 38/8's NaN and 38/36's 4e-5 came from the free slip's
+        # bound, singular there, and were averaged silently).
+        from cuespin.recover.mle import INTER_CODEC_ACF, first_measured_after
+        ar1 = float(getattr(est.mle, "ar1", 0.0) or 0.0)
+        # An inter-frame codec: its frames' errors correlated in time as the
+        # fit's covariance takes them (recover.mle.INTER_CODEC_ACF).
+        acf = INTER_CODEC_ACF if tr.inter_frame and not tr.lossless and not ar1 else None
+        model = "rolling" if mle.get("model") == "rolling" else "full"
+        for key, indep in (("mle_crb_z_indep", True), ("mle_crb_z", False)):
+            b = answer_bound(scene, est.meas, model, ar1=0.0 if indep else ar1, acf=None if indep else acf,
+                             independent=indep)
+            if b.cov is None:
+                if not indep:
+                    row["mle_bound_fail"] = b.reason
+                continue
+            zc = b.z(err + truth_vw)
+            row[key] = float(np.sqrt(np.nanmean(zc ** 2)))
+            if not indep:  # per component (NaN for w0 on a rolling answer: its bound is v0's)
+                for k, name in enumerate(COMPONENTS):
+                    row[f"mle_crb_{name}"] = float(zc[k])
+                bz = b.bias_z()
+                row["mle_bias_z"] = float(np.sqrt(np.nanmean(bz ** 2)))
+                # the whole error (bias with it) in the same bound, for reference
+                row["mle_crb_z_truth"] = float(np.sqrt(np.nanmean((zc + bz) ** 2)))
+        if model == "rolling":
+            # The unseen slide's size: the truth's sliding time beside the
+            # time after the strike with no measured moving frame, and the
+            # answer's allowance for it (recover.mle.unseen_slip, as time).
+            # (b: the loop's last, the fit's own measurements; its centre and bias stand without a bound)
+            row["mle_bias_v0"] = float(np.hypot(*b.bias[:2]) / speed)
+            row["t_unseen"] = float(first_measured_after(est.meas, float(truth.t0)) - truth.t0)
+            row["t_allowance"] = float((mle.get("unseen_slip") or 0.0) / (p.mu_s * p.g))
     return row
 
 
@@ -321,7 +339,8 @@ def intervals(rows, n_boot: int = 4000, seed: int = 0, m: str = "mle"):
     bands = (("all", lambda r: True), ("noise < 0.5", lambda r: r["noise"] < 0.5),
              ("noise >= 0.5", lambda r: r["noise"] >= 0.5))
     if m == "mle":
-        bands += (("free slip answers", lambda r: r.get("mle_model") == "full"),)
+        bands += (("free slip answers", lambda r: r.get("mle_model") == "full"),
+                  ("rolling answers", lambda r: r.get("mle_model") == "rolling"))
     for band, sel in bands:
         ok = [r for r in rows if r[f"{m}_status"] == "ok" and sel(r) and f"{m}_z_{COMPONENTS[0]}" in r
               and not np.isnan(float(r[f"{m}_z_{COMPONENTS[0]}"]))]
@@ -351,6 +370,56 @@ def intervals(rows, n_boot: int = 4000, seed: int = 0, m: str = "mle"):
               f"{np.sqrt(np.nanmean(Z * Z)):.2f} ({boot['rms'][0]:.2f}-{boot['rms'][1]:.2f})"
               + (f"; RMS / bound {np.sqrt(np.nanmean(K * K)):.2f} ({boot['crb'][0]:.2f}-{boot['crb'][1]:.2f}); "
                  f"chi2/dof median {np.nanmedian([r['chi2_per_dof'] for r in ok]):.2f}" if m == "mle" else ""))
+
+
+def bound_fail(r) -> str:
+    """Why a row has no bound ("" when it has one; a CSV's empty cell reads NaN)."""
+    v = r.get("mle_bound_fail", "")
+    return "" if v is None or (isinstance(v, float) and np.isnan(v)) else str(v)
+
+
+def bound_summary(ok):
+    """RMS error / Cramer-Rao bound of the MLE's ok answers, each against
+    the bound of the model it answered with (pipeline.measure.answer_bound):
+    all, free slip and rolling answers apart; a rolling answer's error about
+    the rolling model's parameters nearest the truth, the bias of assuming
+    no slip (the truth sliding unseen) stated apart; the shots without a
+    bound listed with why, never averaged in."""
+    for key, what in (("mle_crb_z", "the fit's own measurements (recover.measurements; on inter-frame video "
+                                    "correlated in time as the fit's covariance takes them)"),
+                      ("mle_crb_z_indep", "tracker's errors, every frame independent (reference)")):
+        for band, sel in (("all", lambda r: True), ("free slip answers", lambda r: r.get("mle_model") == "full"),
+                          ("rolling answers", lambda r: r.get("mle_model") == "rolling")):
+            crb_z = np.array([r[key] for r in ok if sel(r) and np.isfinite(r[key])])
+            if len(crb_z):
+                print(f"{'' if band == 'all' else '  '}MLE: RMS error / Cramer-Rao bound of the answer's model, "
+                      f"{band}, with {what} (v0, w0 components; rolling: v0; {len(crb_z)} shots): "
+                      f"{np.sqrt(np.mean(np.square(crb_z))):.2f}; per shot median {np.median(crb_z):.2f}, "
+                      f"p90 {np.percentile(crb_z, 90):.2f} (target <= 1.1)")
+            if band == "all" and key == "mle_crb_z":
+                print("  (a rolling answer's error about the rolling parameters nearest the truth: its model's "
+                      "bias on a truth that slid unseen apart, below)")
+    roll = [r for r in ok if r.get("mle_model") == "rolling" and np.isfinite(r.get("mle_bias_v0", np.nan))]
+    slid = [r for r in roll if r["t1_true"] > 0]
+    if roll:
+        print(f"  rolling answers: {len(roll) - len(slid)} on a truth rolling from the strike (no bias), "
+              f"{len(slid)} on a truth that slid")
+    if slid:
+        roll = slid
+        print(f"  rolling answers' bias of assuming no slip ({len(roll)}; per shot: |bias of v0| / |v0|, "
+              "bias in the rolling bound, the truth's sliding time, the answer's unseen-slide allowance "
+              "(recover.mle.unseen_slip), the time to the first measured moving frame, error / stated):")
+        for r in roll:
+            print(f"    shot {int(r['i'])}: {r['mle_bias_v0']:.1%}, {r['mle_bias_z']:.1f} bounds; slide "
+                  f"{1e3 * r['t1_true']:.1f} ms, allowance {1e3 * r['t_allowance']:.1f} ms"
+                  f"{' (shorter)' if r['t_allowance'] < r['t1_true'] else ''}, first frame "
+                  f"{1e3 * r['t_unseen']:.1f} ms; error / stated {r['mle_z']:.2f}, / bound "
+                  f"{r['mle_crb_z']:.2f} (about the truth {r['mle_crb_z_truth']:.1f})")
+    failed = [r for r in ok if bound_fail(r)]
+    if failed:
+        print(f"  no bound on {len(failed)} ok answers (left out of the RMS / bound above):")
+        for r in failed:
+            print(f"    shot {int(r['i'])} ({r.get('mle_model')}): {bound_fail(r)}")
 
 
 def pct(x, q):
@@ -440,14 +509,7 @@ def summarize(rows, seed=0):
               f"{pct([r[f'{m}_ev'] for r in ok], 95):9.2e} {pct([r[f'{m}_ew'] for r in ok], 50):9.2e} "
               f"{pct([r[f'{m}_ew'] for r in ok], 95):9.2e}  {other}")
     ok = [r for r in rows if r["mle_status"] == "ok"]
-    for key, what in (("mle_crb_z", "the fit's own measurements (recover.measurements; on inter-frame video "
-                                    "correlated in time as the fit's covariance takes them)"),
-                      ("mle_crb_z_indep", "tracker's errors, every frame independent (reference)")):
-        crb_z = np.array([r[key] for r in ok if np.isfinite(r[key])])
-        if len(crb_z):
-            print(f"\nMLE: RMS error / Cramer-Rao bound with {what} (v0, w0 components, {len(crb_z)} shots): "
-                  f"{np.sqrt(np.mean(np.square(crb_z))):.2f}; per shot median {np.median(crb_z):.2f}, "
-                  f"p90 {np.percentile(crb_z, 90):.2f} (target <= 1.1)")
+    bound_summary(ok)
     chi = np.array([r["chi2_per_dof"] for r in ok if np.isfinite(r["chi2_per_dof"])])
     if len(chi):
         print(f"MLE: chi2/dof of the fits answered ok: median {np.median(chi):.2f} (target 0.9-1.1), "

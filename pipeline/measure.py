@@ -137,3 +137,146 @@ def mle_bound(scene: Scene, track, mle: dict | None = None, independent: bool = 
         ar1 = (mle or {}).get("ar1") or 0.0
     return crb_covariance(truth, p, meas, cam.exposure_s, rolling=rolling,
                           ar1=0.0 if independent else float(ar1), acf=None if independent else acf), rolling
+
+
+@dataclass
+class AnswerBound:
+    """The Cramer-Rao bound of the model an answer was given with, at the
+    parameters of that model nearest the truth.
+
+    Attributes
+    ----------
+    model : str
+        The answer's model: ``"rolling"`` (rolling from the strike; its
+        bound covers v0 alone, w0 following from it) or ``"full"`` (free
+        slip: v0 and w0).
+    centre : ndarray, shape (4,)
+        That model's ``(v0 (m/s), w0 (rad/s))`` nearest the truth: the
+        truth itself when the model holds it, else (a rolling answer on a
+        shot that slid, unseen) the rolling fit to the truth's exact path
+        at the answer's own measurements and weights: where the answer
+        tends as the errors shrink.
+    bias : ndarray, shape (4,)
+        ``centre - truth`` (m/s, rad/s): what assuming the answer's model
+        costs however small the errors (zero when the model holds the truth).
+    cov : ndarray or None
+        The bound, Cramer-Rao covariance of ``(x0, t0, v0[, w0])`` at
+        ``centre`` (m, s, m/s, rad/s); None when there is none.
+    reason : str
+        Why there is no bound ("" when there is one).
+    """
+
+    model: str
+    centre: np.ndarray
+    bias: np.ndarray
+    cov: np.ndarray | None = None
+    reason: str = ""
+
+    @property
+    def components(self) -> list:
+        """Indices into ``(v0x, v0y, w0x, w0y)`` the bound covers."""
+        return [0, 1] if self.model == "rolling" else [0, 1, 2, 3]
+
+    @property
+    def sd(self) -> np.ndarray:
+        """The bound's standard deviations of the covered components (m/s, rad/s)."""
+        return np.sqrt(np.diag(self.cov)[[c + 3 for c in self.components]])
+
+    def z(self, answer) -> np.ndarray:
+        """The answer's error about ``centre`` in bound units, over
+        ``(v0x, v0y, w0x, w0y)`` (NaN where the bound covers none)."""
+        out = np.full(4, np.nan)
+        c = self.components
+        out[c] = (np.asarray(answer, float)[c] - self.centre[c]) / self.sd
+        return out
+
+    def bias_z(self) -> np.ndarray:
+        """``bias`` in bound units (NaN where the bound covers none)."""
+        out = np.full(4, np.nan)
+        out[self.components] = self.bias[self.components] / self.sd
+        return out
+
+
+def answer_bound(scene: Scene, meas, model: str, ar1: float = 0.0, acf=None, independent: bool = False,
+                 fit_friction: bool = False) -> AnswerBound:
+    """The Cramer-Rao bound of the model an answer was given with
+    (``model``: the MLE's JSON ``model``, ``"rolling"`` or ``"full"``), for
+    the measurements it used (``meas``, recover.measurements) under the
+    error model the fit took (``ar1``, ``acf``: as :func:`mle_bound`;
+    ``independent``: every frame its own measurement, a reference).
+
+    An efficient estimator's error about the point its model tends to
+    reaches this bound: a rolling answer is compared with the rolling
+    model's bound at the rolling parameters nearest the truth
+    (:class:`AnswerBound` ``centre``), and what assuming no slip costs
+    when the truth slid unseen is its ``bias``, stated apart.  (The free
+    slip's bound at a truth that slid only before the first measured
+    frame, mle_bound's before, is singular by form, held37's 38/8 NaN and
+    38/36's 10^4-times-too-large bound: it is the bound of an estimator
+    the answer was not given by.)
+
+    No bound, with ``reason``: a free-slip answer on a truth rolling from
+    the strike, or one whose slide ends before the first measured moving
+    frame's exposure (the v0 and w0 columns then combine to zero, as
+    recover.mle._deficient_by_form's cases), or one that stops as its
+    slide ends (the sampler's case2: the truth on the model's kink, where
+    central differences straddle it; MJPG seed 39 shot 5's w0 "bound" came
+    out 25,000 times its error); a rolling fit to the exact
+    path that fails; an information matrix singular or rank deficient to
+    round-off (recover.mle.RANK_DEFICIENT_EIG, the fit's own rule); a
+    covered variance not positive.  Never raises for those: the caller
+    reports such shots apart.
+    """
+    from dataclasses import replace
+
+    from cuespin.physics import contact_velocity, phases
+    from cuespin.recover.measurements import build_measurements
+    from cuespin.recover.mle import (_rank_deficient, crb_jacobian, first_measured_after, fit_model,
+                                     info_inverse, model_track)
+
+    truth, p, cam = scene.truth, scene.physics, scene.camera
+    exposure = cam.exposure_s
+    truth_vw = np.r_[truth.v0, truth.w0].astype(float)
+    none = AnswerBound(model=model, centre=truth_vw, bias=np.zeros(4))
+    if independent:
+        meas = build_measurements(meas.t, meas.xy, meas.cov)
+    truth_rolls = bool(np.hypot(*contact_velocity(np.array(truth.v0), np.array(truth.w0), p.R)) < 1e-9)
+    rolling = model == "rolling"
+    shot = truth
+    if not rolling:
+        if truth_rolls:
+            return replace(none, reason="free slip answered, the truth rolls from the strike: free slip's "
+                                        "information is singular at zero slip")
+        first = first_measured_after(meas, float(truth.t0))
+        ph = phases(truth, p)
+        if float(np.hypot(*ph.v1)) < 1e-9:
+            return replace(none, reason="free slip answered, the truth stops as its slide ends (no rolling): "
+                                        "the model has a kink there, its derivatives and bound are not defined")
+        if ph.t1 <= first - 0.5 * exposure:
+            return replace(none, reason=f"free slip answered, the truth's slide ends before the first "
+                                        f"measured moving frame ({first - truth.t0:.4f} s after the "
+                                        f"strike): its v0 and w0 not determined by these frames")
+    elif not truth_rolls:
+        # The rolling answer's limit: the rolling fit to the exact path.
+        exact = replace(meas, xy=model_track(truth, p, meas.t, exposure))
+        try:
+            f = fit_model(exact, p, (truth.x0, truth.t0, truth.v0, truth.w0), exposure, True,
+                          fit_friction=fit_friction, ar1=ar1)
+        except (ValueError, np.linalg.LinAlgError) as e:
+            return replace(none, reason=f"the rolling fit to the exact path failed: {e}")
+        if not f.converged:
+            return replace(none, reason=f"the rolling fit to the exact path did not converge: {f.message}")
+        shot = f.shot
+    centre = np.r_[shot.v0, shot.w0].astype(float)
+    out = AnswerBound(model=model, centre=centre, bias=centre - truth_vw)
+    try:
+        J = crb_jacobian(shot, p, meas, exposure, rolling=rolling, ar1=ar1, acf=acf)
+        if _rank_deficient(J):
+            return replace(out, reason="the information is rank deficient to round-off")
+        cov = info_inverse(J)
+    except np.linalg.LinAlgError:
+        return replace(out, reason="the information is singular")
+    var = np.diag(cov)[[c + 3 for c in out.components]]
+    if not np.all(np.isfinite(var) & (var > 0)):
+        return replace(out, reason="a variance of the bound is not positive")
+    return replace(out, cov=cov)

@@ -1607,7 +1607,16 @@ def initial_guess(seg, params: BallParams):
 
 def crb_covariance(shot: Shot, params: BallParams, meas: Measurements, exposure_s: float = 0.0,
                    rolling: bool = False, ar1: float = 0.0, acf=None) -> np.ndarray:
-    """Cramer-Rao covariance of ``(x0, t0, v0[, w0])`` at the true shot.
+    """Cramer-Rao covariance of ``(x0, t0, v0[, w0])`` at the true shot:
+    ``info_inverse`` of :func:`crb_jacobian` (same arguments)."""
+    return info_inverse(crb_jacobian(shot, params, meas, exposure_s, rolling, ar1, acf))
+
+
+def crb_jacobian(shot: Shot, params: BallParams, meas: Measurements, exposure_s: float = 0.0,
+                 rolling: bool = False, ar1: float = 0.0, acf=None) -> np.ndarray:
+    """The whitened Jacobian whose information :func:`crb_covariance` inverts,
+    shape (2m, 5 or 7): the Cramer-Rao covariance of ``(x0, t0, v0[, w0])``
+    at the true shot is ``info_inverse`` of it.
 
     The inverse Fisher information ``(J^T J)^-1`` of the same model, the
     same measurements and the same error model the fit uses, with ``J`` by
@@ -1654,4 +1663,4 @@ def crb_covariance(shot: Shot, params: BallParams, meas: Measurements, exposure_
         R[np.ix_(single, single)] = shared_rho(meas, acf)
         C = np.eye(2 * m) + np.kron(R, np.eye(2))  # rows (m, 2) as the whitened Jacobian's
         J = solve_triangular(cholesky(C, lower=True), J, lower=True)  # whitened in time too
-    return info_inverse(J)
+    return J
