@@ -78,13 +78,16 @@ FIT_SQUARE_MAX_PX = 2
 # is not round, and which channel the track is fitted in (one that sees
 # luma, fitted on pixels with the chroma counted as independent per pixel,
 # or a luma-blind one on the blocks) depends on the noise draw.  Measured on
-# test_track_formats' small scene (FFV1 yuv411p, seeds 1-5 x noise
-# 0.5 / 2 / 5) and realistic shots, the error over the stated error ranged,
-# per axis, over a factor of 4 and more (docs/measurements.md, fix411): no
-# one variance factor states it, so none is applied and the track says so.
+# test_track_formats' small scene (FFV1, seeds 1-5 x noise 0.5 / 2 / 5),
+# the error over the stated error per axis was 0.41-0.49 (v) and 1.22-1.30
+# (u) where the channel was luma-blind, 1.08-1.73 where it saw luma (4:1:1),
+# 0.78-3.69 (4:1:0, fitted on 4 x 4 blocks, frames lost and up to 1.0 px
+# off), 1.9-3.0 on realistic 4:1:1 shots (docs/measurements.md, yuv422 and
+# fix411): no one variance factor states it, so none is applied and the
+# track says so.
 UNCALIBRATED_CHROMA_WARNING = ("stated errors not calibrated: the video's {pix_fmt} chroma is shared over "
                                "{bx} x {by} pixels and interpolated by the decoder, which the tracker's "
-                               "error model does not describe (measured error / stated 0.4-3 per axis); "
+                               "error model does not describe (measured error / stated 0.4-3.7 per axis); "
                                "treat every stated error, the recovery's too, as a rough guide")
 
 
