@@ -92,6 +92,8 @@ def cmd_track(args) -> int:
     counts = ", ".join(f"{v} {k}" for k, v in result.status_counts().items())
     print(f"wrote {out}: {result.n_frames} frames ({counts}); centroid noise "
           f"{result.centroid_noise_px:.4f} px")
+    if result.warning:
+        print(f"warning: {result.warning}")
     if result.error:
         raise InputError(f"{args.video}: {result.error}; {result.n_frames} frame rows written to {out}")
     return 0
@@ -222,6 +224,7 @@ JSON (--json), every field in docs/output.md:
   track.last_tracked_t    time of the last frame with the ball found (s)
   track.contact           {t, kind}: the first contact, after which frames are not used (null: none)
   track.error             present when the video ended early or showed no ball
+  track.warning           present when the stated errors are not calibrated for the video (4:1:1, 4:1:0 chroma)
   methods.paper, .mle     status (ok | ambiguous | degenerate | failed), reason (why, when not ok),
                           x0 (m), t0 (s): the strike; v0 (m/s), w0 (rad/s): the answer;
                           t1/x1: sliding ends; t2/x2: the ball stops (s, m);

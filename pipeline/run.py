@@ -205,6 +205,8 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
             track[key] = out["track"][key]
     if tr.error:
         track["error"] = tr.error
+    if getattr(tr, "warning", ""):
+        track["warning"] = tr.warning
     t_seen = track["last_tracked_t"]
     contact_t = (track.get("contact") or {}).get("t") if isinstance(track.get("contact"), dict) else None
     if contact_t is not None and (t_seen is None or contact_t < t_seen):
@@ -269,6 +271,8 @@ def format_recover(result: dict, truth=None, params=None) -> str:
              + (f" (last at {tr['last_tracked_t']:.3f} s)" if tr.get("last_tracked_t") is not None else "")
              + "; tracker's stated error of a centre, median: "
              + ("unknown" if noise is None else f"{noise:.4f} px per axis")]
+    if tr.get("warning"):
+        lines.append(f"warning: {tr['warning']}")
     contact = tr.get("contact")
     if isinstance(contact, dict):
         lines.append(f"contact ({contact.get('kind', 'unknown')}) at {contact.get('t', float('nan')):.3f} s: "

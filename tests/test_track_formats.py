@@ -11,7 +11,7 @@ from cuespin.data_gen.sampler import make_scene, sample_shot
 from cuespin.physics import Shot
 from cuespin.render import FrameRenderer
 from cuespin.track import video as tv
-from cuespin.track.reader import chroma_subsampling, probe
+from cuespin.track.reader import VideoInfo, chroma_subsampling, probe
 from cuespin.track.video import track_video, write_track_csv
 from cuespin.track.synthetic import colour_frames, write_av
 
@@ -502,48 +502,91 @@ def test_chroma_subsampling_of_pixel_formats():
     assert {pf: chroma_subsampling(pf) for pf in expect} == expect
 
 
+def test_error_warning_only_where_chroma_is_shared_over_4_px():
+    # the stated errors are not calibrated on 4:1:1 and 4:1:0 (fix411): the track says so
+    def warning(pf):
+        return VideoInfo(width=64, height=32, n_frames=10, codec="ffv1", pix_fmt=pf, lossless=True,
+                         time_base=None, backend="cv2").error_warning
+    for pf in ("yuv420p", "yuvj420p", "yuv422p", "yuvj422p", "yuv440p", "yuv444p", "gray", "bgr24", ""):
+        assert warning(pf) == "", pf
+    for pf in ("yuv411p", "yuvj411p", "yuv410p"):
+        assert pf in warning(pf) and "not calibrated" in warning(pf), pf
+
+
 def err_se(res, scene, truth_uv):
-    """RMS over the moving frames' found centres and both axes of the
-    error over the stated error, and how many values it is over."""
+    """RMS over the moving frames' found centres of the error over the
+    stated error, per image axis (u, v), and how many frames it is over."""
     moving = np.arange(res.n_frames) / scene.camera.fps > scene.truth.t0 + 0.02
     ok = res.ok & moving
     z = (res.uv[ok] - truth_uv[ok]) / res.stderr_px[ok]
-    return float(np.sqrt(np.mean(z**2))), z.size
+    return np.sqrt(np.mean(z**2, axis=0)), len(z)
+
+
+def subsampled_track(tmp_path, codec, pix_fmt, ext, seed=1, noise=2.0):
+    """test_track_formats' yellow ball on grey felt written by PyAV in
+    ``codec`` / ``pix_fmt`` and tracked: (scene, truth, probe, track)."""
+    scene = small_scene()
+    truth = FrameRenderer(scene).truth
+    video = tmp_path / f"v.{ext}"
+    write_av(colour_frames(scene, YELLOW, GREY_FELT, noise=noise, seed=seed), video, codec, pix_fmt,
+             scene.camera.fps, options={"crf": "12"} if codec == "libx264" else None,
+             bit_rate=8_000_000 if codec == "mjpeg" else None)
+    info = probe(video)
+    return scene, truth, info, track_video(video, scene)
 
 
 # test_track_formats' yellow ball on grey felt (noise 2, 60 frames, 45 of them
 # moving), written by PyAV; before (the fits on pixels, chroma_block 1 for
 # every format but 4:2:0) -> after (the fits on VideoInfo.fit_block: 4:2:2
-# on 2 x 2, 4:1:1 on 4 x 1), from docs/measurements.md, yuv422: RMSE (px)
-# and err/se.
-#   ffv1 yuv422p     0.0403 -> 0.0051, 0.57 -> 0.97
-#   mjpeg yuvj422p   0.0429 -> 0.0157, 0.61 -> 0.96
-#   ffv1 yuv411p     0.0749 -> 0.0402, 1.50 -> 0.96
-#   libx264 yuv422p  0.0446 -> 0.0196, 0.60 -> 1.26 (its 4:2:0: 0.0292, 1.26)
-@pytest.mark.parametrize("codec,pix_fmt,ext,block,fit_block", [
-    ("ffv1", "yuv422p", "avi", (2, 1), (2, 2)),
-    ("mjpeg", "yuvj422p", "avi", (2, 1), (2, 2)),   # MJPG from a camera
-    ("ffv1", "yuv411p", "avi", (4, 1), (4, 1)),     # DV's subsampling
-    pytest.param("libx264", "yuv422p", "mp4", (2, 1), (2, 2), marks=pytest.mark.slow),
+# on 2 x 2), from docs/measurements.md, yuv422: RMSE (px) and err/se.
+#   ffv1 yuv422p     0.0403 -> 0.0051, 0.57 -> 0.97 (u 0.96, v 0.98)
+#   mjpeg yuvj422p   0.0429 -> 0.0157, 0.61 -> 0.96 (u 1.11, v 0.79)
+#   libx264 yuv422p  0.0446 -> 0.0196, 0.60 -> 1.26 (u 1.47, v 1.01; its 4:2:0: 1.26)
+# Per axis on seeds 2-4 (fix411): FFV1 u 1.14-1.25, v 0.83-0.95.  4:1:1
+# (DV) is test_4x1_chroma_states_its_errors_uncalibrated's.
+SUBSAMPLED = [("ffv1", "yuv422p", "avi", (2, 1), (2, 2)),
+              ("mjpeg", "yuvj422p", "avi", (2, 1), (2, 2))]   # MJPG from a camera
+
+
+@pytest.mark.parametrize("codec,pix_fmt,ext,block,fit_block,seed", [
+    *[(*c, 1) for c in SUBSAMPLED],
+    *[pytest.param(*c, s, marks=pytest.mark.slow) for c in SUBSAMPLED for s in (2, 3, 4)],
+    pytest.param("libx264", "yuv422p", "mp4", (2, 1), (2, 2), 1, marks=pytest.mark.slow),
 ])
-def test_tracker_on_subsampled_video(tmp_path, codec, pix_fmt, ext, block, fit_block):
-    scene = small_scene()
-    truth = FrameRenderer(scene).truth
-    video = tmp_path / f"v.{ext}"
-    write_av(colour_frames(scene, YELLOW, GREY_FELT, noise=2.0, seed=1), video, codec, pix_fmt,
-             scene.camera.fps, options={"crf": "12"} if codec == "libx264" else None,
-             bit_rate=8_000_000 if codec == "mjpeg" else None)
-    info = probe(video)
+def test_tracker_on_subsampled_video(tmp_path, codec, pix_fmt, ext, block, fit_block, seed):
+    scene, truth, info, res = subsampled_track(tmp_path, codec, pix_fmt, ext, seed=seed)
     assert info.pix_fmt == pix_fmt and info.chroma_block == block and info.fit_block == fit_block
-    res = track_video(video, scene)
+    assert res.warning == ""  # its stated errors are calibrated
     assert res.projection.luma_blind  # the chroma's channel: its fits run on the blocks
     check_track(res, scene, truth.uv)  # found in every moving frame, within CENTRE_TOL_PX
     z, n = err_se(res, scene, truth.uv)
-    # 1 +- 3 standard errors of an RMS of n values (1 / sqrt(2 n): 0.075 at
-    # 90); H.264's error is shared between frames (recover.mle's
-    # INTER_CODEC_ACF), so there no more than its 4:2:0's 1.26 by as much.
+    # Per axis, 1 +- 3 standard errors of an RMS of n values (1 / sqrt(2 n):
+    # 0.105 at 45); H.264's error is shared between frames (recover.mle's
+    # INTER_CODEC_ACF), so there no more than its measured u 1.47 by as much.
     se = 1 / np.sqrt(2 * n)
     if codec == "libx264":
-        assert z < 1.26 + 3 * se, z
+        assert (z < 1.47 + 3 * se).all(), z
     else:
-        assert 1 - 3 * se < z < 1 + 3 * se, z
+        assert ((1 - 3 * se < z) & (z < 1 + 3 * se)).all(), z
+
+
+# 4:1:1 (DV's yuv411p) and 4:1:0: the decoder interpolates the chroma, the
+# fits model 4-px means on an oblong (4:1:0: coarse) grid, and the channel
+# chosen (luma-blind on the blocks, or seeing luma on pixels) depends on the
+# noise draw: per axis err/se 0.41-1.73 on this scene (4:1:1, seeds 1-5,
+# noise 0.5-5), 1.9-3.0 on realistic shots; 4:1:0 0.78-3.69, 40-45 of 45
+# moving frames found, up to 1.0 px off (docs/measurements.md, fix411).  The
+# track says its errors are not calibrated (VideoInfo.error_warning) and
+# states none better.
+@pytest.mark.parametrize("pix_fmt,seed,block", [
+    ("yuv411p", 1, (4, 1)),   # the luma-blind channel, on 4 x 1 blocks
+    ("yuv411p", 2, (4, 1)),   # a channel seeing luma, on pixels
+    pytest.param("yuv410p", 2, (4, 4), marks=pytest.mark.slow),
+])
+def test_4x1_chroma_states_its_errors_uncalibrated(tmp_path, pix_fmt, seed, block):
+    scene, truth, info, res = subsampled_track(tmp_path, "ffv1", pix_fmt, "avi", seed=seed)
+    assert info.chroma_block == block and info.fit_block == block
+    assert pix_fmt in res.warning and "not calibrated" in res.warning
+    # 4:1:1 found in every moving frame within CENTRE_TOL_PX (max 0.25 px
+    # over the 15 runs); 4:1:0 (seed 2: every frame, max 0.47 px) within 0.5
+    check_track(res, scene, truth.uv, tol=CENTRE_TOL_PX if block[1] == 1 else 0.5)

@@ -71,6 +71,24 @@ CHROMA_PIXEL_FIT_PIX_FMTS = {"yuv440p", "yuvj440p"}
 # across: 0.302 / 0.390 px against 4 x 1's 0.171 / 0.106 (FFV1 yuv411p),
 # so it keeps 4 x 1 (docs/measurements.md, yuv422).
 FIT_SQUARE_MAX_PX = 2
+# What a track says of its stated errors when its chroma is shared over more
+# pixels along an axis than FIT_SQUARE_MAX_PX (4:1:1: DV's yuv411p; 4:1:0:
+# yuv410p): the decoder interpolates that chroma over ~8 px, its blocks'
+# fits model 4-px means on an oblong grid where the look's quadratic term
+# is not round, and which channel the track is fitted in (one that sees
+# luma, fitted on pixels with the chroma counted as independent per pixel,
+# or a luma-blind one on the blocks) depends on the noise draw.  Measured on
+# test_track_formats' small scene (FFV1, seeds 1-5 x noise 0.5 / 2 / 5),
+# the error over the stated error per axis was 0.41-0.49 (v) and 1.22-1.30
+# (u) where the channel was luma-blind, 1.08-1.73 where it saw luma (4:1:1),
+# 0.78-3.69 (4:1:0, fitted on 4 x 4 blocks, frames lost and up to 1.0 px
+# off), 1.9-3.0 on realistic 4:1:1 shots (docs/measurements.md, yuv422 and
+# fix411): no one variance factor states it, so none is applied and the
+# track says so.
+UNCALIBRATED_CHROMA_WARNING = ("stated errors not calibrated: the video's {pix_fmt} chroma is shared over "
+                               "{bx} x {by} pixels and interpolated by the decoder, which the tracker's "
+                               "error model does not describe (measured error / stated 0.4-3.7 per axis); "
+                               "treat every stated error, the recovery's too, as a rough guide")
 
 
 def chroma_subsampling(pix_fmt: str) -> tuple[int, int]:
@@ -292,6 +310,16 @@ class VideoInfo:
         bx, by = self.chroma_block
         s = max(bx, by)
         return (s, s) if s <= FIT_SQUARE_MAX_PX else (bx, by)
+
+    @property
+    def error_warning(self) -> str:
+        """Empty, or why the tracker's stated errors on this stream are not
+        calibrated (:data:`UNCALIBRATED_CHROMA_WARNING`): its chroma block
+        has a side longer than :data:`FIT_SQUARE_MAX_PX` (4:1:1, 4:1:0)."""
+        bx, by = self.chroma_block
+        if max(bx, by) <= FIT_SQUARE_MAX_PX:
+            return ""
+        return UNCALIBRATED_CHROMA_WARNING.format(pix_fmt=self.pix_fmt.strip().lower(), bx=bx, by=by)
 
 
 def _check_path(path) -> Path:

@@ -184,6 +184,10 @@ class TrackResult:
         spot (:func:`~cuespin.track.tracker.foreign_seen`): only a run of
         these may start a frame or two after the strike
         (``recover_track(foreign=...)``, recover.measurements.touched_run_s).
+    warning : str
+        Empty, or why the stated errors (``stderr_px``, ``cov_px``) are not
+        calibrated for this video (:attr:`cuespin.track.reader.VideoInfo.error_warning`:
+        4:1:1 and 4:1:0 chroma); the track itself is used as on any video.
     """
 
     t: np.ndarray
@@ -207,6 +211,7 @@ class TrackResult:
     fit_rms: np.ndarray | None = None
     touched: np.ndarray | None = None
     foreign: np.ndarray | None = None
+    warning: str = ""
 
     def __post_init__(self):
         if self.cov_px is None:
@@ -706,7 +711,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
                        seconds={"background": t_bg, "track": t_track}, lossless=info.lossless,
                        inter_frame=info.inter_frame, cov_px=cov, projection=proj, camera=cam,
                        look_factor=misfit.factor, look_rho=misfit.rho, look_shaded=tracker.shade is not False,
-                       fit_rms=rms, touched=touched, foreign=foreign)
+                       fit_rms=rms, touched=touched, foreign=foreign, warning=info.error_warning)
 
 
 def leaving_rest(uv, ok, radius_px: float) -> np.ndarray:
