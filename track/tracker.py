@@ -504,11 +504,12 @@ def _groups(bad: np.ndarray, min_px: int) -> np.ndarray | None:
     return _members(n, big).view(np.uint8)[labels]
 
 
-def _strongest_group(bad: np.ndarray, z: np.ndarray) -> np.ndarray | None:
+def _strongest_group(bad: np.ndarray, z: np.ndarray, taken=None) -> np.ndarray | None:
     """Of the pixels ``bad`` (bool), split by the sign of their departure
     ``z`` (noise sigmas) into 8-connected groups of at least
-    :data:`RIM_MARK_MIN_PX`, the group with the largest sum of ``z**2``, as
-    a uint8 mask; None when there is none."""
+    :data:`RIM_MARK_MIN_PX`, the group with the largest sum of ``z**2``
+    among those that, grown by one pixel, reach outside ``taken`` (bool;
+    None: none), as a uint8 mask; None when there is none."""
     best, most = None, 0.0
     for side in (z > 0, z < 0):
         n, labels, stats, _ = cv2.connectedComponentsWithStats((bad & side).astype(np.uint8), connectivity=8)
@@ -517,6 +518,9 @@ def _strongest_group(bad: np.ndarray, z: np.ndarray) -> np.ndarray | None:
         z2 = np.bincount(labels.ravel(), weights=np.where(bad & side, z * z, 0.0).ravel(), minlength=n)
         z2[0] = 0.0
         z2[stats[:, cv2.CC_STAT_AREA] < RIM_MARK_MIN_PX] = 0.0
+        if taken is not None:  # the groups that, grown by one, hold no new pixel
+            fresh = cv2.dilate((~taken).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+            z2[np.bincount(labels[fresh], minlength=n) == 0] = 0.0
         j = int(np.argmax(z2))
         if z2[j] > most:
             best, most = (labels == j).view(np.uint8), float(z2[j])
@@ -525,7 +529,7 @@ def _strongest_group(bad: np.ndarray, z: np.ndarray) -> np.ndarray | None:
 
 def rim_marking_pixels(patch, felt, u0: int, v0: int, g, r: float, sigma: float | None, left=None,
                        outline=None, sigma_min: float = 0.5, refit: bool = False,
-                       strongest: bool = False) -> np.ndarray | None:
+                       strongest: bool = False, taken=None) -> np.ndarray | None:
     """Pixels on the ball (within half a pixel of its outline: the rim
     too, where :func:`marking_pixels` does not look) that depart from the
     lit sphere's fit ``g`` (a
@@ -537,7 +541,9 @@ def rim_marking_pixels(patch, felt, u0: int, v0: int, g, r: float, sigma: float 
     out (never returned); ``refit``: ``g`` is a refit without the pixels
     a pass before found (:data:`RIM_MARK_BOX`'s means are judged then too);
     ``strongest``: the strongest group of one sign alone
-    (:data:`RIM_MARK_GROUPS`' rule).  None when there are none."""
+    (:data:`RIM_MARK_GROUPS`' rule) with a pixel outside ``taken`` (the
+    groups earlier passes took: judged again from the refit, a group may
+    grow).  None when there are none."""
     rr = r if outline is None else outline.radius  # fit_disc's scale of the sphere
     m, _ = _model_rows(g.c, g.b, g.G, felt, rr, u0, v0, blur_nodes(np.hypot(*g.b)), g.shade, False, outline)
     res = np.asarray(patch, np.float64) - felt - m
@@ -561,7 +567,10 @@ def rim_marking_pixels(patch, felt, u0: int, v0: int, g, r: float, sigma: float 
         n = cv2.filter2D(rest.astype(np.float64), -1, k, borderType=cv2.BORDER_CONSTANT)
         s = cv2.filter2D(np.where(rest, res, 0.0), -1, k, borderType=cv2.BORDER_CONSTANT)
         bad |= rest & (n >= RIM_MARK_BOX) & (np.abs(s) > OUTLIER_SIGMAS * sig * np.sqrt(np.maximum(n, 1.0)))
-    bad = _strongest_group(bad, res / sig) if strongest else _groups(bad.astype(np.uint8), RIM_MARK_MIN_PX)
+    if strongest:
+        bad = _strongest_group(bad, res / sig, None if taken is None else taken if left is None else taken | left)
+    else:
+        bad = _groups(bad.astype(np.uint8), RIM_MARK_MIN_PX)
     if bad is None:
         return None
     out = cv2.dilate(bad, np.ones((3, 3), np.uint8)).astype(bool)
@@ -1603,9 +1612,8 @@ class BallTracker:
         g, rim = f, None
         largest = np.pi * (r * np.sin(RIM_MARK_ANGLE_RAD) + np.sqrt(2.0)) ** 2  # px (RIM_MARK_ANGLE_RAD)
         for _ in range(RIM_MARK_GROUPS):
-            add = rim_marking_pixels(patch, felt, u0, v0, g, r, self.bg.sigma,
-                                     left if rim is None else rim if left is None else left | rim, ol,
-                                     refit=rim is not None, strongest=True)
+            add = rim_marking_pixels(patch, felt, u0, v0, g, r, self.bg.sigma, left, ol, refit=rim is not None,
+                                     strongest=True, taken=rim)
             if add is None or add.sum() > largest:
                 break
             add = add if rim is None else rim | add
