@@ -508,19 +508,21 @@ def _strongest_group(bad: np.ndarray, z: np.ndarray, taken=None) -> np.ndarray |
     """Of the pixels ``bad`` (bool), split by the sign of their departure
     ``z`` (noise sigmas) into 8-connected groups of at least
     :data:`RIM_MARK_MIN_PX`, the group with the largest sum of ``z**2``
-    among those that, grown by one pixel, reach outside ``taken`` (bool;
-    None: none), as a uint8 mask; None when there is none."""
+    over its new pixels (those that, grown by one pixel, reach outside
+    ``taken``, bool; None: every pixel), as a uint8 mask; None when no
+    group has one."""
     best, most = None, 0.0
+    # A pixel is new where, grown by one as the mask is, it adds a pixel:
+    # judged from the refit, a group taken before may grow.
+    fresh = None if taken is None else cv2.dilate((~taken).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
     for side in (z > 0, z < 0):
         n, labels, stats, _ = cv2.connectedComponentsWithStats((bad & side).astype(np.uint8), connectivity=8)
         if n < 2:
             continue
-        z2 = np.bincount(labels.ravel(), weights=np.where(bad & side, z * z, 0.0).ravel(), minlength=n)
+        new = bad & side if fresh is None else bad & side & fresh
+        z2 = np.bincount(labels.ravel(), weights=np.where(new, z * z, 0.0).ravel(), minlength=n)
         z2[0] = 0.0
         z2[stats[:, cv2.CC_STAT_AREA] < RIM_MARK_MIN_PX] = 0.0
-        if taken is not None:  # the groups that, grown by one, hold no new pixel
-            fresh = cv2.dilate((~taken).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
-            z2[np.bincount(labels[fresh], minlength=n) == 0] = 0.0
         j = int(np.argmax(z2))
         if z2[j] > most:
             best, most = (labels == j).view(np.uint8), float(z2[j])
