@@ -514,6 +514,17 @@ def _groups(bad: np.ndarray, min_px: int) -> np.ndarray | None:
     return _members(n, big).view(np.uint8)[labels]
 
 
+def markings_area_px(r: float) -> float:
+    """The most of a ball of radius ``r`` (px) its markings can cover at
+    once (px), each grown by the mask's one pixel (up to sqrt(2) px): the
+    renderer's logo, a cap of RIM_MARK_ANGLE_RAD and one of 0.12 rad, or
+    three of its six dots (0.17 rad; at most three face the camera)
+    (render/look.py, marks)."""
+    def cap(a):
+        return np.pi * (r * np.sin(a) + np.sqrt(2.0)) ** 2
+    return max(cap(RIM_MARK_ANGLE_RAD) + cap(0.12), 3 * cap(0.17))
+
+
 def _strongest_group(bad: np.ndarray, z: np.ndarray, taken=None) -> np.ndarray | None:
     """Of the pixels ``bad`` (bool), split by the sign of their departure
     ``z`` (noise sigmas) into 8-connected groups of at least
@@ -1610,8 +1621,10 @@ class BallTracker:
 
     def _rim_unmarked(self, patch, felt, u0, v0, f, r, fit_blur, ol, marks, foreign, pred=None):
         """The lit sphere's fit ``f`` of a marked frame again without the
-        markings at its rim (:func:`rim_marking_pixels`, the strongest group
-        a pass, at most :data:`RIM_MARK_GROUPS`, each from the last refit): (fit,
+        markings at its rim (:func:`rim_marking_pixels`, at most
+        :data:`RIM_MARK_PASSES` times, each from the last refit; where that
+        leaves out more than the markings could cover, the strongest group a
+        pass, at most :data:`RIM_MARK_GROUPS`): (fit,
         markings with those at the rim), or ``(f, marks)`` when there are
         none, a refit fails or it moves more than
         :data:`SPHERE_MARK_MOVE_RADII` and lands no nearer than
@@ -1622,18 +1635,31 @@ class BallTracker:
         left = kept_pixels(marks, foreign)
         left = None if left is None else ~left
         g, rim = f, None
-        largest = np.pi * (r * np.sin(RIM_MARK_ANGLE_RAD) + np.sqrt(2.0)) ** 2  # px (RIM_MARK_ANGLE_RAD)
-        for _ in range(RIM_MARK_GROUPS):
-            add = rim_marking_pixels(patch, felt, u0, v0, g, r, self.bg.sigma, left, ol, refit=rim is not None,
-                                     strongest=True, taken=rim)
-            if add is None or add.sum() > largest:
+        for _ in range(RIM_MARK_PASSES):
+            add = rim_marking_pixels(patch, felt, u0, v0, g, r, self.bg.sigma, left, ol, refit=rim is not None)
+            if add is None:
                 break
-            add = add if rim is None else rim | add
             h = self._fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=self.shade,
                          valid=kept_pixels(marks, add, foreign), outline=ol, block=self.block)
             if not (h and h.stated):
                 break
             g, rim = h, add
+        if rim is not None and rim.sum() > markings_area_px(r):
+            # More than the markings could cover: the passes ran away
+            # (RIM_MARK_GROUPS); the strongest group a pass instead.
+            largest = np.pi * (r * np.sin(RIM_MARK_ANGLE_RAD) + np.sqrt(2.0)) ** 2  # px (RIM_MARK_ANGLE_RAD)
+            g, rim = f, None
+            for _ in range(RIM_MARK_GROUPS):
+                add = rim_marking_pixels(patch, felt, u0, v0, g, r, self.bg.sigma, left, ol, refit=rim is not None,
+                                         strongest=True, taken=rim)
+                if add is None or add.sum() > largest:
+                    break
+                add = add if rim is None else rim | add
+                h = self._fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=self.shade,
+                             valid=kept_pixels(marks, add, foreign), outline=ol, block=self.block)
+                if not (h and h.stated):
+                    break
+                g, rim = h, add
         # A refit that moves farther than a refinement does is kept only
         # where the ball's motion puts it: a logo lying on the rim pulled the
         # first fit 1.3-2.3 px (0.11-0.2 R), and without it the refit landed
