@@ -128,6 +128,8 @@ def mle_bound(scene: Scene, track, mle: dict | None = None, independent: bool = 
                                                   and not getattr(track, "inter_frame", False)),
                                       px_to_m=pixel_to_table(cam, xy) if in_px else None,
                                       clear_s=mle.get("cue_clear_s") or 0.0,
+                                      cue=None if getattr(track, "foreign", None) is None
+                                      else np.asarray(track.foreign, dtype=bool)[ok],
                                       # under the AR(1) model the fit kept a lossless rest frame by frame
                                       group_rest=not mle.get("ar1"),
                                       rest_scale=mle.get("rest_scale") or 1.0,

@@ -248,7 +248,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
                                   frame_dt=frame_dt, shared_rest=not independent, px_to_m=px_to_m, clear_s=clear_s,
                                   group_rest=group_rest, rest_scale=scale[0], rest_scale_dof=scale[1],
                                   look_rest=lossless and not independent, look_factor=look_factor,
-                                  still_look=bool(shaded) and not lossless and not inter_frame)
+                                  still_look=bool(shaded) and not lossless and not inter_frame, cue=foreign)
 
     if keep is not None:
         codec = CodecCorrelation(keep.codec_var, frame_dt) if inter_frame and not lossless else None

@@ -874,7 +874,7 @@ def build_measurements(t, xy, cov, *, t0: float | None = None, t_rest: float | N
                        shared_rest: bool = False, px_to_m=None, clear_s: float = 0.0,
                        group_rest: bool = True, rest_scale: float = 1.0,
                        rest_scale_dof: float = float("inf"), look_rest: bool = False,
-                       look_factor: float = 1.0, still_look: bool = False) -> Measurements:
+                       look_factor: float = 1.0, still_look: bool = False, cue=None) -> Measurements:
     """Turn a track into the measurements a fit uses.
 
     Parameters
@@ -931,6 +931,16 @@ def build_measurements(t, xy, cov, *, t0: float | None = None, t_rest: float | N
         look (``TrackResult.look_shaded``) on a lossy codec, and each rest's
         mean has the still look's own error, :data:`STILL_LOOK_VAR_PX2`
         (:func:`still_look_covariance`), beyond its frames'.
+    cue : ndarray of bool, shape (n,), optional
+        The frames the tracker flags as the cue's (``TrackResult.foreign``):
+        those before ``t0`` are left out, never part of the first rest.  A
+        ball the cue's tip is pressed against is moving (the strike placed
+        late: realistic MJPG seed 45 shot 55 at 480 fps, the ball first
+        found 5 frames after the strike, the first fit's t0 7.6 frames
+        late, its two cue-flagged frames, one 11.8 stated errors off, taken
+        as the rest: free slip at LR 13.1, rolling at 2.9 without them), and
+        beside a still ball the cue's pixels are no part of its look
+        (docs/measurements.md, slipfix).
 
     Returns
     -------
@@ -949,6 +959,8 @@ def build_measurements(t, xy, cov, *, t0: float | None = None, t_rest: float | N
     if frame_dt is None:
         frame_dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
     use = ~strike_window(t, t0, exposure_s, frame_dt, clear_s) if t0 is not None else np.ones(len(t), bool)
+    if cue is not None and t0 is not None and np.isfinite(t0):
+        use &= ~(np.asarray(cue, dtype=bool) & (t < t0))
     key = np.arange(len(t), dtype=float)
     # A rest is one measurement (group_covariance): with a lossy codec
     # always, with a lossless one when its frames' scatter is measured.

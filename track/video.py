@@ -721,9 +721,25 @@ def leaving_rest(uv, ok, radius_px: float) -> np.ndarray:
     was learnt around the resting ball.  On realistic renders with no cue
     in view (sample_scenes(22, 4, case4, realistic) shots 4, 19), the first
     two such frames were 1.5-3.2 stated errors off along the path, and free
-    slip took them; the recovery leaves them out (``recover_track(touched=)``)."""
+    slip took them; the recovery leaves them out (``recover_track(touched=)``).
+
+    A ball not found in the video's first frame has not been seen where it
+    rested: its first found frames, while within two radii of where it was
+    first found, are flagged (the spot it left lies behind it, within
+    reach).  Three first frames within ``STILL_PX`` do not show it still
+    when it moves under a pixel a frame: realistic MJPG seed 43 shot 32 at
+    480 fps, lost until 2 frames after the strike, then 0.8 px a frame, its
+    first three found frames (4.5-5.7 stated errors off along the path)
+    taken for the rest and the spot's flags starting after them, unbridged:
+    free slip at LR 264, rolling at 0.66 with these flags
+    (docs/measurements.md, slipfix)."""
     out = np.zeros(len(ok), bool)
-    first = np.flatnonzero(ok)[:3]
+    found = np.flatnonzero(ok)
+    if len(found) and not ok[0]:
+        d = np.hypot(*(uv - uv[found[0]]).T)
+        out[found[0]:] = ok[found[0]:] & (d[found[0]:] < 2.0 * radius_px)
+        return out
+    first = found[:3]
     if len(first) < 3:
         return out
     rest = np.median(uv[first], axis=0)
