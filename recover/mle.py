@@ -25,6 +25,7 @@ with ``w0`` withheld.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 from scipy.optimize import brentq, least_squares
@@ -833,7 +834,26 @@ def time_correlation(t, acf=INTER_CODEC_ACF, rho: float | None = None, frame_dt:
     AR(1) errors of lag-1 correlation ``rho`` at ``frame_dt`` (s):
     ``rho^(dt / frame_dt)``.  The matrix :func:`time_whitener` whitens by
     (without forming it) and, off its diagonal, :func:`shared_rho`."""
-    t = np.asarray(t, dtype=float)
+    t = np.ascontiguousarray(t, dtype=float)
+    key = (t.tobytes(), tuple(map(float, acf)), None if rho is None else float(rho),
+           None if frame_dt is None else float(frame_dt))
+    kept = _time_correlation if len(t) <= KEPT_CORRELATION_FRAMES else _time_correlation.__wrapped__
+    return kept(key).copy()
+
+
+# time_correlation keeps its last matrices up to this many frames (2 x 32 MB
+# at most): one recovery asks it of the same frames' times 5-7 times (the
+# sandwiches, the codec's variance, the shared scale, the paper's
+# covariances), each an exp over k^2 pairs, ~2 ms at 360 frames.
+KEPT_CORRELATION_FRAMES = 2000
+
+
+@lru_cache(maxsize=2)
+def _time_correlation(key) -> np.ndarray:
+    """:func:`time_correlation` for its arguments as a key ``(t.tobytes(),
+    acf, rho, frame_dt)``, kept read-only (callers get a copy)."""
+    t_bytes, acf, rho, frame_dt = key
+    t = np.frombuffer(t_bytes, dtype=float)
     dt = np.abs(t[:, None] - t[None, :])
     if rho is not None:
         C = float(rho) ** (dt / float(frame_dt))
@@ -841,6 +861,7 @@ def time_correlation(t, acf=INTER_CODEC_ACF, rho: float | None = None, frame_dt:
         a, b, tau, tau_long = acf
         C = a * np.exp(-dt / tau_long) + b * np.exp(-dt / tau)
     np.fill_diagonal(C, 1.0)
+    C.flags.writeable = False
     return C
 
 
