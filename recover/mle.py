@@ -886,20 +886,29 @@ def time_whitener(acf=INTER_CODEC_ACF, rho: float | None = None, frame_dt: float
     def whiten(t, M):
         t = np.asarray(t, dtype=float)
         M = np.asarray(M, dtype=float)
-        out = np.empty_like(M)
-        s = np.zeros((len(var),) + M.shape[1:])
+        # The filter's gains depend on the times only: made first, then
+        # the rows' states (the same operations, in the same order, as one
+        # loop over both).
+        phis, roots, gains = [None] * len(t), [None] * len(t), [None] * len(t)
         P = np.diag(var)
         for k in range(len(t)):
             if k:
                 phi = np.exp(-(t[k] - t[k - 1]) / tc)
-                s = phi.reshape((-1,) + (1,) * (M.ndim - 1)) * s
+                phis[k] = phi.reshape((-1,) + (1,) * (M.ndim - 1))
                 P = phi[:, None] * P * phi[None, :] + np.diag(var * (1.0 - phi**2))
             S = P.sum() + white
             g = P.sum(axis=1) / S  # Kalman gain on the components
-            e = M[k] - s.sum(axis=0)
-            out[k] = e / np.sqrt(S)
-            s = s + np.multiply.outer(g, e)
+            roots[k] = np.sqrt(S)
+            gains[k] = g.reshape((-1,) + (1,) * (M.ndim - 1))
             P = P - S * np.outer(g, g)
+        out = np.empty_like(M)
+        s = np.zeros((len(var),) + M.shape[1:])
+        for k in range(len(t)):
+            if k:
+                s = phis[k] * s
+            e = M[k] - s.sum(axis=0)
+            out[k] = e / roots[k]
+            s = s + gains[k] * e
         return out
     return whiten
 
