@@ -29,7 +29,6 @@ from functools import lru_cache
 
 import numpy as np
 from scipy.optimize import brentq, least_squares
-from scipy.sparse import csr_array
 
 from cuespin.fit.decide import MIN_STILL_FRAMES, autocorrelated, slide_through_excluded, strike_in_view
 from cuespin.fit.lm import lm_fit
@@ -434,11 +433,9 @@ def jacobian_map(meas: Measurements, ar1: float = 0.0):
     ``meas.whiten``) from the model's derivatives at the used frames: a
     function of ``d_model`` (k, 2, p) giving (2m, p), made once per fit
     (both maps are linear, and the residual is observed less model)."""
-    g = meas.group[meas.used]
-    m, k = meas.n, len(g)
-    cnt = np.bincount(g, minlength=m).astype(float)
+    m, k = meas.n, int(meas.used.sum())
     # Each frame's derivative averaged into its measurement (Measurements._means), as one sparse product.
-    average = csr_array((1.0 / cnt[g], (g, np.arange(k))), shape=(m, k))
+    average = meas.averaging
     prewhiten = prewhitener(meas, ar1)
     W = meas.W
 
