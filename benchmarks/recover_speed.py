@@ -14,6 +14,7 @@ waiting); prints per shot and the median and 95th percentile per codec
 (target: median <= 0.1).
 
 Usage: python benchmarks/recover_speed.py [--n 8] [--seed 0] [--rounds 3] [--codec MJPG FFV1] [--max-seconds 2]
+                                         [--look plain|realistic]
 """
 
 import argparse
@@ -34,15 +35,18 @@ def main():
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--codec", nargs="+", default=["MJPG", "FFV1"])
     ap.add_argument("--max-seconds", type=float, default=2.0)
+    ap.add_argument("--look", choices=["plain", "realistic"], default="plain",
+                    help="the sampler's look (realistic: the shaded ball and felt, as accuracy.py --look)")
     args = ap.parse_args()
     from cuespin.data_gen.sampler import sample_scenes
     from cuespin.recover.api import recover_track
     from cuespin.recover.measurements import pixel_to_table, table_covariance
-    from cuespin.render import render_video
+    from cuespin.render import render_settings, render_video
+    from cuespin.render.video import video_suffix
     from cuespin.track.tracker import TrackerConfig
     from cuespin.track.video import track_video
 
-    scenes = sample_scenes(args.n, args.seed)
+    scenes = sample_scenes(args.n, args.seed, look=args.look)
     with tempfile.TemporaryDirectory() as tmp:
         for codec in args.codec:
             print(f"\n{codec}: {'shot':>4} {'frames':>6} {'decode s':>9} {'recover s':>9} {'ratio':>6} "
@@ -51,7 +55,8 @@ def main():
             for i, scene in enumerate(scenes):
                 scene.render["max_duration"] = args.max_seconds
                 scene.render["codec"] = codec
-                video = Path(tmp) / f"shot_{i}.avi"
+                # .mp4 for H264 (libx264 writes no .avi), else .avi
+                video = Path(tmp) / f"shot_{i}{video_suffix(str(render_settings(scene)['codec']))}"
                 render_video(scene, video)
                 tr = track_video(video, scene, TrackerConfig())
                 cam = scene.camera

@@ -636,18 +636,23 @@ def correlated_end_F(seg: Segments, t, xy, whiten) -> float:
     t, xy = t[good], xy[good]
     k = seg.geometry_cov["frames"]
     tf, xf = t[k], xy[k]
-    def whitened_sse(t0, t1, a_r):
+    def design(t0, t1, a_r):
         tau, _, c2, roll = (v[0] for v in _path_basis(tf, np.array([float(t0)]),
                                                       np.array([min(t1, tf[-1] + 1.0)])))
         X = np.stack([np.ones_like(tau), tau, c2], axis=1)
         y = xf - roll[:, None] * a_r[None, :]  # rolling's known deceleration (eq. 18)
-        w = whiten(tf, np.concatenate([X, y], axis=1))
+        return np.concatenate([X, y], axis=1)
+
+    def sse_of(w):
         Xw, yw = w[:, :3], w[:, 3:]
         beta = np.linalg.lstsq(Xw, yw, rcond=None)[0]
         r = yw - Xw @ beta
         return float(np.sum(r * r))
 
-    sse = whitened_sse(seg.t0, seg.t1, np.asarray(seg.a_roll, dtype=float))
-    sse_un = whitened_sse(seg.unended.t0, np.inf, np.zeros(2))
+    # Both fits' columns whitened in one pass (column by column the same
+    # numbers: the filter's gains are the times' alone).
+    w = whiten(tf, np.concatenate([design(seg.t0, seg.t1, np.asarray(seg.a_roll, dtype=float)),
+                                   design(seg.unended.t0, np.inf, np.zeros(2))], axis=1))
+    sse, sse_un = sse_of(w[:, :5]), sse_of(w[:, 5:])
     dof = max(int(seg.end_dof), 1)
     return max(sse_un - sse, 0.0) / max(sse / dof, 1e-300)

@@ -25,10 +25,10 @@ with ``w0`` withheld.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 from scipy.optimize import brentq, least_squares
-from scipy.sparse import csr_array
 
 from cuespin.fit.decide import MIN_STILL_FRAMES, autocorrelated, slide_through_excluded, strike_in_view
 from cuespin.fit.lm import lm_fit
@@ -433,11 +433,9 @@ def jacobian_map(meas: Measurements, ar1: float = 0.0):
     ``meas.whiten``) from the model's derivatives at the used frames: a
     function of ``d_model`` (k, 2, p) giving (2m, p), made once per fit
     (both maps are linear, and the residual is observed less model)."""
-    g = meas.group[meas.used]
-    m, k = meas.n, len(g)
-    cnt = np.bincount(g, minlength=m).astype(float)
+    m, k = meas.n, int(meas.used.sum())
     # Each frame's derivative averaged into its measurement (Measurements._means), as one sparse product.
-    average = csr_array((1.0 / cnt[g], (g, np.arange(k))), shape=(m, k))
+    average = meas.averaging
     prewhiten = prewhitener(meas, ar1)
     W = meas.W
 
@@ -833,7 +831,26 @@ def time_correlation(t, acf=INTER_CODEC_ACF, rho: float | None = None, frame_dt:
     AR(1) errors of lag-1 correlation ``rho`` at ``frame_dt`` (s):
     ``rho^(dt / frame_dt)``.  The matrix :func:`time_whitener` whitens by
     (without forming it) and, off its diagonal, :func:`shared_rho`."""
-    t = np.asarray(t, dtype=float)
+    t = np.ascontiguousarray(t, dtype=float)
+    key = (t.tobytes(), tuple(map(float, acf)), None if rho is None else float(rho),
+           None if frame_dt is None else float(frame_dt))
+    kept = _time_correlation if len(t) <= KEPT_CORRELATION_FRAMES else _time_correlation.__wrapped__
+    return kept(key).copy()
+
+
+# time_correlation keeps its last matrices up to this many frames (2 x 32 MB
+# at most): one recovery asks it of the same frames' times 5-7 times (the
+# sandwiches, the codec's variance, the shared scale, the paper's
+# covariances), each an exp over k^2 pairs, ~2 ms at 360 frames.
+KEPT_CORRELATION_FRAMES = 2000
+
+
+@lru_cache(maxsize=2)
+def _time_correlation(key) -> np.ndarray:
+    """:func:`time_correlation` for its arguments as a key ``(t.tobytes(),
+    acf, rho, frame_dt)``, kept read-only (callers get a copy)."""
+    t_bytes, acf, rho, frame_dt = key
+    t = np.frombuffer(t_bytes, dtype=float)
     dt = np.abs(t[:, None] - t[None, :])
     if rho is not None:
         C = float(rho) ** (dt / float(frame_dt))
@@ -841,6 +858,7 @@ def time_correlation(t, acf=INTER_CODEC_ACF, rho: float | None = None, frame_dt:
         a, b, tau, tau_long = acf
         C = a * np.exp(-dt / tau_long) + b * np.exp(-dt / tau)
     np.fill_diagonal(C, 1.0)
+    C.flags.writeable = False
     return C
 
 
@@ -865,20 +883,29 @@ def time_whitener(acf=INTER_CODEC_ACF, rho: float | None = None, frame_dt: float
     def whiten(t, M):
         t = np.asarray(t, dtype=float)
         M = np.asarray(M, dtype=float)
-        out = np.empty_like(M)
-        s = np.zeros((len(var),) + M.shape[1:])
+        # The filter's gains depend on the times only: made first, then
+        # the rows' states (the same operations, in the same order, as one
+        # loop over both).
+        phis, roots, gains = [None] * len(t), [None] * len(t), [None] * len(t)
         P = np.diag(var)
         for k in range(len(t)):
             if k:
                 phi = np.exp(-(t[k] - t[k - 1]) / tc)
-                s = phi.reshape((-1,) + (1,) * (M.ndim - 1)) * s
+                phis[k] = phi.reshape((-1,) + (1,) * (M.ndim - 1))
                 P = phi[:, None] * P * phi[None, :] + np.diag(var * (1.0 - phi**2))
             S = P.sum() + white
             g = P.sum(axis=1) / S  # Kalman gain on the components
-            e = M[k] - s.sum(axis=0)
-            out[k] = e / np.sqrt(S)
-            s = s + np.multiply.outer(g, e)
+            roots[k] = np.sqrt(S)
+            gains[k] = g.reshape((-1,) + (1,) * (M.ndim - 1))
             P = P - S * np.outer(g, g)
+        out = np.empty_like(M)
+        s = np.zeros((len(var),) + M.shape[1:])
+        for k in range(len(t)):
+            if k:
+                s = phis[k] * s
+            e = M[k] - s.sum(axis=0)
+            out[k] = e / roots[k]
+            s = s + gains[k] * e
         return out
     return whiten
 

@@ -157,6 +157,40 @@ def test_time_whitener_is_the_cholesky_whitening(kw):
     assert np.allclose(time_whitener(**kw)(t, M), np.linalg.solve(L, M), atol=1e-10)
 
 
+@pytest.mark.parametrize("kw", [{}, {"rho": 0.7, "frame_dt": 1 / 240}])
+def test_time_whitener_whitens_columns_alike_together_or_apart(kw):
+    # correlated_end_F whitens both fits' columns in one call: each column
+    # must come out with the same bits as alone (the filter's gains are the
+    # times' alone; every operation on the rows is elementwise).
+    rng = np.random.default_rng(5)
+    t = np.sort(rng.choice(np.arange(600) / 240, 300, replace=False))
+    M = rng.standard_normal((300, 10))
+    whiten = time_whitener(**kw)
+    together = whiten(t, M)
+    assert all(np.array_equal(together[:, [j]], whiten(t, M[:, [j]])) for j in range(10))
+    assert np.array_equal(together[:, :5], whiten(t, M[:, :5]))
+
+
+def test_time_correlation_kept_is_the_same_and_not_shared():
+    # time_correlation keeps its last matrices (a recovery asks for the
+    # same frames' several times): a caller's write (shared_rho zeroes the
+    # diagonal) must not reach the next caller, the answer must be the one
+    # made afresh, and longer tracks than it keeps are made every time.
+    import cuespin.recover.mle as mle
+    t = np.arange(50) / 60.0
+    first = time_correlation(t)
+    first[:] = 7.0
+    again = time_correlation(t)
+    assert np.all(np.diag(again) == 1.0) and np.all(again <= 1.0)
+    assert np.array_equal(again, mle._time_correlation.__wrapped__((t.tobytes(), tuple(mle.INTER_CODEC_ACF),
+                                                                       None, None)))
+    assert np.allclose(time_correlation(t, rho=0.5, frame_dt=1 / 60), 0.5 ** np.abs(np.subtract.outer(t, t)
+                                                                                        * 60))
+    long = np.arange(mle.KEPT_CORRELATION_FRAMES + 1) / 240.0
+    assert time_correlation(long[:5]).shape == (5, 5)
+    assert time_correlation(long).shape == (len(long),) * 2
+
+
 def test_false_sliding_ended_rate_codec_480fps_small():
     # 480 fps: the worst frame rate under the codec's correlation (8.2% with
     # independent errors' end_F; docs/measurements.md, gross13 and endf13).
