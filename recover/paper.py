@@ -97,14 +97,20 @@ SLIDING_TIME_TOLERANCES = 3.0
 # stopped at fit.conics.PARABOLA_MAX_NFEV, the 22 parabola answers of seed
 # 5's fresh MJPG shots took 1-59 more (median 8), one was still stepping at 200.
 PAPER_PARABOLA_MAX_NFEV = 200
-# The answer's root must exist with each input moved this many of its
-# standard errors either way (recover.paper.with_stderr): an answer whose
-# root vanishes nearer is not a smooth function of its inputs over their
-# errors, and the delta method's errors do not hold for it.  pap37's
-# one-sided differences took sliding_tracks(56, 11)[55]'s parabola answer,
-# whose root vanished both ways at 0.01 of an input's error (the review of
-# pap37, onesided.py).  0.5: half an error each way, where a linearisation
-# must hold if the stated errors are to mean what they say.
+# The answer's root must exist with the inputs moved this many standard
+# errors either way along each axis of their covariance (its independent
+# components; recover.paper.with_stderr): an answer whose root vanishes
+# nearer is not a smooth function of its inputs over their errors, and the
+# delta method's errors do not hold for it.  pap37's one-sided differences
+# took sliding_tracks(56, 11)[55]'s parabola answer, whose root vanished
+# both ways at 0.01 of an input's error (the review of pap37, onesided.py).
+# 0.5: half an error each way, where a linearisation must hold if the stated
+# errors are to mean what they say.  Along the axes, not each input alone:
+# the parabola's inputs are strongly correlated, and one moved by half its
+# marginal error with the others held is far outside their joint errors; so
+# asked, 16 of sliding_tracks(200, 11)'s 76 paper answers were refused (ok
+# 60, coverage 93.8%), along the axes 6 (ok 70, 92.9%; docs/measurements.md,
+# fixpap).
 ROOT_SPAN_SIGMAS = 0.5
 
 
@@ -512,8 +518,9 @@ def unpropagated(res: PaperResult, why: str) -> PaperResult:
     Before, :func:`with_stderr` returned such answers ``ok`` without
     errors whenever one side had no root: realistic H.264 37/1 and 38/22
     (held37), 29% and 12% off in v0 (counted as misses, the paper's
-    coverage there 80.0%, not 88.9%); those now take the one-sided
-    difference (z 1.29 and 1.17 at most)."""
+    coverage there 80.0%, not 88.9%); pap37 gave them one-sided
+    differences, whose errors depend on the step at a square-root edge;
+    they are refused here (fixpap)."""
     from dataclasses import replace
     return replace(res, status="degenerate", reason=f"its errors cannot be propagated: {why}", v0=None, w0=None,
                    u0=None, stderr={}, cov=None)
