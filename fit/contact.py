@@ -60,6 +60,16 @@ BALL_TOLERANCE_M = 0.01
 # are this many standard errors from where it started.
 MOVE_SIGMAS = 5.0
 MOVE_CONFIRM_FRAMES = 3
+# The ball is still from the track's start to a change when no window's fitted
+# velocity is off zero at this family-wise level: each window's v.v / var is
+# chi-square with 2 degrees of freedom (the two axes' velocities, independent
+# and of equal variance under the window's fit; survival exp(-x / 2)), and m
+# windows are held to Bonferroni's STILL_LEVEL / m, x <= -2 ln(STILL_LEVEL / m)
+# (13.8 for one window; the windows overlap, so the family's rate is under
+# STILL_LEVEL).  At 0.1% per window without the correction, a still rest
+# drifting 15 errors (tests/test_contact.py) broke it in 1 of 9 tracks (240
+# fps, 73 windows, largest 16.6).
+STILL_LEVEL = 1e-3
 # Placing a jump, the motion before it may kink (sliding ending), but only
 # before the first flagged boundary, whose frames are clear of the jump:
 # a kink allowed up to the candidate imitated the jump and placed it 1-9
@@ -392,17 +402,29 @@ def _moved_index(xy, sig) -> int:
     return int(hits[0]) if hits.size else len(xy)
 
 
-def strike_at(coef_before, cov_before, scale: float = 1.0) -> bool:
-    """A change of motion is the strike: the ball before it still, its
-    velocity over the window before (``coef_before``, ``(2 axes, 3)`` of
-    :func:`_window_fits`; ``cov_before`` their unscaled covariance, times
-    ``scale`` squared as :func:`change_statistic` scales the noise) within
-    ``MOVE_SIGMAS`` of its standard errors of zero, the rule by which
-    :func:`_moved_index` says the ball has not moved.  A contact changes a
-    moving ball's motion; a still ball's only change is the strike."""
-    v = np.asarray(coef_before, float)[:, 1]
-    var = float(np.asarray(cov_before, float)[1, 1]) * float(scale) ** 2
-    return bool(var > 0 and float(v @ v) / var <= 2 * MOVE_SIGMAS ** 2)
+def strike_at(coef_before, cov_before, scale=1.0) -> bool:
+    """A change of motion is the strike: the ball still in every window
+    before it, from the track's start (``coef_before``, ``(m, 2 axes, 3)``
+    of :func:`_window_fits`, one per boundary whose left window ends by the
+    change; ``cov_before`` their unscaled covariances ``(m, 3, 3)``, times
+    ``scale`` (scalar or ``(m,)``) squared as :func:`change_statistic`
+    scales the noise).  Still: each window's fitted velocity within its
+    errors of zero, the ``m`` windows together at ``STILL_LEVEL``
+    (Bonferroni: ``v.v / var <= -2 ln(STILL_LEVEL / m)`` in each).  A
+    contact changes a moving ball's motion; a still ball's only change is
+    the strike.  (pap37's first rule asked only the window just before the
+    change, at ``2 MOVE_SIGMAS^2`` = 50, a position rule's constant: it
+    meant "slow", not "still", and took real contacts and a re-strike after
+    a rest for the strike: strike_power.py's 400 scenes on a 100-m table
+    lost 9 contacts of each error kind; a second strike after a rest was
+    found in 0 of 8 scenes.)"""
+    v = np.asarray(coef_before, float).reshape(-1, 2, 3)[:, :, 1]
+    if not len(v):
+        return False
+    var = np.asarray(cov_before, float).reshape(-1, 3, 3)[:, 1, 1] * np.broadcast_to(
+        np.asarray(scale, float), (len(v),)) ** 2
+    still = -2.0 * np.log(STILL_LEVEL / len(v))
+    return bool(np.all(var > 0) and np.all(np.sum(v * v, axis=1) / var <= still))
 
 
 def _crossing_time(c, t_lo, t_hi, tau, target) -> float | None:
@@ -568,6 +590,7 @@ def find_contact(t, xy, ok, stderr_m, table, R: float, balls=(), W: int | None =
     # Boundaries with the left window wholly after the strike, and not past
     # a cushion contact already found.
     last = geo[1] if geo is not None else len(tt)
+    anchored = False
     while True:
         keep = (b_all - W >= moved) & (b_all <= last)
         b, stat, cl, cr, jump_chi2 = b_all[keep], stat_all[keep], cl_all[keep], cr_all[keep], jump_all[keep]
@@ -588,15 +611,18 @@ def find_contact(t, xy, ok, stderr_m, table, R: float, balls=(), W: int | None =
         k = (_change_point(tt, pp, sig, k0 - W, hi, cands, kink=CHANGE_POINT_KINK,
                            kappa_max=float(tt[k0 - 1])) if cands.size else k0)
         j = int(np.clip(np.searchsorted(b, k), 0, len(b) - 1))
-        if strike_at(cl[j] if b[j] == k else cl[i], covl_all[keep][j if b[j] == k else i],
-                     scale[j if b[j] == k else i] if np.ndim(scale) else scale):
-            # The ball was still before this change: it is the strike (a
-            # change of motion by definition), which _moved_index placed too
-            # early (a resting ball's track wandering by MOVE_SIGMAS errors:
-            # realistic H.264 38/21, "moved" at 0.10 s, the strike at 0.40 s
-            # cut as an unknown contact, and every frame of motion with it).
-            # The search starts again after the strike's window.
-            moved = k
+        before = b_all <= k
+        if not anchored and strike_at(cl_all[before], covl_all[before],
+                                      scale_all[before] if np.ndim(scale_all) else scale_all):
+            # The ball was still in every window before this change: it is
+            # the strike (a change of motion by definition), which
+            # _moved_index placed too early (a resting ball's track wandering
+            # by MOVE_SIGMAS errors: realistic H.264 38/21, "moved" at 0.10
+            # s, the strike at 0.40 s cut as an unknown contact, and every
+            # frame of motion with it).  The search starts again after the
+            # strike's window, once: the track's first motion is the strike,
+            # every later change a contact (a re-strike after a rest too).
+            moved, anchored = k, True
             continue
         if b[j] == k:
             tc = _jump_time(cl[j], cr[j], tt[k - 1], tt[k])

@@ -583,6 +583,23 @@ def _geometry_cov(tf, xf, t0, t1, beyond, decel, v1, s2, n_rest, v0=None):
                 out["x0x1_t"] = Ht[0, 1] * np.outer(v0, v1)
                 out["x0"] = out["x0"] + out["x0_t0"]
                 out["x0x1"] = out["x0x1"] + out["x0x1_t"]
+    elif tau1 == 0 and v0 is not None and len(tf) > 1:
+        # Rolling from the strike (case 4, t1 = t0, x1 = x0): the strike
+        # time's error moves x0 (and x1 with it) along v0, var(t0) = 2 s2 /
+        # (d^2 SSE / d t0^2) along the profile with t1 held at t0, a frame
+        # either side.  (Left out, the paper's case-4 answers on 60 shots
+        # to rest, the review of pap37's case4_rest.py, read x0 up to 6.5
+        # of its stated errors off along the path, and their errors covered
+        # 72.9% of 192 components.)
+        h = float(np.median(np.diff(tf)))
+        g = np.array([-h, 0.0, h])
+        S, _, _ = _solve_many(tf, xf, t0 + g, t0 + g, decel)
+        d2 = float(S[2] - 2 * S[1] + S[0]) / h**2
+        if d2 > 0:
+            share = 2 * s2 / d2 * np.outer(v0, v0)
+            out["x0_t0"] = out["x1_t1"] = out["x0x1_t"] = share
+            for k in ("x0", "x1", "x0x1"):
+                out[k] = out[k] + share
     if n_rest:
         out["x2"] = s2 / n_rest * I2
     return out

@@ -201,17 +201,39 @@ def test_paper_ok_always_states_its_errors():
     # Realistic H.264 37/1 and 38/22 (held37): an input moved by 1e-3 of its
     # error one way gave no root, and with_stderr returned the answer ok with
     # no errors (29% and 12% off in v0).  sliding_tracks(200, 11)'s track 55
-    # (480 fps, parabola) is that case on a plain simulated track: it now
-    # states errors (the one-sided difference from the side with a root),
-    # which cover its error (measured z 0.28 at most; 3 allows chance).
+    # (480 fps, parabola) is that case on a plain simulated track.  pap37
+    # gave it one-sided errors; but its root vanishes both ways at 0.01 of
+    # an input's error (the review of pap37, onesided.py): the answer exists
+    # only on a sliver of its inputs' errors, and is `degenerate` with that
+    # reason (recover.paper.ROOT_SPAN_SIGMAS), never ok without errors.
     from itertools import islice
 
     from cuespin.recover.simulate import sliding_tracks
     tr = next(islice(sliding_tracks(56, 11), 55, None))
     est = estimate(tr.t, tr.xy, np.full(len(tr.t), tr.sigma), tr.params, tr.exposure_s)
     p = est.paper
-    assert p.status == "ok" and p.stderr, p
-    se = np.r_[p.stderr["v0"], p.stderr["w0"]]
-    assert np.all(np.isfinite(se)) and np.all(se > 0), se
-    z = (np.r_[p.v0, p.w0] - np.r_[tr.shot.v0, tr.shot.w0]) / se
-    assert np.max(np.abs(z)) < 3.0, z
+    assert p.status == "degenerate" and "sliver" in p.reason and p.v0 is None and not p.stderr, p
+
+
+@pytest.mark.slow  # 60 simulated tracks: about 15-50 s
+def test_paper_errors_cover_rolling_from_the_strike():
+    # Review of pap37 (case4_rest.py 60 5, the same tracks): case-4 shots
+    # slowed to rest in view.  pap37 moved x1 apart from x0 (a shorter slide
+    # has no root) and took one-sided differences: coverage 75.0% of 192
+    # components, RMS z 3.36, max |z| 27.  Now the answer is propagated from
+    # (x0, x2) with x1 tied to x0, and x0 carries the strike time's error
+    # (fit.segment._geometry_cov): measured 96.9%, RMS z 1.08.  Asked: each
+    # answer's four components within 1.96 stated errors 95% of the time,
+    # within two binomial standard errors counted over the answers (v0 along
+    # the path and w0 across it share one error: z equal).
+    from cuespin.recover.simulate import rolls_to_rest_tracks
+
+    Z = []
+    for tr in rolls_to_rest_tracks(60, 5, presets=("case4",)):
+        p = estimate(tr.t, tr.xy, np.full(len(tr.t), tr.sigma), tr.params, tr.exposure_s).paper
+        if p is not None and p.status == "ok":
+            Z.append((np.r_[p.v0, p.w0] - np.r_[tr.shot.v0, tr.shot.w0]) / np.r_[p.stderr["v0"], p.stderr["w0"]])
+    Z = np.abs(np.array(Z))
+    assert len(Z) >= 40, len(Z)
+    margin = 2 * np.sqrt(0.95 * 0.05 / len(Z))
+    assert abs(np.mean(Z < 1.96) - 0.95) <= margin, (np.mean(Z < 1.96), len(Z))
