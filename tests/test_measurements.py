@@ -712,12 +712,14 @@ def test_a_lossless_shaded_balls_rest_is_one_frames_error_whatever_its_scatter()
 def test_a_shaded_lossy_rest_is_stated_at_least_one_frames_error():
     # A shaded ball at rest on a lossy codec (still_look): the codec's error
     # at its place is the same in every frame (light47, restfloor), so its
-    # mean is stated at least one frame's stated covariance, whatever its
-    # frames' scatter and whatever the codec's measured excess takes back
+    # mean has the still look's STILL_LOOK_VAR_PX2 (px^2 through metres
+    # per pixel) beyond the rest's rule and is stated at least one frame's
+    # stated covariance, whatever its frames' scatter and whatever the
+    # codec's measured excess takes back
     # (a negative with_codec); a rest already stated wider, single frames
     # and tracks without the flag unchanged; a linear estimate's covariance
     # (linear_covariance) carries it as the fit's whitener does.
-    from cuespin.recover.measurements import SHARED_REST_MIN_SHARE, linear_covariance
+    from cuespin.recover.measurements import SHARED_REST_MIN_SHARE, STILL_LOOK_VAR_PX2, linear_covariance
 
     n = 40
     t = np.arange(n + 30) / 100.0
@@ -734,17 +736,24 @@ def test_a_shaded_lossy_rest_is_stated_at_least_one_frames_error():
 
     old, new = meas(), meas(still_look=True)
     one = SIGMA**2 * np.eye(2)
+    look = STILL_LOOK_VAR_PX2 * np.diag([3e-3, 2e-3]) ** 2                # the still look's, kept inside
+
+    def floored(base):  # both diagonal: the Loewner order's least cover is the larger per axis
+        return np.diag(np.maximum(np.diag(base + look), SIGMA**2))
+
     assert cov(old)[0] == pytest.approx((SHARED_REST_MIN_SHARE + (1 - SHARED_REST_MIN_SHARE) / n) * one, rel=1e-9)
-    assert cov(new)[0] == pytest.approx(one, rel=1e-9)                   # raised to one frame's
+    # x: the look's 0.0135 sigma^2 beyond the rest's own already covers one
+    # frame's; y (0.006 sigma^2 of look) is raised to it.
+    assert cov(new)[0] == pytest.approx(floored(cov(old)[0]), rel=1e-9)
+    assert cov(new)[0][1, 1] == pytest.approx(SIGMA**2, rel=1e-9) and cov(new)[0][0, 0] > 1.4 * SIGMA**2
     assert cov(new)[1:] == pytest.approx(cov(old)[1:], rel=1e-12)
     # A negative codec excess shrinks the frames, not the rest's floor; a
     # positive one beyond it widens the rest as before.
     px2 = -0.5 * SIGMA**2 / 3e-3**2
-    assert cov(new.with_codec(px2))[0] == pytest.approx(one, rel=1e-9)
+    assert cov(new.with_codec(px2))[0] == pytest.approx(floored(cov(old.with_codec(px2))[0]), rel=1e-9)
     assert cov(new.with_codec(px2))[1:] == pytest.approx(cov(old.with_codec(px2))[1:], rel=1e-12)
     big = 30.0 * SIGMA**2 / 3e-3**2
-    assert np.all(np.linalg.eigvalsh(cov(new.with_codec(big))[0] - one) > 0)
-    assert cov(new.with_codec(big))[0] == pytest.approx(cov(old.with_codec(big))[0], rel=1e-9)
+    assert cov(new.with_codec(big))[0] == pytest.approx(cov(old.with_codec(big))[0] + look, rel=1e-9)
     # The rest's mean as a linear estimate: its covariance is the whitener's.
     w = np.zeros((1, len(t)))
     w[0, new.group == 0] = 1.0 / np.sum(new.group == 0)
