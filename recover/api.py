@@ -64,8 +64,9 @@ def recover_track(t, xy, ok, stderr_m, params: BallParams, exposure_s: float = 0
         ``TrackResult.look_factor``, on every frame's stated error: taken
         off the rests' frames where they share the look's error.
     shaded : bool
-        ``TrackResult.look_shaded``: on a lossy codec each rest's mean has
-        the still look's own error (recover.measurements.STILL_LOOK_VAR_PX2).
+        ``TrackResult.look_shaded``: on a lossy codec each rest's mean is
+        stated at least one frame's stated covariance, the codec's error at
+        a still ball's place (recover.measurements.rest_floor_covariance).
     inter_frame : bool
         The lossy codec predicts frames from others (H.264): its error is
         shared between neighbouring frames (recover.mle.codec_sandwich).
