@@ -2069,7 +2069,8 @@ class BallTracker:
                 # explains its window better is kept if that is the second,
                 # and otherwise (it failed, or explains less) the frame is
                 # dropped: two places a quarter radius apart and no way to
-                # tell which is the ball's.
+                # tell which is the ball's -- unless the ball is marked and
+                # the first lies beside the prediction and explains more.
                 alt = self._departure_centre(frame, f.c, r_ball)
                 if np.hypot(*(alt - f.c)) > RESTART_RADII * r_ball:
                     # Started at the departure's centroid itself: the
