@@ -202,6 +202,41 @@ RIM_MARK_MIN_PX = 1
 # unmarked frames of that shot the largest such mean was 2.4-4.3 of its
 # noise (76 frames).
 RIM_MARK_BOX = 3
+# On a frame (BallTracker._rim_unmarked) the rim rule takes one group a pass,
+# the strongest: its departing pixels split by sign (a marking is darker or
+# lighter than the ball, not both) into 8-connected groups, the one with the
+# largest sum of squared departures (in noise sigmas) left out and the
+# sphere refitted, the next pass judged from that refit.  Every departing
+# pixel at once, from a fit the marking pulled, ran away: realistic seed 8
+# shot 3 frame 39 (FFV1, a white ball with a red logo over its left rim, 17
+# px at -13..-60 sigmas), the pulled first fit departs +3..+12 sigmas along
+# half the rim, joined to the logo in one group; the first pass took 134 px,
+# the refit moved 2.7 px, the second took 343 px of the 306-px ball, and the
+# frame was 0.040 / 0.067 px off (ten of its neighbours' errors;
+# docs/measurements.md, markgate).  The largest group first (88 px, the logo
+# with the positive misfit beside it) ran off as well (2.7 px, rms 15.4 ->
+# 19.8); the strongest group of one sign is the logo (39 px grown), its
+# refit 0.015 / 0.007 px off (branch rim83).  From each refit every pixel
+# is judged again, and the groups ranked by their new pixels alone (those
+# that, grown by one, add to the mask): a dot's faint edge, under the rule
+# from the pulled fit, joins its group from the refit (realistic seed 9
+# shot 18 frame 21: 9 -> 16 px, its refit 0.066 -> 0.039 px off), and a taken
+# group's slight growth does not come before another marking (seed 8 shot
+# 3 frame 43).  The search stops at no new pixel, at a refit that states no
+# error, at a group larger than any marking (RIM_MARK_ANGLE_RAD), or after
+# RIM_MARK_GROUPS passes (stopping too at a refit whose rms rose, as
+# BallTracker._unmarked's rule, stopped seed 8 shot 18's small dotted ball
+# at noise-level rises, 6.516 -> 6.528, and left its dots in: RMSE 0.0385
+# -> 0.0427 px): a bound on the
+# cost (a logo's two discs or three dots in view, each its core and then
+# its edge), not a figure measured to bind.
+RIM_MARK_GROUPS = 6
+# The largest marking a ball carries shows at most as a disc of radius R
+# sin(RIM_MARK_ANGLE_RAD) px (R the ball's): the renderer's logo is a cap of
+# angular radius 0.33 rad, its dots 0.17 (render/look.py, marks); grown by
+# the mask's one pixel (a 3 x 3 dilation: up to sqrt(2) px).  A group larger
+# than that is not a marking but a fit's misfit.
+RIM_MARK_ANGLE_RAD = 0.33
 # A ball whose markings the rule inside found in this many frames is a
 # marked ball: its frames where the rule finds none (a logo turned away,
 # what is still in view under the rule's threshold) get the lit sphere's
@@ -479,8 +514,45 @@ def _groups(bad: np.ndarray, min_px: int) -> np.ndarray | None:
     return _members(n, big).view(np.uint8)[labels]
 
 
+def markings_area_px(r: float) -> float:
+    """The most of a ball of radius ``r`` (px) its markings can cover at
+    once (px), each grown by the mask's one pixel (up to sqrt(2) px): the
+    renderer's logo, a cap of RIM_MARK_ANGLE_RAD and one of 0.12 rad, or
+    three of its six dots (0.17 rad; at most three face the camera)
+    (render/look.py, marks)."""
+    def cap(a):
+        return np.pi * (r * np.sin(a) + np.sqrt(2.0)) ** 2
+    return max(cap(RIM_MARK_ANGLE_RAD) + cap(0.12), 3 * cap(0.17))
+
+
+def _strongest_group(bad: np.ndarray, z: np.ndarray, taken=None) -> np.ndarray | None:
+    """Of the pixels ``bad`` (bool), split by the sign of their departure
+    ``z`` (noise sigmas) into 8-connected groups of at least
+    :data:`RIM_MARK_MIN_PX`, the group with the largest sum of ``z**2``
+    over its new pixels (those that, grown by one pixel, reach outside
+    ``taken``, bool; None: every pixel), as a uint8 mask; None when no
+    group has one."""
+    best, most = None, 0.0
+    # A pixel is new where, grown by one as the mask is, it adds a pixel:
+    # judged from the refit, a group taken before may grow.
+    fresh = None if taken is None else cv2.dilate((~taken).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    for side in (z > 0, z < 0):
+        n, labels, stats, _ = cv2.connectedComponentsWithStats((bad & side).astype(np.uint8), connectivity=8)
+        if n < 2:
+            continue
+        new = bad & side if fresh is None else bad & side & fresh
+        z2 = np.bincount(labels.ravel(), weights=np.where(new, z * z, 0.0).ravel(), minlength=n)
+        z2[0] = 0.0
+        z2[stats[:, cv2.CC_STAT_AREA] < RIM_MARK_MIN_PX] = 0.0
+        j = int(np.argmax(z2))
+        if z2[j] > most:
+            best, most = (labels == j).view(np.uint8), float(z2[j])
+    return best
+
+
 def rim_marking_pixels(patch, felt, u0: int, v0: int, g, r: float, sigma: float | None, left=None,
-                       outline=None, sigma_min: float = 0.5, refit: bool = False) -> np.ndarray | None:
+                       outline=None, sigma_min: float = 0.5, refit: bool = False,
+                       strongest: bool = False, taken=None) -> np.ndarray | None:
     """Pixels on the ball (within half a pixel of its outline: the rim
     too, where :func:`marking_pixels` does not look) that depart from the
     lit sphere's fit ``g`` (a
@@ -490,8 +562,11 @@ def rim_marking_pixels(patch, felt, u0: int, v0: int, g, r: float, sigma: float 
     pixel; ``sigma`` the noise (levels; None: from the residual's median
     absolute value), at least ``sigma_min``; ``left``: pixels already left
     out (never returned); ``refit``: ``g`` is a refit without the pixels
-    a pass before found (:data:`RIM_MARK_BOX`'s means are judged then too).
-    None when there are none."""
+    a pass before found (:data:`RIM_MARK_BOX`'s means are judged then too);
+    ``strongest``: the strongest group of one sign alone
+    (:data:`RIM_MARK_GROUPS`' rule) with a pixel outside ``taken`` (the
+    groups earlier passes took: judged again from the refit, a group may
+    grow).  None when there are none."""
     rr = r if outline is None else outline.radius  # fit_disc's scale of the sphere
     m, _ = _model_rows(g.c, g.b, g.G, felt, rr, u0, v0, blur_nodes(np.hypot(*g.b)), g.shade, False, outline)
     res = np.asarray(patch, np.float64) - felt - m
@@ -515,7 +590,10 @@ def rim_marking_pixels(patch, felt, u0: int, v0: int, g, r: float, sigma: float 
         n = cv2.filter2D(rest.astype(np.float64), -1, k, borderType=cv2.BORDER_CONSTANT)
         s = cv2.filter2D(np.where(rest, res, 0.0), -1, k, borderType=cv2.BORDER_CONSTANT)
         bad |= rest & (n >= RIM_MARK_BOX) & (np.abs(s) > OUTLIER_SIGMAS * sig * np.sqrt(np.maximum(n, 1.0)))
-    bad = _groups(bad.astype(np.uint8), RIM_MARK_MIN_PX)
+    if strongest:
+        bad = _strongest_group(bad, res / sig, None if taken is None else taken if left is None else taken | left)
+    else:
+        bad = _groups(bad.astype(np.uint8), RIM_MARK_MIN_PX)
     if bad is None:
         return None
     out = cv2.dilate(bad, np.ones((3, 3), np.uint8)).astype(bool)
@@ -1544,7 +1622,9 @@ class BallTracker:
     def _rim_unmarked(self, patch, felt, u0, v0, f, r, fit_blur, ol, marks, foreign, pred=None):
         """The lit sphere's fit ``f`` of a marked frame again without the
         markings at its rim (:func:`rim_marking_pixels`, at most
-        :data:`RIM_MARK_PASSES` times, each from the last refit): (fit,
+        :data:`RIM_MARK_PASSES` times, each from the last refit; where that
+        leaves out more than the markings could cover, the strongest group a
+        pass, at most :data:`RIM_MARK_GROUPS`): (fit,
         markings with those at the rim), or ``(f, marks)`` when there are
         none, a refit fails or it moves more than
         :data:`SPHERE_MARK_MOVE_RADII` and lands no nearer than
@@ -1564,6 +1644,22 @@ class BallTracker:
             if not (h and h.stated):
                 break
             g, rim = h, add
+        if rim is not None and rim.sum() > markings_area_px(r):
+            # More than the markings could cover: the passes ran away
+            # (RIM_MARK_GROUPS); the strongest group a pass instead.
+            largest = np.pi * (r * np.sin(RIM_MARK_ANGLE_RAD) + np.sqrt(2.0)) ** 2  # px (RIM_MARK_ANGLE_RAD)
+            g, rim = f, None
+            for _ in range(RIM_MARK_GROUPS):
+                add = rim_marking_pixels(patch, felt, u0, v0, g, r, self.bg.sigma, left, ol, refit=rim is not None,
+                                         strongest=True, taken=rim)
+                if add is None or add.sum() > largest:
+                    break
+                add = add if rim is None else rim | add
+                h = self._fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=self.shade,
+                             valid=kept_pixels(marks, add, foreign), outline=ol, block=self.block)
+                if not (h and h.stated):
+                    break
+                g, rim = h, add
         # A refit that moves farther than a refinement does is kept only
         # where the ball's motion puts it: a logo lying on the rim pulled the
         # first fit 1.3-2.3 px (0.11-0.2 R), and without it the refit landed
@@ -1973,7 +2069,8 @@ class BallTracker:
                 # explains its window better is kept if that is the second,
                 # and otherwise (it failed, or explains less) the frame is
                 # dropped: two places a quarter radius apart and no way to
-                # tell which is the ball's.
+                # tell which is the ball's -- unless the ball is marked and
+                # the first lies beside the prediction and explains more.
                 alt = self._departure_centre(frame, f.c, r_ball)
                 if np.hypot(*(alt - f.c)) > RESTART_RADII * r_ball:
                     # Started at the departure's centroid itself: the
@@ -1985,6 +2082,16 @@ class BallTracker:
                     other = self._refine(frame, alt, f.b, recentre=False, at_loc=True)
                     self.outline = ol
                     apart = other.status != OK or np.hypot(*(other.uv - f.c)) > RESTART_RADII * r_ball
+                    # A marked ball's fit beside the prediction is where the
+                    # ball's motion puts it (MARK_RETRY_RADII, as the retry
+                    # and the rim's refit): a second fit elsewhere that
+                    # explains less does not make it pulled.  Realistic seed 7
+                    # shot 3 cut to 0.36 s, FFV1, frame 20: the fit 0.06 px
+                    # off (rms 8.2, 0.4 px from the prediction); the second,
+                    # from the departure's centre, 3 px off (rms 26.4): the
+                    # frame was dropped.
+                    beside = marked_ball and pred is not None and other.status == OK and other.rms >= f.rms \
+                        and np.hypot(*(f.c - pred)) <= MARK_RETRY_RADII * r
                     # Agreeing once the look is learnt, they are two fits of
                     # the same ball and the one that explains its window
                     # better is the measurement: a logo on the rim, the
@@ -1996,7 +2103,7 @@ class BallTracker:
                     # (that shot's rest: 3 more frames dropped, measured).
                     if other.status == OK and other.rms < f.rms and (apart or self.shade is not None):
                         return other
-                    if apart:
+                    if apart and not beside:
                         self.last_fit = self.last_patch = None
                         return _lost(PULLED)
             if recentre and ol is not None and np.hypot(*(f.c - self.outline_of.at)) > OUTLINE_REFIT_PX:
