@@ -980,6 +980,33 @@ RAW_FLAT_SHARE = 0.05
 NOISE_FLAT_EXCESS = 0.02
 FROZEN_SHARE = 0.95
 
+# Where the noise speaks (equal share under FROZEN_SHARE) a video is read lossy
+# also when its temporal differences are not a sensor's (``_noise_tail_excess``):
+# a lossless camera's two still frames differ by its noise, N(0, 2 sigma^2)
+# quantised (each frame's noise rounded to whole levels), whose share of
+# |d| >= 2 among the nonzero differences follows from its zero share alone;
+# x264 between keeping the noise and copying frames (CRF 21-22) flattens the
+# felt no more than the noise does, but codes what it keeps in larger steps.
+# The observed share over the law's by more than NOISE_TAIL_EXCESS in any
+# channel (with at least NOISE_TAIL_MIN_NONZERO nonzero differences there)
+# reads lossy.  Measured (fixcrf, docs/measurements.md) on the fresh random
+# tables 18111-18160 (50), the still table's first two frames (32-frame
+# streams): lossless at noise 0.2, 0.3, 0.5 and as drawn (2-4) excess
+# 0.000-0.018 (the renderer's realistic table, noise 0.2-2: 0.000-0.013);
+# H.264 CRF 21-22 wherever the noise speaks 0.077-0.86, the 13 streams the
+# flat share read lossless 0.077-0.69; 0.04 is about the geometric middle of
+# 0.018 and 0.077 (no decision differs anywhere from 0.03 to 0.05).
+# NOISE_TAIL_MIN_NONZERO: with 50 nonzero differences where the law's tail
+# share is 0.002 (noise about 0.17 levels) a share over 0.04 needs 2-3
+# counts where 0.1 are expected.  The law is the project's renderer's (a
+# felt pixel's mean on a whole level); a camera whose means fall between
+# levels shows more +-1 differences for the same zero share, so it errs
+# towards lossless.  JPEG 95-98 keeps the noise's shape (excess up to
+# 0.021) and is read by the flat share alone (JPEG 98 on 18150 read
+# lossless: flat minus equal 0.019).
+NOISE_TAIL_EXCESS = 0.04
+NOISE_TAIL_MIN_NONZERO = 50
+
 # The outline's noses are refused on a frame no lossy codec touched (the
 # felt's flat share at most RAW_FLAT_SHARE) when the second-largest side's
 # faint step (``cushion_noses``' ``hidden``, sides whose step is at least
@@ -1929,7 +1956,10 @@ def _video_lossy(single: np.ndarray, single_next: np.ndarray, sides: list) -> bo
     that (``NOISE_FLAT_EXCESS``).  Where the frames are equal nearly
     everywhere (``FROZEN_SHARE``: noise under about 0.18 levels, or a
     codec's frames coded as copies of the first) the noise says nothing, and
-    the one frame's flat share decides (:func:`_frame_lossy`).
+    the one frame's flat share decides (:func:`_frame_lossy`).  Otherwise a
+    codec that keeps as much of the noise as it flattens (H.264 CRF 21-22)
+    is told by its differences' shape (:func:`_noise_tail_excess` over
+    ``NOISE_TAIL_EXCESS``).
 
     Parameters
     ----------
@@ -1950,7 +1980,64 @@ def _video_lossy(single: np.ndarray, single_next: np.ndarray, sides: list) -> bo
     flat, same = float(np.median(flat)), float(np.median(same))
     if same >= FROZEN_SHARE:
         return flat > RAW_FLAT_SHARE
-    return flat - same > NOISE_FLAT_EXCESS
+    return flat - same > NOISE_FLAT_EXCESS or _noise_tail_excess(single, single_next, sides) > NOISE_TAIL_EXCESS
+
+
+def _quantised_noise_law(sigma: np.ndarray) -> np.ndarray:
+    """The difference of two frames' quantised noise: for per-frame noise
+    ``sigma`` (levels; each frame's N(0, sigma^2) rounded to whole levels
+    about a whole-level mean), the probabilities of a difference 0, +-1 and
+    of magnitude 2 or more, shape (len(sigma), 3)."""
+    from scipy.special import ndtr
+
+    k = np.arange(-60, 61)
+    out = []
+    for s in np.atleast_1d(sigma):
+        p = ndtr((k + 0.5) / s) - ndtr((k - 0.5) / s)
+        d = np.convolve(p, p[::-1])
+        j = np.abs(np.arange(-120, 121))
+        out.append([d[j == 0].sum(), d[j == 1].sum(), d[j >= 2].sum()])
+    return np.array(out)
+
+
+_NOISE_SIGMA = np.geomspace(0.05, 20.0, 400)
+_NOISE_LAW: np.ndarray | None = None
+
+
+def _noise_tail_excess(single: np.ndarray, single_next: np.ndarray, sides: list) -> float:
+    """How far two still frames' differences on the felt are from a sensor's
+    quantised noise: per channel, the share of differences of magnitude 2 or
+    more among the nonzero ones, minus the share :func:`_quantised_noise_law`
+    gives at the channel's observed zero share; the largest over the channels
+    with at least ``NOISE_TAIL_MIN_NONZERO`` nonzero differences (0.0 if
+    none).  Read on the felt pixels :func:`_video_lossy` reads (each once).
+
+    Returns
+    -------
+    float
+        The excess (a share, 0-1); about 0 for a lossless camera's frames.
+    """
+    global _NOISE_LAW
+    if _NOISE_LAW is None:
+        _NOISE_LAW = _quantised_noise_law(_NOISE_SIGMA)
+    a, b = np.asarray(single), np.asarray(single_next)
+    if a.ndim == 2:
+        a, b = a[:, :, None], b[:, :, None]
+    h, w = a.shape[:2]
+    q = np.concatenate([np.rint(P[:, : max(len(offs) // 3, 2)].reshape(-1, 2)).astype(int)
+                        for _, _, offs, P in _inward_samples(sides)])
+    q = np.unique(q[(q[:, 0] >= 0) & (q[:, 0] < w) & (q[:, 1] >= 0) & (q[:, 1] < h)], axis=0)
+    d = np.abs(a[q[:, 1], q[:, 0]].astype(int) - b.reshape(a.shape)[q[:, 1], q[:, 0]].astype(int))
+    excess = 0.0
+    for c in range(d.shape[1]):
+        n0, n2 = int((d[:, c] == 0).sum()), int((d[:, c] >= 2).sum())
+        nonzero = len(d) - n0
+        if nonzero < NOISE_TAIL_MIN_NONZERO:
+            continue
+        sigma = np.interp(-n0 / len(d), -_NOISE_LAW[:, 0], _NOISE_SIGMA)      # zero share falls with sigma
+        p1, p2 = (np.interp(sigma, _NOISE_SIGMA, _NOISE_LAW[:, i]) for i in (1, 2))
+        excess = max(excess, n2 / nonzero - p2 / (p1 + p2))
+    return float(excess)
 
 
 def _band_z(hidden: list, coherent: list, lossy: bool | None = None) -> float:
