@@ -186,7 +186,8 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
                              shaded=bool(getattr(tr, "look_shaded", False)),
                              inter_frame=tr.inter_frame, px_to_m=pixel_to_table(cam, tr.xy[:n]),
                              touched=None if tr.touched is None else tr.touched[:n],
-                             foreign=None if tr.foreign is None else tr.foreign[:n], return_estimate=True)
+                             foreign=None if tr.foreign is None else tr.foreign[:n],
+                             uncalibrated=getattr(tr, "warning", ""), return_estimate=True)
     if scene.calibration:
         # Each refit keeps this fit's decisions: the share measures the camera alone.
         add_calibration_error(out["methods"],

@@ -922,3 +922,24 @@ def test_codec_excess_answers_on_measurements_whose_floor_cancels():
     c = codec_excess(meas, r, 7)
     assert np.isfinite(c)
     meas.with_codec(c)                                      # a covariance the fit can factor
+
+
+def test_a_track_whose_errors_are_not_calibrated_answers_nothing_ok():
+    # A 4:1:1 / 4:1:0 track states its errors uncalibrated (TrackResult
+    # .warning; measured error / stated 0.4-3.7, fix411): the same track that
+    # is answered ok by both methods is then degenerate with that reason, its
+    # numbers kept, and no best (review of fix411, MUST-FIX 1).
+    shot, p = sample_shot(3, "random")
+    ph = phases(shot, p)
+    tr = simulate_track(shot, p, 120.0, SIGMA, 4, t_end=ph.t2 + 0.3)
+    args = (tr.t, tr.xy, np.ones(len(tr.t), bool), np.full(len(tr.t), SIGMA), p)
+    plain = recover_track(*args)
+    assert plain["best"] is not None
+    why = "stated errors not calibrated: the video's yuv411p chroma is shared over 4 x 1 pixels"
+    out = recover_track(*args, uncalibrated=why)
+    assert out["best"] is None
+    for name, m in out["methods"].items():
+        assert m["status"] != "ok", name
+        if plain["methods"][name]["status"] == "ok":
+            assert m["status"] == "degenerate" and why in m["reason"]
+            assert m["v0"] == plain["methods"][name]["v0"]
