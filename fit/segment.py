@@ -597,7 +597,7 @@ def _geometry_cov(tf, xf, t0, t1, beyond, decel, v1, s2, n_rest, v0=None):
         d2 = float(S[2] - 2 * S[1] + S[0]) / h**2
         if d2 > 0:
             share = 2 * s2 / d2 * np.outer(v0, v0)
-            out["x0_t0"] = out["x1_t1"] = out["x0x1_t"] = share
+            out["x0_t0"], out["x1_t1"], out["x0x1_t"] = share, share.copy(), share.copy()
             for k in ("x0", "x1", "x0x1"):
                 out[k] = out[k] + share
     if n_rest:

@@ -832,10 +832,14 @@ def time_correlation(t, acf=INTER_CODEC_ACF, rho: float | None = None, frame_dt:
     ``rho^(dt / frame_dt)``.  The matrix :func:`time_whitener` whitens by
     (without forming it) and, off its diagonal, :func:`shared_rho`."""
     t = np.ascontiguousarray(t, dtype=float)
-    key = (t.tobytes(), tuple(map(float, acf)), None if rho is None else float(rho),
+    # With rho the AR(1) model is used and acf is not (it may be None).
+    key = (t.tobytes(), None if rho is not None else tuple(map(float, acf)), None if rho is None else float(rho),
            None if frame_dt is None else float(frame_dt))
-    kept = _time_correlation if len(t) <= KEPT_CORRELATION_FRAMES else _time_correlation.__wrapped__
-    return kept(key).copy()
+    if len(t) > KEPT_CORRELATION_FRAMES:
+        C = _time_correlation.__wrapped__(key)  # not kept: the caller's own, writeable
+        C.flags.writeable = True
+        return C
+    return _time_correlation(key).copy()
 
 
 # time_correlation keeps its last matrices up to this many frames (2 x 32 MB
