@@ -179,7 +179,14 @@ def test_the_papers_errors_widen_with_the_tracks_own_drift(monkeypatch):
     assert m.error_scale > 2.0 and off.error_scale == 1.0  # the drift shows; without the rule nothing widens
     assert mle_noise(m)[1] == m.error_scale
     ratio = np.asarray(est[True].paper.stderr["v0"]) / np.asarray(est[False].paper.stderr["v0"])
-    assert np.allclose(ratio, np.sqrt(m.error_scale), rtol=1e-3)
+    # The frames' share widens by exactly sqrt(scale); the breakpoints' own
+    # shares (fit.segment's geometry_cov, from the segmentation's residuals,
+    # recover.paper.breakpoint_shares) are not scaled, so the ratio lies just
+    # under it: since fixpap refused the earlier track's one-sided edge, the
+    # track the loop takes has them at 0.1-0.2% of the ratio (1.6245, 1.6227
+    # against 1.6262).  Allowed: up to 1% under, never over.
+    assert np.all(ratio <= np.sqrt(m.error_scale) * (1 + 1e-6))
+    assert np.all(ratio >= 0.99 * np.sqrt(m.error_scale)), ratio
 
 
 @pytest.mark.slow
