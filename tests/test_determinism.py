@@ -98,7 +98,7 @@ def test_the_recovery_gives_the_same_bits_whatever_the_callers_blas_threads():
     # between one and two OpenBLAS threads (docs/measurements.md, fitspeed),
     # two degenerate fits materially.  Here the caller's process at 1 and at 2
     # threads; its own limits are back after the call.  (This short track's
-    # answers happen to agree unpinned as well, as did 36 longer simulated
+    # answers happen to agree unpinned as well, as did 48 longer simulated
     # ones, lossy, AR(1) and with rests, tried: the thread count matters on
     # the realistic tracker's tracks; so the limit inside the call is checked
     # directly too.)
