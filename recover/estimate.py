@@ -8,11 +8,13 @@ arrays in, dataclasses out (recover.api turns them into the JSON object).
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
+from threadpoolctl import ThreadpoolController
 
 from cuespin.fit.decide import (PAPER_FIT_TAU_Z, Decision, autocorrelated, sliding_ended, sliding_seen,
                                sliding_times_differ, strike_in_view, t1_in_view)
@@ -132,6 +134,41 @@ def _first_fit(meas, params, starts, exposure_s, fit_friction) -> ModelFit | Non
     return best
 
 
+# The recovery's BLAS (and OpenMP) run on one thread, inside the call only
+# (threadpoolctl restores the caller's limits on return; the tracker's numba
+# and OpenCV threads are its own and not touched).  Measured (docs/
+# measurements.md, fitspeed and blas1): its matrices are small (at most a few
+# hundred rows: (360, 360) @ (360, 14) takes 0.12 ms CPU on one thread, 2.7 ms
+# on two at load ~5), so OpenBLAS's second thread mostly waits for a core:
+# recovery CPU on held37's 80 realistic H.264 tracks 2.86-3.48 s on one thread
+# against 4.82-5.35 s on the default two, wall about a third.  And the answers
+# depended on the thread count (18 of those 80 tracks differed, two degenerate
+# fits materially: 37/25 v0's stated error inf against 509 m/s, 37/26 t1
+# 8.93 s against 2.26 s); on one thread they are the same on any machine.
+RECOVERY_BLAS_THREADS = 1
+
+
+@functools.cache
+def _thread_pools() -> ThreadpoolController:
+    """The BLAS and OpenMP libraries loaded when first asked (numpy's and
+    scipy's OpenBLAS are, by this module's imports; with OpenCV imported, its
+    own OpenBLAS too, idle during the recovery); found once, because finding
+    them takes ~0.9 ms a call against ~0.01 ms to set their limits."""
+    return ThreadpoolController()
+
+
+def one_blas_thread(f):
+    """Run ``f`` with BLAS and OpenMP limited to RECOVERY_BLAS_THREADS
+    threads, the caller's limits restored on return; ``f.__wrapped__`` is
+    the unlimited function (for measuring the difference)."""
+    @functools.wraps(f)
+    def limited(*args, **kwargs):
+        with _thread_pools().limit(limits=RECOVERY_BLAS_THREADS):
+            return f(*args, **kwargs)
+    return limited
+
+
+@one_blas_thread
 def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: bool = True,
              fit_friction: bool = False, run_paper: bool = True, inter_frame: bool = False,
              px_to_m=None, keep: Decided | None = None, ar1_floor: float = 0.0,
