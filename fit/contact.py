@@ -585,8 +585,6 @@ def find_contact(t, xy, ok, stderr_m, table, R: float, balls=(), W: int | None =
             geo = hit
     b_all, stat_all, scale_all, (cl_all, cr_all), jump_all = change_statistic(
         tt, pp, sig, W, details=True, time_corr=time_corr)
-    _, covl_all, _ = _window_fits(tt, pp, sig, b_all - W, W, 0.5 * (tt[b_all - 1] + tt[b_all])) \
-        if len(b_all) else (None, np.zeros((0, 3, 3)), None)
     # Boundaries with the left window wholly after the strike, and not past
     # a cushion contact already found.
     last = geo[1] if geo is not None else len(tt)
@@ -612,7 +610,11 @@ def find_contact(t, xy, ok, stderr_m, table, R: float, balls=(), W: int | None =
                            kappa_max=float(tt[k0 - 1])) if cands.size else k0)
         j = int(np.clip(np.searchsorted(b, k), 0, len(b) - 1))
         before = b_all <= k
-        if not anchored and strike_at(cl_all[before], covl_all[before],
+        # The left windows' covariances (change_statistic's, which it does
+        # not return) only when the strike question is asked, once a track.
+        if not anchored and strike_at(cl_all[before],
+                                      _window_fits(tt, pp, sig, b_all[before] - W, W,
+                                                   0.5 * (tt[b_all[before] - 1] + tt[b_all[before]]))[1],
                                       scale_all[before] if np.ndim(scale_all) else scale_all):
             # The ball was still in every window before this change: it is
             # the strike (a change of motion by definition), which

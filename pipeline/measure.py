@@ -99,7 +99,7 @@ def mle_bound(scene: Scene, track, mle: dict | None = None, independent: bool = 
     """
     from cuespin.physics import contact_velocity
     from cuespin.recover.measurements import (Measurements, build_measurements, pixel_to_table, stated_frames,
-                                              table_covariance)
+                                              still_look_applies, table_covariance)
     from cuespin.recover.mle import crb_covariance
 
     truth, p, cam = scene.truth, scene.physics, scene.camera
@@ -124,8 +124,8 @@ def mle_bound(scene: Scene, track, mle: dict | None = None, independent: bool = 
                                       look_rest=bool(track.lossless) and not getattr(track, "independent_errors",
                                                                                      track.lossless),
                                       look_factor=float(getattr(track, "look_factor", 1.0)),
-                                      still_look=(bool(getattr(track, "look_shaded", False)) and not track.lossless
-                                                  and not getattr(track, "inter_frame", False)),
+                                      still_look=still_look_applies(getattr(track, "look_shaded", False), track.lossless,
+                                                                 getattr(track, "inter_frame", False)),
                                       px_to_m=pixel_to_table(cam, xy) if in_px else None,
                                       clear_s=mle.get("cue_clear_s") or 0.0,
                                       cue=None if getattr(track, "foreign", None) is None

@@ -183,11 +183,11 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
     out, est = recover_track(tr.t[:n], tr.xy[:n], tr.ok[:n], cov_m[:n], scene.physics, cam.exposure_s,
                              method, fit_friction, lossless=tr.lossless, independent=tr.independent_errors,
                              ar1_floor=tr.error_ar1, look_factor=tr.look_factor,
-                             shaded=bool(getattr(tr, "look_shaded", False)),
+                             shaded=tr.look_shaded,
                              inter_frame=tr.inter_frame, px_to_m=pixel_to_table(cam, tr.xy[:n]),
                              touched=None if tr.touched is None else tr.touched[:n],
                              foreign=None if tr.foreign is None else tr.foreign[:n],
-                             uncalibrated=getattr(tr, "warning", ""), return_estimate=True)
+                             uncalibrated=tr.warning, return_estimate=True)
     if scene.calibration:
         # Each refit keeps this fit's decisions: the share measures the camera alone.
         add_calibration_error(out["methods"],
@@ -206,7 +206,7 @@ def run_recover(video, scene, method="all", fit_friction=False, refine="fit", pr
             track[key] = out["track"][key]
     if tr.error:
         track["error"] = tr.error
-    if getattr(tr, "warning", ""):
+    if tr.warning:
         track["warning"] = tr.warning
     t_seen = track["last_tracked_t"]
     contact_t = (track.get("contact") or {}).get("t") if isinstance(track.get("contact"), dict) else None
@@ -233,7 +233,7 @@ def _refit_through(camera, tr, n: int, scene, method: str, fit_friction: bool, k
     return recover_track(tr.t[:n], xy, np.asarray(tr.ok)[:n], cov, scene.physics, scene.camera.exposure_s,
                          method, fit_friction, lossless=tr.lossless, independent=tr.independent_errors,
                          ar1_floor=tr.error_ar1, look_factor=tr.look_factor,
-                         shaded=bool(getattr(tr, "look_shaded", False)),
+                         shaded=tr.look_shaded,
                          inter_frame=tr.inter_frame,
                          px_to_m=pixel_to_table(camera, xy), keep=keep)["methods"]
 

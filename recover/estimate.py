@@ -22,7 +22,8 @@ from cuespin.fit.segment import Segments, correlated_end_F, segment_track
 from cuespin.physics.motion import BallParams, phases, z_cross
 from cuespin.recover.measurements import (CUE_CLEAR_FRAMES, MAX_CODEC_NOISE_RATIO, MAX_STEP_R, Measurements,
                                           as_covariance, build_measurements, codec_excess, codec_noise_ratio,
-                                          cue_clear_s, fill_covariance, moving_scale, touched_run_s, track_step)
+                                          cue_clear_s, fill_covariance, moving_scale, still_look_applies,
+                                          touched_run_s, track_step)
 from cuespin.recover.mle import (MAX_AR1, CodecCorrelation, MLEResult, ModelFit, ar1_from_residuals,
                                  correlated_codec_var, time_whitener,
                                  fit_model, fit_models, initial_guess, lag1_autocorrelation, model_track, result,
@@ -285,7 +286,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
                                   frame_dt=frame_dt, shared_rest=not independent, px_to_m=px_to_m, clear_s=clear_s,
                                   group_rest=group_rest, rest_scale=scale[0], rest_scale_dof=scale[1],
                                   look_rest=lossless and not independent, look_factor=look_factor,
-                                  still_look=bool(shaded) and not lossless and not inter_frame, cue=foreign)
+                                  still_look=still_look_applies(shaded, lossless, inter_frame), cue=foreign)
 
     if keep is not None:
         codec = CodecCorrelation(keep.codec_var, frame_dt) if inter_frame and not lossless else None

@@ -787,6 +787,16 @@ def frame_lattice(ts) -> np.ndarray:
     return np.r_[0, np.cumsum(steps)].astype(int)
 
 
+def still_look_applies(shaded: bool, lossless: bool, inter_frame: bool) -> bool:
+    """Whether a track's rests carry the still look's own error
+    (:data:`STILL_LOOK_VAR_PX2`, ``build_measurements(still_look=)``): a
+    look the tracker shaded on a lossy intra-frame codec (MJPG); not
+    measured on lossless video nor calibrated on an inter-frame codec
+    (H.264).  One rule for the fit (recover.estimate) and its bound
+    (pipeline.measure)."""
+    return bool(shaded) and not lossless and not inter_frame
+
+
 def still_look_covariance(group, px_to_m, var_px2: float) -> np.ndarray:
     """Per measurement, shape (m, 2, 2), the still look's covariance (m^2)
     of a rest's mean: ``var_px2`` per axis in pixels through its frames'

@@ -3,6 +3,10 @@ depend on what else the process did before (issues 10/11; docs/measurements.md,
 determ)."""
 
 import dataclasses
+import json
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -58,13 +62,10 @@ def test_lm_fit_is_the_same_whatever_an_earlier_array_left_in_the_heap():
     # tests/test_recover.py failed in one process: the workaround is an
     # allocator's behaviour, not its contract; README, Known limits).
     # Without the zeros this fails 4 of 4 in a fresh process (determ).
-    import json
-    import subprocess
-    import sys
     code = ("import json, tests.test_determinism as d; "
             "print(json.dumps(d._lm_fit_answers_bytes()))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
-                         cwd=str(__import__("pathlib").Path(__file__).resolve().parents[1]))
+                         cwd=str(Path(__file__).resolve().parents[1]))
     assert out.returncode == 0, out.stderr[-2000:]
     answers = json.loads(out.stdout.strip().splitlines()[-1])
     assert len(answers) == len(LEFTOVERS)

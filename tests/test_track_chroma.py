@@ -7,7 +7,7 @@ from cuespin.render.draw import FrameRenderer
 from cuespin.render.video import encode_frames
 from cuespin.track.colour import chroma_shared, learn_projection
 from cuespin.track.misfit import JPEG_CHROMA_VAR, codec_variance
-from cuespin.track.model import fit_disc, streak_model
+from cuespin.track.model import block_sides, fit_disc, streak_model
 from cuespin.track.reader import FrameSource, probe
 from cuespin.track.synthetic import write_av
 from cuespin.track.tracker import FIT_BLUR_PX
@@ -122,7 +122,7 @@ def test_blocks_stated_error_independent_noise(block, band):
     # blocks (the disc an ellipse on their grid, model._coarse) the
     # jackknife's err/se over these 60 fits 1.02 (2 x 1) and 0.94 (4 x 1;
     # over 150: 1.02, 0.97); band 1 +- 3 standard errors.
-    bx, by = (block, block) if np.ndim(block) == 0 else block
+    bx, by = block_sides(block)
     rng = np.random.default_rng(1)
     r, n = 9.0, 36
     z = []

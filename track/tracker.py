@@ -514,15 +514,20 @@ def _groups(bad: np.ndarray, min_px: int) -> np.ndarray | None:
     return _members(n, big).view(np.uint8)[labels]
 
 
+def marking_cap_px(r: float, a: float) -> float:
+    """The image area (px) of a cap of half-angle ``a`` (rad) on a ball of
+    radius ``r`` (px) seen face on, grown by the mask's one pixel (up to
+    sqrt(2) px)."""
+    return np.pi * (r * np.sin(a) + np.sqrt(2.0)) ** 2
+
+
 def markings_area_px(r: float) -> float:
     """The most of a ball of radius ``r`` (px) its markings can cover at
-    once (px), each grown by the mask's one pixel (up to sqrt(2) px): the
-    renderer's logo, a cap of RIM_MARK_ANGLE_RAD and one of 0.12 rad, or
+    once (px), each grown by the mask's one pixel (:func:`marking_cap_px`):
+    the renderer's logo, a cap of RIM_MARK_ANGLE_RAD and one of 0.12 rad, or
     three of its six dots (0.17 rad; at most three face the camera)
     (render/look.py, marks)."""
-    def cap(a):
-        return np.pi * (r * np.sin(a) + np.sqrt(2.0)) ** 2
-    return max(cap(RIM_MARK_ANGLE_RAD) + cap(0.12), 3 * cap(0.17))
+    return max(marking_cap_px(r, RIM_MARK_ANGLE_RAD) + marking_cap_px(r, 0.12), 3 * marking_cap_px(r, 0.17))
 
 
 def _strongest_group(bad: np.ndarray, z: np.ndarray, taken=None) -> np.ndarray | None:
@@ -759,11 +764,12 @@ def marks_given_back(samples, look, marks, foreign, r: float, sigma: float, outl
         rr = r if outline is None else outline.radius  # fit_disc's scale of the sphere
         union = np.logical_or.reduce([marks[i] for i in idx if marks[i] is not None])
         if without is not None:
+            rest = kept_pixels(left, union)
             q = fit_disc(s.patch, s.felt, s.u0, s.v0, s.c, r, s.G, b0=s.b, fit_blur=s.fit_blur, shade=without,
-                         valid=kept_pixels(left, union), outline=outline, jackknife=False)
+                         valid=rest, outline=outline, jackknife=False)
             gk = fit_disc(s.patch, s.felt, s.u0, s.v0, s.c, r, s.G, b0=s.b, fit_blur=s.fit_blur, shade=look,
-                          valid=kept_pixels(left, union), outline=outline, jackknife=False)
-            if not q or not gk or look_bent(s, gk, q, rr, kept_pixels(left, union), outline) < GIVE_BACK_FALSE_RATE:
+                          valid=rest, outline=outline, jackknife=False)
+            if not q or not gk or look_bent(s, gk, q, rr, rest, outline) < GIVE_BACK_FALSE_RATE:
                 continue  # the look bent to hold them: markings
         m, _ = _model_rows(g.c, g.b, g.G, s.felt, rr, s.u0, s.v0, blur_nodes(np.hypot(*g.b)), g.shade, False,
                            outline)
@@ -1647,7 +1653,7 @@ class BallTracker:
         if rim is not None and rim.sum() > markings_area_px(r):
             # More than the markings could cover: the passes ran away
             # (RIM_MARK_GROUPS); the strongest group a pass instead.
-            largest = np.pi * (r * np.sin(RIM_MARK_ANGLE_RAD) + np.sqrt(2.0)) ** 2  # px (RIM_MARK_ANGLE_RAD)
+            largest = marking_cap_px(r, RIM_MARK_ANGLE_RAD)  # px
             g, rim = f, None
             for _ in range(RIM_MARK_GROUPS):
                 add = rim_marking_pixels(patch, felt, u0, v0, g, r, self.bg.sigma, left, ol, refit=rim is not None,
