@@ -233,7 +233,7 @@ def _refit_through(camera, tr, n: int, scene, method: str, fit_friction: bool, k
     return recover_track(tr.t[:n], xy, np.asarray(tr.ok)[:n], cov, scene.physics, scene.camera.exposure_s,
                          method, fit_friction, lossless=tr.lossless, independent=tr.independent_errors,
                          ar1_floor=tr.error_ar1, look_factor=tr.look_factor,
-                         shaded=tr.look_shaded,
+                         shaded=bool(getattr(tr, "look_shaded", False)),
                          inter_frame=tr.inter_frame,
                          px_to_m=pixel_to_table(camera, xy), keep=keep)["methods"]
 
