@@ -32,7 +32,8 @@ from scipy.optimize import brentq, least_squares
 
 from cuespin.fit.decide import MIN_STILL_FRAMES, autocorrelated, slide_through_excluded, strike_in_view
 from cuespin.fit.lm import lm_fit
-from cuespin.physics.motion import SLIP_ZERO, BallParams, Shot, phases, positions, positions_jacobian, z_cross
+from cuespin.physics.motion import (SLIP_ZERO, BallParams, Shot, phases, positions, positions_jacobian,
+                                    rolling_deceleration, z_cross)
 from cuespin.recover.measurements import Measurements, frame_lattice, lattice_ar1_sums
 
 # A fit whose residuals are this many times the stated variance does not
@@ -1494,7 +1495,7 @@ def slide_through_chi2(fit: ModelFit, meas: Measurements, n_dir: int = SLIDE_THR
     tau = np.clip(t_used - float(shot.t0), 0.0, None)
     q = 0.5 * tau ** 2
     if fit.rolling:
-        off_line = -(5.0 / 7.0 * pr.mu_r * pr.g) * q[:, None] * v_hat
+        off_line = -rolling_deceleration(pr.mu_r, pr.g) * q[:, None] * v_hat
     else:  # the fit's path off its straight line x0 + v0 (t - t0) after the strike
         line = np.asarray(shot.x0, float) + tau[:, None] * v0
         off_line = np.where((t_used > shot.t0)[:, None], positions(shot, pr, t_used) - line, 0.0)

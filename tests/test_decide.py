@@ -11,7 +11,7 @@ import pytest
 from cuespin.data_gen.sampler import sample_shot
 from cuespin.fit.decide import LEVEL, sliding_ended
 from cuespin.fit.segment import correlated_end_F, segment_track
-from cuespin.physics import phases
+from cuespin.physics import phases, rolling_deceleration
 from cuespin.recover.estimate import estimate
 from cuespin.recover.mle import model_track, time_correlation, time_whitener
 from cuespin.recover.paper import path_shape
@@ -78,7 +78,7 @@ def false_ended(n, seed):
     hits = 0
     for tr in still_sliding_tracks(n, seed):
         p = tr.params
-        seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, tr.sigma, tr.exposure_s)
+        seg = segment_track(tr.t, tr.xy, rolling_deceleration(p.mu_r, p.g), tr.sigma, tr.exposure_s)
         hits += bool(seg) and sliding_ended(seg, tr.t).yes
     return hits
 
@@ -120,7 +120,7 @@ def false_ended_correlated(n, seed, errors, fps_grid=FPS_GRID):
     recover.estimate asks it."""
     hits = 0
     for t, xy, p, sigma, exposure, whiten, _ in correlated_still_sliding_tracks(n, seed, errors, fps_grid):
-        seg = segment_track(t, xy, 5 / 7 * p.mu_r * p.g, sigma, exposure)
+        seg = segment_track(t, xy, rolling_deceleration(p.mu_r, p.g), sigma, exposure)
         hits += bool(seg) and sliding_ended(seg, t, end_F=correlated_end_F(seg, t, xy, whiten)).yes
     return hits
 
@@ -141,7 +141,7 @@ def test_estimate_withholds_w0_of_a_codec_track_cut_mid_slide():
 def test_correlated_end_F_is_end_F_for_independent_errors():
     tr = next(still_sliding_tracks(1, 3))
     p = tr.params
-    seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, tr.sigma, tr.exposure_s)
+    seg = segment_track(tr.t, tr.xy, rolling_deceleration(p.mu_r, p.g), tr.sigma, tr.exposure_s)
     F = correlated_end_F(seg, tr.t, tr.xy, lambda tf, M: M)
     assert np.isclose(F, seg.end_F, rtol=1e-6, atol=1e-9), (F, seg.end_F)
 
@@ -209,7 +209,7 @@ def false_curved(n, seed):
     hits = total = 0
     for tr in sliding_tracks(n, seed, presets=("case1", "case3", "case5")):
         p = tr.params
-        seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, tr.sigma, tr.exposure_s)
+        seg = segment_track(tr.t, tr.xy, rolling_deceleration(p.mu_r, p.g), tr.sigma, tr.exposure_s)
         shape = path_shape(seg, tr.xy, p) if seg else None
         if shape is not None:
             total += 1
@@ -351,7 +351,7 @@ def false_stop_apart(n, seed):
     hits = total = 0
     for tr in case2_tracks(n, seed):
         p = tr.params
-        seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, tr.sigma, tr.exposure_s)
+        seg = segment_track(tr.t, tr.xy, rolling_deceleration(p.mu_r, p.g), tr.sigma, tr.exposure_s)
         s = seg if seg and ran_into_rest(seg) else (seg.unended if seg else None)
         if s is not None and ran_into_rest(s):
             total += 1
@@ -378,7 +378,7 @@ def first_case2_run_into_rest():
     from cuespin.recover.simulate import case2_tracks
     for tr in case2_tracks(8, 23):
         p = tr.params
-        seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, tr.sigma, tr.exposure_s)
+        seg = segment_track(tr.t, tr.xy, rolling_deceleration(p.mu_r, p.g), tr.sigma, tr.exposure_s)
         s = seg if ran_into_rest(seg) else seg.unended
         if s is not None and ran_into_rest(s):
             return tr, s, float(np.median(np.diff(tr.t)))
@@ -436,7 +436,7 @@ def false_rolling_speed(n, seed):
     hits = total = 0
     for tr in rolls_to_rest_tracks(n, seed):
         p = tr.params
-        seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, tr.sigma, tr.exposure_s)
+        seg = segment_track(tr.t, tr.xy, rolling_deceleration(p.mu_r, p.g), tr.sigma, tr.exposure_s)
         if not seg or seg.t2 is None or not np.isfinite(seg.t1) or ran_into_rest(seg) \
                 or not t1_in_view(seg.t1, tr.t[tr.t <= seg.t2]):
             continue
@@ -473,7 +473,7 @@ def test_rolling_speed_refuses_a_slide_into_a_rest_found_early():
     from cuespin.recover.simulate import case2_tracks
     for tr in case2_tracks(40, 5):
         p = tr.params
-        decel = 5 / 7 * p.mu_r * p.g
+        decel = rolling_deceleration(p.mu_r, p.g)
         seg0 = segment_track(tr.t, tr.xy, decel, tr.sigma, tr.exposure_s)
         k = int(np.searchsorted(tr.t, phases(tr.shot, p).t2 - 0.066))
         seg = segment_track(tr.t, tr.xy, decel, tr.sigma, tr.exposure_s, frames=(seg0.k_move, k))
