@@ -448,13 +448,16 @@ def false_rolling_speed(n, seed):
 
 
 def test_false_rolling_speed_rate_small():
+    # At the level in force (ROLL_SPEED_LEVEL, 0.081%: 0 allowed of 32; 0 read)
+    from cuespin.fit.decide import ROLL_SPEED_LEVEL
     hits, total = false_rolling_speed(48, 21)
-    assert total >= 25 and hits <= allowed(total), (hits, total)
+    assert total >= 25 and hits <= allowed(total, ROLL_SPEED_LEVEL), (hits, total)
 
 
 @pytest.mark.slow
 def test_false_rolling_speed_rate_400():
-    # seed 31: held out (ROLL_SPEED_FACTOR was set on seed 2 and checked on 3)
+    # seed 31: held out (ROLL_SPEED_FACTOR was set on seed 2 and checked on 3);
+    # at the level in force (ROLL_SPEED_LEVEL, 0.081%: 1 allowed of 447; 1 read)
     from cuespin.fit.decide import ROLL_SPEED_LEVEL
     hits, total = false_rolling_speed(640, 31)
     assert total >= 400 and hits <= allowed(total, ROLL_SPEED_LEVEL), (hits, total)
@@ -466,11 +469,15 @@ def test_rolling_speed_refuses_a_slide_into_a_rest_found_early():
     # stop.  The segmentation ends sliding early and bridges to the rest
     # with a short "rolling" piece; x1 is apart from x2, so the line's case
     # 3 answers, at a speed that would roll far past the rest (eq. 18-19).
-    # Refused; the segmentation's slide into the rest answers right.
+    # Refused at the stated level on every such answer (measured, fit.decide's
+    # ROLL_SPEED_FACTOR record: 56 of 56 of seed 5's 400 tracks, z >= 5.0,
+    # positive: the rest short of the rolling path; here the first 40, 4 answered
+    # by the line); the segmentation's slide into the rest answers right.
     from cuespin.fit import decide
-    from cuespin.fit.decide import t1_in_view
+    from cuespin.fit.decide import ROLL_SPEED_LEVEL, t1_in_view
     from cuespin.recover.paper import paper_from_segments, ran_into_rest
     from cuespin.recover.simulate import case2_tracks
+    refused = total = 0
     for tr in case2_tracks(40, 5):
         p = tr.params
         decel = rolling_deceleration(p.mu_r, p.g)
@@ -484,14 +491,20 @@ def test_rolling_speed_refuses_a_slide_into_a_rest_found_early():
         got = paper_from_segments(seg, tr.t, tr.xy, p, tr.sigma, dt)
         if got.rolling_speed is None:
             continue  # case 2 by stop_apart: not the line
+        total += 1
+        assert got.rolling_speed.level == ROLL_SPEED_LEVEL
+        if not (got.rolling_speed.yes and got.rolling_speed.statistic > 0):
+            continue
+        refused += 1
         assert got.status == "failed" and "eq. 18-19" in got.reason, got.reason
-        assert got.rolling_speed.statistic > 2 * got.rolling_speed.threshold
+        if refused > 1:
+            continue
         # Without the test the line's answer is many of its errors off.
         try:
-            decide.ROLL_SPEED_FACTOR, factor = float("inf"), decide.ROLL_SPEED_FACTOR
+            decide.ROLL_SPEED_Z, thr = float("inf"), decide.ROLL_SPEED_Z
             line = paper_from_segments(seg, tr.t, tr.xy, p, tr.sigma, dt)
         finally:
-            decide.ROLL_SPEED_FACTOR = factor
+            decide.ROLL_SPEED_Z = thr
         truth = np.r_[tr.shot.v0, tr.shot.w0]
         assert line.status == "ok"
         assert np.max(np.abs(np.r_[line.v0, line.w0] - truth) / np.r_[line.stderr["v0"], line.stderr["w0"]]) > 5
@@ -501,5 +514,4 @@ def test_rolling_speed_refuses_a_slide_into_a_rest_found_early():
         assert case2.status == "ok", case2.reason
         z = (np.r_[case2.v0, case2.w0] - truth) / np.r_[case2.stderr["v0"], case2.stderr["w0"]]
         assert np.max(np.abs(z)) < 3, z
-        return
-    pytest.fail("no case-2 track cut early was answered by the line")
+    assert total >= 3 and refused == total, (refused, total)
