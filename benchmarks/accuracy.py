@@ -70,7 +70,7 @@ def one_shot(args):
     max_seconds = args[11] if len(args) > 11 else MAX_SECONDS
     from cuespin.data_gen.sampler import sample_scenes
     from cuespin.physics import phases
-    from cuespin.pipeline.measure import answer_bound
+    from cuespin.pipeline.measure import answer_bound, rms_z
     from cuespin.recover.api import recover_track
     from cuespin.recover.measurements import table_covariance
     try:
@@ -222,7 +222,7 @@ def one_shot(args):
     row["mle_crb_z"] = row["mle_crb_z_indep"] = row["mle_crb_z_truth"] = row["mle_bias_z"] = np.nan
     row["mle_bias_v0"] = row["t_unseen"] = row["t_allowance"] = np.nan
     row["mle_bound_fail"] = ""
-    row.update({f"mle_crb_{name}": np.nan for name in COMPONENTS})
+    row.update({f"mle_crb{i}_{name}": np.nan for name in COMPONENTS for i in ("", "i")})
     row["chi2_per_dof"] = row["codec_noise_px"] = row["hac"] = row["rho1"] = row["ar1"] = np.nan
     if mle["status"] == "ok":
         err = np.r_[mle["v0"], mle["w0"]] - truth_vw
@@ -251,14 +251,16 @@ def one_shot(args):
                     row["mle_bound_fail"] = b.reason
                 continue
             zc = b.z(err + truth_vw)
-            row[key] = float(np.sqrt(np.nanmean(zc ** 2)))
-            if not indep:  # per component (NaN for w0 on a rolling answer: its bound is v0's)
-                for k, name in enumerate(COMPONENTS):
-                    row[f"mle_crb_{name}"] = float(zc[k])
+            row[key] = rms_z(zc)
+            # per component (NaN for w0 on a rolling answer: its bound is v0's), pooled by bound_summary
+            # and intervals; mle_crbi_*: every frame independent (the reference)
+            for k, name in enumerate(COMPONENTS):
+                row[f"mle_crb{'i' if indep else ''}_{name}"] = float(zc[k])
+            if not indep:
                 bz = b.bias_z()
-                row["mle_bias_z"] = float(np.sqrt(np.nanmean(bz ** 2)))
+                row["mle_bias_z"] = rms_z(bz)
                 # the whole error (bias with it) in the same bound, for reference
-                row["mle_crb_z_truth"] = float(np.sqrt(np.nanmean((zc + bz) ** 2)))
+                row["mle_crb_z_truth"] = rms_z(zc + bz)
         if model == "rolling":
             # The unseen slide's size: the truth's sliding time beside the
             # time after the strike with no measured moving frame, and the
@@ -329,6 +331,8 @@ def intervals(rows, n_boot: int = 4000, seed: int = 0, m: str = "mle"):
     the RMS intervals resample shots (a cluster bootstrap, percentile
     interval, ``n_boot`` draws): a shot's components are not independent
     trials."""
+    from cuespin.pipeline.measure import rms_z
+
     rng = np.random.default_rng(seed)
     print(f"\n{'MLE' if m == 'mle' else m} with 95% intervals (components of v0, w0; coverage: Wilson with "
           "the shots' design effect; RMS: bootstrap over shots)")
@@ -356,19 +360,15 @@ def intervals(rows, n_boot: int = 4000, seed: int = 0, m: str = "mle"):
         k, n = int(hit.sum()), Z.size
         Z = np.where(np.isfinite(Z), Z, np.nan)
         idx = rng.integers(0, len(ok), (n_boot, len(ok)))
-        def rms(a):  # over the stated errors a draw holds (none: NaN, out of the percentiles)
-            a = a[np.isfinite(a)]
-            return float(np.sqrt(np.mean(a * a))) if a.size else np.nan
-
-        boot = {name: np.nanpercentile([f(A[i]) for i in idx], [2.5, 97.5]) for name, f, A in (
-            ("rms", rms, Z), ("crb", lambda a: np.sqrt(np.nanmean(a * a)), K))
-            if name != "crb" or m == "mle"}
+        # over the components a draw holds (none: NaN, out of the percentiles)
+        boot = {name: np.nanpercentile([rms_z(A[i]) for i in idx], [2.5, 97.5]) for name, A in (("rms", Z), ("crb", K))
+                if name != "crb" or m == "mle"}
         lo, hi = coverage_interval(hit)
         print(f"  {band}: {len(ok)} ok" + (f" ({bare} without stated errors: missed)" if bare else "")
               + f"; coverage {k}/{n} = {k / n:.1%} (95% {lo:.1%}-{hi:.1%}, "
               f"design effect of the shots); RMS / stated error "
-              f"{np.sqrt(np.nanmean(Z * Z)):.2f} ({boot['rms'][0]:.2f}-{boot['rms'][1]:.2f})"
-              + (f"; RMS / bound {np.sqrt(np.nanmean(K * K)):.2f} ({boot['crb'][0]:.2f}-{boot['crb'][1]:.2f}); "
+              f"{rms_z(Z):.2f} ({boot['rms'][0]:.2f}-{boot['rms'][1]:.2f})"
+              + (f"; RMS / bound {rms_z(K):.2f} ({boot['crb'][0]:.2f}-{boot['crb'][1]:.2f}); "
                  f"chi2/dof median {np.nanmedian([r['chi2_per_dof'] for r in ok]):.2f}" if m == "mle" else ""))
 
 
@@ -384,17 +384,24 @@ def bound_summary(ok):
     all, free slip and rolling answers apart; a rolling answer's error about
     the rolling model's parameters nearest the truth, the bias of assuming
     no slip (the truth sliding unseen) stated apart; the shots without a
-    bound listed with why, never averaged in."""
-    for key, what in (("mle_crb_z", "the fit's own measurements (recover.measurements; on inter-frame video "
-                                    "correlated in time as the fit's covariance takes them)"),
-                      ("mle_crb_z_indep", "tracker's errors, every frame independent (reference)")):
+    bound listed with why, never averaged in.  Pooled over the answers'
+    components (pipeline.measure.rms_z, as :func:`intervals`); per shot,
+    each answer's own RMS."""
+    from cuespin.pipeline.measure import rms_z
+
+    for key, comp, what in (("mle_crb_z", "mle_crb_", "the fit's own measurements (recover.measurements; on "
+                                                    "inter-frame video correlated in time as the fit's covariance "
+                                                    "takes them)"),
+                            ("mle_crb_z_indep", "mle_crbi_", "tracker's errors, every frame independent (reference)")):
         for band, sel in (("all", lambda r: True), ("free slip answers", lambda r: r.get("mle_model") == "full"),
                           ("rolling answers", lambda r: r.get("mle_model") == "rolling")):
-            crb_z = np.array([r[key] for r in ok if sel(r) and np.isfinite(r[key])])
+            rows = [r for r in ok if sel(r) and np.isfinite(r[key])]
+            crb_z = np.array([r[key] for r in rows])
             if len(crb_z):
+                pooled = rms_z([[r.get(comp + c, np.nan) for c in COMPONENTS] for r in rows])
                 print(f"{'' if band == 'all' else '  '}MLE: RMS error / Cramer-Rao bound of the answer's model, "
                       f"{band}, with {what} (v0, w0 components; rolling: v0; {len(crb_z)} shots): "
-                      f"{np.sqrt(np.mean(np.square(crb_z))):.2f}; per shot median {np.median(crb_z):.2f}, "
+                      f"{pooled:.2f}; per shot median {np.median(crb_z):.2f}, "
                       f"p90 {np.percentile(crb_z, 90):.2f} (target <= 1.1)")
             if band == "all" and key == "mle_crb_z":
                 print("  (a rolling answer's error about the rolling parameters nearest the truth: its model's "

@@ -69,6 +69,7 @@ def slip_ratios(n, seed, rho=0.0):
 def end_ratios(n, seed):
     from cuespin.data_gen.sampler import sample_shot
     from cuespin.fit.segment import segment_track
+    from cuespin.physics import rolling_deceleration
     from cuespin.physics import phases
     from cuespin.recover.simulate import FPS_GRID, SIGMA_GRID_M, simulate_track
     rng = np.random.default_rng(seed)
@@ -83,7 +84,7 @@ def end_ratios(n, seed):
         cut = shot.t0 + float(rng.uniform(0.4, 0.95)) * (ph.t1 - shot.t0)
         exposure = float(rng.uniform(0.3, 1.0) / fps) if rng.random() < 0.5 else 0.0
         tr = simulate_track(shot, p, fps, sigma, rng, exposure, t_end=cut)
-        seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, sigma, exposure)
+        seg = segment_track(tr.t, tr.xy, rolling_deceleration(p.mu_r, p.g), sigma, exposure)
         if seg:
             from cuespin.fit.decide import t1_in_view
             r = seg.end_F / f_dist.isf(0.01, 1, max(seg.end_dof, 1)) if t1_in_view(seg.t1, tr.t) else 0.0
@@ -93,12 +94,13 @@ def end_ratios(n, seed):
 
 def curve_ratios(n, seed):
     from cuespin.fit.segment import segment_track
+    from cuespin.physics import rolling_deceleration
     from cuespin.recover.paper import path_shape
     from cuespin.recover.simulate import sliding_tracks
     out = defaultdict(list)
     for tr in sliding_tracks(n, seed, presets=("case1", "case3", "case5")):
         p = tr.params
-        seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, tr.sigma, tr.exposure_s)
+        seg = segment_track(tr.t, tr.xy, rolling_deceleration(p.mu_r, p.g), tr.sigma, tr.exposure_s)
         shape = path_shape(seg, tr.xy, p) if seg else None
         if shape is not None:
             k = len(seg.slide)
@@ -200,12 +202,13 @@ def report_ar1(cells, rho):
 
 def case2_ratios(n, seed):
     from cuespin.fit.segment import segment_track
+    from cuespin.physics import rolling_deceleration
     from cuespin.recover.paper import case2_distance, geometry_covariance, ran_into_rest
     from cuespin.recover.simulate import case2_tracks
     out = defaultdict(list)
     for tr in case2_tracks(n, seed):
         p = tr.params
-        seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, tr.sigma, tr.exposure_s)
+        seg = segment_track(tr.t, tr.xy, rolling_deceleration(p.mu_r, p.g), tr.sigma, tr.exposure_s)
         # The segmentation that runs into the rest: its best one, or its
         # "unended" alternative (recover.estimate takes that when the
         # breakpoint is not clear of the rest).
@@ -236,6 +239,7 @@ def case2_power(n, seed, gap):
     from cuespin.data_gen.sampler import sample_shot
     from cuespin.fit.decide import CASE2_FACTOR, stop_apart
     from cuespin.fit.segment import segment_track
+    from cuespin.physics import rolling_deceleration
     from cuespin.physics import phases
     from cuespin.recover.paper import case2_distance, geometry_covariance, ran_into_rest
     from cuespin.recover.simulate import FPS_GRID, SIGMA_GRID_M, _exposure, simulate_track
@@ -257,7 +261,7 @@ def case2_power(n, seed, gap):
             continue
         sh = scaled(e)
         tr = simulate_track(sh, p, fps, sigma, rng, _exposure(rng, fps, True), t_end=phases(sh, p).t2 + 0.3)
-        seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, tr.sigma, tr.exposure_s)
+        seg = segment_track(tr.t, tr.xy, rolling_deceleration(p.mu_r, p.g), tr.sigma, tr.exposure_s)
         if not seg:
             continue
         s = seg if ran_into_rest(seg) else seg.unended

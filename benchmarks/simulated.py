@@ -44,7 +44,8 @@ def main():
         cells[(tr.fps, tr.sigma)].append(m["model"] == "full")
         if args.seg:  # the segmentation's own F-test (before issue 11: a second decision)
             from cuespin.fit.segment import segment_track
-            seg = segment_track(tr.t, tr.xy, 5 / 7 * tr.params.mu_r * tr.params.g, tr.sigma, tr.exposure_s)
+            from cuespin.physics import rolling_deceleration
+            seg = segment_track(tr.t, tr.xy, rolling_deceleration(tr.params.mu_r, tr.params.g), tr.sigma, tr.exposure_s)
             seg_fp.append(bool(seg) and seg.sliding_p < 0.01)
     allv = [v for c in cells.values() for v in c]
     if allv:

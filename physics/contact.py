@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cuespin.physics.motion import (
-    BallParams, Shot, State, evaluate, phases, positions,
+    BallParams, Shot, State, evaluate, phases, positions, rolling_deceleration,
 )
 
 CUSHION_RESTITUTION = 0.9
@@ -167,7 +167,7 @@ def _pieces(shot: Shot, params: BallParams):
     speed1 = float(np.hypot(*ph.v1))
     if ph.t2 > ph.t1 and speed1 > 0:
         v1_hat = ph.v1 / speed1
-        out.append((ph.t1, ph.t2, ph.x1, ph.v1, -0.5 * (5.0 / 7.0) * params.mu_r * g * v1_hat))  # eq. 18
+        out.append((ph.t1, ph.t2, ph.x1, ph.v1, -0.5 * rolling_deceleration(params.mu_r, g) * v1_hat))  # eq. 18
     return out
 
 

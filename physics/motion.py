@@ -46,6 +46,13 @@ class BallParams:
     g: float = 9.81
 
 
+def rolling_deceleration(mu_r: float, g: float) -> float:
+    """Eq. 16: a rolling ball's deceleration ``(5/7) mu_r g`` (m/s^2) along
+    its velocity, with ``mu_r`` in the paper's energy convention
+    (:class:`BallParams`) and ``g`` in m/s^2."""
+    return 5.0 / 7.0 * mu_r * g
+
+
 @dataclass(frozen=True)
 class Shot:
     """Initial conditions of one shot.
@@ -263,7 +270,7 @@ def evaluate(shot: Shot, params: BallParams, t, ph: Phases | None = None) -> Sta
     if rolling.any():
         v1_hat = ph.v1 / np.hypot(*ph.v1)
         r = (t[rolling] - ph.t1)[:, None]
-        v[rolling] = ph.v1 - 5.0 / 7.0 * mu_r * g * r * v1_hat  # eq. 16
+        v[rolling] = ph.v1 - rolling_deceleration(mu_r, g) * r * v1_hat  # eq. 16
         w[rolling] = z_cross(v[rolling]) / R  # eq. 12, no slip while rolling
     return State(x=x, v=v, w=w, phase=phase)
 
@@ -305,7 +312,7 @@ def _positions(ph: Phases, params: BallParams, t, before, sliding, rolling, rest
     if _any(rolling):
         v1_hat = ph.v1 / np.hypot(*ph.v1)
         r = t[rolling] - ph.t1
-        c = 0.5 * (5.0 / 7.0 * mu_r * g) * r**2
+        c = 0.5 * rolling_deceleration(mu_r, g) * r**2
         for d in (0, 1):
             x[rolling, d] = ph.x1[d] + ph.v1[d] * r - c * v1_hat[d]  # eq. 18
     x[rest] = ph.x2
@@ -405,7 +412,7 @@ def positions_jacobian(shot: Shot, params: BallParams, t, rolling: bool = False,
     s = t[sliding] - ph.t0
     out[sliding] = _powers(s) @ C.reshape(3, -1)
     if _any(rolls):
-        a_r = 5.0 / 7.0 * mu_r * g  # eq. 16
+        a_r = rolling_deceleration(mu_r, g)  # eq. 16
         v1_hat = v1 / speed_v1
         d_v1hat = (eye - np.outer(v1_hat, v1_hat)) / speed_v1 @ d_v1
         d_r = d_t0 + d_tau1  # r = t - t0 - tau1

@@ -1119,7 +1119,7 @@ def cushion_noses(img: np.ndarray, sides: list, search_frac: float = 0.08, reach
             ring = float(mirror.max()) if len(mirror) else 0.0
             scale = max(noise, HIDDEN_NOISE_FLOOR)
             # the felt's own pixels beside their neighbours (unsmoothed), inside the nose: a codec's flat blocks
-            flat = _flat_share(img, P[:, : max(len(offs) // 3, 2)])
+            flat = _flat_share(img, _felt_part(offs, P))
             # a step the rule sees there is a band's edge in sight (the paths' cross-check), not a hidden one
             hidden.append((top / scale, top / max(ring, scale), ring, flat) if top <= step_min
                           else (0.0, 0.0, ring, flat))
@@ -1157,11 +1157,21 @@ def _inward_samples(sides: list, search_frac: float = 0.08):
         yield base, nrm, offs, base[:, None, :] + offs[None, :, None] * nrm
 
 
-def _felt_flat_shares(img: np.ndarray, sides: list) -> list:
-    """The felt's flat share (:func:`_flat_share`) on each side of an outline,
-    where :func:`cushion_noses` reads it (the deepest third of its search):
-    for a frame whose own noses need not show (a single codec frame)."""
-    return [_flat_share(img, P[:, : max(len(offs) // 3, 2)]) for _, _, offs, P in _inward_samples(sides)]
+def _felt_part(offs, P) -> np.ndarray:
+    """Of one side's inward sample points ``P`` at offsets ``offs``
+    (:func:`_inward_samples`), those on the felt: the deepest third of the
+    search (at least two offsets), where :func:`cushion_noses` reads the
+    felt's flat share."""
+    return P[:, : max(len(offs) // 3, 2)]
+
+
+def _felt_flat_shares(img: np.ndarray, sides: list, other: np.ndarray | None = None) -> list:
+    """The felt's flat share (:func:`_flat_share`; with ``other``, its share
+    equal to the same pixel there) on each side of an outline, where
+    :func:`cushion_noses` reads it (:func:`_felt_part`): for a frame whose
+    own noses need not show (a single codec frame), and for
+    :func:`_video_lossy`'s two still frames."""
+    return [_flat_share(img, _felt_part(offs, P), other) for _, _, offs, P in _inward_samples(sides)]
 
 
 def _flat_share(img: np.ndarray, P: np.ndarray, other: np.ndarray | None = None) -> float:
@@ -1972,12 +1982,8 @@ def _video_lossy(single: np.ndarray, single_next: np.ndarray, sides: list) -> bo
     -------
     bool
     """
-    flat, same = [], []
-    for _, _, offs, P in _inward_samples(sides):
-        P = P[:, : max(len(offs) // 3, 2)]
-        flat.append(_flat_share(single, P))
-        same.append(_flat_share(single, P, single_next))
-    flat, same = float(np.median(flat)), float(np.median(same))
+    flat = float(np.median(_felt_flat_shares(single, sides)))
+    same = float(np.median(_felt_flat_shares(single, sides, single_next)))
     if same >= FROZEN_SHARE:
         return flat > RAW_FLAT_SHARE
     return flat - same > NOISE_FLAT_EXCESS or _noise_tail_excess(single, single_next, sides) > NOISE_TAIL_EXCESS
@@ -2024,7 +2030,7 @@ def _noise_tail_excess(single: np.ndarray, single_next: np.ndarray, sides: list)
     if a.ndim == 2:
         a, b = a[:, :, None], b[:, :, None]
     h, w = a.shape[:2]
-    q = np.concatenate([np.rint(P[:, : max(len(offs) // 3, 2)].reshape(-1, 2)).astype(int)
+    q = np.concatenate([np.rint(_felt_part(offs, P).reshape(-1, 2)).astype(int)
                         for _, _, offs, P in _inward_samples(sides)])
     q = np.unique(q[(q[:, 0] >= 0) & (q[:, 0] < w) & (q[:, 1] >= 0) & (q[:, 1] < h)], axis=0)
     d = np.abs(a[q[:, 1], q[:, 0]].astype(int) - b.reshape(a.shape)[q[:, 1], q[:, 0]].astype(int))

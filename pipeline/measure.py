@@ -199,6 +199,21 @@ class AnswerBound:
         return out
 
 
+def rms_z(z) -> float:
+    """RMS error / bound (or / stated error): the root mean square of
+    errors in those units, ``z`` (any shape), over its finite entries (NaN:
+    a component the bound does not cover, :meth:`AnswerBound.z`; infinite:
+    an answer without stated errors, which the caller counts apart); NaN
+    when there are none.  The one definition for an answer (its covered
+    components) and for a set of answers (every covered component of every
+    answer pooled: a free-slip answer's four, a rolling answer's two v0
+    components), used by benchmarks/accuracy.py's per-shot columns, its
+    summary and its intervals alike."""
+    a = np.asarray(z, dtype=float)
+    a = a[np.isfinite(a)]
+    return float(np.sqrt(np.mean(a * a))) if a.size else float("nan")
+
+
 def answer_bound(scene: Scene, meas, model: str, ar1: float = 0.0, acf=None, independent: bool = False,
                  fit_friction: bool = False) -> AnswerBound:
     """The Cramer-Rao bound of the model an answer was given with

@@ -19,7 +19,7 @@ from threadpoolctl import ThreadpoolController
 from cuespin.fit.decide import (PAPER_FIT_TAU_Z, Decision, autocorrelated, sliding_ended, sliding_seen,
                                sliding_times_differ, strike_in_view, t1_in_view)
 from cuespin.fit.segment import Segments, correlated_end_F, segment_track
-from cuespin.physics.motion import BallParams, phases, z_cross
+from cuespin.physics.motion import BallParams, phases, rolling_deceleration, z_cross
 from cuespin.recover.measurements import (CUE_CLEAR_FRAMES, MAX_CODEC_NOISE_RATIO, MAX_STEP_R, Measurements,
                                           as_covariance, build_measurements, codec_excess, codec_noise_ratio,
                                           cue_clear_s, fill_covariance, moving_scale, still_look_applies,
@@ -261,7 +261,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
     sigma = float(np.median(np.sqrt(0.5 * (cov[:, 0, 0] + cov[:, 1, 1])))) if len(t) else float("nan")
     frame_dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
     clock = time.perf_counter()
-    seg = segment_track(t, xy, 5.0 / 7.0 * params.mu_r * params.g, sigma, exposure_s,
+    seg = segment_track(t, xy, rolling_deceleration(params.mu_r, params.g), sigma, exposure_s,
                         frames=keep.frames if keep is not None else None,
                         breaks=keep.breaks if keep is not None else None)
     t_fit = time.perf_counter() - clock
@@ -692,7 +692,7 @@ def rolling_fit(t, xy, cov, px_to_m, params: BallParams, mle, seg, exposure_s: f
     sel = (t > t1 + 0.5 * exposure_s + frame_dt) & (t < t2 - 0.5 * exposure_s)
     mu_r = getattr(mle, "mu_r", None) or params.mu_r
     pm = None if px_to_m is None else np.asarray(px_to_m)[sel]
-    return rolling_slope(t[sel], xy[sel], cov[sel], 5.0 / 7.0 * mu_r * params.g, sigma, pm, params.g, acf=acf)
+    return rolling_slope(t[sel], xy[sel], cov[sel], rolling_deceleration(mu_r, params.g), sigma, pm, params.g, acf=acf)
 
 
 def mle_noise(mle, codec: CodecCorrelation | None = None) -> tuple[float, float, tuple | None]:

@@ -603,6 +603,14 @@ def group_covariance(frame_cov_used, g, m: int, scatter, min_share: float = 0.0,
     independent frames' (``F(2(n - 1), scale_dof)``), else 0.  Where the
     scatter is not measured, ``C`` (one shared error)."""
     c, f = group_shares(frame_cov_used, g, m, scatter, min_share, scale, scale_dof)
+    return shares_covariance(c, f, g, m)
+
+
+def shares_covariance(c, f, g, m: int) -> np.ndarray:
+    """Each measurement's covariance, shape (m, 2, 2), from its frames' mean
+    stated covariance ``c`` and their shared share ``f``
+    (:func:`group_shares`; group ``g`` of the used frames): ``(1 - f) c / n
+    + f c`` for its ``n`` frames (:func:`group_covariance`)."""
     n = np.bincount(g, minlength=m).astype(float)
     return c * ((1.0 - f) / n + f)[:, None, None]
 
@@ -696,12 +704,10 @@ def linear_covariance(meas: Measurements, weights, ar1: float = 0.0, scale: floa
         out += np.einsum("amj,mjk,bmk->ab", S, fc, S) - np.einsum("aij,ijk,bik->ab", Gu, fc[g], Gu)
         # The still look's error, and a rest's rise to its floor: each one
         # error shared by all the rest's frames.
-        look = still_look_covariance(meas.group, meas.px_to_m, meas.rest_look_px2)
-        if meas.rest_floor is not None:
-            look = look + rest_floor_covariance(group_covariance(
-                meas.cov[used], g, m, group_scatter(meas.xy, meas.group, meas.rest_scatter), meas.rest_min_share,
-                meas.rest_scale, meas.rest_scale_dof) + look, meas.rest_floor)
-        out += np.einsum("amj,mjk,bmk->ab", S, look, S)
+        _, shared = rest_covariance(shares_covariance(c, f, g, m),
+                                    still_look_covariance(meas.group, meas.px_to_m, meas.rest_look_px2),
+                                    meas.rest_floor)
+        out += np.einsum("amj,mjk,bmk->ab", S, shared, S)
         if ar1 > 0:
             out += _ar1_extra(meas, G, float(ar1))
         if acf is not None:
@@ -841,6 +847,27 @@ def rest_floor_covariance(base, floor) -> np.ndarray:
     return L @ E @ np.swapaxes(L, -1, -2)
 
 
+def rest_covariance(base, look, floor) -> tuple[np.ndarray, np.ndarray]:
+    """Each measurement's covariance (m^2, shape (m, 2, 2)) from its frames'
+    (``base``: :func:`group_covariance`'s) and the errors all a rest's
+    frames share beyond them: its still look's (``look``:
+    :func:`still_look_covariance`'s) and its rise to its ``floor``
+    (:func:`rest_floor_covariance`; None: none).  The one place the fit's
+    whiteners (:func:`_make`), the codec's excess (:func:`codec_excess`) and
+    the covariance of linear estimates (:func:`linear_covariance`) add them.
+
+    Returns
+    -------
+    cov : ndarray, shape (m, 2, 2)
+        ``base`` with both.
+    shared : ndarray, shape (m, 2, 2)
+        Both alone: one error shared by all the rest's frames.
+    """
+    c = base + look
+    rise = rest_floor_covariance(c, floor)
+    return c + rise, look + rise
+
+
 def _make(t, xy, cov, group, px_to_m=None, rest_scatter: bool = False, rest_min_share: float = 0.0,
           rest_scale: float = 1.0, rest_scale_dof: float = float("inf"), rest_look_px2: float = 0.0,
           rest_floor=None) -> Measurements:
@@ -851,9 +878,9 @@ def _make(t, xy, cov, group, px_to_m=None, rest_scatter: bool = False, rest_min_
     used = group >= 0
     g = group[used]
     m = int(g.max()) + 1 if len(g) else 0
-    c = group_covariance(cov[used], g, m, group_scatter(xy, group, rest_scatter), rest_min_share,
-                         rest_scale, rest_scale_dof) + still_look_covariance(group, px_to_m, rest_look_px2)
-    c = c + rest_floor_covariance(c, rest_floor)
+    c, _ = rest_covariance(group_covariance(cov[used], g, m, group_scatter(xy, group, rest_scatter),
+                                            rest_min_share, rest_scale, rest_scale_dof),
+                           still_look_covariance(group, px_to_m, rest_look_px2), rest_floor)
     W = np.linalg.inv(np.linalg.cholesky(c)) if m else np.zeros((0, 2, 2))
     return Measurements(t=t, xy=xy, cov=cov, group=group, W=W, px_to_m=px_to_m, rest_scatter=rest_scatter,
                         rest_min_share=rest_min_share, rest_scale=rest_scale, rest_scale_dof=rest_scale_dof,
@@ -1231,9 +1258,9 @@ def codec_excess(meas: Measurements, whitened_residuals, n_par: int) -> float:
     def excess_chi2(c):
         # As with_codec(c).whiten, without building the Measurements; NaN
         # where a measurement's covariance is numerically no covariance.
-        C = group_covariance(cov + np.maximum(c, floor)[:, None, None] * K, g, m, scatter, meas.rest_min_share,
-                             meas.rest_scale, meas.rest_scale_dof) + look
-        C = C + rest_floor_covariance(C, meas.rest_floor)
+        C, _ = rest_covariance(group_covariance(cov + np.maximum(c, floor)[:, None, None] * K, g, m, scatter,
+                                                meas.rest_min_share, meas.rest_scale, meas.rest_scale_dof),
+                               look, meas.rest_floor)
         try:
             w = np.linalg.solve(np.linalg.cholesky(C), raw[:, :, None])[:, :, 0]
         except np.linalg.LinAlgError:

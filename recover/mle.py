@@ -32,7 +32,8 @@ from scipy.optimize import brentq, least_squares
 
 from cuespin.fit.decide import MIN_STILL_FRAMES, autocorrelated, slide_through_excluded, strike_in_view
 from cuespin.fit.lm import lm_fit
-from cuespin.physics.motion import SLIP_ZERO, BallParams, Shot, phases, positions, positions_jacobian, z_cross
+from cuespin.physics.motion import (SLIP_ZERO, BallParams, Shot, phases, positions, positions_jacobian,
+                                    rolling_deceleration, z_cross)
 from cuespin.recover.measurements import Measurements, frame_lattice, lattice_ar1_sums
 
 # A fit whose residuals are this many times the stated variance does not
@@ -887,29 +888,25 @@ def time_whitener(acf=INTER_CODEC_ACF, rho: float | None = None, frame_dt: float
     def whiten(t, M):
         t = np.asarray(t, dtype=float)
         M = np.asarray(M, dtype=float)
-        # The filter's gains depend on the times only: made first, then
-        # the rows' states (the same operations, in the same order, as one
-        # loop over both).
-        phis, roots, gains = [None] * len(t), [None] * len(t), [None] * len(t)
-        P = np.diag(var)
-        for k in range(len(t)):
-            if k:
-                phi = np.exp(-(t[k] - t[k - 1]) / tc)
-                phis[k] = phi.reshape((-1,) + (1,) * (M.ndim - 1))
-                P = phi[:, None] * P * phi[None, :] + np.diag(var * (1.0 - phi**2))
-            S = P.sum() + white
-            g = P.sum(axis=1) / S  # Kalman gain on the components
-            roots[k] = np.sqrt(S)
-            gains[k] = g.reshape((-1,) + (1,) * (M.ndim - 1))
-            P = P - S * np.outer(g, g)
+        # The gains depend on the times alone and every operation on the
+        # rows is elementwise: the columns whitened together or apart come
+        # out alike (fit.segment.correlated_end_F whitens both fits' in one
+        # call, each call its own times: nothing to keep between calls).
+        shape = (-1,) + (1,) * (M.ndim - 1)  # a component's factor against the rows' columns
         out = np.empty_like(M)
+        P = np.diag(var)
         s = np.zeros((len(var),) + M.shape[1:])
         for k in range(len(t)):
             if k:
-                s = phis[k] * s
+                phi = np.exp(-(t[k] - t[k - 1]) / tc)
+                P = phi[:, None] * P * phi[None, :] + np.diag(var * (1.0 - phi**2))
+                s = phi.reshape(shape) * s
+            S = P.sum() + white
+            g = P.sum(axis=1) / S  # Kalman gain on the components
             e = M[k] - s.sum(axis=0)
-            out[k] = e / roots[k]
-            s = s + gains[k] * e
+            out[k] = e / np.sqrt(S)
+            s = s + g.reshape(shape) * e
+            P = P - S * np.outer(g, g)
         return out
     return whiten
 
@@ -1494,7 +1491,7 @@ def slide_through_chi2(fit: ModelFit, meas: Measurements, n_dir: int = SLIDE_THR
     tau = np.clip(t_used - float(shot.t0), 0.0, None)
     q = 0.5 * tau ** 2
     if fit.rolling:
-        off_line = -(5.0 / 7.0 * pr.mu_r * pr.g) * q[:, None] * v_hat
+        off_line = -rolling_deceleration(pr.mu_r, pr.g) * q[:, None] * v_hat
     else:  # the fit's path off its straight line x0 + v0 (t - t0) after the strike
         line = np.asarray(shot.x0, float) + tau[:, None] * v0
         off_line = np.where((t_used > shot.t0)[:, None], positions(shot, pr, t_used) - line, 0.0)

@@ -25,7 +25,7 @@ import numpy as np
 
 from cuespin.fit.conics import fit_parabola
 from cuespin.fit.decide import rolling_speed_differs, stop_apart
-from cuespin.physics.motion import BallParams, z_cross
+from cuespin.physics.motion import BallParams, rolling_deceleration, z_cross
 from cuespin.physics.parabola import Parabola
 from cuespin.recover.mle import MIN_SLIDING_FRAMES
 
@@ -811,7 +811,7 @@ def rolling_speed(x1, x2, params: BallParams) -> float:
     """Eq. 19 (eq. 16-17 integrated): the speed (m/s) at ``x1`` that rolls
     to rest at ``x2``, ``sqrt(2 (5/7) mu_r g |x2 - x1|)``."""
     d = float(np.hypot(*(np.asarray(x2, float) - np.asarray(x1, float))))
-    return float(np.sqrt(2.0 * 5.0 / 7.0 * params.mu_r * params.g * d))
+    return float(np.sqrt(2.0 * rolling_deceleration(params.mu_r, params.g) * d))
 
 
 def rolling_speed_z(seg, params: BallParams, sigma: float, t, xy, meas=None, noise=(0.0, 1.0)) -> float:
@@ -848,7 +848,7 @@ def rolling_speed_z(seg, params: BallParams, sigma: float, t, xy, meas=None, noi
             or not np.isfinite(seg.t1):
         return float("nan")
     t, xy = np.asarray(t, float), np.asarray(xy, float)
-    decel = 5.0 / 7.0 * params.mu_r * params.g
+    decel = rolling_deceleration(params.mu_r, params.g)
     v1 = np.asarray(seg.v1, float)
     speed = float(np.hypot(*v1))
     w = segment_weights(seg, len(t))

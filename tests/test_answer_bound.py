@@ -71,9 +71,12 @@ def test_a_shot_without_a_bound_is_listed_apart(capsys):
     # and lists the others with the reason answer_bound gave.
     from benchmarks.accuracy import bound_summary
     nan = float("nan")
+    from benchmarks.accuracy import COMPONENTS
     row = dict(mle_crb_z_indep=nan, mle_bias_v0=nan, mle_bound_fail="")
-    rows = [dict(row, i=0, mle_model="full", mle_crb_z=1.0), dict(row, i=1, mle_model="full", mle_crb_z=3.0),
-            dict(row, i=2, mle_model="full", mle_crb_z=nan, mle_bound_fail="the information is singular")]
+
+    def shot(i, z, **kw):  # every component z bounds off
+        return dict(row, i=i, mle_model="full", mle_crb_z=z, **{f"mle_crb_{c}": z for c in COMPONENTS}, **kw)
+    rows = [shot(0, 1.0), shot(1, 3.0), shot(2, nan, mle_bound_fail="the information is singular")]
     bound_summary(rows)
     out = capsys.readouterr().out
     assert f"2 shots): {np.sqrt(5.0):.2f}" in out, out
@@ -96,3 +99,23 @@ def test_no_bound_where_the_truth_stops_as_its_slide_ends():
                            return_estimate=True)
     b = answer_bound(make_scene(shot, p, fps=120.0), est.meas, "full")
     assert b.cov is None and "stops as its slide ends" in b.reason
+
+
+def test_the_summary_and_the_intervals_pool_rms_over_bound_alike(capsys):
+    # One definition (pipeline.measure.rms_z): bound_summary and intervals
+    # pool every covered component, a rolling answer's two (v0) beside a
+    # free slip's four; before, the summary took the RMS of the shots' own
+    # RMS (held37's seed 37: 1.09 against the intervals' 1.11).
+    from benchmarks.accuracy import COMPONENTS, bound_summary, intervals
+    nan = float("nan")
+    base = dict(mle_status="ok", noise=1.0, chi2_per_dof=1.0, mle_crb_z_indep=nan, mle_bias_v0=nan,
+                mle_bound_fail="", **{f"mle_z_{c}": 0.5 for c in COMPONENTS})
+    full = dict(base, i=0, mle_model="full", mle_crb_z=1.0, **{f"mle_crb_{c}": 1.0 for c in COMPONENTS})
+    rolling = dict(base, i=1, mle_model="rolling", mle_crb_z=3.0,
+                   **{f"mle_crb_{c}": z for c, z in zip(COMPONENTS, (3.0, 3.0, nan, nan))})
+    pooled = f"{np.sqrt((4 * 1.0 + 2 * 9.0) / 6):.2f}"  # 1.91; the shots' RMS of RMS would be 2.24
+    bound_summary([full, rolling])
+    intervals([full, rolling], n_boot=10)
+    out = capsys.readouterr().out
+    assert "all, with the fit's own measurements" in out and f"2 shots): {pooled}" in out, out
+    assert "all: 2 ok; coverage" in out and f"RMS / bound {pooled}" in out, out

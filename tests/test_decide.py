@@ -11,7 +11,7 @@ import pytest
 from cuespin.data_gen.sampler import sample_shot
 from cuespin.fit.decide import LEVEL, sliding_ended
 from cuespin.fit.segment import correlated_end_F, segment_track
-from cuespin.physics import phases
+from cuespin.physics import phases, rolling_deceleration
 from cuespin.recover.estimate import estimate
 from cuespin.recover.mle import model_track, time_correlation, time_whitener
 from cuespin.recover.paper import path_shape
@@ -78,7 +78,7 @@ def false_ended(n, seed):
     hits = 0
     for tr in still_sliding_tracks(n, seed):
         p = tr.params
-        seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, tr.sigma, tr.exposure_s)
+        seg = segment_track(tr.t, tr.xy, rolling_deceleration(p.mu_r, p.g), tr.sigma, tr.exposure_s)
         hits += bool(seg) and sliding_ended(seg, tr.t).yes
     return hits
 
@@ -120,7 +120,7 @@ def false_ended_correlated(n, seed, errors, fps_grid=FPS_GRID):
     recover.estimate asks it."""
     hits = 0
     for t, xy, p, sigma, exposure, whiten, _ in correlated_still_sliding_tracks(n, seed, errors, fps_grid):
-        seg = segment_track(t, xy, 5 / 7 * p.mu_r * p.g, sigma, exposure)
+        seg = segment_track(t, xy, rolling_deceleration(p.mu_r, p.g), sigma, exposure)
         hits += bool(seg) and sliding_ended(seg, t, end_F=correlated_end_F(seg, t, xy, whiten)).yes
     return hits
 
@@ -141,7 +141,7 @@ def test_estimate_withholds_w0_of_a_codec_track_cut_mid_slide():
 def test_correlated_end_F_is_end_F_for_independent_errors():
     tr = next(still_sliding_tracks(1, 3))
     p = tr.params
-    seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, tr.sigma, tr.exposure_s)
+    seg = segment_track(tr.t, tr.xy, rolling_deceleration(p.mu_r, p.g), tr.sigma, tr.exposure_s)
     F = correlated_end_F(seg, tr.t, tr.xy, lambda tf, M: M)
     assert np.isclose(F, seg.end_F, rtol=1e-6, atol=1e-9), (F, seg.end_F)
 
@@ -209,7 +209,7 @@ def false_curved(n, seed):
     hits = total = 0
     for tr in sliding_tracks(n, seed, presets=("case1", "case3", "case5")):
         p = tr.params
-        seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, tr.sigma, tr.exposure_s)
+        seg = segment_track(tr.t, tr.xy, rolling_deceleration(p.mu_r, p.g), tr.sigma, tr.exposure_s)
         shape = path_shape(seg, tr.xy, p) if seg else None
         if shape is not None:
             total += 1
@@ -351,7 +351,7 @@ def false_stop_apart(n, seed):
     hits = total = 0
     for tr in case2_tracks(n, seed):
         p = tr.params
-        seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, tr.sigma, tr.exposure_s)
+        seg = segment_track(tr.t, tr.xy, rolling_deceleration(p.mu_r, p.g), tr.sigma, tr.exposure_s)
         s = seg if seg and ran_into_rest(seg) else (seg.unended if seg else None)
         if s is not None and ran_into_rest(s):
             total += 1
@@ -378,7 +378,7 @@ def first_case2_run_into_rest():
     from cuespin.recover.simulate import case2_tracks
     for tr in case2_tracks(8, 23):
         p = tr.params
-        seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, tr.sigma, tr.exposure_s)
+        seg = segment_track(tr.t, tr.xy, rolling_deceleration(p.mu_r, p.g), tr.sigma, tr.exposure_s)
         s = seg if ran_into_rest(seg) else seg.unended
         if s is not None and ran_into_rest(s):
             return tr, s, float(np.median(np.diff(tr.t)))
@@ -436,7 +436,7 @@ def false_rolling_speed(n, seed):
     hits = total = 0
     for tr in rolls_to_rest_tracks(n, seed):
         p = tr.params
-        seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, tr.sigma, tr.exposure_s)
+        seg = segment_track(tr.t, tr.xy, rolling_deceleration(p.mu_r, p.g), tr.sigma, tr.exposure_s)
         if not seg or seg.t2 is None or not np.isfinite(seg.t1) or ran_into_rest(seg) \
                 or not t1_in_view(seg.t1, tr.t[tr.t <= seg.t2]):
             continue
@@ -448,13 +448,16 @@ def false_rolling_speed(n, seed):
 
 
 def test_false_rolling_speed_rate_small():
+    # At the level in force (ROLL_SPEED_LEVEL, 0.081%: 0 allowed of 32; 0 read)
+    from cuespin.fit.decide import ROLL_SPEED_LEVEL
     hits, total = false_rolling_speed(48, 21)
-    assert total >= 25 and hits <= allowed(total), (hits, total)
+    assert total >= 25 and hits <= allowed(total, ROLL_SPEED_LEVEL), (hits, total)
 
 
 @pytest.mark.slow
 def test_false_rolling_speed_rate_400():
-    # seed 31: held out (ROLL_SPEED_FACTOR was set on seed 2 and checked on 3)
+    # seed 31: held out (ROLL_SPEED_FACTOR was set on seed 2 and checked on 3);
+    # at the level in force (ROLL_SPEED_LEVEL, 0.081%: 1 allowed of 447; 1 read)
     from cuespin.fit.decide import ROLL_SPEED_LEVEL
     hits, total = false_rolling_speed(640, 31)
     assert total >= 400 and hits <= allowed(total, ROLL_SPEED_LEVEL), (hits, total)
@@ -466,14 +469,18 @@ def test_rolling_speed_refuses_a_slide_into_a_rest_found_early():
     # stop.  The segmentation ends sliding early and bridges to the rest
     # with a short "rolling" piece; x1 is apart from x2, so the line's case
     # 3 answers, at a speed that would roll far past the rest (eq. 18-19).
-    # Refused; the segmentation's slide into the rest answers right.
+    # Refused at the stated level on every such answer (measured, fit.decide's
+    # ROLL_SPEED_FACTOR record: 56 of 56 of seed 5's 400 tracks, z >= 5.0,
+    # positive: the rest short of the rolling path; here the first 40, 4 answered
+    # by the line); the segmentation's slide into the rest answers right.
     from cuespin.fit import decide
-    from cuespin.fit.decide import t1_in_view
+    from cuespin.fit.decide import ROLL_SPEED_LEVEL, t1_in_view
     from cuespin.recover.paper import paper_from_segments, ran_into_rest
     from cuespin.recover.simulate import case2_tracks
+    refused = total = 0
     for tr in case2_tracks(40, 5):
         p = tr.params
-        decel = 5 / 7 * p.mu_r * p.g
+        decel = rolling_deceleration(p.mu_r, p.g)
         seg0 = segment_track(tr.t, tr.xy, decel, tr.sigma, tr.exposure_s)
         k = int(np.searchsorted(tr.t, phases(tr.shot, p).t2 - 0.066))
         seg = segment_track(tr.t, tr.xy, decel, tr.sigma, tr.exposure_s, frames=(seg0.k_move, k))
@@ -484,14 +491,20 @@ def test_rolling_speed_refuses_a_slide_into_a_rest_found_early():
         got = paper_from_segments(seg, tr.t, tr.xy, p, tr.sigma, dt)
         if got.rolling_speed is None:
             continue  # case 2 by stop_apart: not the line
+        total += 1
+        assert got.rolling_speed.level == ROLL_SPEED_LEVEL
+        if not (got.rolling_speed.yes and got.rolling_speed.statistic > 0):
+            continue
+        refused += 1
         assert got.status == "failed" and "eq. 18-19" in got.reason, got.reason
-        assert got.rolling_speed.statistic > 2 * got.rolling_speed.threshold
+        if refused > 1:
+            continue
         # Without the test the line's answer is many of its errors off.
         try:
-            decide.ROLL_SPEED_FACTOR, factor = float("inf"), decide.ROLL_SPEED_FACTOR
+            decide.ROLL_SPEED_Z, thr = float("inf"), decide.ROLL_SPEED_Z
             line = paper_from_segments(seg, tr.t, tr.xy, p, tr.sigma, dt)
         finally:
-            decide.ROLL_SPEED_FACTOR = factor
+            decide.ROLL_SPEED_Z = thr
         truth = np.r_[tr.shot.v0, tr.shot.w0]
         assert line.status == "ok"
         assert np.max(np.abs(np.r_[line.v0, line.w0] - truth) / np.r_[line.stderr["v0"], line.stderr["w0"]]) > 5
@@ -501,5 +514,4 @@ def test_rolling_speed_refuses_a_slide_into_a_rest_found_early():
         assert case2.status == "ok", case2.reason
         z = (np.r_[case2.v0, case2.w0] - truth) / np.r_[case2.stderr["v0"], case2.stderr["w0"]]
         assert np.max(np.abs(z)) < 3, z
-        return
-    pytest.fail("no case-2 track cut early was answered by the line")
+    assert total >= 3 and refused == total, (refused, total)

@@ -7,7 +7,7 @@ from cuespin.data_gen.sampler import sample_shot
 from cuespin.fit.decide import sliding_ended
 from cuespin.fit.conics import classify_path, fit_line, parabola_distances
 from cuespin.fit.segment import noise_from_track, segment_track
-from cuespin.physics import phases, positions, sliding_parabola
+from cuespin.physics import phases, positions, rolling_deceleration, sliding_parabola
 
 # Position noise of a ~0.01 px centroid at 500 px/m (the tracker's tier).
 SIGMA_M = 2e-5
@@ -29,7 +29,7 @@ def noisy_track(shot, params, fps=240.0, seed=0, sigma=SIGMA_M, t_max=6.0):
 def test_segmentation_finds_strike_and_breakpoint(preset):
     shot, params = sample_shot(21, preset)
     t, xy, ph = noisy_track(shot, params)
-    seg = segment_track(t, xy, 5 / 7 * params.mu_r * params.g, SIGMA_M)
+    seg = segment_track(t, xy, rolling_deceleration(params.mu_r, params.g), SIGMA_M)
     assert seg, seg.reason
     assert seg.t0 == pytest.approx(shot.t0, abs=T0_TOL_S)
     np.testing.assert_allclose(seg.x0, shot.x0, atol=5 * SIGMA_M)
@@ -48,7 +48,7 @@ def test_rolling_from_the_strike_alternative():
     # sliding one; fit.decide chooses (tests/test_decide.py).
     shot, params = sample_shot(22, "case4")
     t, xy, ph = noisy_track(shot, params)
-    seg = segment_track(t, xy, 5 / 7 * params.mu_r * params.g, SIGMA_M)
+    seg = segment_track(t, xy, rolling_deceleration(params.mu_r, params.g), SIGMA_M)
     roll = seg.rolling
     assert roll and roll.t1 == roll.t0
     assert roll.t0 == pytest.approx(shot.t0, abs=T0_TOL_S)
@@ -59,7 +59,7 @@ def test_track_ending_while_sliding():
     shot, params = sample_shot(23, "masse")
     t, xy, ph = noisy_track(shot, params)
     cut = t < shot.t0 + 0.5 * (ph.t1 - shot.t0)
-    seg = segment_track(t[cut], xy[cut], 5 / 7 * params.mu_r * params.g, SIGMA_M)
+    seg = segment_track(t[cut], xy[cut], rolling_deceleration(params.mu_r, params.g), SIGMA_M)
     assert seg and not sliding_ended(seg, t[cut])
 
 
@@ -78,7 +78,7 @@ def test_strike_found_when_still_frames_scatter_more_than_stated(seed):
     shot, params = sample_shot(seed, "case3")
     t, xy, ph = noisy_track(shot, params, sigma=3 * SIGMA_M)
     xy[1] += 8 * SIGMA_M
-    seg = segment_track(t, xy, 5 / 7 * params.mu_r * params.g, SIGMA_M)
+    seg = segment_track(t, xy, rolling_deceleration(params.mu_r, params.g), SIGMA_M)
     assert seg, seg.reason
     assert seg.t0 == pytest.approx(shot.t0, abs=3 * T0_TOL_S)  # 3x the noise: 3x the tier
     np.testing.assert_allclose(seg.x0, shot.x0, atol=15 * SIGMA_M)
@@ -213,7 +213,7 @@ def test_sliding_arc_does_not_run_on_into_the_rolling(k, held):
     # 27's and 91's are free of it (|a_s| 29.1 and 12.2 times rolling's).
     from tests.test_recover import short_slide_shot
     tr, p, sigma, exposure, _ = short_slide_shot(5, k)
-    decel = 5 / 7 * p.mu_r * p.g
+    decel = rolling_deceleration(p.mu_r, p.g)
     seg = segment_track(tr.t, tr.xy, decel, sigma, exposure)
     t1_true = phases(tr.shot, p).t1
     assert abs(seg.t1 - t1_true) * tr.fps < KNOWN_SHOT_T1_FRAMES, (seg.t1, t1_true)
@@ -242,7 +242,7 @@ def test_slide_below_the_deceleration_ratio_is_not_identified(ratio_true, held):
         p = dataclasses.replace(p, mu_s=0.1, mu_r=0.1 * 7 / (5 * ratio_true))
         fps, sigma = (120.0, 240.0)[i % 2], (2e-5, 1e-4, 6e-4)[i % 3]
         tr = simulate_track(shot, p, fps, sigma, rng, 0.0)
-        seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, sigma, 0.0)
+        seg = segment_track(tr.t, tr.xy, rolling_deceleration(p.mu_r, p.g), sigma, 0.0)
         off = abs(seg.t1 - phases(shot, p).t1) * fps
         if not held:
             assert not seg.t1_bound and off < KNOWN_SHOT_T1_FRAMES, (i, off)
@@ -272,10 +272,33 @@ def test_breakpoint_error_on_short_slides_seen_to_rest():
     n, far, worst = 120, 0, 0.0
     for tr in short_slip_tracks(n, 41, frames=(0.2, 8.0), to_rest=True):
         p = tr.params
-        seg = segment_track(tr.t, tr.xy, 5 / 7 * p.mu_r * p.g, tr.sigma, tr.exposure_s)
+        seg = segment_track(tr.t, tr.xy, rolling_deceleration(p.mu_r, p.g), tr.sigma, tr.exposure_s)
         err = abs(seg.t1 - phases(tr.shot, p).t1) * tr.fps
         far += err > SLIP_T1_FAR_FRAMES
         worst = max(worst, err)
     assert worst < SLIP_T1_RUNAWAY_FRAMES
     # Within two binomial standard errors of the measured rate.
     assert far / n <= SLIP_T1_FAR_RATE + 2 * np.sqrt(SLIP_T1_FAR_RATE * (1 - SLIP_T1_FAR_RATE) / n)
+
+
+def test_the_strike_times_share_left_out_only_where_the_strike_is_not_in_view():
+    # fit.segment._geometry_cov, rolling from the strike (t1 = t0): x0
+    # carries t0's error from the profile's curvature a frame either side;
+    # where the profile does not curve there (d2 <= 0) the share is left
+    # out and flagged (t_curved False).  Measured: never with the strike in
+    # view (360 simulated case-4 tracks, 40 realistic H.264); on tracks cut
+    # to begin after the strike (2 of 30 at 0.5 frame: seed 5's tracks 15
+    # and 24), where no still frame holds x0 and the paper's answer, which
+    # needs x0, is refused: so no answer is given on errors missing the share.
+    from cuespin.recover.estimate import estimate
+    from cuespin.recover.simulate import rolls_to_rest_tracks
+    tracks = list(rolls_to_rest_tracks(25, 5, presets=("case4",)))
+    for i, cut, curved in ((24, 0.0, True), (24, 0.5, False)):
+        tr = tracks[i]
+        k = tr.t > tr.shot.t0 + (cut / tr.fps - 1e-12 if cut else -np.inf)
+        est = estimate(tr.t[k], tr.xy[k], np.full(k.sum(), tr.sigma), tr.params, tr.exposure_s)
+        g = est.seg.geometry_cov
+        assert est.seg.t1 == est.seg.t0 and g["t_curved"] is curved, (i, cut, g["t_curved"])
+        assert bool(np.any(g["x0_t0"])) is curved
+        if not curved:
+            assert est.paper.status == "degenerate" and "strike is not in view" in est.paper.reason, est.paper.reason

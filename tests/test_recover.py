@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from cuespin.data_gen.sampler import make_scene, sample_shot
-from cuespin.physics import BallParams, Shot, phases, positions, sliding_parabola
+from cuespin.physics import BallParams, Shot, phases, positions, rolling_deceleration, sliding_parabola
 from cuespin.physics.straight import straight_frame
 from cuespin.pipeline.io import write_scene
 from cuespin.recover.estimate import estimate
@@ -75,7 +75,7 @@ def test_paper_line_without_rest_point_is_degenerate():
     ph = phases(shot, p)
     t = np.arange(0, shot.t0 + 0.5 * (ph.t2 - shot.t0), 1 / 240)
     xy = positions(shot, p, t) + 2e-5 * np.random.default_rng(0).standard_normal((len(t), 2))
-    seg = segment_track(t, xy, 5 / 7 * p.mu_r * p.g, 2e-5)
+    seg = segment_track(t, xy, rolling_deceleration(p.mu_r, p.g), 2e-5)
     r = paper_from_segments(seg, t, xy, p, 2e-5, 1 / 240)
     assert r.status == "degenerate" and "rest point" in r.reason
 

@@ -8,7 +8,7 @@ import pytest
 
 from cuespin.data_gen.contacts import sample_contact
 from cuespin.data_gen.sampler import sample_shot
-from cuespin.physics import phases, positions
+from cuespin.physics import phases, positions, rolling_deceleration
 from cuespin.physics.contact import simulate
 from cuespin.physics.scene import Table
 from cuespin.recover.api import recover_track
@@ -34,7 +34,7 @@ def sloped(shot, p, t, a, dt=1e-3):
     sliding phase stays level)."""
     ph = phases(shot, p)
     xy = positions(shot, p, t, ph)
-    k = 5 / 7 * p.mu_r * p.g
+    k = rolling_deceleration(p.mu_r, p.g)
     a = np.asarray(a, dtype=float)
 
     def acc(v):

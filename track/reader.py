@@ -40,14 +40,6 @@ LOSSLESS_CODECS = {"ffv1", "huffyuv", "ffvhuff", "png", "rawvideo", "utvideo", "
 INTRA_CODECS = {"mjpeg", "mjpg", "jpeg", "mjpa", "mjpb", "jpeg2000", "mjp2", "prores", "apch", "apcn",
                 "dnxhd", "avdn", "dvvideo", "dvsd"}
 GREY_PIX_FMTS = {"gray", "gray8", "y8", "gray10le", "gray12le", "gray16le", "gray16be", "monow", "monob"}
-# Pixels (across, down) sharing one chroma sample, by FFmpeg's pixel format,
-# for when PyAV does not know the name (its own ``av.VideoFormat`` gives the
-# chroma planes' size for every format FFmpeg knows: chroma_subsampling).
-CHROMA_SUBSAMPLING = {"yuv420p": (2, 2), "yuvj420p": (2, 2), "nv12": (2, 2), "nv21": (2, 2),
-                      "p010le": (2, 2), "p010be": (2, 2), "p016le": (2, 2), "p016be": (2, 2),
-                      "yuv422p": (2, 1), "yuvj422p": (2, 1), "yuyv422": (2, 1), "uyvy422": (2, 1),
-                      "nv16": (2, 1), "yuv422p10le": (2, 1), "yuv411p": (4, 1), "uyyvyy411": (4, 1),
-                      "yuv440p": (1, 2), "yuvj440p": (1, 2), "yuv410p": (4, 4)}
 
 
 # Subsampled formats whose decoding does not repeat each chroma sample over
@@ -97,24 +89,19 @@ def chroma_subsampling(pix_fmt: str) -> tuple[int, int]:
     ``nv12``), (2, 1) for 4:2:2 (``yuv422p``, ``yuvj422p``), (4, 1) for
     4:1:1 (``yuv411p``, DV), (1, 2) for 4:4:0, (1, 1) for 4:4:4, RGB, grey
     or an unknown or empty name.  From PyAV's description of the format
-    (its chroma planes' size against the luma's), else
-    :data:`CHROMA_SUBSAMPLING`, else names with ``420`` in them (2, 2)."""
+    (its chroma planes' size against the luma's; PyAV is a dependency, and
+    every name the reader reports is FFmpeg's, which PyAV knows)."""
+    import av
+
     pf = pix_fmt.strip().lower()
     if not pf:
         return 1, 1
+    n = 48  # a multiple of every subsampling factor FFmpeg has (1, 2, 4)
     try:
-        import av
-
-        n = 48  # a multiple of every subsampling factor FFmpeg has (1, 2, 4)
         comps = av.VideoFormat(pf, n, n).components
-        if len(comps) >= 3:
-            return n // int(comps[1].width), n // int(comps[1].height)
+        return (n // int(comps[1].width), n // int(comps[1].height)) if len(comps) >= 3 else (1, 1)
+    except (ValueError, TypeError, ZeroDivisionError):  # a name FFmpeg does not know
         return 1, 1
-    except (ValueError, TypeError, ImportError, ZeroDivisionError):
-        pass
-    if pf in CHROMA_SUBSAMPLING:
-        return CHROMA_SUBSAMPLING[pf]
-    return (2, 2) if "420" in pf else (1, 1)
 # 8-bit 4:2:0 planar formats read as planes (PlanarFrame), and whether their
 # levels are full range (JPEG's ``yuvj``) rather than BT.601's 16-235.
 PLANAR_PIX_FMTS = {"yuv420p": False, "yuvj420p": True}

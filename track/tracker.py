@@ -1640,32 +1640,30 @@ class BallTracker:
             return f, marks
         left = kept_pixels(marks, foreign)
         left = None if left is None else ~left
-        g, rim = f, None
-        for _ in range(RIM_MARK_PASSES):
-            add = rim_marking_pixels(patch, felt, u0, v0, g, r, self.bg.sigma, left, ol, refit=rim is not None)
-            if add is None:
-                break
-            h = self._fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=self.shade,
-                         valid=kept_pixels(marks, add, foreign), outline=ol, block=self.block)
-            if not (h and h.stated):
-                break
-            g, rim = h, add
-        if rim is not None and rim.sum() > markings_area_px(r):
-            # More than the markings could cover: the passes ran away
-            # (RIM_MARK_GROUPS); the strongest group a pass instead.
-            largest = marking_cap_px(r, RIM_MARK_ANGLE_RAD)  # px
+
+        def passes(n: int, strongest: bool):
+            # Each pass from the last refit; with ``strongest`` the strongest
+            # group a pass, added to those before, none over a marking's cap.
+            cap = marking_cap_px(r, RIM_MARK_ANGLE_RAD) if strongest else None  # px
             g, rim = f, None
-            for _ in range(RIM_MARK_GROUPS):
+            for _ in range(n):
                 add = rim_marking_pixels(patch, felt, u0, v0, g, r, self.bg.sigma, left, ol, refit=rim is not None,
-                                         strongest=True, taken=rim)
-                if add is None or add.sum() > largest:
+                                         strongest=strongest, taken=rim)
+                if add is None or (strongest and add.sum() > cap):
                     break
-                add = add if rim is None else rim | add
+                add = add if rim is None or not strongest else rim | add
                 h = self._fit_disc(patch, felt, u0, v0, f.c, r, f.G, b0=f.b, fit_blur=fit_blur, shade=self.shade,
-                             valid=kept_pixels(marks, add, foreign), outline=ol, block=self.block)
+                                   valid=kept_pixels(marks, add, foreign), outline=ol, block=self.block)
                 if not (h and h.stated):
                     break
                 g, rim = h, add
+            return g, rim
+
+        g, rim = passes(RIM_MARK_PASSES, False)
+        if rim is not None and rim.sum() > markings_area_px(r):
+            # More than the markings could cover: the passes ran away
+            # (RIM_MARK_GROUPS); the strongest group a pass instead.
+            g, rim = passes(RIM_MARK_GROUPS, True)
         # A refit that moves farther than a refinement does is kept only
         # where the ball's motion puts it: a logo lying on the rim pulled the
         # first fit 1.3-2.3 px (0.11-0.2 R), and without it the refit landed
