@@ -25,7 +25,7 @@ with ``w0`` withheld.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
 from scipy.optimize import brentq, least_squares
@@ -266,7 +266,11 @@ class ModelFit:
     """One model fitted to the measurements (before any decision).
 
     ``jac`` is the Jacobian of the whitened residuals (2m, p), ``residuals``
-    the whitened residuals (m, 2); ``chi2`` their sum of squares.
+    the whitened residuals (m, 2); ``chi2`` their sum of squares;
+    ``n_fitted`` the parameters the degrees of freedom count (an AR(1)
+    coefficient estimated from the same residuals among them); ``meas`` and
+    ``acf`` (an inter-frame codec's correlation in time, None: none) the
+    measurements and error model :attr:`dof` is counted under.
     """
 
     rolling: bool
@@ -274,13 +278,24 @@ class ModelFit:
     shot: Shot
     params: BallParams
     chi2: float
-    dof: float
+    n_fitted: int
     jac: np.ndarray
     residuals: np.ndarray
     converged: bool
     message: str
     names: tuple
     ar1: float = 0.0
+    meas: Measurements | None = field(default=None, compare=False, repr=False)
+    acf: tuple | None = None
+
+    @cached_property
+    def dof(self) -> float:
+        """Degrees of freedom (:func:`fit_dof`), counted when first asked: a
+        recovery reads them of the fits it decides by, not of every fit
+        (under an inter-frame codec each is an (s, s) product: read of
+        every fit, 5% of a simulated 480-fps 1.5-s recovery's CPU; as
+        asked, 1%; docs/measurements.md chi2h)."""
+        return fit_dof(self.meas, self.jac, self.n_fitted, self.acf)
 
 
 def _unpack(p, rolling, fit_friction, params: BallParams):
@@ -548,10 +563,9 @@ def fit_model(meas: Measurements, params: BallParams, start, exposure_s: float, 
     # The AR(1) coefficient was estimated from the same residuals: one
     # parameter more.
     return ModelFit(rolling=rolling, x=r.x, shot=shot, params=pr, chi2=float(2 * r.cost),
-                    dof=fit_dof(meas, r.jac, len(r.x) + (1 if ar1 > 0 else 0), acf), jac=r.jac,
-                    residuals=r.fun.reshape(-1, 2),
+                    n_fitted=len(r.x) + (1 if ar1 > 0 else 0), jac=r.jac, residuals=r.fun.reshape(-1, 2),
                     converged=bool(r.success or r.status > 0), message=str(r.message),
-                    names=_names(rolling, fit_friction), ar1=ar1)
+                    names=_names(rolling, fit_friction), ar1=ar1, meas=meas, acf=acf)
 
 
 def fit_models(meas: Measurements, params: BallParams, start, exposure_s: float = 0.0,
