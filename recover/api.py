@@ -191,7 +191,7 @@ def mle_dict(est: Estimate) -> dict:
            "slip_lr": _num(m.slip_lr),
            "unseen_slip": _num(m.unseen_slip) if m.model == "rolling" else None,
            "chi2_per_dof": _num(m.chi2 / m.dof) if m.dof else None,
-           "dof": int(m.dof) if m.dof else None, "hac": bool(m.hac), "rho1": _num(m.rho1),
+           "dof": _num(round(float(m.dof), 1)) if m.dof else None, "hac": bool(m.hac), "rho1": _num(m.rho1),
            "ar1": _num(m.ar1),
            # The frames after t0 left out while the cue's tip may touch the
            # ball (recover.measurements.cue_clear_s): the bound leaves out

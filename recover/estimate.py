@@ -352,7 +352,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
     try:
         start = (first.shot.x0, first.shot.t0, first.shot.v0, first.shot.w0) if first else starts[0]
         full, roll = fit_models(meas, params, start, exposure_s, fit_friction,
-                                initial_guess(seg.rolling, params))
+                                initial_guess(seg.rolling, params), acf=None if codec is None else codec.acf)
         if codec is None:
             # Residuals correlated along the track (a lossy codec at low
             # noise): both models again under AR(1) errors of that lag-1
@@ -481,7 +481,8 @@ def _refit(keep: Decided, seg, t, xy, cov, params, exposure_s, fit_friction, run
         decisions["sliding_seen"] = Decision(keep.sliding_seen, nan, nan)
         rolling = not keep.sliding_seen
         try:
-            fit = fit_model(meas, params, keep.start, exposure_s, rolling, fit_friction, keep.ar1)
+            fit = fit_model(meas, params, keep.start, exposure_s, rolling, fit_friction, keep.ar1,
+                            None if codec is None else codec.acf)
             mle = result(fit, meas, nan, keep.sliding_ended or rolling, codec, not lossless and codec is None,
                          keep.hac, keep.verdicts)
         except FIT_ERRORS as exc:

@@ -25,7 +25,7 @@ with ``w0`` withheld.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
 from scipy.optimize import brentq, least_squares
@@ -248,7 +248,7 @@ class MLEResult:
     slip_lr: float = float("nan")
     unseen_slip: float = 0.0
     chi2: float = float("nan")
-    dof: int = 0
+    dof: float = 0.0
     residuals: np.ndarray | None = None
     cov: np.ndarray | None = None
     names: tuple = ()
@@ -267,7 +267,11 @@ class ModelFit:
     """One model fitted to the measurements (before any decision).
 
     ``jac`` is the Jacobian of the whitened residuals (2m, p), ``residuals``
-    the whitened residuals (m, 2); ``chi2`` their sum of squares.
+    the whitened residuals (m, 2); ``chi2`` their sum of squares;
+    ``n_fitted`` the parameters the degrees of freedom count (an AR(1)
+    coefficient estimated from the same residuals among them); ``meas`` and
+    ``acf`` (an inter-frame codec's correlation in time, None: none) the
+    measurements and error model :attr:`dof` is counted under.
     """
 
     rolling: bool
@@ -275,13 +279,24 @@ class ModelFit:
     shot: Shot
     params: BallParams
     chi2: float
-    dof: int
+    n_fitted: int
     jac: np.ndarray
     residuals: np.ndarray
     converged: bool
     message: str
     names: tuple
     ar1: float = 0.0
+    meas: Measurements | None = field(default=None, compare=False, repr=False)
+    acf: tuple | None = None
+
+    @cached_property
+    def dof(self) -> float:
+        """Degrees of freedom (:func:`fit_dof`), counted when first asked: a
+        recovery reads them of the fits it decides by, not of every fit
+        (under an inter-frame codec each is an (s, s) product: read of
+        every fit, 5% of a simulated 480-fps 1.5-s recovery's CPU; as
+        asked, 1%; docs/measurements.md chi2h)."""
+        return fit_dof(self.meas, self.jac, self.n_fitted, self.acf)
 
 
 def _unpack(p, rolling, fit_friction, params: BallParams):
@@ -480,14 +495,17 @@ def ar1_prewhiten(meas: Measurements, r, rho: float) -> np.ndarray:
 
 
 def fit_model(meas: Measurements, params: BallParams, start, exposure_s: float, rolling: bool,
-              fit_friction: bool = False, ar1: float = 0.0) -> ModelFit:
+              fit_friction: bool = False, ar1: float = 0.0, acf=None) -> ModelFit:
     """Fit one model (free slip or rolling from the strike) to the measurements.
 
     ``start`` is ``(x0, t0, v0, w0)`` (``w0`` ignored when rolling);
     friction starts from ``params``; ``ar1``, the errors' lag-1 correlation
     along the track (0: independent), prewhitens the residuals
-    (:func:`ar1_prewhiten`).  Raises ValueError or LinAlgError when the fit
-    cannot run.
+    (:func:`ar1_prewhiten`); ``acf``, an inter-frame codec's correlation in
+    time (:data:`INTER_CODEC_ACF`; None: none), does not change the fit
+    (frames weighted as independent, its covariance the sandwich) but its
+    degrees of freedom (:func:`fit_dof`).  Raises ValueError or LinAlgError
+    when the fit cannot run.
     """
     ar1 = float(np.clip(ar1, 0.0, MAX_AR1))
     t = meas.t_used
@@ -546,24 +564,25 @@ def fit_model(meas: Measurements, params: BallParams, start, exposure_s: float, 
     # The AR(1) coefficient was estimated from the same residuals: one
     # parameter more.
     return ModelFit(rolling=rolling, x=r.x, shot=shot, params=pr, chi2=float(2 * r.cost),
-                    dof=meas.dof(len(r.x) + (1 if ar1 > 0 else 0)), jac=r.jac, residuals=r.fun.reshape(-1, 2),
+                    n_fitted=len(r.x) + (1 if ar1 > 0 else 0), jac=r.jac, residuals=r.fun.reshape(-1, 2),
                     converged=bool(r.success or r.status > 0), message=str(r.message),
-                    names=_names(rolling, fit_friction), ar1=ar1)
+                    names=_names(rolling, fit_friction), ar1=ar1, meas=meas, acf=acf)
 
 
 def fit_models(meas: Measurements, params: BallParams, start, exposure_s: float = 0.0,
-               fit_friction: bool = False, start_rolling=None, ar1: float = 0.0):
+               fit_friction: bool = False, start_rolling=None, ar1: float = 0.0, acf=None):
     """Both models: free slip from ``start`` and rolling from the strike from
     ``start_rolling`` (default ``start``), with AR(1) errors of lag-1
-    correlation ``ar1`` (0: independent).  Returns ``(full, rolling)``.
+    correlation ``ar1`` (0: independent), or an inter-frame codec's
+    correlation in time ``acf`` (:func:`fit_model`).  Returns ``(full, rolling)``.
 
     Rolling is nested in free slip, so a full fit worse than the rolling one
     stopped in a local minimum: it is restarted from the rolling answer,
     nudged along the start's slip, and the better kept.
     """
-    full = fit_model(meas, params, start, exposure_s, False, fit_friction, ar1)
+    full = fit_model(meas, params, start, exposure_s, False, fit_friction, ar1, acf)
     roll = fit_model(meas, params, start_rolling if start_rolling is not None else start,
-                     exposure_s, True, fit_friction, ar1)
+                     exposure_s, True, fit_friction, ar1, acf)
     if full.chi2 > roll.chi2:
         s = roll.shot
         w_roll = np.asarray(s.w0)
@@ -571,7 +590,7 @@ def fit_models(meas: Measurements, params: BallParams, start, exposure_s: float 
         nudge = 0.05 * np.hypot(*s.v0) / params.R
         w_start = w_roll + nudge * d / max(np.hypot(*d), 1e-12)
         again = fit_model(meas, roll.params, (s.x0, s.t0, s.v0, w_start), exposure_s, False,
-                          fit_friction, ar1)
+                          fit_friction, ar1, acf)
         if again.chi2 < full.chi2:
             full = again
     return full, roll
@@ -964,6 +983,45 @@ def _shared_terms(J, meas: Measurements, acf) -> tuple[np.ndarray, np.ndarray]:
     return _shared_S0(Js, Q, p), 0.5 * (T + T.T)
 
 
+def hat_inverse(J) -> np.ndarray:
+    """``(J^T J)^+`` (p, p) of a whitened Jacobian ``J`` (2m, p), for the fit's
+    hat matrix ``H = J (J^T J)^+ J^T`` and traces through it: a
+    pseudo-inverse, so a parameter the track does not determine (an
+    undetermined slip: singular) does not stop it; columns scaled to unit
+    length first, as in :func:`info_inverse`, so its relative cutoff drops
+    only directions that are truly undetermined, not ones that are small
+    because of their units."""
+    J = np.asarray(J, dtype=float)
+    s = _column_norms(J)
+    return np.linalg.pinv((J / s).T @ (J / s)) / s[:, None] / s[None, :]
+
+
+def fit_dof(meas: Measurements, jac, n_par: int, acf=None) -> float:
+    """Degrees of freedom of a fit of ``n_par`` parameters with whitened
+    Jacobian ``jac`` (2m, p): the expectation of its chi-square under the
+    errors' model, against which chi2/dof is read (the failure gate, the
+    factor on the errors, the slip's likelihood ratio).  Frames independent
+    (``acf`` None): 2 per measurement less the parameters
+    (Measurements.dof).  With an inter-frame codec's correlation in time
+    (``acf``, the whitened errors ``C = I + C_off``, ``rho(dt_ij) I``
+    between single-frame measurements i != j: :func:`shared_info`), a fit
+    that weights frames as independent takes up part of the shared error
+    (a constant share is a shift of x0; a slow one looks like the motion),
+    so ``E[chi2] = tr((I - H) C) = 2m - p - tr(H C_off)``, ``tr(H C_off)
+    = tr((J^T J)^+ J^T C_off J)`` (:func:`hat_inverse`), at least 1.
+    Measured (docs/measurements.md, chi2h): on held37's 51 H.264 answers
+    ``tr(H C_off)`` was a quarter of 2m - p (median 0.251), and chi2/dof
+    counted without it 0.72 (p10-p90 0.63-0.79) while the fit's true
+    per-frame errors were as stated (whitened mean square median 1.04 per
+    shot); against this expectation 0.95 (0.86-1.04)."""
+    dof = meas.dof(n_par)
+    if acf is None or meas.single.sum() < 2:
+        return float(dof)
+    J = np.asarray(jac, dtype=float)
+    absorbed = float(np.trace(hat_inverse(J) @ shared_info(J, meas, acf)))
+    return max(dof - absorbed, 1.0)
+
+
 def correlated_codec_var(fit: ModelFit, meas: Measurements, acf=INTER_CODEC_ACF) -> float:
     """Per-axis variance (px^2 through the measurements' ``px_to_m``, else
     m^2) of an inter-frame codec's error, from a fit's residuals
@@ -979,12 +1037,7 @@ def correlated_codec_var(fit: ModelFit, meas: Measurements, acf=INTER_CODEC_ACF)
     m, p = len(J) // 2, J.shape[1]
     if 2 * m <= p + 2:
         return 0.0
-    # The hat matrix's trace needs no inverse (slip undetermined: singular);
-    # columns scaled to unit length first, as in info_inverse, so pinv's
-    # relative cutoff drops only directions that are truly undetermined,
-    # not ones that are small because of their units.
-    s = _column_norms(J)
-    A = np.linalg.pinv((J / s).T @ (J / s)) / s[:, None] / s[None, :]
+    A = hat_inverse(J)
     G = _codec_G(J, meas)
     WF = meas.W @ meas.codec_factor()
     trM = float(np.einsum("mab,mab->", WF, WF))
@@ -1048,8 +1101,7 @@ def shared_scale(fit: ModelFit, meas: Measurements, acf=INTER_CODEC_ACF,
     B[idx, blk] = 1.0
     B2 = np.kron(B, np.eye(2))  # (2m, 2 nb): each axis's block sums
     q = float(np.sum((B2.T @ np.asarray(fit.residuals, dtype=float).ravel()) ** 2))
-    s = _column_norms(J)  # as correlated_codec_var: pinv, so an undetermined slip does not stop it
-    A = np.linalg.pinv((J / s).T @ (J / s)) / s[:, None] / s[None, :]
+    A = hat_inverse(J)  # an undetermined slip does not stop it
     X = B2 - J @ (A @ (J.T @ B2))  # (I - H) B
     Xm = X.reshape(m, 2, -1)
     CX = Xm.copy()
@@ -1211,7 +1263,7 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
     if chi2 / dof > MAX_CHI2_PER_DOF:
         return MLEResult("failed", f"the fitted shot does not describe the track (residuals "
                          f"{np.sqrt(chi2 / dof):.0f} times the stated noise): the fit stopped far "
-                         "from the shot, or the track is not one shot", chi2=float(chi2), dof=int(dof))
+                         "from the shot, or the track is not one shot", chi2=float(chi2), dof=float(dof))
     try:
         cov, hac, rho, factor = covariance(fit, meas, codec, still_codec, hac)
     except np.linalg.LinAlgError:
@@ -1246,7 +1298,7 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
             stderr["mu_s"] = float(se[-2])
     common = dict(stderr=stderr, model="rolling" if rolling else "full", slip_lr=float(lr),
                   unseen_slip=float(dv_unseen),
-                  chi2=float(chi2), dof=int(dof), residuals=fit.residuals, cov=cov, names=fit.names,
+                  chi2=float(chi2), dof=float(dof), residuals=fit.residuals, cov=cov, names=fit.names,
                   hac=hac, rho1=float(rho), ar1=float(fit.ar1), error_scale=float(factor))
     verdicts = dict(verdicts or {})
     speed = float(np.hypot(*shot.v0))
