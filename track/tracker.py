@@ -247,18 +247,6 @@ RIM_MARK_ANGLE_RAD = 0.33
 # fit, shot 17's 97 frames counted 174-194, review 10c, and the 8 fits this
 # was first set at were about 4 frames).
 MARKED_BALL_FRAMES = 4
-# A marked ball's fit is last refitted without its pixels (on the ball,
-# within half a pixel of its outline) departing from the lit sphere's fit
-# by more than ROBUST_SIGMAS noise sigmas, one at a time (no group, no
-# growing), each pass from the last refit, at most ROBUST_PASSES times: a
-# skipped mean (an M-estimator whose weight is 1 within the threshold and 0
-# beyond), for a marking's edge, a logo crossing the rim or a dot smeared by
-# the spin that the rules above leave in (RIM_MARK_PASSES's 5 sigmas and
-# groups).  At 3 sigmas a ball without markings loses 0.27% of its pixels,
-# symmetrically about the fit (no pull on the centre).  Measured on the
-# realistic benchmark's markings look (docs/measurements.md, branch marks3).
-ROBUST_SIGMAS = 3.0
-ROBUST_PASSES = 3
 # A ball at rest is not fitted again every frame (BallTracker._rest_step).
 # Once two consecutive frames' fits lie within REST_STEP_PX of each other,
 # the next frames are measured against the last one fitted (the reference)
@@ -1688,38 +1676,6 @@ class BallTracker:
             return f, marks
         return g, rim if marks is None else marks | rim
 
-    def _robust_unmarked(self, patch, felt, u0, v0, f, r, fit_blur, ol, marks, foreign):
-        """The lit sphere's fit ``f`` of a marked ball's frame again without
-        the ball's pixels departing from it by more than
-        :data:`ROBUST_SIGMAS` of the noise (:data:`ROBUST_PASSES` at most,
-        each from the last refit; ``marks`` and ``foreign`` stay out):
-        (fit, every pixel left out but the foreign ones), or ``(f, marks)``
-        when none departs, a refit fails or moves more than
-        :data:`SPHERE_MARK_MOVE_RADII`."""
-        if block_area(self.block) > 1:
-            return f, marks
-        rr = r if ol is None else ol.radius  # fit_disc's scale of the sphere
-        out = kept_pixels(marks, foreign)
-        out = np.zeros(felt.shape, bool) if out is None else ~out.reshape(felt.shape)
-        g, add = f, None
-        for _ in range(ROBUST_PASSES):
-            m, _ = _model_rows(g.c, g.b, g.G, felt, rr, u0, v0, blur_nodes(np.hypot(*g.b)), g.shade, False, ol)
-            res = np.asarray(patch, np.float64) - felt - m
-            bad = (segment_distance(felt.shape, u0, v0, g.c, g.b) < r + 0.5) & ~out \
-                & (np.abs(res) > ROBUST_SIGMAS * self.bg.sigma)
-            if not bad.any():
-                break
-            grown = bad if add is None else add | bad
-            h = self._fit_disc(patch, felt, u0, v0, g.c, r, g.G, b0=g.b, fit_blur=fit_blur, shade=self.shade,
-                               valid=kept_pixels(marks, grown, foreign), outline=ol, block=self.block)
-            if not (h and h.stated) or np.hypot(*(h.c - f.c)) > SPHERE_MARK_MOVE_RADII * r:
-                break
-            g, add = h, grown
-            out |= bad
-        if add is None:
-            return f, marks
-        return g, add if marks is None else marks | add
-
     @staticmethod
     def _explains_better(patch, felt, u0, v0, g, f, marks, foreign, r, fit_blur, shade, ol, block=1) -> bool:
         """Whether the fit ``g`` explains the window better than ``f``, both
@@ -2109,12 +2065,6 @@ class BallTracker:
                 f, marks = self._rim_unmarked(patch, felt, u0, v0, f, r, fit_blur, ol, None, foreign, pred)
             if marks is not None:
                 self._marked.add(self._k)
-            if isinstance(shade, SphereLook) and (marks is not None or marked_ball) and f.shade is not None \
-                    and len(f.shade) > 3:
-                # (a lit sphere's fit: its shade holds the geometry too; the
-                # quadratic look's, kept where the sphere's refit explained
-                # less, is left as it is)
-                f, marks = self._robust_unmarked(patch, felt, u0, v0, f, r, fit_blur, ol, marks, foreign)
             if recentre:
                 # The ball's middle may lie on the other side of the felt
                 # than its rim (a shaded ball close to the felt's colour):
