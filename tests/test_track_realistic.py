@@ -523,6 +523,26 @@ def test_a_logo_balls_stated_error_is_honest(tmp_path):
 
 
 @pytest.mark.slow
+def test_a_held_out_logo_ball_stays_near_its_bound(tmp_path):
+    # benchmarks/track.py realistic seed 12 shot 18 (a seed no rule was
+    # tuned on): a yellow ball with a logo on red felt, 60 fps, noise 6.2,
+    # FFV1, 0.8 s; the logo crosses the rim twice.  Measured on main c07f45d
+    # (docs/measurements.md, marks3): the 31 found moving frames' RMSE
+    # 0.0268 px, 1.34x the colour bound 0.0200 (the benchmark's 6 frames),
+    # err/se 1.22, every frame found.  Asserted: RMSE within 1.45x the bound
+    # (the measured 1.34x and 8%), err/se within 0.8-1.35 (31 frames: ~0.09
+    # a standard error), at least 30 frames: a guard against the markings
+    # rules getting worse on a shot they were not tuned on (the issue's
+    # 1.3x is not met yet).
+    scene = sample_scenes(19, 12, look="realistic", codec="FFV1")[18]
+    scene.render.update(specular=0.0, psf_sigma=0.0, markings="logo", cue=False, balls=[], max_duration=0.8)
+    e, rmse, z = _moving_errors(scene, tmp_path / "logo.avi")
+    assert len(e) >= 30
+    assert rmse < 1.45 * 0.0200, rmse
+    assert 0.8 < z < 1.35, z
+
+
+@pytest.mark.slow
 def test_a_logo_over_the_rim_does_not_run_the_rim_rule_away(tmp_path):
     # benchmarks/track.py realistic seed 8 shot 3: a white ball with a red
     # logo on red felt, 60 fps, noise 3.2, FFV1, 48 frames.  In frame 39 the
