@@ -27,7 +27,7 @@ from cuespin.recover.measurements import (CUE_CLEAR_FRAMES, MAX_CODEC_NOISE_RATI
 from cuespin.recover.mle import (MAX_AR1, CodecCorrelation, MLEResult, ModelFit, ar1_from_residuals,
                                  correlated_codec_var, time_whitener,
                                  fit_model, fit_models, initial_guess, lag1_autocorrelation, model_track, result,
-                                 slip_lr, with_profile_interval)
+                                 slip_lr, slip_lr_without_largest, with_profile_interval)
 from cuespin.recover.paper import PaperResult, paper_from_segments, ran_into_rest, sliding_time, sliding_time_stderr
 from cuespin.recover.slope import rolling_slope
 
@@ -382,7 +382,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         mle = MLEResult("failed", f"the fit did not run: {exc}")
     if mle is None:
         lr = slip_lr(full, roll, meas, codec, hac)
-        decisions["sliding_seen"] = sliding_seen(lr)
+        decisions["sliding_seen"] = sliding_seen(lr, slip_lr_without_largest(full, roll, lr))
         if decisions["sliding_seen"]:
             decisions["sliding_ended"] = sliding_ended(
                 seg, t, phases(full.shot, full.params).t1, friction_known=not fit_friction,
