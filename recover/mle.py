@@ -635,6 +635,19 @@ def slip_lr(full: ModelFit, roll: ModelFit, meas: Measurements | None = None,
     return float((roll.chi2 - full.chi2) / scale)
 
 
+def slip_lr_without_largest(full: ModelFit, roll: ModelFit, lr: float) -> float:
+    """The slip statistic ``lr`` (:func:`slip_lr` of ``full`` and ``roll``)
+    less the share one measurement carries: the measurement whose whitened
+    squared residuals fall most from the rolling fit to the free-slip fit
+    (``|r_roll|^2 - |r_full|^2``), its fall taken off the chi-square
+    difference in the same scale (no refit)."""
+    fall = np.sum(np.asarray(roll.residuals) ** 2, axis=1) - np.sum(np.asarray(full.residuals) ** 2, axis=1)
+    total = float(roll.chi2 - full.chi2)
+    if not (np.isfinite(lr) and total > 0 and len(fall)):
+        return float(lr)
+    return float(lr * (1.0 - max(float(np.max(fall)), 0.0) / total))
+
+
 def _positive_definite(cov) -> bool:
     """Whether a covariance is positive definite, judged on its correlation
     matrix (the parameters' units differ by orders of magnitude)."""

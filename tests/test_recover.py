@@ -137,6 +137,15 @@ def test_paper_refuses_the_one_frame_arc_it_once_answered_196_percent_off(monkey
     def paper_answer():
         return estimate(tr.t, tr.xy, np.full(len(tr.t), sigma), p, exposure).paper
 
+    # The slip ratio (28.2) passes its threshold on the one slid frame alone
+    # (8.8 without it): rolling, and the paper's rolling answer refused
+    # (docs/measurements.md, slip2).
+    r = paper_answer()
+    assert r.status == "degenerate" and "one measurement alone" in r.reason, r.reason
+    # The refusals of the slide's answer, reached with the slip decided on the
+    # ratio alone (before slip2).
+    import cuespin.recover.estimate as estimate_module
+    monkeypatch.setattr(estimate_module, "slip_lr_without_largest", lambda full, roll, lr: lr)
     assert paper_answer().status == "degenerate"
     monkeypatch.setattr(paper, "PAPER_MIN_SLIDING_FRAMES", 1)
     assert paper_answer().status == "failed"  # the sliding-time check alone
@@ -146,20 +155,24 @@ def test_paper_refuses_the_one_frame_arc_it_once_answered_196_percent_off(monkey
     # follows ``sliding_frames`` (recover.estimate.trusted_frames_refuse).
     r = paper_answer()
     assert r.status == "degenerate" and "seen in 1 frame" in r.reason, r.reason
-    import cuespin.recover.estimate as estimate_module
     monkeypatch.setattr(estimate_module, "trusted_frames_refuse", lambda mle: False)
     r = paper_answer()  # none: the confident wrong answer they exist for
     assert r.status == "ok" and np.linalg.norm(np.asarray(r.v0) - v0) > np.linalg.norm(v0)
 
 
-def test_paper_refuses_an_answer_that_slides_longer_than_the_track():
+def test_paper_refuses_an_answer_that_slides_longer_than_the_track(monkeypatch):
     # benchmarks/short_slide.py's generator with the rest in view (seed 5,
     # its 12th shot: case 4 given a slip of 2.15 frames at 240 fps, 2e-5 m):
     # the segmentation's arc holds 3 frames (0.010 s of sliding) and the
     # line's root slides 3.29 s (eq. 10), its v0 200% off, once answered ok
-    # (docs/measurements.md, arc9).
+    # (docs/measurements.md, arc9).  Since slip2 its slip ratio (31.2) passes
+    # on one frame alone (4.8 without it) and the paper's rolling answer is
+    # refused; the slide's answer is reached with the ratio alone.
+    import cuespin.recover.estimate as estimate_module
     from cuespin.recover.estimate import estimate
     tr, p, sigma, exposure, _ = short_slide_shot(5, 12)
+    assert estimate(tr.t, tr.xy, np.full(len(tr.t), sigma), p, exposure).paper.status == "degenerate"
+    monkeypatch.setattr(estimate_module, "slip_lr_without_largest", lambda full, roll, lr: lr)
     r = estimate(tr.t, tr.xy, np.full(len(tr.t), sigma), p, exposure).paper
     assert r.status == "failed", (r.status, r.reason)
     assert "eq. 26" in r.reason and r.v0 is None
