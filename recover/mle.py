@@ -1688,10 +1688,16 @@ def crb_jacobian(shot: Shot, params: BallParams, meas: Measurements, exposure_s:
     J = np.stack(cols, axis=1)
     if acf is not None and meas.single.sum() >= 2:
         from scipy.linalg import cholesky, solve_triangular
-        m = meas.n
+        m, p = meas.n, J.shape[1]
         R = np.zeros((m, m))
         single = np.flatnonzero(meas.single)
         R[np.ix_(single, single)] = shared_rho(meas, acf)
-        C = np.eye(2 * m) + np.kron(R, np.eye(2))  # rows (m, 2) as the whitened Jacobian's
-        J = solve_triangular(cholesky(C, lower=True), J, lower=True)  # whitened in time too
+        # Whitened in time too: C = I + R (x) I_2 over the rows (m, 2) is
+        # (I + R) (x) I_2, whose Cholesky factor is L (x) I_2 with L L^T =
+        # I + R, so each axis's rows are whitened by the (m, m) factor: a
+        # factor 8 fewer operations than the (2m, 2m) one (which was ~90% of
+        # pipeline.measure.answer_bound's time on 360-frame H.264 tracks;
+        # the same numbers to rounding, docs/measurements.md recspeed).
+        L = cholesky(np.eye(m) + R, lower=True)
+        J = solve_triangular(L, J.reshape(m, 2 * p), lower=True).reshape(2 * m, p)
     return J
