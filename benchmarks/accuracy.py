@@ -68,7 +68,13 @@ def code_version() -> str:
 def one_shot(args):
     i, seed, tmp, codec, tracks, only_cached, noise_max, camera, disc, look, preset = args[:11]
     max_seconds = args[11] if len(args) > 11 else MAX_SECONDS
-    from cuespin.data_gen.sampler import sample_scenes
+    try:
+        from cuespin.data_gen.sampler import scene_at
+    except ImportError:  # an older data_gen/, for before/after tables
+        from cuespin.data_gen.sampler import sample_scenes
+
+        def scene_at(i, seed, preset=None, **kwargs):
+            return sample_scenes(i + 1, seed, preset=preset, **kwargs)[i]
     from cuespin.physics import phases
     from cuespin.pipeline.measure import answer_bound, rms_z
     from cuespin.recover.api import recover_track
@@ -94,7 +100,7 @@ def one_shot(args):
                 super().__init__(*a, **kw)
 
         video_module.BallTracker = DiscTracker
-    scene = sample_scenes(i + 1, seed, preset=preset, camera=camera, look=look)[i]
+    scene = scene_at(i, seed, preset=preset, camera=camera, look=look)
     scene.render["max_duration"] = max_seconds
     if codec:
         scene.render["codec"] = codec

@@ -341,11 +341,17 @@ def sample_scenes(n: int, seed: int, preset: str | None = None, **kwargs) -> lis
     With ``preset=None`` the presets cycle so that a dataset holds every kind
     of shot: mostly ``random`` with each named preset mixed in.
     """
-    children = np.random.SeedSequence(seed).spawn(n)
+    return [scene_at(i, seed, preset, **kwargs) for i in range(n)]
+
+
+def scene_at(i: int, seed: int, preset: str | None = None, **kwargs) -> Scene:
+    """``sample_scenes(i + 1, seed, preset, **kwargs)[i]``, without sampling
+    the ``i`` scenes before it: each scene has its own child seed
+    (``SeedSequence(seed).spawn``'s ``i``-th, the same whatever the number
+    spawned), so a benchmark's shot ``i`` costs one scene, not ``i + 1``
+    (accuracy.py spent 13% of its per-shot CPU sampling the scenes before
+    each shot on 40-shot runs; docs/measurements.md recspeed)."""
+    child = np.random.SeedSequence(seed, spawn_key=(i,))
     # Contact shots only when asked for: the default mix is of shots on open cloth.
     mix = ["random"] * 4 + [p for p in PRESETS if p != "random" and p not in CONTACT_PRESETS]
-    scenes = []
-    for i, child in enumerate(children):
-        p = preset if preset is not None else mix[i % len(mix)]
-        scenes.append(sample_scene(np.random.default_rng(child), p, **kwargs))
-    return scenes
+    return sample_scene(np.random.default_rng(child), preset if preset is not None else mix[i % len(mix)], **kwargs)

@@ -13,6 +13,7 @@ import numpy as np
 
 from cuespin.physics.scene import Scene
 from cuespin.render import FrameRenderer, render_video
+from cuespin.recover.estimate import one_blas_thread
 from cuespin.render.draw import FrameTruth
 from cuespin.track.bound import centroid_crb
 from cuespin.track.tracker import FIT_BLUR_PX, TrackerConfig
@@ -65,6 +66,7 @@ def tracker_accuracy(scene: Scene, video: Path, refine: str = "fit", n_eval: int
                            stated_z=float(np.sqrt(np.mean(z**2))))
 
 
+@one_blas_thread  # its (m, m) Cholesky on one BLAS thread, as the recovery's own products (recover.estimate)
 def mle_bound(scene: Scene, track, mle: dict | None = None, independent: bool = False, ar1: float | None = None,
               acf=None):
     """Cramer-Rao covariance of ``(x0, t0, v0[, w0])`` at the scene's truth.
@@ -214,6 +216,7 @@ def rms_z(z) -> float:
     return float(np.sqrt(np.mean(a * a))) if a.size else float("nan")
 
 
+@one_blas_thread  # as mle_bound
 def answer_bound(scene: Scene, meas, model: str, ar1: float = 0.0, acf=None, independent: bool = False,
                  fit_friction: bool = False) -> AnswerBound:
     """The Cramer-Rao bound of the model an answer was given with

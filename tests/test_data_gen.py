@@ -19,6 +19,17 @@ def test_same_seed_same_scene_and_no_global_state():
     assert sample_scenes(6, seed=43) != a
 
 
+def test_one_scene_of_a_seed_is_the_scene_the_whole_list_holds():
+    # scene_at(i) samples shot i alone (the benchmarks' shot i of a seed):
+    # the same scene as sample_scenes(n)[i], whatever n, preset mix and look.
+    from cuespin.data_gen.sampler import scene_at
+
+    for kw in ({}, {"look": "realistic"}, {"preset": "case4", "camera": "topdown"}):
+        scenes = sample_scenes(12, seed=37, **kw)
+        assert all(scene_at(i, 37, **kw) == scenes[i] for i in (0, 5, 11))
+        assert scene_at(5, 37, **kw) == sample_scenes(6, seed=37, **kw)[5]
+
+
 @pytest.mark.parametrize("case", range(1, 6))
 def test_case_presets(case):
     for seed in range(5):

@@ -943,3 +943,27 @@ def test_a_track_whose_errors_are_not_calibrated_answers_nothing_ok():
         if plain["methods"][name]["status"] == "ok":
             assert m["status"] == "degenerate" and why in m["reason"]
             assert m["v0"] == plain["methods"][name]["v0"]
+
+
+def test_bound_whitens_a_codecs_correlation_axis_by_axis_as_the_whole_factor_does():
+    # crb_jacobian whitens the time correlation C = I + R (x) I_2 of the rows
+    # (m, 2) by L (x) I_2, L the (m, m) Cholesky factor of I + R: the same
+    # factor as the (2m, 2m) one, in 8 times fewer operations (recspeed).
+    # Tolerance: rounding of the two factorisations' sums (measured <= 2e-15
+    # on J's entries, 1.3e-12 on the bound's numbers on 80 H.264 tracks).
+    from scipy.linalg import cholesky, solve_triangular
+
+    from cuespin.recover.mle import INTER_CODEC_ACF, crb_jacobian, shared_rho
+
+    shot, p = sample_shot(7, "random")
+    t = np.arange(0.0, 1.0, 1 / 120)
+    meas = build_measurements(t, model_track(shot, p, t), np.full(len(t), SIGMA), t0=shot.t0, frame_dt=1 / 120)
+    J = crb_jacobian(shot, p, meas, acf=INTER_CODEC_ACF)
+    plain = crb_jacobian(shot, p, meas)
+    m = meas.n
+    R = np.zeros((m, m))
+    single = np.flatnonzero(meas.single)
+    R[np.ix_(single, single)] = shared_rho(meas, INTER_CODEC_ACF)
+    whole = solve_triangular(cholesky(np.eye(2 * m) + np.kron(R, np.eye(2)), lower=True), plain, lower=True)
+    assert single.size > 50 and J.shape == whole.shape == (2 * m, 7)
+    np.testing.assert_allclose(J, whole, rtol=0, atol=1e-12 * np.abs(whole).max())
