@@ -530,8 +530,9 @@ def test_a_held_out_logo_ball_stays_near_its_bound(tmp_path):
     # (docs/measurements.md, marks3): the 31 found moving frames' RMSE
     # 0.0268 px, 1.34x the colour bound 0.0200 (the benchmark's 6 frames),
     # err/se 1.22, every frame found.  Asserted: RMSE within 1.45x the bound
-    # (the measured 1.34x and 8%), err/se within 0.8-1.35 (31 frames: ~0.09
-    # a standard error), at least 30 frames: a guard against the markings
+    # (the measured 1.34x and 8%), err/se within the issue's honest band
+    # 0.8-1.25 (the render and FFV1 are deterministic, so no sampling
+    # margin applies; measured 1.22), at least 30 frames: a guard against the markings
     # rules getting worse on a shot they were not tuned on (the issue's
     # 1.3x is not met yet).
     scene = sample_scenes(19, 12, look="realistic", codec="FFV1")[18]
@@ -539,7 +540,7 @@ def test_a_held_out_logo_ball_stays_near_its_bound(tmp_path):
     e, rmse, z = _moving_errors(scene, tmp_path / "logo.avi")
     assert len(e) >= 30
     assert rmse < 1.45 * 0.0200, rmse
-    assert 0.8 < z < 1.35, z
+    assert 0.8 < z < 1.25, z
 
 
 @pytest.mark.slow
