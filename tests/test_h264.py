@@ -120,7 +120,12 @@ def _shared_scale_z(monkeypatch, n_tracks: int, seed: int, drift: float):
             monkeypatch.setattr(mle, "shared_scale", own if on else lambda *a, **k: (1.0, float("inf"), 0))
             ms[on] = estimate(tr.t, xy, np.full(n, tr.sigma), tr.params, lossless=False, run_paper=False,
                               inter_frame=True).mle
-        if ms[True].status == "ok" and ms[False].status == "ok":
+        # Compared only where both answer with the same model: the scale
+        # also divides the slip ratio (slipscale), and since slip2 a ratio
+        # carried by one measurement names no slide, so a widened track can
+        # answer rolling (seed 4's first 60-fps slide: rolling z 3.2, a cost
+        # docs/measurements.md slip2 counts), which says nothing of the scale.
+        if ms[True].status == "ok" and ms[False].status == "ok" and ms[True].model == ms[False].model:
             for on in (True, False):
                 z[on].append(z_of(ms[on], tr.shot))
                 se[on].append(ms[on].stderr["v0"][0])
@@ -133,7 +138,8 @@ def test_a_tracks_own_drift_widens_its_errors(monkeypatch):
     the whole error's variance): with the track's own shared scale the
     errors are within their stated size, without it well beyond; where the
     errors are as the model says the scale widens little.  Measured on
-    these 8 tracks: drift RMS z 0.78 with, 1.35 without (ratio 1.72); no
+    these 8 tracks (7 answering with one model either way since slip2):
+    drift RMS z 0.81 with, 1.38 without (ratio 1.70; 0.78, 1.35 on 8); no
     drift: none widened (shared_widening; max(1, ratio) before it: v0's
     stated errors 1.11 times wider), RMS z 1.02 (docs/measurements.md
     fixss: 5% of null tracks widen by design)."""
