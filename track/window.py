@@ -783,7 +783,7 @@ def warm_up() -> None:
     block_means(felt, 0, 0, 4, 4, 2, 2)
     block_all(np.ones((9, 9), bool), 0, 0, 4, 4, 2, 2)
     felt_add(np.zeros((12, 12), np.float32), np.zeros((12, 12), np.int32), D, np.zeros((9, 9), np.bool_), True,
-             felt, True, 1.0, 1, 1, 4.0, 4.0, 3.0)
+             np.zeros((12, 12), np.float32), True, 1.0, 1, 1, 4.0, 4.0, 3.0)  # the whole felt: contiguous
     hidden_pixels(np.zeros((9, 9, 3), np.uint16), np.zeros((9, 9), np.int32), np.zeros((9, 9, 3), np.uint8), D, True,
                   D, 1.0, 0, 0, 9, 9, 4.0, 4.0, 3.0)
     frame = np.zeros((12, 12, 3), np.uint8)
