@@ -527,3 +527,44 @@ def test_felt_accumulator_sums_any_frame_layout(layout):
         ref[out] -= frame[out]
     felt._carry()
     assert np.array_equal(felt.full, ref.astype(np.float32))
+
+
+@pytest.mark.parametrize("tolerance", [6.3, np.float64(6.3), np.inf])
+@pytest.mark.parametrize("with_exclude", [False, True])
+@pytest.mark.parametrize("with_reference", [False, True])
+def test_felt_accumulator_adds_windows_as_numpy(tolerance, with_exclude, with_reference):
+    """add's compiled pass (track.window.felt_add) gives numpy's masks' sums
+    and counts bit for bit: the disc's squares in float64, the reference
+    compared in the dtype numpy compares in (float32 with a Python float,
+    float64 with a numpy float64), left-out pixels adding 0."""
+    from cuespin.track.background import FeltAccumulator
+
+    rng = np.random.default_rng(11)
+    H, W = 40, 56
+    felt = FeltAccumulator((H, W, 3))
+    total = np.zeros((H, W), np.float32)
+    count = np.zeros((H, W), np.int32)
+    # Levels 0 and 1 and steps of float32(6.3): differences exactly on the
+    # tolerance's float32 value, which float64's 6.3 lies under.
+    reference = rng.integers(0, 2, (H, W)).astype(np.float32) if with_reference else None
+    for _ in range(30):
+        h, w = rng.integers(5, 20, 2)
+        u0, v0 = int(rng.integers(0, W - w)), int(rng.integers(0, H - h))
+        base = reference[v0:v0 + h, u0:u0 + w] if with_reference else np.ones((h, w), np.float32)
+        step = np.float32(6.3) * rng.choice(np.array([-1.0, 1.0, 0.0, 7.0], np.float32), (h, w))
+        patch = base + step
+        exclude = rng.random((h, w)) < 0.2 if with_exclude else None
+        centre = rng.uniform((u0, v0), (u0 + w, v0 + h))
+        radius = float(rng.uniform(1.0, 8.0))
+        felt.add(patch, u0, v0, centre, radius, exclude, reference, tolerance)
+        keep = ~FeltAccumulator._disc(u0, v0, h, w, centre, radius)
+        if exclude is not None:
+            keep &= ~exclude
+        if reference is not None:
+            keep &= np.abs(patch - reference[v0:v0 + h, u0:u0 + w]) <= tolerance
+        total[v0:v0 + h, u0:u0 + w] += np.where(keep, patch, 0).astype(np.float32)
+        count[v0:v0 + h, u0:u0 + w] += keep
+    assert felt.n == 30
+    assert np.array_equal(felt.count, count)
+    assert np.array_equal(felt.total, total)
+    assert np.array_equal(np.signbit(felt.total), np.signbit(total))

@@ -549,6 +549,7 @@ FULL_CARRY = 257
 
 
 _NO_WINDOW = np.zeros((1, 1), np.float32)
+_NO_MASK = np.zeros((1, 1), bool)
 
 
 class FeltAccumulator:
@@ -602,6 +603,18 @@ class FeltAccumulator:
         if u0 < 0 or v0 < 0 or u0 + w > W or v0 + h > H:
             return
         self.n += 1
+        if patch.dtype == np.float32 and (reference is None or reference.dtype == np.float32) \
+                and (exclude is None or exclude.dtype == bool):
+            # Compiled (track.window.felt_add), the same sums; the tolerance
+            # rounded to the dtype numpy's comparison below takes (a Python
+            # float to float32, a numpy float64 not).
+            from cuespin.track import window
+            tol = float(np.result_type(patch.dtype, tolerance).type(tolerance))
+            window.felt_add(self.total, self.count, patch, _NO_MASK if exclude is None else exclude,
+                            exclude is not None, _NO_WINDOW if reference is None else reference,
+                            reference is not None, tol, int(u0), int(v0), float(centre[0]), float(centre[1]),
+                            float(radius))
+            return
         felt = ~self._disc(u0, v0, h, w, centre, radius)
         if exclude is not None:
             felt &= ~exclude

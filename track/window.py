@@ -550,6 +550,40 @@ def hidden_pixels(partial, hidden, frame, P, has_P, reference, tolerance, u0, v0
                 hidden[v, u] += 1
 
 
+@_jit()
+def felt_add(total, count, patch, exclude, has_exclude, reference, has_ref, tolerance, u0, v0, cu, cv, radius):
+    """:meth:`cuespin.track.background.FeltAccumulator.add` in one pass:
+    the window ``patch`` (float32 (h, w), top-left pixel ``(u0, v0)``)
+    added to the running sums ``total`` (float32) and ``count`` (int32)
+    at its pixels beyond ``radius`` of ``(cu, cv)`` (px; the disc's squares
+    in float64 as ``FeltAccumulator._disc`` takes them), not ``exclude``d
+    (with ``has_exclude``) and, with ``has_ref``, within ``tolerance`` of
+    ``reference`` (the frame's felt, float32): ``|patch - reference|`` in
+    float32 compared in float64 with ``tolerance`` already rounded to the
+    dtype numpy compares in (a float32 value is exact in float64).  The
+    pixels left out add 0 to ``total`` as ``np.where(felt, patch, 0)``
+    does; the same sums, in place of numpy's ~10 calls a frame (~40 us).
+    """
+    r2 = radius * radius
+    for i in range(patch.shape[0]):
+        v = v0 + i
+        dv = float(v) - cv
+        dv2 = dv * dv
+        for j in range(patch.shape[1]):
+            u = u0 + j
+            du = float(u) - cu
+            felt = not (du * du + dv2 <= r2)
+            if felt and has_exclude and exclude[i, j]:
+                felt = False
+            if felt and has_ref and not (float(abs(patch[i, j] - reference[v, u])) <= tolerance):
+                felt = False
+            if felt:
+                total[v, u] += patch[i, j]
+                count[v, u] += 1
+            else:
+                total[v, u] += np.float32(0.0)
+
+
 # The markings rule's residual ``y - A theta`` here and numpy's (BLAS's
 # dgemv, its own order and fused products) differ by at most 2 gamma_4
 # sum |a_i theta_i| plus the subtraction's rounding, gamma_4 = 4 u / (1 - 4 u),
@@ -748,6 +782,8 @@ def warm_up() -> None:
     block_means(D, 0, 0, 4, 4, 2, 2)
     block_means(felt, 0, 0, 4, 4, 2, 2)
     block_all(np.ones((9, 9), bool), 0, 0, 4, 4, 2, 2)
+    felt_add(np.zeros((12, 12), np.float32), np.zeros((12, 12), np.int32), D, np.zeros((9, 9), np.bool_), True,
+             np.zeros((12, 12), np.float32), True, 1.0, 1, 1, 4.0, 4.0, 3.0)  # the whole felt: contiguous
     hidden_pixels(np.zeros((9, 9, 3), np.uint16), np.zeros((9, 9), np.int32), np.zeros((9, 9, 3), np.uint8), D, True,
                   D, 1.0, 0, 0, 9, 9, 4.0, 4.0, 3.0)
     frame = np.zeros((12, 12, 3), np.uint8)
