@@ -609,6 +609,9 @@ class FeltAccumulator:
             # rounded to the dtype numpy's comparison below takes (a Python
             # float to float32, a numpy float64 not).
             from cuespin.track import window
+            # The compiled loop does no bounds checks where numpy raised.
+            assert exclude is None or exclude.shape == patch.shape, (exclude.shape, patch.shape)
+            assert reference is None or reference.shape == self.total.shape, (reference.shape, self.total.shape)
             tol = float(np.result_type(patch.dtype, tolerance).type(tolerance))
             window.felt_add(self.total, self.count, patch, _NO_MASK if exclude is None else exclude,
                             exclude is not None, _NO_WINDOW if reference is None else reference,
