@@ -393,10 +393,14 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
             # A ratio over its threshold on one measurement's share alone
             # (fit.decide.sliding_seen) leaves a slip the track may show: the
             # rolling fit's stated errors hold the slip it cannot exclude
-            # (recover.mle.unseen_slip), the paper's rolling segments' do not
-            # (paper_verdicts).
+            # (recover.mle.unseen_slip) and the gap to the free-slip fit that
+            # the ratio alone would have answered with (neither excluded);
+            # the paper's rolling segments' hold neither (paper_verdicts).
+            in_one = bool(lr > slip_threshold())
+            gap = (np.concatenate([np.subtract(full.shot.v0, roll.shot.v0), np.subtract(full.shot.w0, roll.shot.w0)])
+                   if in_one else None)
             mle = result(roll, meas, lr, True, codec, still, hac,
-                         verdicts={"slip_in_one_measurement": bool(lr > slip_threshold())})
+                         verdicts={"slip_in_one_measurement": in_one}, slip_gap=gap)
     else:
         decisions["sliding_ended"] = sliding_ended(seg, t, end_F=end_F())
     chosen = seg
