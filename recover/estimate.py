@@ -16,8 +16,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from threadpoolctl import ThreadpoolController
 
-from cuespin.fit.decide import (PAPER_FIT_TAU_Z, Decision, autocorrelated, slip_threshold, sliding_ended, sliding_seen,
-                               sliding_times_differ, strike_in_view, t1_in_view)
+from cuespin.fit.decide import (PAPER_FIT_TAU_Z, Decision, autocorrelated, slip_in_one_measurement, sliding_ended,
+                               sliding_seen, sliding_times_differ, strike_in_view, t1_in_view)
 from cuespin.fit.segment import Segments, correlated_end_F, segment_track
 from cuespin.physics.motion import BallParams, phases, rolling_deceleration, z_cross
 from cuespin.recover.measurements import (CUE_CLEAR_FRAMES, MAX_CODEC_NOISE_RATIO, MAX_STEP_R, Measurements,
@@ -396,7 +396,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
             # (recover.mle.unseen_slip) and the gap to the free-slip fit that
             # the ratio alone would have answered with (neither excluded);
             # the paper's rolling segments' hold neither (paper_verdicts).
-            in_one = bool(lr > slip_threshold())
+            in_one = slip_in_one_measurement(decisions["sliding_seen"], lr)
             gap = (np.concatenate([np.subtract(full.shot.v0, roll.shot.v0), np.subtract(full.shot.w0, roll.shot.w0)])
                    if in_one else None)
             mle = result(roll, meas, lr, True, codec, still, hac,

@@ -410,3 +410,25 @@ def test_an_intra_frame_codecs_degrees_of_freedom_are_counted():
     assert m.status == "ok"
     assert m.dof == est.meas.dof(5 if m.model == "rolling" else 7)
     assert float(m.dof).is_integer()
+
+
+def test_a_slide_carried_by_one_measurement_states_the_free_slip_gap():
+    """A true 55-ms slide at 60 fps under H.264-like errors with a 0.2-s
+    drift (the first track of test_a_tracks_own_drift_widens_its_errors):
+    its slip ratio passes only with the one measurement carrying most of it
+    (fit.decide.sliding_seen), so the answer is rolling; before the gap to
+    the free-slip fit was stated (statistics review of slip2) it was `ok`
+    with z (3.18, -1.10, -1.16, -3.33), v0 16% off; with it z (0.92, -0.71,
+    -0.72, -0.93).  Asserted: covered at 95% per component (held-out
+    realistic H.264 48/22 was the same case, 2.4 stated errors off)."""
+    from cuespin.recover.simulate import ar1_errors
+    rng = np.random.default_rng(4)
+    tr = next(iter(sliding_tracks(8, seed=4, presets=("case3", "random"), fps_grid=(60.0, 120.0, 240.0),
+                                  sigma_grid=(1e-4,), blur=False)))
+    n = len(tr.t)
+    err = 2.0 * tr.sigma * (shared_errors(n, tr.fps, rng) + ar1_errors(n, np.exp(-1.0 / (0.2 * tr.fps)), rng))
+    xy = model_track(tr.shot, tr.params, tr.t, tr.exposure_s) + err
+    m = estimate(tr.t, xy, np.full(n, tr.sigma), tr.params, lossless=False, run_paper=False, inter_frame=True).mle
+    assert m.status == "ok" and m.model == "rolling"
+    assert m.verdicts["slip_in_one_measurement"]
+    assert np.all(np.abs(z_of(m, tr.shot)) < 1.96), z_of(m, tr.shot)
