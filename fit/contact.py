@@ -19,7 +19,10 @@ before it.  Two tests, the earlier answer wins:
    against the track's noise (its stated errors, scaled up by what the
    local fits' residuals show).  The first run of boundaries above
    :data:`CHANGE_THRESHOLD` is a contact, placed at the run's largest
-   statistic.  Kind ``ball`` when the ball's centre is then within a
+   statistic, unless, with the frames off the one path through its windows
+   left out (:func:`outlier_frames`), the motion on both sides reads the
+   same (:func:`trimmed_statistic`): a few frames off the path (a tracker's
+   outliers) with the same motion either side are not a contact.  Kind ``ball`` when the ball's centre is then within a
    diameter (plus a tolerance) of a ball known to rest there, ``cushion``
    when near a cushion, else ``unknown``.
 

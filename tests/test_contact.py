@@ -380,6 +380,36 @@ def test_a_restrike_after_a_rest_is_a_contact():
         assert c is not None and abs(c.t - th) < 0.05, (k, c)
 
 
+def paired_contact_scenes(rules, n=400, seed=41):
+    """Contacts found on ``n`` contact scenes on a 100-m table (no cushion,
+    no listed ball: the change test alone), each cut 0.25 s after its
+    contact, with independent and H.264-like correlated errors, under each
+    rule: ``rules`` maps a name to the ``(module, attribute, value)`` set
+    for it.  Returns ``{(errors, name): [found, ...]}``."""
+    from contact import CONTACT_PRESETS, noise_level, simulated_track
+
+    from cuespin.recover.mle import time_correlation
+    from cuespin.recover.simulate import shared_errors
+
+    big = Table(length=100.0, width=100.0)
+    rng = np.random.default_rng(seed)
+    found = {}
+    for i in range(n):
+        scene = sample_scene(int(rng.integers(2**31)), CONTACT_PRESETS[i % 2])
+        t, xy, se, traj = simulated_track(scene, noise_level(rng) * 10, rng)
+        xys = {"indep": xy, "corr": traj.positions(t) + se[0] * shared_errors(len(t), scene.camera.fps, rng)}
+        m = t <= traj.first_contact.t + 0.25
+        for errs, X in xys.items():
+            for name, sets in rules.items():
+                with pytest.MonkeyPatch.context() as mp:
+                    for module, attr, value in sets:
+                        mp.setattr(module, attr, value)
+                    c = find_contact(t[m], X[m], np.ones(m.sum(), bool), se[m], big, scene.physics.R, (),
+                                     time_corr=None if errs == "indep" else time_correlation)
+                found.setdefault((errs, name), []).append(c is not None)
+    return found
+
+
 @pytest.mark.slow  # 400 contact scenes, 2 error kinds, 2 rules: about 1-3 min
 def test_strike_at_loses_no_contacts():
     # Review of pap37 (strike_power.py 400 41 0.25): contact scenes on a
@@ -391,26 +421,8 @@ def test_strike_at_loses_no_contacts():
     # scenes, within McNemar's two-standard-error margin (losses - gains <=
     # 2 sqrt(losses + gains)).
     import cuespin.fit.contact as contact_module
-    from contact import CONTACT_PRESETS, noise_level, simulated_track
 
-    from cuespin.recover.mle import time_correlation
-    from cuespin.recover.simulate import shared_errors
-
-    big = Table(length=100.0, width=100.0)
-    rng = np.random.default_rng(41)
-    found = {}
-    for i in range(400):
-        scene = sample_scene(int(rng.integers(2**31)), CONTACT_PRESETS[i % 2])
-        t, xy, se, traj = simulated_track(scene, noise_level(rng) * 10, rng)
-        xys = {"indep": xy, "corr": traj.positions(t) + se[0] * shared_errors(len(t), scene.camera.fps, rng)}
-        m = t <= traj.first_contact.t + 0.25
-        for errs, X in xys.items():
-            for rule, fn in (("landed", contact_module.strike_at), ("off", lambda *a, **k: False)):
-                with pytest.MonkeyPatch.context() as mp:
-                    mp.setattr(contact_module, "strike_at", fn)
-                    c = find_contact(t[m], X[m], np.ones(m.sum(), bool), se[m], big, scene.physics.R, (),
-                                     time_corr=None if errs == "indep" else time_correlation)
-                found.setdefault((errs, rule), []).append(c is not None)
+    found = paired_contact_scenes({"landed": [], "off": [(contact_module, "strike_at", lambda *a, **k: False)]})
     for errs in ("indep", "corr"):
         a, b = np.array(found[(errs, "landed")]), np.array(found[(errs, "off")])
         lost, gained = int(np.sum(b & ~a)), int(np.sum(a & ~b))
@@ -502,7 +514,7 @@ def test_frames_off_the_path_are_found_at_their_level_on_clean_tracks():
 
 
 @pytest.mark.slow  # 400 contact scenes, 2 error kinds, the rule on and off: about 2-3 min
-def test_the_outlier_rule_loses_no_contacts(monkeypatch):
+def test_the_outlier_rule_loses_no_contacts():
     # As test_strike_at_loses_no_contacts: contact scenes on a 100-m table
     # (the change test alone), cut 0.25 s after the contact, independent and
     # H.264-like errors, the rule on and off (MAX_OUTLIER_SHARE 0).  Measured
@@ -511,27 +523,9 @@ def test_the_outlier_rule_loses_no_contacts(monkeypatch):
     # SAME_MOTION_CHI2 it lost 13 and 17.  Asked: losses - gains within
     # McNemar's two-standard-error margin.
     import cuespin.fit.contact as contact_module
-    from contact import CONTACT_PRESETS, noise_level, simulated_track
 
-    from cuespin.recover.mle import time_correlation
-    from cuespin.recover.simulate import shared_errors
-
-    big = Table(length=100.0, width=100.0)
-    rng = np.random.default_rng(41)
-    on = contact_module.MAX_OUTLIER_SHARE
-    found = {}
-    for i in range(400):
-        scene = sample_scene(int(rng.integers(2**31)), CONTACT_PRESETS[i % 2])
-        t, xy, se, traj = simulated_track(scene, noise_level(rng) * 10, rng)
-        xys = {"indep": xy, "corr": traj.positions(t) + se[0] * shared_errors(len(t), scene.camera.fps, rng)}
-        m = t <= traj.first_contact.t + 0.25
-        for errs, X in xys.items():
-            for share in (on, 0.0):
-                monkeypatch.setattr(contact_module, "MAX_OUTLIER_SHARE", share)
-                c = find_contact(t[m], X[m], np.ones(m.sum(), bool), se[m], big, scene.physics.R, (),
-                                 time_corr=None if errs == "indep" else time_correlation)
-                found.setdefault((errs, share), []).append(c is not None)
+    found = paired_contact_scenes({"on": [], "off": [(contact_module, "MAX_OUTLIER_SHARE", 0.0)]})
     for errs in ("indep", "corr"):
-        a, b = np.array(found[(errs, on)]), np.array(found[(errs, 0.0)])
+        a, b = np.array(found[(errs, "on")]), np.array(found[(errs, "off")])
         lost, gained = int(np.sum(b & ~a)), int(np.sum(a & ~b))
         assert lost - gained <= 2 * np.sqrt(lost + gained), (errs, lost, gained)
