@@ -380,6 +380,36 @@ def test_a_restrike_after_a_rest_is_a_contact():
         assert c is not None and abs(c.t - th) < 0.05, (k, c)
 
 
+def paired_contact_scenes(rules, n=400, seed=41):
+    """Contacts found on ``n`` contact scenes on a 100-m table (no cushion,
+    no listed ball: the change test alone), each cut 0.25 s after its
+    contact, with independent and H.264-like correlated errors, under each
+    rule: ``rules`` maps a name to the ``(module, attribute, value)`` set
+    for it.  Returns ``{(errors, name): [found, ...]}``."""
+    from contact import CONTACT_PRESETS, noise_level, simulated_track
+
+    from cuespin.recover.mle import time_correlation
+    from cuespin.recover.simulate import shared_errors
+
+    big = Table(length=100.0, width=100.0)
+    rng = np.random.default_rng(seed)
+    found = {}
+    for i in range(n):
+        scene = sample_scene(int(rng.integers(2**31)), CONTACT_PRESETS[i % 2])
+        t, xy, se, traj = simulated_track(scene, noise_level(rng) * 10, rng)
+        xys = {"indep": xy, "corr": traj.positions(t) + se[0] * shared_errors(len(t), scene.camera.fps, rng)}
+        m = t <= traj.first_contact.t + 0.25
+        for errs, X in xys.items():
+            for name, sets in rules.items():
+                with pytest.MonkeyPatch.context() as mp:
+                    for module, attr, value in sets:
+                        mp.setattr(module, attr, value)
+                    c = find_contact(t[m], X[m], np.ones(m.sum(), bool), se[m], big, scene.physics.R, (),
+                                     time_corr=None if errs == "indep" else time_correlation)
+                found.setdefault((errs, name), []).append(c is not None)
+    return found
+
+
 @pytest.mark.slow  # 400 contact scenes, 2 error kinds, 2 rules: about 1-3 min
 def test_strike_at_loses_no_contacts():
     # Review of pap37 (strike_power.py 400 41 0.25): contact scenes on a
@@ -391,26 +421,8 @@ def test_strike_at_loses_no_contacts():
     # scenes, within McNemar's two-standard-error margin (losses - gains <=
     # 2 sqrt(losses + gains)).
     import cuespin.fit.contact as contact_module
-    from contact import CONTACT_PRESETS, noise_level, simulated_track
 
-    from cuespin.recover.mle import time_correlation
-    from cuespin.recover.simulate import shared_errors
-
-    big = Table(length=100.0, width=100.0)
-    rng = np.random.default_rng(41)
-    found = {}
-    for i in range(400):
-        scene = sample_scene(int(rng.integers(2**31)), CONTACT_PRESETS[i % 2])
-        t, xy, se, traj = simulated_track(scene, noise_level(rng) * 10, rng)
-        xys = {"indep": xy, "corr": traj.positions(t) + se[0] * shared_errors(len(t), scene.camera.fps, rng)}
-        m = t <= traj.first_contact.t + 0.25
-        for errs, X in xys.items():
-            for rule, fn in (("landed", contact_module.strike_at), ("off", lambda *a, **k: False)):
-                with pytest.MonkeyPatch.context() as mp:
-                    mp.setattr(contact_module, "strike_at", fn)
-                    c = find_contact(t[m], X[m], np.ones(m.sum(), bool), se[m], big, scene.physics.R, (),
-                                     time_corr=None if errs == "indep" else time_correlation)
-                found.setdefault((errs, rule), []).append(c is not None)
+    found = paired_contact_scenes({"landed": [], "off": [(contact_module, "strike_at", lambda *a, **k: False)]})
     for errs in ("indep", "corr"):
         a, b = np.array(found[(errs, "landed")]), np.array(found[(errs, "off")])
         lost, gained = int(np.sum(b & ~a)), int(np.sum(a & ~b))
@@ -444,3 +456,76 @@ def test_a_still_rest_is_still_at_the_strike_tests_level():
                 covl = C._window_fits(t, xy, np.full(n, sig), b - W, W, 0.5 * (t[b - 1] + t[b]))[1]
                 moved += not C.strike_at(cl, covl, scale)
     assert moved <= 3, moved
+
+
+def test_a_run_of_frames_off_the_path_is_not_a_contact(monkeypatch):
+    # Realistic H.264 48/13 (docs/measurements.md, held39 and rimdot): frames
+    # 57, 59, 63 and 64 of a 60-fps slide 4-5 stated errors off where a dark
+    # dot reaches the ball's rim, the path the same on either side; the change
+    # test cut an "unknown" contact there and the fit ended the slide between
+    # them, `ok` at 15 stated errors.  Here the same pattern (frames k, k+2,
+    # k+6, k+7 six errors off along x, 4.2 along y) on the forward model, 10
+    # seeds: without the rule (MAX_OUTLIER_SHARE 0) most are cut, with it none.
+    import cuespin.fit.contact as contact_module
+
+    shot = Shot(x0=(0.5, 0.4), v0=(0.9, 0.35), w0=(-12.0, 40.0), t0=0.15)
+    traj = simulate(shot, P, TABLE)
+    t = np.arange(70) / 60.0
+    sig = 5e-4
+    found = {}
+    for share in (0.0, contact_module.MAX_OUTLIER_SHARE):
+        monkeypatch.setattr(contact_module, "MAX_OUTLIER_SHARE", share)
+        for seed in range(10):
+            xy = traj.positions(t) + sig * np.random.default_rng(seed).standard_normal((len(t), 2))
+            xy[[47, 49, 53, 54]] += 6.0 * sig * np.array([1.0, 0.7])
+            c = find_contact(t, xy, np.ones(len(t), bool), sig, TABLE, P.R)
+            found.setdefault(share, []).append(c)
+    assert sum(c is not None and c.kind == "unknown" for c in found[0.0]) >= 5
+    assert all(c is None for c in found[contact_module.MAX_OUTLIER_SHARE])
+
+
+def test_frames_off_the_path_are_found_at_their_level_on_clean_tracks():
+    # fit.contact.outlier_frames on 400 windows of 2 W frames within one
+    # phase (sliding or rolling: one quadratic) of contact-free simulated
+    # tracks (benchmarks/contact.py's, noise 0.005-0.5 px): a window with a
+    # frame taken off at most OUTLIER_LEVEL of the time plus two binomial
+    # standard errors (measured: 4 of 400, seed 7).
+    from contact import NULL_PRESETS, noise_level, simulated_track
+
+    from cuespin.fit.contact import OUTLIER_LEVEL, outlier_frames, window_frames
+    from cuespin.physics.motion import phases
+
+    rng = np.random.default_rng(7)
+    flagged = used = i = 0
+    while used < 400:
+        scene = sample_scene(int(rng.integers(2**31)), NULL_PRESETS[i % len(NULL_PRESETS)])
+        i += 1
+        t, xy, se, _ = simulated_track(scene, noise_level(rng), rng)
+        W = window_frames(t)
+        ph = phases(scene.truth, scene.physics)
+        for lo, hi in ((scene.truth.t0, ph.t1), (ph.t1, ph.t2)):
+            k = np.flatnonzero((t > lo) & (t < hi))
+            if len(k) >= 2 * W:
+                s = int(rng.integers(k[0], k[-1] - 2 * W + 2))
+                flagged += outlier_frames(t, xy, se, np.arange(s, s + 2 * W)).size > 0
+                used += 1
+                break
+    assert flagged <= 400 * OUTLIER_LEVEL + 2 * np.sqrt(400 * OUTLIER_LEVEL * (1 - OUTLIER_LEVEL))
+
+
+@pytest.mark.slow  # 400 contact scenes, 2 error kinds, the rule on and off: about 2-3 min
+def test_the_outlier_rule_loses_no_contacts():
+    # As test_strike_at_loses_no_contacts: contact scenes on a 100-m table
+    # (the change test alone), cut 0.25 s after the contact, independent and
+    # H.264-like errors, the rule on and off (MAX_OUTLIER_SHARE 0).  Measured
+    # (seed 41): independent 325 found either way; correlated 304 / 305 (one
+    # lost, none gained).  At the change threshold in place of
+    # SAME_MOTION_CHI2 it lost 13 and 17.  Asked: losses - gains within
+    # McNemar's two-standard-error margin.
+    import cuespin.fit.contact as contact_module
+
+    found = paired_contact_scenes({"on": [], "off": [(contact_module, "MAX_OUTLIER_SHARE", 0.0)]})
+    for errs in ("indep", "corr"):
+        a, b = np.array(found[(errs, "on")]), np.array(found[(errs, "off")])
+        lost, gained = int(np.sum(b & ~a)), int(np.sum(a & ~b))
+        assert lost - gained <= 2 * np.sqrt(lost + gained), (errs, lost, gained)
