@@ -520,7 +520,7 @@ def with_unseen_slip(res: PaperResult, dv: float, params: BallParams) -> PaperRe
     direction the track does not show; its error spans that disc at 95%
     (per axis ``dv / 1.96``).  Case 4's line answer otherwise states only
     x0's and x2's errors: on short_slip_tracks(160, 22) (slides 1-8 frames,
-    60-480 fps) its 13 ``ok`` answers lay 560-45,000 stated errors off
+    60-480 fps) its 37 ``ok`` answers lay 560-85,000 stated errors off in v0
     (docs/measurements.md, papshort)."""
     if res.status != "ok" or not dv > 0 or res.cov is None:
         return res
