@@ -28,7 +28,8 @@ from cuespin.recover.mle import (MAX_AR1, CodecCorrelation, MLEResult, ModelFit,
                                  correlated_codec_var, time_whitener,
                                  fit_model, fit_models, initial_guess, lag1_autocorrelation, model_track, result,
                                  slip_lr, slip_lr_without_largest, with_profile_interval)
-from cuespin.recover.paper import PaperResult, paper_from_segments, ran_into_rest, sliding_time, sliding_time_stderr
+from cuespin.recover.paper import (PaperResult, paper_from_segments, ran_into_rest, sliding_time, sliding_time_stderr,
+                                   with_unseen_slip)
 from cuespin.recover.slope import rolling_slope
 
 # The first fit's strike time is used to place the strike's window only
@@ -552,6 +553,12 @@ def paper_verdicts(paper, mle, rolling: bool, params: BallParams, agree: bool | 
         return PaperResult("degenerate", "the slip ratio passes its threshold on one measurement alone: a slip "
                            "the track may show is neither seen nor excluded, and the paper's rolling "
                            "segments hold none")
+    if rolling and getattr(mle, "model", "") == "rolling":
+        # The rolling segments' answer (case 4, x1 at x0) holds no slip;
+        # the track cannot exclude one up to the fit's unseen slip, whose
+        # errors the fit's rolling answer states and the paper's now too
+        # (recover.paper.with_unseen_slip; docs/measurements.md, papshort).
+        paper = with_unseen_slip(paper, float(mle.unseen_slip or 0.0), params)
     if v.get("slide_ends") is False:
         # The fit's end of sliding does not exclude a slide through every
         # frame (recover.mle.result's slide_ends, asked of the free-slip
@@ -561,6 +568,14 @@ def paper_verdicts(paper, mle, rolling: bool, params: BallParams, agree: bool | 
         # fitted frame, the paper's x1 16 cm off, w0 9.9 stated errors off and
         # given as best; of the 20 paper answers ok on seeds 37/38 the one so
         # refused; held37).
+        return PaperResult("degenerate", mle.reason)
+    if v.get("sliding_ended") is False:
+        # The fit's slide outlasts the track (recover.mle.result): a rest the
+        # segmentation found, and case 2's slide into it, is a slow moment of
+        # a slide going on (realistic MJPG 49/48, 240 fps: a spin-reversed
+        # slide of 1.9 s, the segmentation's rest at 1.43 s, the track ending
+        # at 1.50 s; case 2's answer ok with w0 1,573 stated errors off;
+        # docs/measurements.md, papshort).
         return PaperResult("degenerate", mle.reason)
     if trusted_frames_refuse(mle):
         return PaperResult("degenerate", mle.reason)

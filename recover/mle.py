@@ -1476,6 +1476,9 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
         lower = 3.5 * pr.mu_s * pr.g * (t_end - shot.t0)
         out.update(w0=None)
         out["stderr"] = {k: v for k, v in stderr.items() if k != "w0"}
+        # Told to the paper's answer (recover.estimate.paper_verdicts): its
+        # x1 needs an end of sliding, which this fit puts past the track.
+        verdicts["sliding_ended"] = False
         ended = "" if verdicts.get("slide_ends", True) else (
             f" (the fit ends sliding at t1 = {ph.t1:.3f} s, but a slide lasting all of it fits the track about as "
             "well" + ("" if ends is None else f": chi-square {ends.statistic:+.1f} against it, over "

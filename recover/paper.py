@@ -27,7 +27,7 @@ from cuespin.fit.conics import fit_parabola
 from cuespin.fit.decide import rolling_speed_differs, stop_apart
 from cuespin.physics.motion import BallParams, rolling_deceleration, z_cross
 from cuespin.physics.parabola import Parabola
-from cuespin.recover.mle import MIN_SLIDING_FRAMES
+from cuespin.recover.mle import MIN_SLIDING_FRAMES, Z95
 
 # The rolling-speed test (rolling_speed_asked) is asked under an inter-frame
 # codec's errors when their short correlation time spans at most this many
@@ -507,6 +507,34 @@ def with_stderr(res: PaperResult, solve, x, C, params: BallParams) -> PaperResul
     if not np.all(np.isfinite(se)):
         return unpropagated(res, "the propagated covariance is not finite")
     return replace(res, stderr={"v0": se[0:2], "w0": se[2:4]}, cov=cov)
+
+
+def with_unseen_slip(res: PaperResult, dv: float, params: BallParams) -> PaperResult:
+    """``res`` (an answer from the rolling segments, x1 at x0) with the
+    errors of a slip the track cannot exclude added, as the
+    maximum-likelihood fit's rolling answer states them
+    (recover.mle.result): a slide of ``tau1`` leaves the rolling path from
+    ``v0 - mu_s g tau1 u_hat``, so the rolling answer's ``v0`` is off by
+    ``dv = mu_s g tau1 u_hat`` and its ``w0`` by ``-5/2 z x dv / R`` (eqs. 7,
+    8), ``|dv|`` up to the fit's ``dv`` (m/s, recover.mle.unseen_slip) in a
+    direction the track does not show; its error spans that disc at 95%
+    (per axis ``dv / 1.96``).  Case 4's line answer otherwise states only
+    x0's and x2's errors: on short_slip_tracks(160, 22) (slides 1-8 frames,
+    60-480 fps) its 37 ``ok`` answers lay 560-85,000 stated errors off in v0
+    (docs/measurements.md, papshort)."""
+    if res.status != "ok" or not dv > 0 or res.cov is None:
+        return res
+    s2 = (dv / Z95) ** 2
+    k = 2.5 / params.R
+    zx = np.array([[0.0, -1.0], [1.0, 0.0]])  # z_cross as a matrix
+    add = np.zeros((4, 4))
+    add[:2, :2] = s2 * np.eye(2)
+    add[2:, 2:] = k**2 * s2 * zx @ zx.T
+    add[:2, 2:] = -k * s2 * zx.T
+    add[2:, :2] = add[:2, 2:].T
+    cov = res.cov + add
+    se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    return replace(res, cov=cov, stderr={**res.stderr, "v0": se[:2], "w0": se[2:]})
 
 
 def unpropagated(res: PaperResult, why: str) -> PaperResult:
