@@ -589,8 +589,9 @@ def test_the_felts_ghost_of_the_rest_is_not_flagged_as_something_else(tmp_path):
     assert tr.foreign[:n].any() and away[tr.foreign[:n]].max() < 1.0, np.nonzero(tr.foreign[:n])[0]
 
 
-# Slow (crash48): ~75 s alone (481 frames at 480 fps, 9 s of it the render);
-# it cannot be cut: the crash came at frame 354, after the strike (frame 170).
+# Slow (crash48): 16 s on a quiet machine, 75 s under load (481 frames at
+# 480 fps and their render); it cannot be cut: the crash came at frame 354,
+# after the strike (frame 170).
 @pytest.mark.slow
 def test_a_blob_narrower_than_the_ball_is_not_a_window_of_negative_size(tmp_path):
     # benchmarks/accuracy.py --look realistic --preset case4 --codec MJPG
