@@ -65,10 +65,12 @@ FOREIGN_GAP_PX = 2.0
 FOREIGN_CONTRAST = 0.25
 FOREIGN_MIN_PX = 4
 FOREIGN_GROW_PX = 3
-# The flag (foreign_seen) asks more than the fit's mask: its group holds
-# more than one independent sample (SEEN_MIN_BLOCKS chroma blocks in a
+# The flag (foreign_seen) asks more than the fit's mask: on H.264 its group
+# holds more than one independent sample (SEEN_MIN_BLOCKS chroma blocks in a
 # luma-blind channel, where 4:2:0's one sample is FOREIGN_MIN_PX pixels:
-# 49/0's still frames' groups were 4-5 px, the cue's on 49/9 8-12), and its
+# 49/0's still frames' groups were 4-5 px, the cue's on 49/9 8-12; on MJPG
+# the cue's were 1-2 samples in 49/1 and 49/9 and the rule is not applied:
+# BallTracker.seen_block), and its
 # threshold is at least
 # SEEN_SPREAD_SIGMAS robust sd of the window's departure from the felt beyond
 # the ball.  H.264 keeps a still scene's blocks frame to frame, so the noise
@@ -1240,7 +1242,8 @@ class BallTracker:
     def __init__(self, background: Background, radius_px: float, exposure_frames: float,
                  config: TrackerConfig = TrackerConfig(), projection: Projection = GREY,
                  search_mask: np.ndarray | None = None, max_step_px: float = np.inf,
-                 camera=None, R: float | None = None, radii: RadiusMap | None = None, chroma_block=1):
+                 camera=None, R: float | None = None, radii: RadiusMap | None = None, chroma_block=1,
+                 inter_frame: bool = False):
         if config.refine not in REFINERS:
             raise ValueError(f"refine must be one of {REFINERS}, got {config.refine!r}")
         self.bg = background
@@ -1253,6 +1256,11 @@ class BallTracker:
         # A luma-blind channel of a video storing colour in blocks is those
         # blocks' means: the fits model them (fit_disc's ``block``).
         self.block = block_sides(chroma_block) if projection.luma_blind else (1, 1)
+        # The foreign flag's group counts those blocks on an inter-frame
+        # codec (H.264) only, whose still felt the noise read between two
+        # frames does not hold (foreign_seen): on MJPG the cue's flags were
+        # 1-2 chroma samples (docs/measurements.md, foreign).
+        self.seen_block = self.block if inter_frame else (1, 1)
         self.cap = np.float32(SCORE_CAP * max(background.contrast, 1.0))
         self.H, self.W = background.image.shape
         self.radii = radii if radii is not None else RadiusMap((self.H, self.W), self.r)
@@ -2162,7 +2170,7 @@ class BallTracker:
             c, se, cov, rms = f.c, f.stderr, f.cov, f.rms
             ghost = self._ghost_of[2] if self._ghost_of is not None and self._ghost_of[0] is patch else None
             seen = foreign is not None and foreign_seen(D, u0, v0, f.c, f.b, r_out, self.bg.sigma, self.bg.contrast,
-                                                        ghost, self.block)
+                                                        ghost, self.seen_block)
             self.last_fit = LastFit(u0, v0, v1 - v0, u1 - u0, f.c.copy(), f.b.copy(), f.G, bool(fit_blur),
                                     f.shade, ol, foreign, marks, seen)
             if self.shade is None:
