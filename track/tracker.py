@@ -65,6 +65,23 @@ FOREIGN_GAP_PX = 2.0
 FOREIGN_CONTRAST = 0.25
 FOREIGN_MIN_PX = 4
 FOREIGN_GROW_PX = 3
+# The flag (foreign_seen) asks more than the fit's mask: on H.264 its group
+# holds more than one independent sample (SEEN_MIN_BLOCKS chroma blocks in a
+# luma-blind channel, where 4:2:0's one sample is FOREIGN_MIN_PX pixels:
+# 49/0's still frames' groups were 4-5 px, the cue's on 49/9 8-12; on MJPG
+# the cue's were 1-2 samples in 49/1 and 49/9 and the rule is not applied:
+# BallTracker.seen_block), and its
+# threshold is at least
+# SEEN_SPREAD_SIGMAS robust sd of the window's departure from the felt beyond
+# the ball.  H.264 keeps a still scene's blocks frame to frame, so the noise
+# read between two look-ahead samples is the codec's (0.26-0.82 levels on
+# realistic seeds 48/49 at 6.7-7.1 per channel), while the felt learnt where
+# the ball rested departs from the frozen frame by the felt's own noise:
+# 4-pixel groups at 1-2.3 times the threshold flagged every still frame of
+# 49/0, 48/6 and 48/7 (docs/measurements.md, foreign).
+SEEN_SPREAD_SIGMAS = OUTLIER_SIGMAS
+SEEN_MIN_BLOCKS = 2
+MAD_TO_SD = 1.4826
 # The search's detection threshold as a fraction of the ball's own score in
 # the look-ahead samples (Background.score): the former rule, a quarter of
 # the pixel contrast, assumed the score is ~0.8 of it (0.25 / 0.8); a shaded
@@ -858,16 +875,31 @@ def foreign_pixels(D: np.ndarray, beyond: np.ndarray, sigma: float, contrast: fl
 
 
 def foreign_seen(D: np.ndarray, u0: int, v0: int, c, b, r_out: float, sigma: float, contrast: float,
-                 ghost: np.ndarray | None) -> bool:
-    """Whether :func:`foreign_pixels` of a window ``D`` finds a group beyond
-    the ball with the felt's ghost of it (:func:`felt_ghost`'s mask
-    ``ghost``) left out: something else in view (the cue, another ball),
-    not the felt's memory of the rest spot, whose pixels depart by the
-    ball's whole contrast (|D|) and would flag every frame leaving the rest."""
+                 ghost: np.ndarray | None, block=1) -> bool:
+    """Whether a window ``D`` shows something beyond the ball with the felt's
+    ghost of it (:func:`felt_ghost`'s mask ``ghost``) left out: something
+    else in view (the cue, another ball), not the felt's memory of the rest
+    spot, whose pixels depart by the ball's whole contrast (|D|) and would
+    flag every frame leaving the rest.
+
+    A group of ``FOREIGN_MIN_PX`` pixels and at least ``SEEN_MIN_BLOCKS``
+    chroma blocks of ``block`` (:func:`~cuespin.track.model.block_sides`;
+    a luma-blind channel's, else 1) beyond the foreign threshold and beyond
+    ``SEEN_SPREAD_SIGMAS`` of the window's own robust spread of ``D``
+    beyond the ball (the felt's departure from its model where ``sigma``,
+    read between two frames, is not it; docs/measurements.md, foreign).
+    Only the flag (``TrackResult.foreign``) reads this; the fit leaves out
+    :func:`foreign_near`'s pixels as before."""
     beyond = beyond_ball(D.shape, u0, v0, c, b, r_out)
     if ghost is not None:
         beyond = beyond & ~ghost
-    return foreign_pixels(D, beyond, sigma, contrast) is not None
+    x = D[beyond]
+    if x.size < FOREIGN_MIN_PX:
+        return False
+    spread = MAD_TO_SD * float(np.median(np.abs(x - np.median(x))))
+    thresh = max(foreign_threshold(sigma, contrast), SEEN_SPREAD_SIGMAS * spread)
+    min_px = max(FOREIGN_MIN_PX, SEEN_MIN_BLOCKS * block_area(block))
+    return _groups((beyond & (np.abs(D) > thresh)).astype(np.uint8), min_px) is not None
 
 
 def foreign_near(D: np.ndarray, u0: int, v0: int, c, b, r_out: float, sigma: float,
@@ -1210,7 +1242,8 @@ class BallTracker:
     def __init__(self, background: Background, radius_px: float, exposure_frames: float,
                  config: TrackerConfig = TrackerConfig(), projection: Projection = GREY,
                  search_mask: np.ndarray | None = None, max_step_px: float = np.inf,
-                 camera=None, R: float | None = None, radii: RadiusMap | None = None, chroma_block=1):
+                 camera=None, R: float | None = None, radii: RadiusMap | None = None, chroma_block=1,
+                 inter_frame: bool = False):
         if config.refine not in REFINERS:
             raise ValueError(f"refine must be one of {REFINERS}, got {config.refine!r}")
         self.bg = background
@@ -1223,6 +1256,11 @@ class BallTracker:
         # A luma-blind channel of a video storing colour in blocks is those
         # blocks' means: the fits model them (fit_disc's ``block``).
         self.block = block_sides(chroma_block) if projection.luma_blind else (1, 1)
+        # The foreign flag's group counts those blocks on an inter-frame
+        # codec (H.264) only, whose still felt the noise read between two
+        # frames does not hold (foreign_seen): on MJPG the cue's flags were
+        # 1-2 chroma samples (docs/measurements.md, foreign).
+        self.seen_block = self.block if inter_frame else (1, 1)
         self.cap = np.float32(SCORE_CAP * max(background.contrast, 1.0))
         self.H, self.W = background.image.shape
         self.radii = radii if radii is not None else RadiusMap((self.H, self.W), self.r)
@@ -2137,7 +2175,7 @@ class BallTracker:
             c, se, cov, rms = f.c, f.stderr, f.cov, f.rms
             ghost = self._ghost_of[2] if self._ghost_of is not None and self._ghost_of[0] is patch else None
             seen = foreign is not None and foreign_seen(D, u0, v0, f.c, f.b, r_out, self.bg.sigma, self.bg.contrast,
-                                                        ghost)
+                                                        ghost, self.seen_block)
             self.last_fit = LastFit(u0, v0, v1 - v0, u1 - u0, f.c.copy(), f.b.copy(), f.G, bool(fit_blur),
                                     f.shade, ol, foreign, marks, seen)
             if self.shade is None:

@@ -523,7 +523,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         sphere_cfg = replace(config, sphere=config.sphere and bool(info.lossless))
         tracker = BallTracker(bg, radius_px, cam.exposure_s * cam.fps, sphere_cfg, projection=proj,
                               search_mask=mask, max_step_px=max_step, camera=cam, R=R, radii=radii,
-                              chroma_block=info.fit_block)
+                              chroma_block=info.fit_block, inter_frame=bool(info.inter_frame))
         felt = FeltAccumulator(first.shape)
         foreign_level = foreign_threshold(bg.sigma, bg.contrast)
         fits = []  # (frame index, the fit's state) for the final background correction
