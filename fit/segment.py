@@ -367,7 +367,10 @@ def segment_track(t, xy, decel: float, sigma: float | None = None,
         k_move, rest_k = int(frames[0]), None if frames[1] is None else int(frames[1])
     k_end = rest_k if rest_k is not None else len(t)
     if k_end - k_move < MIN_MOVING_FRAMES:
-        return Segments(False, f"only {k_end - k_move} frames of motion")
+        # A rest given (``frames``) before the motion's start counts none
+        # (held52's 52/32 read "only -32 frames": a false contact at the strike).
+        return Segments(False, f"only {max(k_end - k_move, 0)} frames of motion before the final rest or the "
+                        "track's end")
     # Fit from a few rest frames before the motion up to the final rest.
     lo = max(k_move - 8, 0)
     tf, xf = t[lo:k_end + (1 if rest_k is not None else 0)], xy[lo:k_end + (1 if rest_k is not None else 0)]

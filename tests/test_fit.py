@@ -302,3 +302,14 @@ def test_the_strike_times_share_left_out_only_where_the_strike_is_not_in_view():
         assert bool(np.any(g["x0_t0"])) is curved
         if not curved:
             assert est.paper.status == "degenerate" and "strike is not in view" in est.paper.reason, est.paper.reason
+
+
+def test_a_rest_before_the_motion_counts_no_frames_of_motion():
+    # held52's 52/32: a rest given before the motion's start gave the
+    # reason "only -32 frames of motion".
+    from cuespin.fit.segment import segment_track
+    t = np.arange(40) / 60.0
+    xy = np.zeros((40, 2))
+    xy[20:, 0] = 0.01 * np.arange(20)
+    seg = segment_track(t, xy, 0.1, sigma=1e-4, frames=(20, 5))
+    assert not seg and "only 0 frames of motion" in seg.reason, seg.reason
