@@ -647,3 +647,26 @@ def test_a_still_h264_rest_is_not_flagged_foreign_and_the_cue_still_is(tmp_path)
     fr = FrameRenderer(scene)
     near = fr.cue_tip(fr.truth.t)[:tr.n_frames] < scene.physics.R
     assert tr.foreign[:tr.n_frames][near].sum() >= 3, np.nonzero(tr.foreign)[0]
+
+
+@pytest.mark.slow
+def test_the_cues_joint_over_the_rail_is_not_first_found_as_the_ball(tmp_path):
+    # benchmarks/track.py realistic --mix seed 5 shot 9 (FFV1, 0.6 s): a red
+    # ball on red felt with lens blur (PSF 0.858 px, noise 4.0, 120 fps), two
+    # balls at rest and a cue.  The channel is learnt from the cue's motion
+    # (tan against red); the ball is ~0 in it (box score 3.4 against the
+    # threshold 26) and the cue's joint on the rail, its centre 0.75 radii
+    # past the cushion's line, was found as the ball in 8 of 73 frames,
+    # 255-314 px off with stated errors 0.09-0.23 px (docs/measurements.md,
+    # red9).  The ball is first found on the playing surface only
+    # (tracker.FIRST_ON_SURFACE): measured 0 of 73 found, the track's error
+    # saying no ball was found.  Finding the ball here needs a channel
+    # learnt from its own motion, not the cue's: not done.
+    from benchmarks.track import realistic_scene
+
+    scene, look = realistic_scene(9, 5, 0.6, True)
+    assert look == "blur" and scene.render["cue"] and len(scene.render["balls"]) == 2
+    found, err, tr = track_against_truth(scene, tmp_path / "joint.avi")
+    assert not (err >= MAX_ERR_RADII).any(), f"{(err >= MAX_ERR_RADII).sum()} found centres up to {err.max():.1f} radii off"
+    if not err.size:  # failure is an answer, with its reason
+        assert "no ball found" in tr.error

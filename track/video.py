@@ -419,6 +419,8 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     radii = RadiusMap((h, w), radius_px, cam, R, region=mask)
     if radii.r_max > radius_px:
         mask = search_mask(cam, scene.table, R, (h, w), grow_px=radii.r_max)
+    # The playing surface and a pixel (search_mask adds one to the margin): where the ball is first found.
+    surface = search_mask(cam, scene.table, R, (h, w), grow_px=0.0)
 
     source = FrameSource(path, info, planes=config.planes)
     frame_bytes = max(w * h * 3, 1)
@@ -523,7 +525,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
         sphere_cfg = replace(config, sphere=config.sphere and bool(info.lossless))
         tracker = BallTracker(bg, radius_px, cam.exposure_s * cam.fps, sphere_cfg, projection=proj,
                               search_mask=mask, max_step_px=max_step, camera=cam, R=R, radii=radii,
-                              chroma_block=info.fit_block, inter_frame=bool(info.inter_frame))
+                              chroma_block=info.fit_block, inter_frame=bool(info.inter_frame), surface=surface)
         felt = FeltAccumulator(first.shape)
         foreign_level = foreign_threshold(bg.sigma, bg.contrast)
         fits = []  # (frame index, the fit's state) for the final background correction
