@@ -34,6 +34,15 @@ from cuespin.recover.mle import MIN_SLIDING_FRAMES, Z95
 # frames: measured to hold at 5 (240 fps, 0 of 55), not at 10 (480 fps, 7
 # of 62); 8 lies between, not measured there (docs/measurements.md, v1chk).
 ROLL_SPEED_MAX_CORR_FRAMES = 8.0
+# ... and under AR(1) errors (a lossy intra-frame codec's, recover.mle's
+# fitted ``ar1``) whose correlation time, -1 / ln(ar1), spans at most this
+# many frames (ar1 <= exp(-1) = 0.37): simulated AR(1) nulls through
+# recover.estimate (rolls_to_rest_tracks' shots, rho 0.3-0.9), fitted ar1
+# <= 0.37: 0 of 464 beyond the threshold (max |z| 3.24; seeds 13, 14, 15).
+# Two frames (ar1 <= 0.61) was tried first: 1 of 452 on seeds 13-14, then 2
+# of 509 on seed 15 (60 fps, fitted ar1 0.46-0.53, z 3.6-4.0), beyond the
+# level's margin (docs/measurements.md, seg16).
+ROLL_SPEED_MAX_AR1_FRAMES = 1.0
 # A candidate satisfies eq. 37 when its predicted x1 is within this many
 # position-noise sigmas of the measured one (the measured x1 is itself an
 # estimate; callers add a frame's travel); every candidate within it is kept.
@@ -817,20 +826,26 @@ def _paper(seg, t, xy, params, sigma, frame_dt, strike_seen, lossless, curved, n
 def rolling_speed_asked(noise, frame_dt: float) -> bool:
     """Is :func:`rolling_speed_z`'s error stated under these errors?
     ``noise`` is the maximum-likelihood fit's ``(ar1, scale[, acf])``
-    (recover.estimate.mle_noise).  Measured (docs/measurements.md, v1chk):
-    independent errors (rolls_to_rest_tracks held out, 1 of 925 beyond the
-    threshold; through recover.estimate 0 of 408); an inter-frame codec's
-    correlation (recover.mle.INTER_CODEC_ACF, through recover.estimate) at
-    60-240 fps 0 of 139 (max |z| 1.77); at 480 fps, where its short
-    correlation time spans 10 frames, 7 of 62 at |z| up to 59 (the
-    breakpoints' share, from the profile's curvature, takes the frames as
-    independent).  So asked without a correlation in time, or with a
-    codec's whose short time spans at most :data:`ROLL_SPEED_MAX_CORR_FRAMES`
-    frames; not under AR(1) errors (a lossy intra-frame codec's: not
-    measured)."""
+    (recover.estimate.mle_noise).  Asked where the errors' correlation in
+    time is short (an inter-frame codec's short time at most
+    :data:`ROLL_SPEED_MAX_CORR_FRAMES` frames, AR(1)'s at most
+    :data:`ROLL_SPEED_MAX_AR1_FRAMES`): the breakpoints' share, from the
+    profile's curvature, takes the frames as independent.  Measured
+    (docs/measurements.md, v1chk, seg16): independent errors
+    (rolls_to_rest_tracks held out, 1 of 925 beyond the threshold; through
+    recover.estimate 0 of 408); an inter-frame codec's correlation
+    (recover.mle.INTER_CODEC_ACF, its short time ``acf[2]`` / ``frame_dt``
+    frames, through recover.estimate) at 60-240 fps 0 of 139 (max |z|
+    1.77), at 480 fps (10 frames) 7 of 62 at |z| up to 59; AR(1) errors
+    (a lossy intra-frame codec's, ``-1 / ln(ar1)`` frames) with the fitted
+    ar1 <= 0.37, 0 of 464; with 0.37-0.61, 3 of 497; at rho 0.7-0.9 15
+    of 391 at |z| up to 81.  (Before seg16 never asked under AR(1): realistic MJPG
+    49/16's line answer, its rest found 46 ms early and its breakpoint 70
+    ms early on a slide into the rest, stood `ok` 9.1 stated errors off;
+    asked, z 9.5, and the slide into the rest answers within 1.9.)"""
     ar1 = float(noise[0]) if len(noise) > 0 else 0.0
     acf = noise[2] if len(noise) > 2 else None
-    if ar1 > 0:
+    if ar1 > 0 and not (ar1 < 1 and -1.0 / np.log(ar1) <= ROLL_SPEED_MAX_AR1_FRAMES):
         return False
     return acf is None or float(acf[2]) / frame_dt <= ROLL_SPEED_MAX_CORR_FRAMES
 

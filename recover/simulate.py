@@ -142,20 +142,21 @@ def mixed_tracks(n: int, seed: int):
         yield next(roll) if i % 2 == 0 else next(slide)
 
 
-def case2_tracks(n: int, seed: int, fps_grid=FPS_GRID, sigma_grid=SIGMA_GRID_M, blur: bool = True):
+def case2_tracks(n: int, seed: int, fps_grid=FPS_GRID, sigma_grid=SIGMA_GRID_M, blur: bool = True,
+                 rho: float = 0.0):
     """``n`` tracks of shots whose sliding runs into the rest (paper case 2:
-    ``x1 = x2``), cycling over frame rates and noise levels, seen to rest.
-    Yields :class:`SimTrack`."""
+    ``x1 = x2``), cycling over frame rates and noise levels, seen to rest;
+    ``rho``: AR(1) errors (:func:`ar1_errors`).  Yields :class:`SimTrack`."""
     rng = np.random.default_rng(seed)
     for i in range(n):
         fps, sigma = _grid_point(i, fps_grid, sigma_grid)
         shot, params = sample_shot(rng, "case2")
         exposure = _exposure(rng, fps, blur)
-        yield simulate_track(shot, params, fps, sigma, rng, exposure, t_end=phases(shot, params).t2 + 0.3)
+        yield simulate_track(shot, params, fps, sigma, rng, exposure, t_end=phases(shot, params).t2 + 0.3, rho=rho)
 
 
 def rolls_to_rest_tracks(n: int, seed: int, presets=("case1", "case3", "case5"), rest_s=(0.6, 2.5),
-                         fps_grid=FPS_GRID, sigma_grid=SIGMA_GRID_M, blur: bool = True):
+                         fps_grid=FPS_GRID, sigma_grid=SIGMA_GRID_M, blur: bool = True, rho: float = 0.0):
     """``n`` tracks of straight shots that slide, then roll to a rest in
     view (the sampler's presets: paper cases 1, 3, 5; the line method's
     case with ``x1`` apart from ``x2``), each slowed (``v0`` and ``w0`` by
@@ -163,8 +164,8 @@ def rolls_to_rest_tracks(n: int, seed: int, presets=("case1", "case3", "case5"),
     ``rest_s[0]``-``rest_s[1]`` seconds after the strike when it would
     take longer (as a clip sees a slow shot to its rest: the presets'
     0.5-3 m/s roll for up to 19 s), seen to 0.3 s after the rest.  Cycles
-    over frame rates and noise levels as the others.  Yields
-    :class:`SimTrack`."""
+    over frame rates and noise levels as the others; ``rho``: AR(1)
+    errors (:func:`ar1_errors`).  Yields :class:`SimTrack`."""
     from dataclasses import replace
     rng = np.random.default_rng(seed)
     for i in range(n):
@@ -174,7 +175,7 @@ def rolls_to_rest_tracks(n: int, seed: int, presets=("case1", "case3", "case5"),
         f = min(1.0, float(rng.uniform(*rest_s)) / (ph.t2 - shot.t0))
         shot = replace(shot, v0=tuple(f * np.asarray(shot.v0)), w0=tuple(f * np.asarray(shot.w0)))
         exposure = _exposure(rng, fps, blur)
-        yield simulate_track(shot, params, fps, sigma, rng, exposure, t_end=phases(shot, params).t2 + 0.3)
+        yield simulate_track(shot, params, fps, sigma, rng, exposure, t_end=phases(shot, params).t2 + 0.3, rho=rho)
 
 
 def short_slip_tracks(n: int, seed: int, frames=(0.2, 1.0), fps_grid=(60.0, 120.0, 240.0),
