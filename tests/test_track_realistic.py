@@ -613,9 +613,11 @@ def test_a_blob_narrower_than_the_ball_is_not_a_window_of_negative_size(tmp_path
     render_video(scene, path)
     tr = track_video(path, scene, TrackerConfig(threaded=False))
     assert tr.n_frames == 481
-    # every frame not found says why
-    assert np.all((tr.status == OK) == tr.ok[: len(tr.status)])
-    assert tr.status_counts()["ok"] == int(tr.ok.sum()) > 0
+    assert tr.ok.any()
+    # the frame that crashed is refused with a status (re-read: the earlier
+    # ok-versus-status checks held by construction, track.video builds ok
+    # from status)
+    assert tr.status[354] != OK
 
 
 @pytest.mark.slow
@@ -659,7 +661,7 @@ def test_the_cues_joint_over_the_rail_is_not_first_found_as_the_ball(tmp_path):
     # past the cushion's line, was found as the ball in 8 of 73 frames,
     # 255-314 px off with stated errors 0.09-0.23 px (docs/measurements.md,
     # red9).  The ball is first found on the playing surface only
-    # (tracker.FIRST_ON_SURFACE): measured 0 of 73 found, the track's error
+    # (BallTracker's ``surface``): measured 0 of 73 found, the track's error
     # saying no ball was found.  Finding the ball here needs a channel
     # learnt from its own motion, not the cue's: not done.
     from benchmarks.track import realistic_scene

@@ -312,11 +312,6 @@ LOOK_FRAMES = 12
 # 1.30 of its stated errors), and on a realistic FFV1 render the resting
 # ball's shift was under one error while the moving ball's was three.
 LOOK_P = 1e-3
-# The ball's first centre must lie on the playing surface itself (the
-# tracker's ``surface``), not merely in the search mask's margin: a shot is
-# struck from rest on open cloth (CONVENTIONS.md), so the first find beyond
-# the cushions' line is something else (red9: the cue's joint on the rail).
-FIRST_ON_SURFACE = True
 
 
 class LastFit(NamedTuple):
@@ -1228,7 +1223,10 @@ class BallTracker:
         from the last centre, a few frames on, is not the ball.
     surface : ndarray of bool, shape (h, w), optional
         The playing surface itself (``search_mask`` less its margin): where
-        the ball is first found (:data:`FIRST_ON_SURFACE`).  None: anywhere
+        the ball is first found: a shot is struck from rest on open cloth
+        (CONVENTIONS.md), so a first find beyond the cushions' line, in the
+        search mask's margin, is something else (red9: the cue's joint on the
+        rail).  None: anywhere
         in ``search_mask``.
     camera : Camera, optional
         The scene's camera, with ``R`` the ball's radius (m): under
@@ -1509,7 +1507,7 @@ class BallTracker:
             # 0.28 radii, off where the felt's model no longer holds).
             self.last_fit = self.last_patch = None
             return _lost(NO_BALL)
-        if obs.status == OK and not self.history and FIRST_ON_SURFACE and self.surface is not None \
+        if obs.status == OK and not self.history and self.surface is not None \
                 and not self._on_surface(obs.uv, self.surface):
             # The ball is first found where a shot starts: at rest on the
             # cloth, its centre at least R inside the cushions' line, so
