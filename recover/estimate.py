@@ -72,7 +72,9 @@ class Decided:
     a lossless rest's scatter is judged against:
     recover.measurements.moving_scale), ``sliding_times_agree`` (the
     paper's sliding time against the fit's, :func:`sliding_times_agree`;
-    None: not asked).
+    None: not asked), ``slip_gap`` (a rolling answer's gap to the free-slip
+    fit where the slip was neither seen nor excluded, recover.mle.result's
+    ``slip_gap``: the refit states it too).
     """
 
     sliding_seen: bool | None
@@ -93,6 +95,7 @@ class Decided:
     clear_s: float = 0.0
     rest_scale: tuple = (1.0, float("inf"))
     sliding_times_agree: bool | None = None
+    slip_gap: tuple | None = None
 
 
 @dataclass(frozen=True)
@@ -381,6 +384,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         # h264cov), so no HAC question is asked.
     except FIT_ERRORS as exc:
         mle = MLEResult("failed", f"the fit did not run: {exc}")
+    gap = None
     if mle is None:
         lr = slip_lr(full, roll, meas, codec, hac)
         decisions["sliding_seen"] = sliding_seen(lr, slip_lr_without_largest(full, roll, lr))
@@ -467,7 +471,8 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         ar1=0.0 if fit is None else fit.ar1,
         breaks=(chosen.t0, float("inf") if runs_to_end(chosen) else chosen.t1) if chosen else None,
         hac=hac, verdicts=dict(mle.verdicts) or None, stop_apart=None if paper is None else paper.stop_apart,
-        clear_s=clear_s, rest_scale=scale, sliding_times_agree=agree)
+        clear_s=clear_s, rest_scale=scale, sliding_times_agree=agree,
+        slip_gap=None if gap is None else tuple(float(g) for g in gap))
     paper, mle = unexplained(paper, mle, meas, codec_var, sigma,
                              lambda: rolling_fit(t, xy, cov, meas.px_to_m, params, mle, chosen, exposure_s, frame_dt, sigma,
                                                  acf=None if codec is None else codec.acf),
@@ -495,7 +500,7 @@ def _refit(keep: Decided, seg, t, xy, cov, params, exposure_s, fit_friction, run
             fit = fit_model(meas, params, keep.start, exposure_s, rolling, fit_friction, keep.ar1,
                             None if codec is None else codec.acf)
             mle = result(fit, meas, nan, keep.sliding_ended or rolling, codec, not lossless and codec is None,
-                         keep.hac, keep.verdicts)
+                         keep.hac, keep.verdicts, slip_gap=keep.slip_gap if rolling else None)
         except FIT_ERRORS as exc:
             mle = MLEResult("failed", f"the fit did not run: {exc}")
     paper = None
