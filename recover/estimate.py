@@ -415,7 +415,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         # then puts t1 where the sliding velocity vanishes (eq. 29).
         chosen = seg.unended
     paper, shape, agree = None, None, None
-    strike_seen = strike_in_view(t, chosen.t0, touched)
+    strike_seen = strike_in_view(t, chosen.t0, touched, meas.xy, meas.cov)
     if run_paper:
         # The paper's errors are propagated from the same per-frame noise the
         # fit weights by: the tracker's, with the codec's measured share.

@@ -1433,12 +1433,14 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
     # found: 32/31 t0 104 ms late, v0 20% off at 168 stated errors; 32/57
     # 16.7 errors; gross13).
     if verdicts.get("strike_seen") is None:
-        verdicts["strike_seen"] = strike_in_view(meas.t_used, float(shot.t0), meas.touched_used)
+        verdicts["strike_seen"] = strike_in_view(meas.t_used, float(shot.t0), meas.touched_used,
+                                                 meas.xy[meas.used], meas.cov[meas.used])
     if not verdicts["strike_seen"]:
-        n_still = still_before(meas.t_used, float(shot.t0), meas.touched_used)
+        n_still = still_before(meas.t_used, float(shot.t0), meas.touched_used, meas.xy[meas.used],
+                               meas.cov[meas.used])
         return MLEResult("degenerate",
-                         f"the strike is not in view: {n_still} measured frame(s) not flagged touched show the ball "
-                         f"before the fitted "
+                         f"the strike is not in view: {n_still} measured frame(s) show the ball still "
+                         f"(fit.decide.still_before) before the fitted "
                          f"t0 = {shot.t0:.4f} s (at least {MIN_STILL_FRAMES} needed), so t0, x0 and v0 at the "
                          "strike are not measured", **common)
     if rolling:
