@@ -377,7 +377,7 @@ def still_before(t, t0: float, touched=None, xy=None, cov=None) -> int:
         flagged frames before t0, all within 0.5 stated errors); a ball lost
         until after the strike and found already moving beside the cue, a
         fitted t0 late among those frames, does not (52/28: its 5 flagged
-        frames up to 11.5 stated errors from their median, 3 beyond,
+        frames up to 11.5 stated errors from their median, none counted,
         answered ``ok`` 10.8 stated errors off; docs/measurements.md,
         held52, strike28).  Without them no flagged frame counts.
 

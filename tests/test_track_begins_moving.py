@@ -95,7 +95,7 @@ def test_touched_moving_frames_before_a_late_t0_are_not_the_strike_in_view():
     touched and the first five thrown by the cue as 52/28's: the fit's t0
     lands late among them, and they are no evidence of where the strike
     was (fit.decide.still_before), so no answer is ``ok``.  Before, 5 of
-    these 6 were ``ok`` 16-103 stated errors off (the flagged frames before
+    these 6 were ``ok`` 16-96 stated errors off (the flagged frames before
     the late t0 counted as the strike in view; held52, strike28)."""
     rng = np.random.default_rng(1)
     for j in range(6):
