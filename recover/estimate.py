@@ -290,7 +290,8 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
                                   frame_dt=frame_dt, shared_rest=not independent, px_to_m=px_to_m, clear_s=clear_s,
                                   group_rest=group_rest, rest_scale=scale[0], rest_scale_dof=scale[1],
                                   look_rest=lossless and not independent, look_factor=look_factor,
-                                  still_look=still_look_applies(shaded, lossless, inter_frame), cue=foreign)
+                                  still_look=still_look_applies(shaded, lossless, inter_frame), cue=foreign,
+                                  touched=touched)
 
     if keep is not None:
         codec = CodecCorrelation(keep.codec_var, frame_dt) if inter_frame and not lossless else None
@@ -418,7 +419,7 @@ def estimate(t, xy, cov, params: BallParams, exposure_s: float = 0.0, lossless: 
         # then puts t1 where the sliding velocity vanishes (eq. 29).
         chosen = seg.unended
     paper, shape, agree = None, None, None
-    strike_seen = strike_in_view(t, chosen.t0)
+    strike_seen = strike_in_view(t, chosen.t0, touched, meas.xy, meas.cov)
     if run_paper:
         # The paper's errors are propagated from the same per-frame noise the
         # fit weights by: the tracker's, with the codec's measured share.

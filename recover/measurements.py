@@ -399,6 +399,10 @@ class Measurements:
         Per measurement, the least covariance (m^2) its mean is stated
         (:func:`rest_floor_covariance`): a shaded lossy rest's one frame's
         stated covariance, zero for the others; None: none.
+    touched : ndarray of bool, shape (n,), or None
+        The frames the tracker flags (``TrackResult.touched``), carried for
+        the strike-in-view rule (fit.decide.strike_in_view: a flagged frame
+        before t0 does not show the ball still); None: none given.
     """
 
     t: np.ndarray
@@ -413,6 +417,7 @@ class Measurements:
     rest_scale_dof: float = float("inf")
     rest_look_px2: float = 0.0
     rest_floor: np.ndarray | None = None
+    touched: np.ndarray | None = None
 
     @property
     def used(self) -> np.ndarray:
@@ -448,6 +453,11 @@ class Measurements:
     @property
     def t_used(self) -> np.ndarray:
         return self.t[self.used]
+
+    @property
+    def touched_used(self) -> np.ndarray | None:
+        """The tracker's flags (``touched``) of the used frames; None: none given."""
+        return None if self.touched is None else self.touched[self.used]
 
     def _means(self, v):
         g, cnt, _ = self._grouping
@@ -563,7 +573,7 @@ class Measurements:
         c = np.maximum(float(codec_var), self.codec_floor())
         cov = self.cov + c[:, None, None] * self.codec_shape()
         return _make(self.t, self.xy, cov, self.group, self.px_to_m, self.rest_scatter, self.rest_min_share,
-                     self.rest_scale, self.rest_scale_dof, self.rest_look_px2, self.rest_floor)
+                     self.rest_scale, self.rest_scale_dof, self.rest_look_px2, self.rest_floor, self.touched)
 
 
 def group_scatter(xy, group, measured: bool = True) -> np.ndarray:
@@ -870,7 +880,7 @@ def rest_covariance(base, look, floor) -> tuple[np.ndarray, np.ndarray]:
 
 def _make(t, xy, cov, group, px_to_m=None, rest_scatter: bool = False, rest_min_share: float = 0.0,
           rest_scale: float = 1.0, rest_scale_dof: float = float("inf"), rest_look_px2: float = 0.0,
-          rest_floor=None) -> Measurements:
+          rest_floor=None, touched=None) -> Measurements:
     """Measurements with their whiteners: each measurement's covariance
     (:func:`group_covariance`, a rest's with its still look's,
     :func:`still_look_covariance`, raised to its floor,
@@ -884,7 +894,8 @@ def _make(t, xy, cov, group, px_to_m=None, rest_scatter: bool = False, rest_min_
     W = np.linalg.inv(np.linalg.cholesky(c)) if m else np.zeros((0, 2, 2))
     return Measurements(t=t, xy=xy, cov=cov, group=group, W=W, px_to_m=px_to_m, rest_scatter=rest_scatter,
                         rest_min_share=rest_min_share, rest_scale=rest_scale, rest_scale_dof=rest_scale_dof,
-                        rest_look_px2=float(rest_look_px2), rest_floor=rest_floor)
+                        rest_look_px2=float(rest_look_px2), rest_floor=rest_floor,
+                        touched=None if touched is None else np.asarray(touched, dtype=bool))
 
 
 def cue_clear_s(speed: float, R: float, frame_dt: float) -> float:
@@ -984,7 +995,8 @@ def build_measurements(t, xy, cov, *, t0: float | None = None, t_rest: float | N
                        shared_rest: bool = False, px_to_m=None, clear_s: float = 0.0,
                        group_rest: bool = True, rest_scale: float = 1.0,
                        rest_scale_dof: float = float("inf"), look_rest: bool = False,
-                       look_factor: float = 1.0, still_look: bool = False, cue=None) -> Measurements:
+                       look_factor: float = 1.0, still_look: bool = False, cue=None,
+                       touched=None) -> Measurements:
     """Turn a track into the measurements a fit uses.
 
     Parameters
@@ -1055,6 +1067,10 @@ def build_measurements(t, xy, cov, *, t0: float | None = None, t_rest: float | N
         as the rest: free slip at LR 13.1, rolling at 2.9 without them), and
         beside a still ball the cue's pixels are no part of its look
         (docs/measurements.md, slipfix).
+    touched : ndarray of bool, shape (n,), optional
+        The tracker's flags (``TrackResult.touched``), kept on the result
+        (``Measurements.touched``) for the strike-in-view rule; they change
+        no measurement.
 
     Returns
     -------
@@ -1104,7 +1120,8 @@ def build_measurements(t, xy, cov, *, t0: float | None = None, t_rest: float | N
     return _make(t, xy, cov, group, px_to_m, rest_scatter=True,
                  rest_min_share=(LOOK_REST_SHARE if look_rest else SHARED_REST_MIN_SHARE) if shared_rest else 0.0,
                  rest_scale=float(rest_scale), rest_scale_dof=float(rest_scale_dof),
-                 rest_look_px2=STILL_LOOK_VAR_PX2 if (still_look and shared_rest) else 0.0, rest_floor=rest_floor)
+                 rest_look_px2=STILL_LOOK_VAR_PX2 if (still_look and shared_rest) else 0.0, rest_floor=rest_floor,
+                 touched=touched)
 
 
 def moving_scale(meas: Measurements, whitened_residuals, n_par: int) -> tuple[float, float]:

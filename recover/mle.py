@@ -31,7 +31,8 @@ from functools import cached_property, lru_cache
 import numpy as np
 from scipy.optimize import brentq, least_squares
 
-from cuespin.fit.decide import MIN_STILL_FRAMES, autocorrelated, slide_through_excluded, strike_in_view
+from cuespin.fit.decide import (MIN_STILL_FRAMES, autocorrelated, slide_through_excluded, still_before,
+                                strike_in_view)
 from cuespin.fit.lm import lm_fit
 from cuespin.physics.motion import (SLIP_ZERO, BallParams, Shot, phases, positions, positions_jacobian,
                                     rolling_deceleration, z_cross)
@@ -1432,11 +1433,14 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
     # found: 32/31 t0 104 ms late, v0 20% off at 168 stated errors; 32/57
     # 16.7 errors; gross13).
     if verdicts.get("strike_seen") is None:
-        verdicts["strike_seen"] = strike_in_view(meas.t_used, float(shot.t0))
+        verdicts["strike_seen"] = strike_in_view(meas.t_used, float(shot.t0), meas.touched_used,
+                                                 meas.xy[meas.used], meas.cov[meas.used])
     if not verdicts["strike_seen"]:
-        n_still = int(np.sum(meas.t_used < shot.t0))
+        n_still = still_before(meas.t_used, float(shot.t0), meas.touched_used, meas.xy[meas.used],
+                               meas.cov[meas.used])
         return MLEResult("degenerate",
-                         f"the strike is not in view: {n_still} measured frame(s) show the ball before the fitted "
+                         f"the strike is not in view: {n_still} measured frame(s) show the ball still "
+                         f"(fit.decide.still_before) before the fitted "
                          f"t0 = {shot.t0:.4f} s (at least {MIN_STILL_FRAMES} needed), so t0, x0 and v0 at the "
                          "strike are not measured", **common)
     if rolling:

@@ -82,7 +82,7 @@ def test_refit_keeps_the_first_fits_verdicts(monkeypatch):
     assert first.paper.stop_apart is False and first.decided.stop_apart is False
     monkeypatch.setattr(mle_mod, "MIN_SLIDING_FRAMES", 10**6)
     monkeypatch.setattr(mle_mod, "MAX_REL_STDERR_V0", 0.0)
-    monkeypatch.setattr(mle_mod, "strike_in_view", lambda t, t0: False)
+    monkeypatch.setattr(mle_mod, "strike_in_view", lambda t, t0, touched=None, xy=None, cov=None: False)
     monkeypatch.setattr(mle_mod, "slide_through_excluded", lambda d: Decision(False, d, 0.0))
     monkeypatch.setattr(mle_mod, "autocorrelated", lambda rho, z: Decision(True, z, 0.0))
     monkeypatch.setattr(paper_mod, "stop_apart", lambda d2: Decision(True, d2, 0.0))

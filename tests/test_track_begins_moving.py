@@ -64,3 +64,60 @@ def test_a_ball_first_found_after_the_videos_start_is_flagged_leaving_its_spot()
     # Found from the first frame, still, then moving: the spot is known (unchanged).
     uv2 = np.r_[np.zeros((5, 2)), np.c_[4.0 * np.arange(1, 8) + 0.5, np.zeros(7)]]
     assert np.flatnonzero(leaving_rest(uv2, np.ones(len(uv2), bool), 8.0)).tolist() == [5, 6, 7]
+
+
+LOST_52_28 = 5.5        # realistic H.264 52/28: found from 5.5 frames after the strike on
+TOUCHED_52_28 = 38      # its first 38 found frames flagged touched (the cue beside them), none foreign
+# 52/28's first five found centres off the true path, in frame steps (its 1.86 mm a frame at 480 fps):
+# along the path 4.6, 13.1, 3.0, 10.7, 8.4 mm, across -3.6, -1.2, 0.6, 4.4, 4.5 mm (the cue's tip beside them).
+THROWN_ALONG = (2.5, 7.0, 1.6, 5.8, 4.5)
+THROWN_ACROSS = (-1.9, -0.6, 0.3, 2.4, 2.4)
+
+
+def _found_moving_beside_the_cue(shot, params, rng):
+    tr = simulate_track(shot, params, FPS, SIGMA_M, rng, 0.0)
+    t, xy = tr.t, tr.xy.copy()
+    ok = t > shot.t0 + LOST_52_28 / FPS
+    first = np.flatnonzero(ok)
+    along = np.asarray(shot.v0) / np.hypot(*shot.v0)
+    across = np.array([-along[1], along[0]])
+    step = np.hypot(*shot.v0) / FPS
+    for k, (a, c) in enumerate(zip(THROWN_ALONG, THROWN_ACROSS)):
+        xy[first[k]] += step * (a * along + c * across)
+    touched = np.zeros(len(t), bool)
+    touched[first[0]:first[0] + TOUCHED_52_28] = True
+    return t, xy, ok, touched
+
+
+def test_touched_moving_frames_before_a_late_t0_are_not_the_strike_in_view():
+    """Generator free-slip shots (case 3) at 480 fps on H.264, the ball lost
+    until 5.5 frames after the strike, its first 38 found frames flagged
+    touched and the first five thrown by the cue as 52/28's: the fit's t0
+    lands late among them, and they are no evidence of where the strike
+    was (fit.decide.still_before), so no answer is ``ok``.  Before, 5 of
+    these 6 were ``ok`` 16-96 stated errors off (the flagged frames before
+    the late t0 counted as the strike in view; held52, strike28)."""
+    rng = np.random.default_rng(1)
+    for j in range(6):
+        shot, params = sample_shot(rng, "case3")
+        t, xy, ok, touched = _found_moving_beside_the_cue(shot, params, rng)
+        out = recover_track(t, xy, ok, np.full(len(t), SIGMA_M), params, 0.0, "mle", lossless=False,
+                            inter_frame=True, touched=touched)
+        m = out["methods"]["mle"]
+        assert m["status"] != "ok", (j, m["t0"] - shot.t0)
+
+
+def test_a_still_ball_beside_the_cue_shows_the_strike():
+    """The same shots seen from the video's start, every frame before the
+    strike flagged touched (the cue beside a still ball: realistic H.264
+    48/28, 104 such frames): the flagged still frames count, the strike is
+    in view."""
+    from cuespin.fit.decide import strike_in_view
+    rng = np.random.default_rng(1)
+    for j in range(6):
+        shot, params = sample_shot(rng, "case3")
+        tr = simulate_track(shot, params, FPS, SIGMA_M, rng, 0.0)
+        touched = tr.t < shot.t0 + 2 / FPS
+        cov = np.broadcast_to(SIGMA_M**2 * np.eye(2), (len(tr.t), 2, 2))
+        assert strike_in_view(tr.t, shot.t0, touched, tr.xy, cov), j
+        assert not strike_in_view(tr.t, shot.t0, touched), j  # flags alone: no frame counts
