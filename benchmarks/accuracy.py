@@ -387,7 +387,6 @@ def intervals(rows, n_boot: int = 4000, seed: int = 0, m: str = "mle"):
                      float)
         hit = np.abs(Z) < 1.959964
         k, n = int(hit.sum()), Z.size
-        Z = np.where(np.isfinite(Z), Z, np.nan)
         idx = rng.integers(0, len(ok), (n_boot, len(ok)))
         # over the components a draw holds (none: NaN, out of the percentiles)
         boot = {name: np.nanpercentile([rms_z(A[i]) for i in idx], [2.5, 97.5]) for name, A in (("rms", Z), ("crb", K))
@@ -536,6 +535,7 @@ def main():
 
 def summarize(rows, seed=0):
     """Print the tables for finished rows (also: python -c 'from accuracy import ...' on a CSV)."""
+    from cuespin.pipeline.measure import rms_z
     rows = sorted(rows, key=lambda r: r["i"])
     n = len(rows)
     print(f"\n{n} shots (seed {seed}); errors over shots answered ok")
@@ -579,7 +579,7 @@ def summarize(rows, seed=0):
                 bare = len(zs) - len(fin)
                 print(f"{m}: {band}: coverage of 95% intervals {np.mean([r[f'{m}_cover'] for r in zs]):.1%} "
                       f"(target {target}; {bare} ok without stated errors counted as missed); RMS error / own "
-                      f"stderr {np.sqrt(np.mean(np.square(fin))) if fin else np.nan:.2f} (target 0.9-1.1); "
+                      f"stderr {rms_z(fin):.2f} (target 0.9-1.1); "
                       f"{len(zs)} shots")
     intervals(rows)
     intervals(rows, m="paper")

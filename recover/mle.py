@@ -1338,10 +1338,10 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
         # 5/2 z x dv / R (eqs. 7, 8: dv = mu_s g tau1 u_hat), |dv| <= dv_unseen in
         # an unknown direction; its error spans that disc at 95%.
         dv_unseen, tau_unseen = unseen_slip(fit, meas, float(se[2]))
-        s2 = (dv_unseen / Z95) ** 2
+        U = unseen_slip_cov(dv_unseen, pr.R)
         cov = cov.copy()
-        cov[3:5, 3:5] += s2 * np.eye(2)
-        vw = vw + (2.5 / pr.R) ** 2 * s2
+        cov[3:5, 3:5] += U[:2, :2]
+        vw = vw + np.diag(U[2:, 2:])
         if slip_gap is not None:
             # A slip neither seen nor excluded (review of slip2: held-out
             # H.264 48/22, a true 55-ms slide at 60 fps, answered rolling
@@ -1542,6 +1542,26 @@ def slide_bound_s(speed: float, params: BallParams) -> float:
     2 |u0| / (7 mu_s g)`` exceeds ``|v1| / (mu_s g)`` on stun and draw
     shots (up to 12 times in the sampler)."""
     return float(speed) / (params.mu_s * params.g)
+
+
+def unseen_slip_cov(dv: float, R: float) -> np.ndarray:
+    """The (v0, w0) covariance (4, 4) of a slip the track cannot exclude:
+    a slide of ``tau1`` leaves the rolling path from ``v0 - mu_s g tau1
+    u_hat``, so a rolling answer's ``v0`` is off by ``dv = mu_s g tau1
+    u_hat`` and its ``w0`` by ``-5/2 z x dv / R`` (eqs. 7, 8), ``|dv|`` up to
+    ``dv`` (m/s, :func:`unseen_slip`) in a direction the track does not
+    show; the error spans that disc at 95% (per axis ``dv / 1.96``).  The
+    fit's rolling answer (:func:`result`) and the paper's
+    (recover.paper.with_unseen_slip) state it alike."""
+    s2 = (dv / Z95) ** 2
+    k = 2.5 / R
+    zx = np.array([[0.0, -1.0], [1.0, 0.0]])  # z_cross as a matrix; zx zx^T = I
+    add = np.zeros((4, 4))
+    add[:2, :2] = s2 * np.eye(2)
+    add[2:, 2:] = k**2 * s2 * np.eye(2)
+    add[:2, 2:] = -k * s2 * zx.T
+    add[2:, :2] = add[:2, 2:].T
+    return add
 
 
 def unseen_slip(fit: ModelFit, meas: Measurements, se_t0: float) -> tuple[float, float]:

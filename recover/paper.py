@@ -27,7 +27,7 @@ from cuespin.fit.conics import fit_parabola
 from cuespin.fit.decide import rolling_speed_differs, stop_apart
 from cuespin.physics.motion import BallParams, rolling_deceleration, z_cross
 from cuespin.physics.parabola import Parabola
-from cuespin.recover.mle import MIN_SLIDING_FRAMES, Z95
+from cuespin.recover.mle import MIN_SLIDING_FRAMES, unseen_slip_cov
 
 # The rolling-speed test (rolling_speed_asked) is asked under an inter-frame
 # codec's errors when their short correlation time spans at most this many
@@ -533,15 +533,7 @@ def with_unseen_slip(res: PaperResult, dv: float, params: BallParams) -> PaperRe
     (docs/measurements.md, papshort)."""
     if res.status != "ok" or not dv > 0 or res.cov is None:
         return res
-    s2 = (dv / Z95) ** 2
-    k = 2.5 / params.R
-    zx = np.array([[0.0, -1.0], [1.0, 0.0]])  # z_cross as a matrix
-    add = np.zeros((4, 4))
-    add[:2, :2] = s2 * np.eye(2)
-    add[2:, 2:] = k**2 * s2 * zx @ zx.T
-    add[:2, 2:] = -k * s2 * zx.T
-    add[2:, :2] = add[:2, 2:].T
-    cov = res.cov + add
+    cov = res.cov + unseen_slip_cov(dv, params.R)
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     return replace(res, cov=cov, stderr={**res.stderr, "v0": se[:2], "w0": se[2:]})
 
