@@ -499,6 +499,23 @@ def test_false_rolling_speed_rate_400():
     assert total >= 400 and hits <= allowed(total, ROLL_SPEED_LEVEL), (hits, total)
 
 
+def _rest_found_early(tr, early_s: float = 0.066):
+    """A case-2 track's segmentation with its rest found ``early_s`` before
+    the stop (realistic H.264 36/38's 66 ms), where it answers with the
+    line's case 3 (sliding ended in view, not run into the rest); else None."""
+    from cuespin.fit.decide import t1_in_view
+    from cuespin.recover.paper import ran_into_rest
+    p = tr.params
+    decel = rolling_deceleration(p.mu_r, p.g)
+    seg0 = segment_track(tr.t, tr.xy, decel, tr.sigma, tr.exposure_s)
+    k = int(np.searchsorted(tr.t, phases(tr.shot, p).t2 - early_s))
+    seg = segment_track(tr.t, tr.xy, decel, tr.sigma, tr.exposure_s, frames=(seg0.k_move, k))
+    if not seg or seg.t2 is None or not np.isfinite(seg.t1) or ran_into_rest(seg) \
+            or not t1_in_view(seg.t1, tr.t[tr.t <= seg.t2]):
+        return None
+    return seg
+
+
 def test_rolling_speed_refuses_a_slide_into_a_rest_found_early():
     # Realistic H.264 36/38's situation (docs/measurements.md, p38, v1chk):
     # a case-2 slide into the rest whose rest is found 66 ms before the
@@ -510,18 +527,14 @@ def test_rolling_speed_refuses_a_slide_into_a_rest_found_early():
     # positive: the rest short of the rolling path; here the first 40, 4 answered
     # by the line); the segmentation's slide into the rest answers right.
     from cuespin.fit import decide
-    from cuespin.fit.decide import ROLL_SPEED_LEVEL, t1_in_view
+    from cuespin.fit.decide import ROLL_SPEED_LEVEL
     from cuespin.recover.paper import paper_from_segments, ran_into_rest
     from cuespin.recover.simulate import case2_tracks
     refused = total = 0
     for tr in case2_tracks(40, 5):
         p = tr.params
-        decel = rolling_deceleration(p.mu_r, p.g)
-        seg0 = segment_track(tr.t, tr.xy, decel, tr.sigma, tr.exposure_s)
-        k = int(np.searchsorted(tr.t, phases(tr.shot, p).t2 - 0.066))
-        seg = segment_track(tr.t, tr.xy, decel, tr.sigma, tr.exposure_s, frames=(seg0.k_move, k))
-        if not seg or seg.t2 is None or not np.isfinite(seg.t1) or ran_into_rest(seg) \
-                or not t1_in_view(seg.t1, tr.t[tr.t <= seg.t2]):
+        seg = _rest_found_early(tr)
+        if seg is None:
             continue
         dt = 1.0 / tr.fps
         got = paper_from_segments(seg, tr.t, tr.xy, p, tr.sigma, dt)
@@ -562,22 +575,18 @@ def test_rolling_speed_asked_under_ar1_errors():
     # 0.3), the rest put 66 ms before the stop, 4 line answers 7-30 stated
     # errors off.  Now asked (ar1 within ROLL_SPEED_MAX_AR1_FRAMES)
     # and refused at more than twice the threshold on every one (z 6.6-33).
-    from cuespin.fit.decide import ROLL_SPEED_Z, t1_in_view
+    from cuespin.fit.decide import ROLL_SPEED_Z
     from cuespin.recover.measurements import build_measurements
-    from cuespin.recover.paper import paper_from_segments, ran_into_rest, rolling_speed_asked
+    from cuespin.recover.paper import paper_from_segments, rolling_speed_asked
     from cuespin.recover.simulate import case2_tracks
     rho = 0.3
     refused = total = 0
     for tr in case2_tracks(40, 5, rho=rho):
         p = tr.params
-        decel = rolling_deceleration(p.mu_r, p.g)
         dt = 1.0 / tr.fps
         assert rolling_speed_asked((rho, 1.0, None), dt)
-        seg0 = segment_track(tr.t, tr.xy, decel, tr.sigma, tr.exposure_s)
-        k = int(np.searchsorted(tr.t, phases(tr.shot, p).t2 - 0.066))
-        seg = segment_track(tr.t, tr.xy, decel, tr.sigma, tr.exposure_s, frames=(seg0.k_move, k))
-        if not seg or seg.t2 is None or not np.isfinite(seg.t1) or ran_into_rest(seg) \
-                or not t1_in_view(seg.t1, tr.t[tr.t <= seg.t2]):
+        seg = _rest_found_early(tr)
+        if seg is None:
             continue
         meas = build_measurements(tr.t, tr.xy, np.full(len(tr.t), tr.sigma), t0=seg.t0, t_rest=seg.t2,
                                   exposure_s=tr.exposure_s, frame_dt=dt, group_rest=False)
