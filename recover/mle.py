@@ -1342,6 +1342,7 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
         cov = cov.copy()
         cov[3:5, 3:5] += U[:2, :2]
         vw = vw + np.diag(U[2:, 2:])
+        se_speed_own = float(np.sqrt(cov[3, 3] + cov[4, 4]))  # before the gap: names a refusal's cause
         if slip_gap is not None:
             # A slip neither seen nor excluded (review of slip2: held-out
             # H.264 48/22, a true 55-ms slide at 60 fps, answered rolling
@@ -1420,6 +1421,15 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
                              "have started at any speed up to twice that; v0 and w0 are not determined",
                              **common)
     if not verdicts["v0_determined"]:
+        if rolling and slip_gap is not None and se_speed_own < MAX_REL_STDERR_V0 * speed:
+            # The gap alone refuses (late review: 48/22 read "the strike ...
+            # not in view" with the strike in view).
+            return MLEResult("degenerate",
+                             f"a slip neither seen nor excluded: the slip ratio passes only with the one "
+                             f"measurement carrying most of it (fit.decide.sliding_seen), and the free-slip fit's "
+                             f"v0 differs from the rolling one's by {float(np.hypot(*slip_gap[:2])):.3g} m/s, so v0 "
+                             f"is not determined (standard error {se_speed:.3g} m/s for |v0| = {speed:.3g} m/s)",
+                             **common)
         return MLEResult("degenerate",
                          f"the track does not determine v0 (standard error {se_speed:.3g} m/s for "
                          f"|v0| = {speed:.3g} m/s): the strike at t0 is not in view, or the ball "

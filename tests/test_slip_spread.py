@@ -40,3 +40,23 @@ def test_a_slip_carried_by_the_rest_alone_is_not_seen():
             # Neither model excluded: the rolling answer's errors hold the gap.
             assert est.mle.verdicts["slip_in_one_measurement"]
     assert carried >= 4
+
+
+def test_a_refusal_by_the_slip_gap_names_the_slip():
+    """Where the gap to the free-slip fit alone leaves v0 undetermined, the
+    reason names the slip, not the strike (late review: held-out H.264 48/22,
+    the strike in view, read "the strike at t0 is not in view").  A rolling
+    generator track's rolling fit, answered with a gap of its whole speed
+    (over MAX_REL_STDERR_V0 of it) and without one."""
+    from cuespin.recover import mle
+    from cuespin.recover.measurements import build_measurements
+    tr = next(iter(null_rolling_tracks(1, 7, sigma_grid=(1e-4,))))
+    meas = build_measurements(tr.t, tr.xy, np.full(len(tr.t), tr.sigma))
+    s = tr.shot
+    _, roll = mle.fit_models(meas, tr.params, (s.x0, s.t0, s.v0, s.w0), tr.exposure_s)
+    plain = mle.result(roll, meas, 0.0, True)
+    assert plain.status == "ok", plain.reason
+    v = np.asarray(roll.shot.v0, float)
+    got = mle.result(roll, meas, 0.0, True, slip_gap=np.concatenate([v, [0.0, 0.0]]))
+    assert got.status == "degenerate"
+    assert got.reason.startswith("a slip neither seen nor excluded"), got.reason
