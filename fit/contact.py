@@ -456,18 +456,14 @@ def trimmed_statistic(t, xy, sig, b: int, W: int, scale2: float = 1.0) -> float:
     (:func:`outlier_frames`): the Wald statistic of equal position and
     velocity of the quadratics fitted to the rest of the ``W`` frames on
     each side, in the stated errors times ``sqrt(scale2)``.  Without such
-    frames it is :func:`change_statistic`'s at ``b``."""
+    frames it is :func:`change_statistic`'s at ``b``.  The fits are
+    :func:`_window_fits`' with the left-out frames weighted 0 (their error
+    infinite)."""
     gone = outlier_frames(t, xy, sig, np.arange(b - W, b + W), scale2)
-    tau = 0.5 * (t[b - 1] + t[b])
-
-    def fit(k):
-        s = t[k] - tau
-        X = np.stack([np.ones_like(s), s, s * s], axis=1)
-        Xw = X * (1.0 / sig[k] ** 2)[:, None]
-        cov = np.linalg.inv(Xw.T @ X)
-        return (cov @ (Xw.T @ xy[k])).T, cov
-
-    (cl, covl), (cr, covr) = (fit(np.setdiff1d(np.arange(lo, hi), gone)) for lo, hi in ((b - W, b), (b, b + W)))
+    sig = np.array(sig, dtype=float)
+    sig[gone] = np.inf
+    tau = np.full(2, 0.5 * (t[b - 1] + t[b]))
+    (cl, cr), (covl, covr), _ = _window_fits(t, xy, sig, np.array([b - W, b]), W, tau)
     d = cl[:, :2] - cr[:, :2]
     return float(np.einsum("ai,ij,aj->", d, np.linalg.inv(covl[:2, :2] + covr[:2, :2]), d)) / scale2
 
@@ -698,6 +694,9 @@ def find_contact(t, xy, ok, stderr_m, table, R: float, balls=(), W: int | None =
         b, stat, cl, cr, jump_chi2 = b_all[keep], stat_all[keep], cl_all[keep], cr_all[keep], jump_all[keep]
         scale = scale_all[keep] if np.ndim(scale_all) else scale_all
         stat = kink_statistic(tt, pp, sig, W, b, stat, jump_chi2, scale, threshold, first_over=threshold)
+        # Kept for later passes: a boundary refined to at most the threshold
+        # is not refined again (its statistic does not depend on the pass).
+        stat_all[keep] = stat
         over = np.flatnonzero(stat > threshold)
         if not over.size:
             break

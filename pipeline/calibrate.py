@@ -1931,9 +1931,10 @@ def detect_corners(img: np.ndarray, K=None, dist=None, estimate_lens: bool = Tru
     if on_noses and single is not None:
         # the single frame's felt where the mean's was read; the ringing the mean's (the codec's, the same in
         # every frame of a still run: mean12)
-        flat_hidden = [(z, zr, ring, f) for (z, zr, ring, _), f in zip(hidden, _felt_flat_shares(single, felt_sides))]
+        felt_flat = _felt_flat_shares(single, felt_sides)
+        flat_hidden = [(z, zr, ring, f) for (z, zr, ring, _), f in zip(hidden, felt_flat)]
         if single_next is not None:     # the video's own noise says how flat a lossless frame's felt is
-            lossy = lossy or _video_lossy(single, single_next, felt_sides)
+            lossy = lossy or _video_lossy(single, single_next, felt_sides, flat=felt_flat)
         else:
             lossy = lossy or _frame_lossy(flat_hidden) or _frame_lossy(hidden)
     elif on_noses:
@@ -1955,7 +1956,7 @@ def _frame_lossy(hidden: list) -> bool:
     return bool(hidden) and bool(np.median(np.asarray(hidden, dtype=float)[:, 3]) > RAW_FLAT_SHARE)
 
 
-def _video_lossy(single: np.ndarray, single_next: np.ndarray, sides: list) -> bool:
+def _video_lossy(single: np.ndarray, single_next: np.ndarray, sides: list, flat: list | None = None) -> bool:
     """Whether a lossy codec touched a video's frames, from two still frames.
 
     A lossless camera's quantised noise leaves a felt pixel equal to its
@@ -1977,12 +1978,15 @@ def _video_lossy(single: np.ndarray, single_next: np.ndarray, sides: list) -> bo
         The still run's first two frames (BGR or grey, as decoded).
     sides : list
         The felt outline's edge points (:func:`_felt_flat_shares`' ``sides``).
+    flat : list, optional
+        ``_felt_flat_shares(single, sides)`` when the caller has it already;
+        None: computed here.
 
     Returns
     -------
     bool
     """
-    flat = float(np.median(_felt_flat_shares(single, sides)))
+    flat = float(np.median(_felt_flat_shares(single, sides) if flat is None else flat))
     same = float(np.median(_felt_flat_shares(single, sides, single_next)))
     if same >= FROZEN_SHARE:
         return flat > RAW_FLAT_SHARE

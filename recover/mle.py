@@ -298,7 +298,17 @@ class ModelFit:
         (under an inter-frame codec each is an (s, s) product: read of
         every fit, 5% of a simulated 480-fps 1.5-s recovery's CPU; as
         asked, 1%; docs/measurements.md chi2h)."""
-        return fit_dof(self.meas, self.jac, self.n_fitted, self.acf)
+        return fit_dof(self.meas, self.jac, self.n_fitted, self.acf, shared=self.shared)
+
+    @cached_property
+    def shared(self) -> np.ndarray | None:
+        """:func:`shared_info` of this fit's Jacobian under its ``acf``,
+        computed once: :attr:`dof` and, under an inter-frame codec, the
+        chosen fit's covariance (:func:`codec_sandwich`) both read it.  None
+        without ``acf``, ``meas`` or two single-frame measurements."""
+        if self.acf is None or self.meas is None or self.meas.single.sum() < 2:
+            return None
+        return shared_info(np.asarray(self.jac, dtype=float), self.meas, self.acf)
 
 
 def _unpack(p, rolling, fit_friction, params: BallParams):
@@ -1049,7 +1059,7 @@ def hat_inverse(J) -> np.ndarray:
     return np.linalg.pinv((J / s).T @ (J / s)) / s[:, None] / s[None, :]
 
 
-def fit_dof(meas: Measurements, jac, n_par: int, acf=None) -> float:
+def fit_dof(meas: Measurements, jac, n_par: int, acf=None, shared=None) -> float:
     """Degrees of freedom of a fit of ``n_par`` parameters with whitened
     Jacobian ``jac`` (2m, p): the expectation of its chi-square under the
     errors' model, against which chi2/dof is read (the failure gate, the
@@ -1066,12 +1076,15 @@ def fit_dof(meas: Measurements, jac, n_par: int, acf=None) -> float:
     ``tr(H C_off)`` was a quarter of 2m - p (median 0.251), and chi2/dof
     counted without it 0.72 (p10-p90 0.63-0.79) while the fit's true
     per-frame errors were as stated (whitened mean square median 1.04 per
-    shot); against this expectation 0.95 (0.86-1.04)."""
+    shot); against this expectation 0.95 (0.86-1.04).  ``shared``: that
+    ``shared_info(jac, meas, acf)`` already computed (:attr:`ModelFit.shared`);
+    None: computed here."""
     dof = meas.dof(n_par)
     if acf is None or meas.single.sum() < 2:
         return float(dof)
     J = np.asarray(jac, dtype=float)
-    absorbed = float(np.trace(hat_inverse(J) @ shared_info(J, meas, acf)))
+    S = shared_info(J, meas, acf) if shared is None else shared
+    absorbed = float(np.trace(hat_inverse(J) @ S))
     return max(dof - absorbed, 1.0)
 
 
@@ -1105,24 +1118,28 @@ def codec_sandwich(fit: ModelFit, meas: Measurements, codec: CodecCorrelation) -
     """The parameters' covariance when an inter-frame codec shares each
     frame's error with its neighbours in time: :func:`shared_sandwich` of
     the fit's whitened Jacobian under ``codec.acf``.  Raises LinAlgError
-    when ``J^T J`` is singular."""
-    return shared_sandwich(meas, fit.jac, codec.acf)
+    when ``J^T J`` is singular.  The fit's own :attr:`ModelFit.shared` is
+    reused when it was counted on these measurements under this ``acf``."""
+    same = fit.meas is meas and fit.acf is not None and tuple(fit.acf) == tuple(codec.acf)
+    return shared_sandwich(meas, fit.jac, codec.acf, shared=fit.shared if same else None)
 
 
-def shared_sandwich(meas: Measurements, jac, acf=INTER_CODEC_ACF) -> np.ndarray:
+def shared_sandwich(meas: Measurements, jac, acf=INTER_CODEC_ACF, shared=None) -> np.ndarray:
     """The covariance of parameters fitted as if independent (whitened
     Jacobian ``jac``, (2m, p)) when each frame's whole error is shared with
     its neighbours in time (an inter-frame codec): ``A J^T C J A`` with
     ``A = (J^T J)^-1`` (:func:`info_inverse`) and ``C`` the whitened
     measurements' covariance: the identity (the stated errors, a codec's
     variance included) plus ``rho(dt_ij) I`` between single-frame
-    measurements i != j (:func:`shared_info`).  Raises LinAlgError when
-    ``J^T J`` is singular."""
+    measurements i != j (:func:`shared_info`; ``shared``: that already
+    computed on ``jac``, ``meas`` and ``acf``, None: computed here).  Raises
+    LinAlgError when ``J^T J`` is singular."""
     J = np.asarray(jac, dtype=float)
     A = info_inverse(J)
     if meas.single.sum() < 2:
         return A
-    return A @ (J.T @ J + shared_info(J, meas, acf)) @ A
+    S = shared_info(J, meas, acf) if shared is None else shared
+    return A @ (J.T @ J + S) @ A
 
 
 def shared_scale(fit: ModelFit, meas: Measurements, acf=INTER_CODEC_ACF,
