@@ -190,6 +190,10 @@ def mle_dict(est: Estimate) -> dict:
            "x0": _num(m.x0), "t0": _num(m.t0), "t1": _num(m.t1), "t2": _num(m.t2),
            "slip_lr": _num(m.slip_lr),
            "unseen_slip": _num(m.unseen_slip) if m.model == "rolling" else None,
+           # The free-slip fit's (v0, w0) less the rolling answer's, stated in
+           # its errors where the slip was neither seen nor excluded.
+           "slip_gap": (_num(np.asarray(est.decided.slip_gap)) if est.decided is not None
+                        and est.decided.slip_gap is not None and m.model == "rolling" else None),
            "chi2_per_dof": _num(m.chi2 / m.dof) if m.dof else None,
            "dof": _num(round(float(m.dof), 1)) if m.dof else None, "hac": bool(m.hac), "rho1": _num(m.rho1),
            "ar1": _num(m.ar1),

@@ -428,7 +428,12 @@ def test_a_slide_carried_by_one_measurement_states_the_free_slip_gap():
     n = len(tr.t)
     err = 2.0 * tr.sigma * (shared_errors(n, tr.fps, rng) + ar1_errors(n, np.exp(-1.0 / (0.2 * tr.fps)), rng))
     xy = model_track(tr.shot, tr.params, tr.t, tr.exposure_s) + err
-    m = estimate(tr.t, xy, np.full(n, tr.sigma), tr.params, lossless=False, run_paper=False, inter_frame=True).mle
+    est = estimate(tr.t, xy, np.full(n, tr.sigma), tr.params, lossless=False, run_paper=False, inter_frame=True)
+    m = est.mle
     assert m.status == "ok" and m.model == "rolling"
     assert m.verdicts["slip_in_one_measurement"]
     assert np.all(np.abs(z_of(m, tr.shot)) < 1.96), z_of(m, tr.shot)
+    # The JSON states the gap it added (docs/output.md, methods.mle.slip_gap).
+    from cuespin.recover.api import mle_dict
+    gap = mle_dict(est)["slip_gap"]
+    assert len(gap) == 4 and np.hypot(*gap[:2]) > 0
