@@ -559,6 +559,12 @@ def paper_verdicts(paper, mle, rolling: bool, params: BallParams, agree: bool | 
         return PaperResult("degenerate", "the slip ratio passes its threshold on one measurement alone: a slip "
                            "the track may show is neither seen nor excluded, and the paper's rolling "
                            "segments hold none")
+    if rolling and mle.status == "failed":
+        # No rolling fit to bound the slip the track cannot exclude (the fit
+        # failed): the rolling segments' answer would state x0's and x2's
+        # errors alone (late review of papshort).
+        return PaperResult("degenerate", "the rolling segments' answer holds no slip, and without the fit's rolling "
+                           f"answer the slip the track cannot exclude is not bounded ({mle.reason})")
     if rolling and getattr(mle, "model", "") == "rolling":
         # The rolling segments' answer (case 4, x1 at x0) holds no slip;
         # the track cannot exclude one up to the fit's unseen slip, whose

@@ -86,3 +86,18 @@ def test_the_papers_rolling_answer_states_the_unseen_slip():
         assert np.allclose(p.x1, p.x0)  # the rolling segments: x1 at x0
         z = np.r_[p.v0 - tr.shot.v0, p.w0 - tr.shot.w0] / np.r_[p.stderr["v0"], p.stderr["w0"]]
         assert np.abs(z).max() < PAPER_ROLLING_Z_MAX, (tr.fps, z)
+
+
+def test_the_papers_rolling_answer_is_refused_where_the_fit_failed():
+    # Late review of papshort: the rolling segments' answer (case 4) states
+    # the fit's unseen slip; where the fit failed there is none to state, and
+    # the answer would give x0's and x2's errors alone.
+    from cuespin.physics.motion import BallParams
+    from cuespin.recover.estimate import paper_verdicts
+    from cuespin.recover.mle import MLEResult
+    from cuespin.recover.paper import PaperResult
+    paper = PaperResult("ok", "", "line", v0=np.array([1.0, 0.0]), w0=np.array([0.0, 10.0]))
+    failed = MLEResult("failed", "the fit did not run: singular matrix")
+    got = paper_verdicts(paper, failed, True, BallParams())
+    assert got.status == "degenerate" and "not bounded" in got.reason
+    assert paper_verdicts(paper, failed, False, BallParams()) is paper  # the sliding segments carry their own
