@@ -1359,9 +1359,9 @@ def result(fit: ModelFit, meas: Measurements, lr: float, sliding_ended: bool,
         cov = cov.copy()
         cov[3:5, 3:5] += U[:2, :2]
         vw = vw + np.diag(U[2:, 2:])
-        ev = np.diag(cov)[3:5]  # before the gap: names a refusal's cause (non-positive: not determined)
-        se_speed_own = float(np.hypot(*np.sqrt(np.where(ev > 0, ev, np.inf))))
         if slip_gap is not None:
+            ev = np.diag(cov)[3:5]  # before the gap: names a refusal's cause (non-positive: not determined)
+            se_speed_own = float(np.hypot(*np.sqrt(np.where(ev > 0, ev, np.inf))))
             # A slip neither seen nor excluded (review of slip2: held-out
             # H.264 48/22, a true 55-ms slide at 60 fps, answered rolling
             # 31% off in v0 at 2.4 stated errors, the free-slip fit 2.8% off).

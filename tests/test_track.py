@@ -557,13 +557,7 @@ def test_felt_accumulator_adds_windows_as_numpy(tolerance, with_exclude, with_re
         centre = rng.uniform((u0, v0), (u0 + w, v0 + h))
         radius = float(rng.uniform(1.0, 8.0))
         felt.add(patch, u0, v0, centre, radius, exclude, reference, tolerance)
-        keep = ~FeltAccumulator._disc(u0, v0, h, w, centre, radius)
-        if exclude is not None:
-            keep &= ~exclude
-        if reference is not None:
-            keep &= np.abs(patch - reference[v0:v0 + h, u0:u0 + w]) <= tolerance
-        total[v0:v0 + h, u0:u0 + w] += np.where(keep, patch, 0).astype(np.float32)
-        count[v0:v0 + h, u0:u0 + w] += keep
+        FeltAccumulator.add_numpy(total, count, patch, u0, v0, centre, radius, exclude, reference, tolerance)
     assert felt.n == 30
     assert np.array_equal(felt.count, count)
     assert np.array_equal(felt.total, total)

@@ -618,13 +618,22 @@ class FeltAccumulator:
                             reference is not None, tol, int(u0), int(v0), float(centre[0]), float(centre[1]),
                             float(radius))
             return
-        felt = ~self._disc(u0, v0, h, w, centre, radius)
+        self.add_numpy(self.total, self.count, patch, u0, v0, centre, radius, exclude, reference, tolerance)
+
+    @staticmethod
+    def add_numpy(total, count, patch, u0, v0, centre, radius, exclude=None, reference=None,
+                  tolerance: float = np.inf) -> None:
+        """:meth:`add`'s sums in numpy, into ``total`` and ``count``: its
+        path for other dtypes, and the reference the compiled pass
+        (track.window.felt_add) is held to bit for bit."""
+        h, w = patch.shape
+        felt = ~FeltAccumulator._disc(u0, v0, h, w, centre, radius)
         if exclude is not None:
             felt &= ~exclude
         if reference is not None:  # something other than felt: the cue, the ball's blurred rim
             felt &= np.abs(patch - reference[v0:v0 + h, u0:u0 + w]) <= tolerance
-        self.total[v0:v0 + h, u0:u0 + w] += np.where(felt, patch, 0).astype(np.float32)
-        self.count[v0:v0 + h, u0:u0 + w] += felt
+        total[v0:v0 + h, u0:u0 + w] += np.where(felt, patch, 0).astype(np.float32)
+        count[v0:v0 + h, u0:u0 + w] += felt
 
     def add_frame(self, frame: np.ndarray, centre, radius: float, reference=None, projection=None,
                   tolerance: float = np.inf, reach: float = 0.0) -> None:
