@@ -638,7 +638,7 @@ def group_shares(frame_cov_used, g, m: int, scatter, min_share: float = 0.0, sca
     c /= np.maximum(cnt, 1)[:, None, None]
     share = np.zeros(m)
     share[cnt > 1] = 1.0  # a scatter not measured: one shared error
-    rest = (cnt > 1) & np.all(np.isfinite(scatter.reshape(m, -1)), axis=1)
+    rest = (cnt > 1) & np.all(np.isfinite(scatter.reshape(m, 4)), axis=1)
     if rest.any():
         n = cnt[rest].astype(float)
         lam = 0.5 * np.trace(np.linalg.solve(c[rest], scatter[rest]), axis1=1, axis2=2)

@@ -403,6 +403,21 @@ def test_mle_degenerate_when_the_strike_is_not_in_view():
     assert mle_of(t, xy, p).status == "ok"
 
 
+def test_a_track_touched_in_every_frame_is_answered_not_raised():
+    # Held-out H.264 seed 54 shot 5 (a kept track whose every found frame the
+    # tracker flagged as touched, found only from just after the strike): the
+    # cue's window then covered the whole track, the measurements were empty,
+    # and recover.measurements.group_shares raised on reshaping nothing.
+    # Failure is an answer: a status and a reason, no number.
+    shot, p = sample_shot(9, "case4")
+    ph = phases(shot, p)
+    t, xy = synthetic(shot, p, t_cut=ph.t2 + 0.3)
+    late = t > shot.t0 + 0.02
+    m = mle_of(t[late], xy[late], p, touched=np.ones(late.sum(), bool))
+    assert m.status in ("degenerate", "failed") and m.reason, m.reason
+    assert m.v0 is None and m.w0 is None
+
+
 def test_mle_fits_friction_on_request():
     shot, p = sample_shot(13, "random")
     ph = phases(shot, p)
