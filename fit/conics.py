@@ -105,10 +105,12 @@ def _foot_points(par: Parabola, p):
     X, Y = q[..., 0], q[..., 1]
     a = par.a
     x = X.copy()
+    # The iteration's constants made once (the same numbers each time).
+    a2, a6, k = 2 * a * a, 6 * a * a, 1 - 2 * a * Y
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         for _ in range(30):
-            f = 2 * a * a * x**3 + (1 - 2 * a * Y) * x - X
-            fp = 6 * a * a * x**2 + (1 - 2 * a * Y)
+            f = a2 * x**3 + k * x - X
+            fp = a6 * x**2 + k
             step = f / np.where(np.abs(fp) > 1e-12, fp, 1e-12)
             x -= step
             if not np.all(np.abs(step) >= 1e-15):

@@ -622,3 +622,41 @@ def test_false_rolling_speed_rate_400_ar1():
                 total += 1
                 hits += bool(d.yes)
     assert total >= 400 and hits <= allowed(total, ROLL_SPEED_LEVEL), (hits, total)
+
+
+def test_codec_correlation_in_place_is_the_formulas_bits():
+    # _time_correlation builds its matrix in place (docs/measurements.md,
+    # rec10): the same numbers, bit for bit, as the formula written out, in
+    # both forms; shared_rho is that matrix with a zero diagonal, kept
+    # read-only for its callers (none writes to it).
+    import cuespin.recover.mle as mle
+
+    rng = np.random.default_rng(11)
+    a, b, tau, tau_long = mle.INTER_CODEC_ACF
+    for t in (np.arange(1) / 60.0, np.arange(90) / 60.0, np.sort(rng.uniform(0.0, 1.5, 361))):
+        dt = np.abs(t[:, None] - t[None, :])
+        want = a * np.exp(-dt / tau_long) + b * np.exp(-dt / tau)
+        np.fill_diagonal(want, 1.0)
+        assert np.array_equal(mle._time_correlation.__wrapped__((t.tobytes(), tuple(map(float, mle.INTER_CODEC_ACF)),
+                                                                None, None)), want)
+        want = 0.6 ** (dt / (1 / 240))
+        np.fill_diagonal(want, 1.0)
+        assert np.array_equal(mle._time_correlation.__wrapped__((t.tobytes(), None, 0.6, 1 / 240)), want)
+    t = np.arange(40) / 60.0
+    rho = mle._shared_rho(t.tobytes(), tuple(map(float, mle.INTER_CODEC_ACF)))
+    want = time_correlation(t)
+    np.fill_diagonal(want, 0.0)
+    assert np.array_equal(rho, want) and not rho.flags.writeable
+
+
+def test_slide_through_sums_in_chunks_are_one_directions_bits():
+    # slide_through_chi2's 360 directions summed SLIDE_THROUGH_CHUNK at a
+    # time give each direction's sum as one vector's, bit for bit.
+    import cuespin.recover.mle as mle
+
+    rng = np.random.default_rng(12)
+    for m2 in (2, 73, 720, 2001):
+        rp, ex, ey = rng.standard_normal((3, m2)) * rng.uniform(0.1, 100.0, (3, 1))
+        th = np.linspace(0.0, 2.0 * np.pi, 360, endpoint=False)
+        one = np.array([np.sum((rp - np.cos(a) * ex - np.sin(a) * ey) ** 2) for a in th])
+        assert np.array_equal(mle._through_sums(rp, ex, ey, 360), one)
