@@ -497,6 +497,7 @@ def main():
         for k, path in enumerate(args.summarize.split(",")):
             rows += [dict(r, i=r["i"] + 100000 * k) for r in pd.read_csv(path).to_dict("records")]
         summarize(rows, args.seed)
+        refuse_if_none_answered(rows)
         return
     from tqdm import tqdm
     rows = []
@@ -531,6 +532,24 @@ def main():
     if out is not None:
         out.close()
     summarize(rows, args.seed)
+    refuse_if_none_answered(rows)
+
+
+def raised(row) -> bool:
+    """Did the shot's render, track or recovery raise (one_shot's ``error``
+    row; a CSV read back holds "nan" for the others' empty text)?"""
+    return str(row.get("error", "") or "") not in ("", "nan")
+
+
+def refuse_if_none_answered(rows) -> None:
+    """Exit non-zero, saying why, when no shot gave an answer (every one
+    raised, or none ran): the tables then measure nothing, and a run that
+    exits 0 reads as a measurement (crash48 kept a raised shot as a row, so
+    a run whose every shot raises finished with 0)."""
+    if any(not raised(r) for r in rows):
+        return
+    first = next((f"; the first: shot {r['i']}, {r['error']}" for r in sorted(rows, key=lambda r: r["i"])), "")
+    raise SystemExit(f"accuracy.py: no shot gave an answer ({len(rows)} run, all raised{first})")
 
 
 def summarize(rows, seed=0):
@@ -542,9 +561,9 @@ def summarize(rows, seed=0):
     # Shots whose render, track or recovery raised (one_shot): counted as
     # status "error" in the shares below and each named here; the look
     # factors and speeds are the other shots'.
-    done = [r for r in rows if str(r.get("error", "") or "") in ("", "nan")]  # "nan": a CSV's empty
+    done = [r for r in rows if not raised(r)]
     for r in rows:
-        if str(r.get("error", "") or "") not in ("", "nan"):
+        if raised(r):
             print(f"shot {r['i']} raised: {r['error']}")
     stale = sum(str(r.get("stale", "")) in ("True", "1", "1.0") for r in rows)
     if stale:

@@ -92,7 +92,18 @@ CHANGE_POINT_KINK = True
 # 14.7 at W = 8; the deleted residual of a frame with the stated error is
 # exactly chi-square(2) on a path that is one quadratic).  At most
 # MAX_OUTLIER_SHARE of the 2 W frames are taken off: a run off the path is a
-# minority of the frames around it, more is a change of motion.  Realistic
+# minority of the frames around it, more is a change of motion.  1/4 from
+# measured distributions (docs/measurements.md, gapcov): on 300 contact-free
+# generated tracks (benchmarks/contact.py's, noise 0.005-0.5 px) with a run
+# of 1/16-3/8 of the 2 W frames, 4-6 stated errors off one way, among W
+# frames, the runs the rule clears needed 1/8 (9 of 12), 3/16 (2) and 1/4
+# (1), none more, and 48/13 needs 1/4; on its null, 400 paired contact
+# scenes (real contacts must stand), 1/4 loses 1 of 305 (H.264-like errors;
+# McNemar margin 2), 3/16 none, 5/16 the same 1.  So 1/4 clears every run
+# the rule can, within the null's margin.  Its ceiling: (MIN_WINDOW - 3) /
+# (2 MIN_WINDOW) = 5/16, each side keeping the 3 frames its quadratic needs
+# when every frame taken off falls on it (above it a side's fit in
+# trimmed_statistic was singular on a paired scene).  Realistic
 # H.264 48/13 (docs/measurements.md, held39 and rimdot): frames 57, 59, 63,
 # 64, 2.3-2.8 px off where a dark dot reaches the ball's rim, flagged
 # boundary 63 at 41.5 over the threshold's 40, a false "unknown" contact at

@@ -232,7 +232,11 @@ def slip_in_one_measurement(seen: Decision, lr: float) -> bool:
     threshold, i.e. only with the one measurement carrying most of it.  The
     rolling answer then states the gap to the free-slip fit
     (recover.mle.result's ``slip_gap``) and the paper's rolling answer is
-    refused (recover.estimate.paper_verdicts)."""
+    refused (recover.estimate.paper_verdicts).  Measured (docs/measurements.md,
+    gapcov; tests/test_slip_spread.py): on short_slip_tracks (1-8 frames,
+    60-480 fps) 73 of 1,200 answered so, 72 covered in all four components
+    at 95% (64 without the gap: the unseen slip's errors alone miss it),
+    RMS error / stated 0.62; on true rollers 9 of 800, all covered."""
     return (not seen) and bool(np.isfinite(lr) and lr > slip_threshold())
 
 

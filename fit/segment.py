@@ -98,10 +98,10 @@ class Segments:
     sum_k w[k, 0] xy[frames_k]`` (``v0``, ``a_slide``: columns 1 and 2),
     ``x1`` likewise by ``w1`` (plus the breakpoints' shares ``x1_t1``,
     ``x0_t0`` and ``x0x1_t``), and
-    ``x2`` the mean of ``xy[rest]``; ``t_curved`` says whether those
-    shares are in (True), left out because the fit's profile does not
-    curve about the breakpoints (False: their errors are not measured
-    there; see :func:`_geometry_cov`) or not asked (None).
+    ``x2`` the mean of ``xy[rest]``.  Where the fit's profile does not
+    curve about the breakpoints those shares are zero: their errors are not
+    measured there (:func:`_geometry_cov`; docs/measurements.md, gapcov: on
+    a slide into the rest the paper's answers then cover less).
     """
 
     ok: bool
@@ -555,7 +555,7 @@ def _geometry_cov(tf, xf, t0, t1, beyond, decel, v1, s2, n_rest, v0=None):
            "x0x1": s2 * float(c0 @ M @ c1) * I2, "x2": None,
            "w": A @ M, "w1": A @ (M @ c1), "wv1": A @ (M @ cv1), "x1_t1": np.zeros((2, 2)),
            "x0_t0": np.zeros((2, 2)), "x0x1_t": np.zeros((2, 2)),
-           "x1v1_t": np.zeros((5, 5)), "t_curved": None}
+           "x1v1_t": np.zeros((5, 5))}
     if 0 < tau1 and t1 < beyond:
         # The Hessian of the profile over (t0, t1), a frame either side: t1's
         # marginal variance, with t0 free too (they trade off).
@@ -566,8 +566,7 @@ def _geometry_cov(tf, xf, t0, t1, beyond, decel, v1, s2, n_rest, v0=None):
         H = np.array([[S[2, 1] - 2 * S[1, 1] + S[0, 1], (S[2, 2] - S[2, 0] - S[0, 2] + S[0, 0]) / 4],
                       [0.0, S[1, 2] - 2 * S[1, 1] + S[1, 0]]]) / h**2
         H[1, 0] = H[0, 1]
-        out["t_curved"] = bool(np.linalg.det(H) > 0 and H[0, 0] > 0)
-        if out["t_curved"]:
+        if np.linalg.det(H) > 0 and H[0, 0] > 0:
             Ht = 2 * s2 * np.linalg.inv(H)  # covariance of (t0, t1)
             out["x1_t1"] = Ht[1, 1] * np.outer(v1, v1)
             # (x1, v1, t1) along the profile (the path refitted at each
@@ -603,14 +602,12 @@ def _geometry_cov(tf, xf, t0, t1, beyond, decel, v1, s2, n_rest, v0=None):
         S, _, _ = _solve_many(tf, xf, t0 + g, t0 + g, decel)
         d2 = float(S[2] - 2 * S[1] + S[0]) / h**2
         # Not curved (d2 <= 0): the profile does not hold t0 a frame either
-        # side, and t0's share is left out, flagged (t_curved False), not
-        # guessed.  Measured where that happens: never on 360 simulated
+        # side, and t0's share is left out, not guessed.  Measured where that happens: never on 360 simulated
         # case-4 tracks with their strike in view (rolls_to_rest_tracks,
         # seed 5's 60, seed 6's 300) nor on held37's 40 realistic H.264; on 2 of
         # 30 case-4 tracks cut to begin 0.5-1 frame after the strike, where
         # nothing before the strike holds x0 and the paper refuses it ("the
         # strike is not in view"; tests/test_fit.py pins both).
-        out["t_curved"] = d2 > 0
         if d2 > 0:
             share = 2 * s2 / d2 * np.outer(v0, v0)
             out["x0_t0"], out["x1_t1"], out["x0x1_t"] = share, share.copy(), share.copy()

@@ -529,3 +529,57 @@ def test_the_outlier_rule_loses_no_contacts():
         a, b = np.array(found[(errs, "on")]), np.array(found[(errs, "off")])
         lost, gained = int(np.sum(b & ~a)), int(np.sum(a & ~b))
         assert lost - gained <= 2 * np.sqrt(lost + gained), (errs, lost, gained)
+
+
+def _injected_runs(seed, q_cycle=(1 / 16, 1 / 8, 3 / 16, 1 / 4, 5 / 16, 3 / 8), off=(4.0, 6.0)):
+    """Contact-free generated tracks (benchmarks/contact.py's NULL_PRESETS,
+    noise 0.005-0.5 px), each with a run off the path injected: round(q 2W)
+    frames (q cycling over ``q_cycle``) among W consecutive moving frames,
+    each ``off`` stated errors off one way (48/13: 4 frames among 8, 4-5
+    errors).  Yields ``(t, xy, se, R)`` (/tmp/gapcov/shareB.py's tracks)."""
+    from contact import NULL_PRESETS, noise_level, simulated_track
+
+    from cuespin.fit.contact import window_frames
+
+    rng = np.random.default_rng(seed)
+    i = used = 0
+    while True:
+        scene = sample_scene(int(rng.integers(2**31)), NULL_PRESETS[i % len(NULL_PRESETS)])
+        i += 1
+        t, xy, se, _ = simulated_track(scene, noise_level(rng), rng)
+        W = window_frames(t)
+        mv = np.flatnonzero(t > scene.truth.t0 + 2 * W / scene.camera.fps)
+        if len(mv) < 4 * W + 2:
+            continue
+        m = max(1, int(round(q_cycle[used % len(q_cycle)] * 2 * W)))
+        used += 1
+        s0 = int(rng.integers(mv[0] + W, mv[-1] - 2 * W))
+        frames = s0 + np.sort(rng.choice(W, size=min(m, W), replace=False))
+        ang = rng.uniform(0, 2 * np.pi)
+        xy = xy.copy()
+        xy[frames] += rng.uniform(*off) * se[frames, None] * np.array([np.cos(ang), np.sin(ang)])
+        yield t, xy, se, scene.physics.R
+
+
+def test_the_outlier_share_is_the_largest_a_cleared_run_needed(monkeypatch):
+    # fit.contact.MAX_OUTLIER_SHARE (docs/measurements.md, gapcov): of 300
+    # generated runs the rule cleared 12, needing 1/8 (9), 3/16 (2) and 1/4
+    # (1: seed 5's fourth, 6 frames of a 12-frame window's 24, 120 fps);
+    # none more.  That run is cleared at 1/4 and not at 3/16.  And the share
+    # leaves each side of a boundary the 3 frames its quadratic needs when
+    # every frame taken off falls on it, at every window size.
+    import cuespin.fit.contact as contact_module
+    from cuespin.fit.contact import MAX_OUTLIER_SHARE, MAX_WINDOW, MIN_WINDOW
+
+    big = Table(length=100.0, width=100.0)
+    runs = _injected_runs(5)
+    for _ in range(3):
+        next(runs)
+    t, xy, se, R = next(runs)
+    found = {}
+    for share in (0.0, 3 / 16, MAX_OUTLIER_SHARE):
+        monkeypatch.setattr(contact_module, "MAX_OUTLIER_SHARE", share)
+        found[share] = find_contact(t, xy, np.ones(len(t), bool), se, big, R, ())
+    assert found[0.0] is not None and found[3 / 16] is not None  # the run reads as a contact
+    assert found[MAX_OUTLIER_SHARE] is None
+    assert all(int(MAX_OUTLIER_SHARE * 2 * W) <= W - 3 for W in range(MIN_WINDOW, MAX_WINDOW + 1))
