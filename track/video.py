@@ -152,8 +152,10 @@ class TrackResult:
         What the per-frame fits' covariances were multiplied by: the track's
         own measure of what the ball's model misses (a realistic ball's
         shading, highlight and turning markings: an error shared by
-        neighbouring frames), :func:`cuespin.track.misfit.look_misfit`; 1
-        when the stated errors hold (a ball the model describes).
+        neighbouring frames), :func:`cuespin.track.misfit.look_misfit`,
+        measured on a shaded look and on any look on a lossy codec; 1
+        when the stated errors hold (a ball the model describes) or on a
+        disc on lossless video, which is left as stated.
     look_rho : float
         Lag-1 correlation between consecutive frames of the error that
         factor adds (0: none added, or independent): the errors are then
