@@ -152,8 +152,10 @@ class TrackResult:
         What the per-frame fits' covariances were multiplied by: the track's
         own measure of what the ball's model misses (a realistic ball's
         shading, highlight and turning markings: an error shared by
-        neighbouring frames), :func:`cuespin.track.misfit.look_misfit`; 1
-        when the stated errors hold (a ball the model describes).
+        neighbouring frames), :func:`cuespin.track.misfit.look_misfit`,
+        measured on a shaded look and on any look on a lossy codec; 1
+        when the stated errors hold (a ball the model describes) or on a
+        disc on lossless video, which is left as stated.
     look_rho : float
         Lag-1 correlation between consecutive frames of the error that
         factor adds (0: none added, or independent): the errors are then
@@ -677,11 +679,14 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     # it a second time.
     cov[ok] *= codec_variance(info.lossless, info.inter_frame, tracker.block)
     # What the ball's model misses, seen along the track (its stated errors
-    # are the per-frame fits' own; see track.misfit).  Only where the fits
+    # are the per-frame fits' own; see track.misfit).  Where the fits
     # modelled the look (shaded: the first frames showed the disc does not
-    # describe the ball): a disc that does is left as stated (its err/se
-    # 0.91-1.02, benchmarks/track.py accuracy), and the kinks of a short,
-    # low-noise track cannot then pass for a misfit.
+    # describe the ball), and on a lossy codec whatever the look: a disc on
+    # lossless video that does describe the ball is left as stated (its
+    # err/se 0.91-1.02, benchmarks/track.py accuracy), and the kinks of a
+    # short, low-noise track cannot then pass for a misfit; on H.264 the
+    # disc's errors were 2.1-2.8 times too small, 1.1-1.4 with the factor
+    # (docs/measurements.md, offv).
     if ok.any():
         uv[ok] = projected_centres(cam, uv[ok], R)  # the centre's image, not the silhouette's
     xy = np.full_like(uv, np.nan)
@@ -693,7 +698,7 @@ def track_video(path, scene: Scene, config: TrackerConfig = TrackerConfig(),
     # metres at the image centre's scale, so that the misfit's thresholds
     # stay in px (a similarity camera: the same numbers as in px).
     misfit = LookMisfit()
-    if bg.polarity and tracker.shade is not False and ok.any():
+    if bg.polarity and (tracker.shade is not False or not info.lossless) and ok.any():
         s = cam.px_per_m(center)
         cov_t = np.full_like(cov, np.nan)
         cov_t[ok] = cam.cov_to_table(xy[ok], cov[ok]) * s**2
