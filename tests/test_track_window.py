@@ -121,6 +121,9 @@ def test_sample_medians_are_numpys_bit_for_bit():
     for n in (1, 2, 1001, 1002):
         x = rng.integers(0, 256, (n, 3), dtype=np.uint8)
         assert np.array_equal(median_counts(x), np.median(x, axis=0))
+        # 8 bits are counted by OpenCV's histogram, any other dtype by bincount; a strided view too
+        assert np.array_equal(median_counts(x.astype(np.int32)), np.median(x, axis=0))
+        assert np.array_equal(median_counts(x[::2, ::-1]), np.median(x[::2, ::-1], axis=0))
     # noise_covariance's robust centre and spread from counts: the numpy form's
     a = rng.integers(0, 256, (64, 96, 3), dtype=np.uint8)
     b = np.clip(a + rng.normal(0, 4, a.shape), 0, 255).astype(np.uint8)
